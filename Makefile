@@ -1,0 +1,24 @@
+# The two Quick start commands are `make demo` and `make test`; each installs
+# what it needs first (scripts/setup.sh is idempotent).
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: demo test setup setup-test bench clean
+
+demo: setup
+	$(VENV)/bin/inkslice demo
+
+test: setup-test
+	$(PY) -m pytest -q
+
+setup:
+	@scripts/setup.sh
+
+setup-test:
+	@scripts/setup.sh --test
+
+bench: setup-test
+	$(VENV)/bin/inkslice bench all
+
+clean:
+	rm -rf demo-out benches/out tests/artifacts

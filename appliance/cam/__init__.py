@@ -1,0 +1,1 @@
+"""CAM room: height map -> cutter-compensated toolpaths -> G-code; verification. Pure."""

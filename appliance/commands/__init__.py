@@ -1,0 +1,1 @@
+"""One module per `inkslice` sub-command (see appliance/cli.py)."""

@@ -1,0 +1,1 @@
+"""The scan runner: state machine, job store, recovery."""

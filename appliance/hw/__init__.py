@@ -1,0 +1,1 @@
+"""Every device lives here, behind the small interfaces in hw/base.py."""

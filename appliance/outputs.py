@@ -1,0 +1,74 @@
+"""Job outputs as plain files: heightmap.csv (x,y,z in mm) and friends.
+
+All writes are atomic (see atomicio). Readers validate and raise
+InkSliceError naming the file and the problem.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from . import atomicio
+from .errors import InkSliceError
+from .surface.heightmap import HeightMap
+
+
+def heightmap_csv_text(hm: HeightMap) -> str:
+    """Rows for every on-part cell, row by row; off-part cells are omitted."""
+    X, Y = hm.grid()
+    keep = hm.on_part
+    buf = io.StringIO()
+    buf.write("x,y,z\n")
+    pts = np.column_stack([X[keep], Y[keep], hm.z[keep]])
+    np.savetxt(buf, pts, fmt="%.4f", delimiter=",")
+    return buf.getvalue()
+
+
+def write_heightmap_csv(path, hm: HeightMap):
+    atomicio.write_text(path, heightmap_csv_text(hm))
+
+
+def read_heightmap_csv(path) -> HeightMap:
+    """Rebuild the lattice from the x and y values present (they must form a regular grid)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InkSliceError(path, "height map file does not exist")
+    text = path.read_text(encoding="utf-8", errors="replace")
+    lines = text.splitlines()
+    if not lines or lines[0].replace(" ", "").lower() != "x,y,z":
+        raise InkSliceError(path, "first line must be the header 'x,y,z'")
+    try:
+        data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
+    except ValueError as e:
+        raise InkSliceError(path, f"not three numbers per line ({e})") from None
+    if data.size == 0 or data.shape[1] != 3:
+        raise InkSliceError(path, "no x,y,z rows")
+    if not np.all(np.isfinite(data)):
+        raise InkSliceError(path, "a value is not finite")
+    xs = np.unique(np.round(data[:, 0], 4))
+    ys = np.unique(np.round(data[:, 1], 4))
+    for name, v in (("x", xs), ("y", ys)):
+        if v.size > 2:
+            d = np.diff(v)
+            step = np.median(d)
+            # gaps of whole steps are allowed (off-part cells), uneven steps are not
+            k = d / step
+            if np.any(np.abs(k - np.round(k)) > 1e-3):
+                raise InkSliceError(path, f"{name} values are not on a regular grid")
+    x = _regular_axis(xs)
+    y = _regular_axis(ys)
+    z = np.full((y.size, x.size), np.nan)
+    ix = np.rint((data[:, 0] - x[0]) / (x[1] - x[0])).astype(int) if x.size > 1 else np.zeros(len(data), int)
+    iy = np.rint((data[:, 1] - y[0]) / (y[1] - y[0])).astype(int) if y.size > 1 else np.zeros(len(data), int)
+    z[iy, ix] = data[:, 2]
+    return HeightMap(x, y, z)
+
+
+def _regular_axis(v):
+    if v.size < 2:
+        return v
+    step = float(np.min(np.diff(v)))
+    n = int(round((v[-1] - v[0]) / step)) + 1
+    return v[0] + step * np.arange(n)

@@ -1,0 +1,1 @@
+"""The virtual bench: known surfaces, a camera renderer, the firmware under simavr."""

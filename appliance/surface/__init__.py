@@ -1,0 +1,1 @@
+"""Surface room: waterlines at levels -> height map; seed methods; statistics. Pure."""

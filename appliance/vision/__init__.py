@@ -1,0 +1,1 @@
+"""Vision room: frame -> binary -> sub-pixel waterlines in mm. Pure, integer-first."""

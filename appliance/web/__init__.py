@@ -1,0 +1,1 @@
+"""The LAN web UI (Flask app factory, served by waitress)."""

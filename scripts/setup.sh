@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Installs everything InkSlice needs on a Debian machine, idempotently:
+# the Debian packages (AVR toolchain, simavr, LinuxCNC's G-code interpreter,
+# chromium for browser tests, ...), then a venv in .venv with the package in
+# editable mode. A second run with nothing missing does no network traffic.
+#
+#   scripts/setup.sh          what `make demo` needs
+#   scripts/setup.sh --test   plus what `make test` needs
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+want_test=0
+[ "${1:-}" = "--test" ] && want_test=1
+
+# Needed to run the appliance on the simulated bench.
+APT_RUN=(python3 python3-venv python3-dev build-essential pkg-config
+         gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev)
+# Needed by the test suite and the benches on top of that.
+APT_TEST=(libcmocka-dev clang libclang-rt-14-dev chromium chromium-driver
+          systemd linuxcnc-uspace)
+
+pkgs=("${APT_RUN[@]}")
+[ "$want_test" = 1 ] && pkgs+=("${APT_TEST[@]}")
+
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "${#missing[@]}" -gt 0 ]; then
+  echo "setup: installing Debian packages: ${missing[*]}"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  # linuxcnc-uspace pulls a desktop's worth of recommends; we only want rs274.
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.inkslice-installed
+sig=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$sig" ]; then
+  echo "setup: installing Python packages into .venv"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e ".[test]"
+  echo "$sig" > "$stamp"
+fi
