@@ -18,7 +18,7 @@ setup-test:
 	@scripts/setup.sh --test
 
 bench: setup-test
-	$(VENV)/bin/inkslice bench all
+	for b in benches/*.py; do $(PY) $$b --quick || exit 1; done
 
 clean:
 	rm -rf demo-out benches/out tests/artifacts
