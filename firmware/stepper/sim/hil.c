@@ -273,7 +273,7 @@ static void control(char *line)
     stage_pos = atoll(b);
     update_limits();
     reply("ok");
-  } else if (!strcmp(a, "fault") && args == 3) {
+  } else if (!strcmp(a, "fault") && args >= 2) {
     int d = !strcmp(a, "fault") && !strcmp(b, "rx") ? 0 : !strcmp(b, "tx") ? 1 : -1;
     char kind[32] = "";
     unsigned long ppm = 0;

@@ -1,0 +1,309 @@
+"""SerialStage: the lifting stage, driven over the controller's line protocol.
+
+The rules it follows (firmware/stepper/PROTOCOL.md has the whole contract):
+
+* One command at a time.  Each goes out with a new sequence number and a
+  CRC; the driver waits for the reply carrying that number.  No reply in
+  `reply_timeout`, a reply whose CRC fails, or an `error:1` (the controller
+  saw a damaged line) means: send the very same line again.  The controller
+  answers a repeated (seq, crc) with its remembered reply and does not
+  execute it twice, so resending MOVE is safe.  After `timeout` seconds of
+  trying the driver gives up with a DeviceError: it never hangs.
+* MOVE targets are absolute step counts.  Whatever gets lost, re-issuing a
+  move to the same target after a recovery cannot move the stage twice.
+* Motion is complete when a status report says idle, homed, at the target.
+  Status goes by the real-time '?' byte, which works even mid-line.
+* A reset of the MCU loses the position (homed flag off, fresh_boot on).
+  The driver notices it in the next status or reply, re-homes (unless
+  auto_rehome=False, then it raises) and re-issues the interrupted move.
+  The counters in `.counters` say how often each of these happened.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import serial
+
+from appliance.errors import DeviceError, SettingError
+from appliance.hw import protocol as P
+from appliance.hw.base import Stage, StageStatus
+
+BAUD = 115200
+
+
+class SerialStage(Stage):
+    def __init__(self, port: str, steps_per_mm: float | None = None, timeout: float = 3.0,
+                 reply_timeout: float = 0.15, auto_rehome: bool = True, poll_interval: float = 0.004):
+        self.port_name = port
+        self.timeout = float(timeout)
+        self.reply_timeout = float(reply_timeout)
+        self.auto_rehome = auto_rehome
+        self.poll_interval = poll_interval
+        self.counters = dict(commands=0, resends=0, damaged_lines=0, status_polls=0,
+                             resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0)
+        self._stop_requested = False
+        self._lock = threading.RLock()
+        self._seq = int.from_bytes(__import__("os").urandom(2), "big") % 60000 + 1
+        self._target: int | None = None
+        try:
+            self._ser = serial.serial_for_url(port, BAUD, timeout=self.reply_timeout)
+        except (serial.SerialException, OSError) as e:
+            raise DeviceError(f"stage {port}", f"cannot open the serial port: {e}") from None
+        try:
+            self.info = self.identify()
+            self._settings = {name: self.get_setting(name) for name in
+                              ("steps_per_rev", "lead_um", "soft_min", "soft_max", "max_rate", "accel")}
+        except Exception:
+            self._ser.close()
+            raise
+        if steps_per_mm is None:
+            steps_per_mm = self._settings["steps_per_rev"] * 1000.0 / self._settings["lead_um"]
+        if not steps_per_mm > 0:
+            raise SettingError("steps_per_mm", f"must be positive, got {steps_per_mm}")
+        self.steps_per_mm = float(steps_per_mm)
+
+    # ---- low level -------------------------------------------------------
+    def _where(self) -> str:
+        return f"stage {self.port_name}"
+
+    def _next_seq(self) -> int:
+        self._seq = self._seq % 65535 + 1
+        return self._seq
+
+    def _readline(self, deadline: float):
+        """One intact line before the deadline (None on timeout); damaged lines are counted and skipped."""
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            self._ser.timeout = left
+            raw = self._ser.readline()
+            if not raw:
+                return None
+            if not raw.endswith(b"\n"):
+                continue
+            try:
+                return P.parse_line(raw)
+            except P.ProtocolError:
+                self.counters["damaged_lines"] += 1
+
+    def _note_reset(self):
+        self.counters["resets_seen"] += 1
+
+    def transact(self, verb: str, *args) -> P.Reply:
+        """Send one command until a reply to it arrives; return the reply (ok or error)."""
+        with self._lock:
+            seq = self._next_seq()
+            data = P.encode_command(seq, verb, *args)
+            self.counters["commands"] += 1
+            start = time.monotonic()
+            deadline = start + self.timeout
+            tries = 0
+            while time.monotonic() < deadline:
+                if tries:
+                    self.counters["resends"] += 1
+                tries += 1
+                self._ser.write(data)
+                attempt_end = min(deadline, time.monotonic() + self.reply_timeout)
+                while True:
+                    item = self._readline(attempt_end)
+                    if item is None:
+                        break                               # silence: resend
+                    if isinstance(item, P.Banner):
+                        self._note_reset()
+                        continue
+                    if not isinstance(item, P.Reply):
+                        continue                            # a stray status report
+                    if item.seq == seq:
+                        if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
+                            break                           # our line arrived damaged: resend
+                        return item
+                    if item.seq == 0 and not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
+                        break                               # a damaged line, perhaps ours: resend
+            raise DeviceError(self._where(), f"no valid reply to {verb} after {tries} tries in "
+                                             f"{self.timeout:.1f} s: is the controller connected and powered?")
+
+    def command(self, verb: str, *args) -> str:
+        """transact() and turn an error reply into a DeviceError naming the code."""
+        r = self.transact(verb, *args)
+        if not r.ok:
+            raise DeviceError(self._where(), f"{verb} {' '.join(map(str, args))} refused: "
+                                             f"error:{r.error} {r.error_name} ({r.error_text})")
+        return r.payload
+
+    def raw_status(self) -> P.Status:
+        """A real-time status report ('?'), retried until one arrives intact."""
+        with self._lock:
+            deadline = time.monotonic() + self.timeout
+            while time.monotonic() < deadline:
+                self._ser.reset_input_buffer()               # drop stale reports
+                self._ser.write(P.RT_STATUS)
+                self.counters["status_polls"] += 1
+                attempt_end = min(deadline, time.monotonic() + self.reply_timeout)
+                while True:
+                    item = self._readline(attempt_end)
+                    if item is None:
+                        break
+                    if isinstance(item, P.Banner):
+                        self._note_reset()
+                    elif isinstance(item, P.Status):
+                        return item
+            raise DeviceError(self._where(), f"no status report in {self.timeout:.1f} s")
+
+    # ---- the Stage interface ---------------------------------------------
+    def identify(self) -> dict:
+        try:
+            r = self.transact("ID")
+        except DeviceError:
+            raise DeviceError(self._where(), f"no reply to ID at {BAUD} baud: is this the InkSlice "
+                                             "stepper controller (firmware/stepper)?") from None
+        info = P.parse_identity(r.payload) if r.ok else {}
+        if not r.ok or info.get("name") != "inkslice-stepper":
+            raise DeviceError(self._where(), f"the device does not identify as inkslice-stepper "
+                                             f"(reply {r.payload or r.error_name!r})")
+        if info.get("proto") != P.PROTO_VERSION:
+            raise DeviceError(self._where(), f"firmware speaks protocol {info.get('proto')!r} but this driver "
+                                             f"speaks protocol {P.PROTO_VERSION}: flash the firmware from "
+                                             "firmware/stepper of this checkout")
+        return info
+
+    def get_setting(self, name: str) -> int:
+        if name not in P.SETTINGS:
+            raise SettingError(f"stage setting {name}", "no such setting")
+        return int(self.command("GET", name))
+
+    def set_setting(self, name: str, value: int) -> None:
+        s = P.SETTINGS.get(name)
+        if s is None:
+            raise SettingError(f"stage setting {name}", "no such setting")
+        if int(value) != value or not s.low <= value <= s.high:
+            raise SettingError(f"stage setting {name}", f"{value} is outside {s.low}..{s.high} ({s.text})")
+        self.command("SET", name, int(value))
+        if name in self._settings:
+            self._settings[name] = int(value)
+
+    def status(self) -> StageStatus:
+        st = self.raw_status()
+        flags = dict(st.flags)
+        flags["alarm"] = st.alarm
+        return StageStatus(state=st.state, position_steps=st.position,
+                           position_mm=st.position / self.steps_per_mm, homed=st.homed, flags=flags)
+
+    def _lost(self, st: P.Status) -> bool:
+        """The position is gone through no fault of the bench: the MCU was
+        reset, or line noise forged an emergency-stop byte we never sent."""
+        return bool(st.flags.get("fresh_boot")) or (st.state == "estop" and not self._stop_requested)
+
+    def _wait(self, done, what: str, deadline: float) -> P.Status:
+        """Poll until done(status) is true; alarms raise; a lost position returns the status for recovery."""
+        while True:
+            st = self.raw_status()
+            if self._lost(st):
+                if st.state == "estop":
+                    self.counters["spurious_estops"] += 1
+                return st
+            if st.state in ("alarm", "estop"):
+                raise DeviceError(self._where(), f"{what} stopped: state {st.state}, alarm {st.alarm} "
+                                                 f"({P.ALARMS_BY_NAME[st.alarm].text if st.alarm in P.ALARMS_BY_NAME else ''}); "
+                                                 "home the stage to clear it")
+            if done(st):
+                return st
+            if time.monotonic() > deadline:
+                raise DeviceError(self._where(), f"{what} did not finish in time (state {st.state}, "
+                                                 f"position {st.position} steps)")
+            time.sleep(self.poll_interval)
+
+    def _recover_or_raise(self, what: str):
+        if self._stop_requested:
+            raise DeviceError(self._where(), f"{what} refused: the stage was emergency-stopped; home it first")
+        self._note_reset()
+        if not self.auto_rehome:
+            raise DeviceError(self._where(), f"the controller was reset during {what}: position unknown, home first")
+        self.counters["rehomes"] += 1
+
+    def home(self, timeout: float = 60.0) -> None:
+        with self._lock:
+            deadline = time.monotonic() + timeout
+            while True:
+                r = self.transact("HOME")
+                if not r.ok and r.error == P.ERROR_NUMBER["busy"]:
+                    self._wait(lambda s: s.state not in ("moving", "homing"), "waiting for idle", deadline)
+                    continue
+                if not r.ok:
+                    raise DeviceError(self._where(), f"HOME refused: error:{r.error} {r.error_name}")
+                self._stop_requested = False
+                st = self._wait(lambda s: s.state == "idle" and s.homed, "homing", deadline)
+                if self._lost(st):
+                    self._note_reset()          # reset mid-homing: start over
+                    continue
+                self._target = st.position
+                return
+
+    def move_to(self, position_mm: float, timeout: float = 60.0) -> None:
+        self.move_to_steps(round(position_mm * self.steps_per_mm), timeout)
+
+    def move_by(self, delta_mm: float, timeout: float = 60.0) -> None:
+        base = self._target if self._target is not None else self.raw_status().position
+        self.move_to_steps(base + round(delta_mm * self.steps_per_mm), timeout)
+
+    def move_to_steps(self, target: int, timeout: float = 60.0) -> None:
+        lo, hi = self._settings["soft_min"], self._settings["soft_max"]
+        if not lo <= target <= hi:
+            raise SettingError("stage move", f"{target / self.steps_per_mm:.4f} mm is outside the soft limits "
+                                             f"{lo / self.steps_per_mm:.3f}..{hi / self.steps_per_mm:.3f} mm")
+        with self._lock:
+            deadline = time.monotonic() + timeout
+            issued = 0
+            while True:
+                if time.monotonic() > deadline:
+                    raise DeviceError(self._where(), f"move to {target} steps did not finish in {timeout:.1f} s")
+                r = self.transact("MOVE", target)
+                if not r.ok:
+                    if r.error == P.ERROR_NUMBER["not_homed"]:
+                        self._recover_or_raise("a move")
+                        self.home(max(1.0, deadline - time.monotonic()))
+                        continue
+                    if r.error == P.ERROR_NUMBER["busy"]:
+                        self._wait(lambda s: s.state not in ("moving", "homing"), "waiting for idle", deadline)
+                        continue
+                    raise DeviceError(self._where(), f"MOVE {target} refused: error:{r.error} {r.error_name} "
+                                                     f"({r.error_text})")
+                if issued:
+                    self.counters["reissued_moves"] += 1
+                issued += 1
+                stuck = 0
+                while True:
+                    st = self._wait(lambda s: s.state == "idle", "move", deadline)
+                    if self._lost(st) or not st.homed:
+                        self._recover_or_raise("a move")
+                        self.home(max(1.0, deadline - time.monotonic()))
+                        break                       # re-issue the move from the new home
+                    if st.position == target:
+                        self._target = target
+                        return
+                    stuck += 1                      # idle elsewhere: a stale report, or a lost move
+                    if stuck >= 3:
+                        break
+                    time.sleep(self.poll_interval)
+
+    def stop(self) -> None:
+        """Emergency stop: three Ctrl-X bytes (one may be lost on the wire),
+        outside the command lock so it preempts a move in progress."""
+        self._stop_requested = True
+        self._ser.write(P.RT_ESTOP * 3)
+        deadline = time.monotonic() + self.timeout
+        with self._lock:
+            while time.monotonic() < deadline:
+                st = self.raw_status()
+                if st.state == "estop":
+                    self._target = None
+                    return
+                self._ser.write(P.RT_ESTOP)
+            raise DeviceError(self._where(), "emergency stop not confirmed by the controller")
+
+    def close(self) -> None:
+        try:
+            self._ser.close()
+        except Exception:
+            pass
