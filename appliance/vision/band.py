@@ -1,0 +1,78 @@
+"""The band of tiles where the waterline can be, and 8-bit work on just those tiles.
+
+Between two levels of a scan the waterline moves a few pixels, so after the
+first frame only a band of square tiles around last frame's contour is read:
+the tiles are gathered (each with a one-pixel apron, so a 3x3 median inside a
+tile sees true neighbours) side by side into one short, wide strip, filtered
+and thresholded there in two OpenCV calls, and scattered back into the
+full-frame buffers. The rest of the binary image keeps last frame's labels.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+
+
+class TileGrid:
+    """Square tiles of side `tile` covering the region of interest, one pixel in from its edge."""
+
+    def __init__(self, roi, tile: int):
+        x0, y0, x1, y1 = roi
+        self.tile = tile
+        self.ox, self.oy = x0 + 1, y0 + 1
+        self.nx = max(0, (x1 - x0 - 2) // tile)
+        self.ny = max(0, (y1 - y0 - 2) // tile)
+
+    @property
+    def shape(self):
+        return (self.ny, self.nx)
+
+    @property
+    def covered(self):
+        """(x0, y0, x1, y1) of the pixels the tiles cover."""
+        return (self.ox, self.oy, self.ox + self.nx * self.tile, self.oy + self.ny * self.tile)
+
+    def _offsets(self, margin):
+        # steps of at most one tile, so every tile between the corners is hit
+        return np.append(np.arange(-margin, margin, self.tile, dtype=np.float64), margin)
+
+    def _tiles(self, pts, margin):
+        T = self.tile
+        for d in self._offsets(margin):
+            tx = np.floor((pts[:, 0] + d - self.ox) / T).astype(np.intp)
+            for e in self._offsets(margin):
+                ty = np.floor((pts[:, 1] + e - self.oy) / T).astype(np.intp)
+                yield ty, tx
+
+    def mark(self, mask: np.ndarray, pts: np.ndarray, margin: float):
+        """Set every tile that a square of half-side `margin` around any point touches."""
+        for ty, tx in self._tiles(pts, margin):
+            ok = (tx >= 0) & (tx < self.nx) & (ty >= 0) & (ty < self.ny)
+            mask[ty[ok], tx[ok]] = True
+        return mask
+
+    def all_marked(self, mask: np.ndarray, pts: np.ndarray, margin: float) -> bool:
+        """Do the tiles around every point (within `margin`) all belong to `mask`?"""
+        for ty, tx in self._tiles(pts, margin):
+            ok = (tx >= 0) & (tx < self.nx) & (ty >= 0) & (ty < self.ny)
+            if not ok.all() or not mask[ty, tx].all():
+                return False
+        return True
+
+    def gather(self, image: np.ndarray, ty: np.ndarray, tx: np.ndarray) -> np.ndarray:
+        """Tiles (with a 1-pixel apron) of a 2-D uint8 image side by side: (tile+2, n*(tile+2))."""
+        T, A = self.tile, self.tile + 2
+        s0, s1 = image.strides
+        base = image[self.oy - 1:, self.ox - 1:]
+        view = as_strided(base, shape=(self.ny, self.nx, A, A), strides=(s0 * T, s1 * T, s0, s1),
+                          writeable=False)
+        tiles = view[ty, tx]                                   # (n, A, A), one copy
+        return np.ascontiguousarray(tiles.transpose(1, 0, 2)).reshape(A, -1)
+
+    def scatter(self, strip: np.ndarray, dst: np.ndarray, ty: np.ndarray, tx: np.ndarray):
+        """Write the inner tile x tile of each strip tile back into the full-size `dst`."""
+        T, A = self.tile, self.tile + 2
+        n = len(ty)
+        inner = strip.reshape(A, n, A)[1:-1, :, 1:-1].transpose(1, 0, 2)     # (n, T, T)
+        x0, y0, x1, y1 = self.covered
+        dst[y0:y1, x0:x1].reshape(self.ny, T, self.nx, T)[ty, :, tx, :] = inner

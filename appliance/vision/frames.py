@@ -1,0 +1,132 @@
+"""Frame checks, channel choice and the lighting-adaptive threshold, all 8-bit.
+
+The ink is dark blue: in a colour frame its red channel is nearly black while
+a light part is bright in every channel, so one well-chosen channel separates
+them better than a grey mix and costs only a strided read. The threshold comes
+from a histogram of a decimated view of the tank (a few tens of thousands of
+pixels), not of the whole frame, and saturated bins are left out so that
+specular glare (clipped at 255) cannot drag it upwards.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import ScanError
+
+SATURATED = 250          # bins at or above this are glare or clipped highlights
+
+
+class FrameError(ScanError):
+    """A frame the waterline cannot be read from (wrong size, truncated, ...)."""
+
+
+class NoPartError(FrameError):
+    """No part above the liquid: all ink (or only glare and specks)."""
+
+
+class AllPartError(FrameError):
+    """The part fills the view: no ink, so no waterline."""
+
+
+def check_frame(frame, width: int, height: int, where="frame"):
+    """Raise FrameError unless `frame` is an 8-bit gray/BGR(A) image of the camera size."""
+    if not isinstance(frame, np.ndarray):
+        raise FrameError(where, f"frame must be a numpy array, got {type(frame).__name__}")
+    if frame.dtype != np.uint8:
+        raise FrameError(where, f"frame must be 8-bit, got {frame.dtype}")
+    if frame.ndim not in (2, 3) or (frame.ndim == 3 and frame.shape[2] not in (1, 3, 4)):
+        raise FrameError(where, f"frame must be gray or BGR, got shape {frame.shape}")
+    h, w = frame.shape[:2]
+    if w == width and h < height:
+        raise FrameError(where, f"frame is truncated: {h} of {height} rows")
+    if (w, h) != (width, height):
+        raise FrameError(where, f"frame is {w}x{h}, the camera is {width}x{height}")
+    # A truncated file decoded by a lenient reader ends in rows of exact zeros;
+    # a real sensor never reads 0 in every channel over whole rows (black level).
+    tail = frame[-max(2, height // 64):]
+    if not tail.any():
+        raise FrameError(where, "frame ends in rows of zeros (truncated capture or file?)")
+
+
+def channel_view(frame, channel: int):
+    """A (strided) view of one channel; a gray frame is its own channel."""
+    if frame.ndim == 2:
+        return frame
+    return frame[:, :, min(channel, frame.shape[2] - 1)]
+
+
+@dataclass
+class Split:
+    """Two classes of a histogram: ink below `threshold`, part at or above it."""
+    threshold: int
+    ink: float            # mean grey level of the ink class
+    part: float           # mean grey level of the part class
+    part_fraction: float
+    separability: float   # Otsu's between-class / total variance, 0..1
+
+    @property
+    def contrast(self):
+        return self.part - self.ink
+
+
+def otsu_split(hist: np.ndarray) -> Split:
+    """Otsu's threshold of a 256-bin histogram, saturated bins excluded."""
+    h = np.asarray(hist, np.float64)[:SATURATED]
+    total = h.sum()
+    if total <= 0:
+        return Split(128, 0.0, 255.0, 0.0, 0.0)
+    levels = np.arange(h.size, dtype=np.float64)
+    w0 = np.cumsum(h)
+    m0 = np.cumsum(h * levels)
+    mean = m0[-1] / total
+    w1 = total - w0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        between = (mean * w0 - m0) ** 2 / (w0 * w1)
+    between[~np.isfinite(between)] = 0
+    k = int(np.argmax(between))                    # ink is 0..k, part k+1..
+    var = float(np.dot(h, (levels - mean) ** 2) / total)
+    ink = m0[k] / w0[k] if w0[k] > 0 else 0.0
+    part = (m0[-1] - m0[k]) / w1[k] if w1[k] > 0 else 255.0
+    sep = float(between[k] / var) if var > 0 else 0.0
+    return Split(k + 1, float(ink), float(part), float(w1[k] / total), sep)
+
+
+def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
+    """0/255 part mask: at or above the threshold, and below `glare_cut`.
+
+    Specular glare on the liquid clips at the top of the range while a diffuse
+    part does not; pixels at or above `glare_cut` (256 disables it) count as
+    ink so that a highlight beside the part cannot bulge its waterline.
+    """
+    return cv2.inRange(smooth, split.threshold, glare_cut - 1, out)
+
+
+def glare_cut(hist: np.ndarray, split: Split) -> int:
+    """Where glare starts, or 256 when the part itself is what saturates."""
+    h = np.asarray(hist, np.float64)
+    saturated = h[SATURATED:].sum()
+    part = h[split.threshold:SATURATED].sum()
+    return SATURATED if saturated < 0.2 * part else 256
+
+
+def histogram(img: np.ndarray) -> np.ndarray:
+    return np.bincount(img.ravel(), minlength=256)
+
+
+def best_channel(sample_bgr: np.ndarray, min_contrast: float = 24.0):
+    """The channel whose Otsu split is cleanest on a (decimated) colour sample.
+
+    None when no channel shows two classes (all ink, all part): decide later.
+    """
+    if sample_bgr.ndim == 2:
+        return 0
+    scores = []
+    for c in range(min(3, sample_bgr.shape[2])):
+        s = otsu_split(histogram(sample_bgr[:, :, c]))
+        # separability alone likes a tiny bright class; weigh in the contrast
+        ok = s.separability >= 0.75 and s.contrast >= min_contrast
+        scores.append(s.separability * s.contrast if ok else 0.0)
+    return int(np.argmax(scores)) if max(scores) > 0 else None

@@ -1,0 +1,338 @@
+"""The frame pipeline: one 8-bit frame in, the sub-pixel waterline in mm out.
+
+    frame (BGR/gray, uint8)
+      -> one channel (the one that best separates part from dark-blue ink)
+      -> 3x3 median (salt-and-pepper, sensor noise)        uint8
+      -> threshold from this frame's histogram             uint8 0/255
+      -> contours with topology (outer boundaries, holes)  findContours RETR_CCOMP
+      -> drop specks, glare and islands that cannot be real
+      -> grey-level crossing along each contour normal     Q8 fixed point, band pixels only
+      -> undistort the points (not the frame), homography  mm on the liquid plane
+
+The first frame (and any frame where the waterline jumps) is read over the
+whole region of interest. After that only a band of tiles around the last
+waterline is read, plus a sparse 1-in-8 lattice over the rest that catches a
+new island or a flood; if the new waterline reaches the edge of the band the
+frame is simply read again in full. So a scan costs little more than reading
+the band, and never silently loses a piece of the part.
+
+What a contour that appears in one frame and not the next means. Across a
+scan the part above the liquid is nested: at a lower level it contains what
+stood out at a higher level (the part is seen from above, as a height map).
+So an island that appears while the liquid *rises*, away from everything that
+stood out before, cannot be part: it is glare, a bubble or a floating speck,
+and is dropped. One that appears while the liquid falls is a new peak coming
+out, and is kept if it is big enough to be more than a speck. An island that
+vanishes while the liquid falls means last frame's was spurious; that is
+recorded in `events` (the caller may drop it from the slice stack).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import SettingError
+from .band import TileGrid
+from .frames import (AllPartError, FrameError, NoPartError, Split, best_channel, check_frame,
+                     glare_cut, histogram, otsu_split, part_mask)
+from .subpixel import refine
+from .types import Waterline, signed_area
+
+__all__ = ["WaterlineExtractor", "FrameError", "NoPartError", "AllPartError", "Event"]
+
+
+@dataclass
+class Event:
+    level_mm: float
+    kind: str           # "rejected-island", "vanished-island", "full-frame"
+    detail: str
+
+
+@dataclass
+class _Loop:
+    pixels: np.ndarray      # (N, 2) int32 contour pixels (u, v)
+    hole: bool
+    parent: int             # index of the outer loop a hole belongs to, else -1
+
+
+class WaterlineExtractor:
+    """Stateful per-scan extractor; call `.extract(frame, level_mm)` for every frame.
+
+    Options (all keyword):
+      channel: "auto" (chosen on the first frame), 0, 1 or 2 (B, G, R);
+      roi: (x0, y0, x1, y1) pixels of the tank in the frame (default: the frame);
+      band: read only a band around last frame's waterline (default True);
+      band_px: half-width of that band in pixels (default 16);
+      tile_px: tile side of the band (default 32);
+      min_area_px: smallest island or hole kept, pixels (default 60);
+      min_new_island_px: smallest island kept that is not connected to the
+        part of the previous frame (default 400);
+      min_contrast: smallest part/ink grey-level difference trusted (default 24);
+      half_width: samples each side of the contour along the normal (default 4).
+    """
+
+    def __init__(self, camera, **options):
+        self.camera = camera
+        self.width, self.height = int(camera.width), int(camera.height)
+        opts = dict(channel="auto", roi=None, band=True, band_px=16, tile_px=32, min_area_px=60,
+                    min_new_island_px=400, min_contrast=24, half_width=4)
+        unknown = set(options) - set(opts)
+        if unknown:
+            raise SettingError("vision", f"unknown WaterlineExtractor option(s): {', '.join(sorted(unknown))}")
+        opts.update(options)
+        self.options = opts
+        self.roi = self._check_roi(opts["roi"])
+        self.grid = TileGrid(self.roi, int(opts["tile_px"]))
+        self.channel = None if opts["channel"] == "auto" else int(opts["channel"])
+        self.K = None if camera.K is None else np.asarray(camera.K, np.float64)
+        self.dist = None if camera.dist is None else np.asarray(camera.dist, np.float64)
+        self.H = np.asarray(camera.homography, np.float64)
+        # full-size 8-bit buffers reused for every frame: the median-filtered
+        # channel (sampled by the sub-pixel step) and the binary part mask
+        self._smooth = np.zeros((self.height, self.width), np.uint8)
+        self._binary = np.zeros((self.height, self.width), np.uint8)
+        self._chan = None
+        self.reset()
+
+    # -- state -----------------------------------------------------------------
+
+    def reset(self):
+        """Forget the previous frame (the next one is read in full)."""
+        self.split: Split | None = None
+        self.glare_cut = 256
+        self._band = None                 # (ny, nx) bool tiles to read next frame
+        self._islands = []                # previous frame's outer loops, pixel contours
+        self._level = None
+        self.events: list[Event] = []
+        self.last_mode = None             # "full" or "band": how the last frame was read
+
+    def _check_roi(self, roi):
+        if roi is None:
+            return (0, 0, self.width, self.height)
+        x0, y0, x1, y1 = (int(v) for v in roi)
+        if not (0 <= x0 < x1 <= self.width and 0 <= y0 < y1 <= self.height) or x1 - x0 < 16 or y1 - y0 < 16:
+            raise SettingError("vision.roi", f"{roi!r} is not a rectangle inside the {self.width}x{self.height} frame")
+        return (x0, y0, x1, y1)
+
+    # -- the frame ---------------------------------------------------------------
+
+    def extract(self, frame: np.ndarray, level_mm: float) -> Waterline:
+        where = f"frame at level {level_mm:g} mm"
+        check_frame(frame, self.width, self.height, where)
+        if self.channel is None:
+            self.channel = best_channel(self._sample(frame, 4, all_channels=True), self.options["min_contrast"])
+        loops = None
+        if self._band is not None and self.options["band"]:
+            loops = self._read_band(frame, level_mm, where)
+        if loops is None:
+            loops = self._read_full(frame, level_mm, where)
+        return self._finish(loops, level_mm, where)
+
+    @property
+    def _ch(self):
+        return 2 if self.channel is None else self.channel     # red until a frame shows two classes
+
+    def _sample(self, frame, step, all_channels=False):
+        x0, y0, x1, y1 = self.roi
+        sub = frame[y0 + step // 2:y1:step, x0 + step // 2:x1:step]
+        if sub.ndim == 3 and not all_channels:
+            sub = sub[:, :, min(self._ch, sub.shape[2] - 1)]
+        return np.ascontiguousarray(sub)
+
+    def _plane(self, frame, y0, y1, x0, x1):
+        """One channel of a rectangle, into a reused contiguous buffer."""
+        if frame.ndim == 2:
+            return frame[y0:y1, x0:x1]
+        shape = (y1 - y0, x1 - x0)
+        if self._chan is None or self._chan.shape != shape:
+            self._chan = np.empty(shape, np.uint8)
+        return cv2.extractChannel(frame[y0:y1, x0:x1], min(self._ch, frame.shape[2] - 1), self._chan)
+
+    def _check_split(self, split: Split, where):
+        """Refuse a frame whose histogram has no ink/part split (all ink, all part, blank)."""
+        mc = self.options["min_contrast"]
+        two_classes = split.separability >= 0.75 and split.contrast >= mc and 1e-4 < split.part_fraction < 0.995
+        if two_classes:
+            return
+        mean = split.ink * (1 - split.part_fraction) + split.part * split.part_fraction
+        if not 0 < split.part_fraction < 1:
+            mean = split.part if split.part_fraction >= 1 else split.ink
+        if mean < (0.5 * (self.split.ink + self.split.part) if self.split else 100):
+            raise NoPartError(where, "all ink: no part above the liquid at this level")
+        raise AllPartError(where, "no ink in view: the part fills the frame (or the frame is blank/overexposed)")
+
+    def _read_full(self, frame, level_mm, where):
+        self.last_mode = "full"
+        hist = histogram(self._sample(frame, 4))
+        split = otsu_split(hist)
+        self._check_split(split, where)
+        self.split = split
+        self.glare_cut = glare_cut(hist, split)
+        x0, y0, x1, y1 = self.roi
+        smooth = self._smooth[y0:y1, x0:x1]
+        cv2.medianBlur(self._plane(frame, y0, y1, x0, x1), 3, smooth)
+        part_mask(smooth, split, self.glare_cut, self._binary[y0:y1, x0:x1])
+        read = np.ones(self.grid.shape, bool)
+        return self._loops(self.roi, level_mm, read, full=True)
+
+    def _read_band(self, frame, level_mm, where):
+        """Read the band tiles (+ tiles where the sparse lattice saw a change); None: read in full."""
+        self.last_mode = "band"
+        grid = self.grid
+        read = self._band | self._lattice_changes(frame)
+        ty, tx = np.nonzero(read)
+        if len(ty) == 0:
+            return None
+        strip = grid.gather(frame if frame.ndim == 2 else frame[:, :, min(self._ch, frame.shape[2] - 1)], ty, tx)
+        smooth = cv2.medianBlur(strip, 3)
+        hist = cv2.calcHist([smooth], [0], None, [256], [0, 256]).ravel()
+        split = otsu_split(hist)
+        mc = self.options["min_contrast"]
+        if split.separability < 0.6 or split.contrast < mc:
+            return None                       # the band lost the edge: read everything
+        self.split = split
+        self.glare_cut = glare_cut(hist, split)
+        binary = part_mask(smooth, split, self.glare_cut)
+        grid.scatter(smooth, self._smooth, ty, tx)
+        grid.scatter(binary, self._binary, ty, tx)
+        rows, cols = np.nonzero(read.any(axis=1))[0], np.nonzero(read.any(axis=0))[0]
+        T = grid.tile
+        box = (grid.ox + cols[0] * T, grid.oy + rows[0] * T,
+               grid.ox + (cols[-1] + 1) * T, grid.oy + (rows[-1] + 1) * T)
+        return self._loops(box, level_mm, read, full=False)
+
+    def _lattice_changes(self, frame):
+        """Tiles where a 1-in-8 lattice of the new frame disagrees with the kept binary image."""
+        g = self.grid
+        D = 8
+        x0, y0, x1, y1 = g.covered
+        plane = frame if frame.ndim == 2 else frame[:, :, min(self._ch, frame.shape[2] - 1)]
+        now = cv2.medianBlur(np.ascontiguousarray(plane[y0:y1:D, x0:x1:D]), 3)
+        was = self._binary[y0:y1:D, x0:x1:D]
+        changed = ((now >= self.split.threshold) & (now < self.glare_cut)) != (was > 0)
+        changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
+        changed[:, 0] = changed[:, -1] = False
+        out = np.zeros(g.shape, bool)
+        cy, cx = np.nonzero(changed)
+        if len(cy):
+            pts = np.column_stack([x0 + cx * D, y0 + cy * D]).astype(np.float64)
+            g.mark(out, pts, g.tile)
+        return out
+
+    # -- contours ------------------------------------------------------------------
+
+    def _loops(self, box, level_mm, read, full):
+        x0, y0, x1, y1 = box
+        contours, hierarchy = cv2.findContours(self._binary[y0:y1, x0:x1], cv2.RETR_CCOMP,
+                                               cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
+        loops = self._filter(contours, hierarchy, level_mm)
+        refined = []
+        half = self.options["half_width"]
+        for lp in loops:
+            pts, _ = refine(self._smooth, lp.pixels, self.split.threshold, half, self.options["min_contrast"] / 2)
+            refined.append(pts)
+        if not full:
+            # every point and its sampling reach must lie in tiles read this frame
+            edge = np.vstack([lp.pixels for lp in loops]) if loops else np.zeros((0, 2))
+            if not self.grid.all_marked(read, edge.astype(np.float64), half + 2):
+                self.events.append(Event(level_mm, "full-frame", "waterline left the band"))
+                return None
+        self._remember(loops, level_mm)
+        return [(lp, pts) for lp, pts in zip(loops, refined) if len(pts) >= 8]
+
+    def _filter(self, contours, hierarchy, level_mm):
+        """Outer boundaries and their holes, without specks, glare and impossible islands."""
+        if hierarchy is None:
+            return []
+        hier = hierarchy.reshape(-1, 4)
+        min_area = self.options["min_area_px"]
+        keep = {}
+        loops = []
+        for i, c in enumerate(contours):
+            if hier[i, 3] >= 0 or len(c) < 8:
+                continue
+            area = cv2.contourArea(c)
+            if area < min_area or not self._plausible(c, area, level_mm):
+                continue
+            keep[i] = len(loops)
+            loops.append(_Loop(c.reshape(-1, 2), False, -1))
+        for i, c in enumerate(contours):
+            parent = hier[i, 3]
+            if parent in keep and len(c) >= 8 and cv2.contourArea(c) >= min_area:
+                loops.append(_Loop(c.reshape(-1, 2), True, keep[parent]))
+        return loops
+
+    def _plausible(self, contour, area, level_mm):
+        """Is an island allowed by the previous frame (see the module notes)?"""
+        if self._level is None or not self._islands:
+            return True
+        if self._connected(contour):
+            return True
+        if level_mm > self._level:
+            self.events.append(Event(level_mm, "rejected-island",
+                                     f"{area:.0f} px island appeared while the liquid rose"))
+            return False
+        if area < self.options["min_new_island_px"]:
+            return False
+        return True
+
+    def _connected(self, contour):
+        """Does an island touch or overlap one of the previous frame's islands?"""
+        pts = contour.reshape(-1, 2)
+        reach = self.options["band_px"]
+        x, y, w, h = cv2.boundingRect(contour)
+        for prev in self._islands:
+            px, py, pw, ph = cv2.boundingRect(prev)
+            if x > px + pw + reach or px > x + w + reach or y > py + ph + reach or py > y + h + reach:
+                continue
+            probe = (float(pts[0, 0]), float(pts[0, 1]))
+            if cv2.pointPolygonTest(prev, probe, True) > -reach:
+                return True
+            back = (float(prev[0, 0, 0]), float(prev[0, 0, 1]))
+            if cv2.pointPolygonTest(contour, back, True) > -reach:
+                return True
+        return False
+
+    def _remember(self, loops, level_mm):
+        outer = [lp.pixels.reshape(-1, 1, 2) for lp in loops if not lp.hole]
+        if self._level is not None and level_mm < self._level:
+            for prev in self._islands:
+                if not any(self._overlaps(prev, o) for o in outer):
+                    self.events.append(Event(level_mm, "vanished-island",
+                                             "an island of the previous frame is gone although the liquid fell"))
+        self._islands = outer
+        self._level = level_mm
+        band = np.zeros(self.grid.shape, bool)
+        for lp in loops:
+            self.grid.mark(band, lp.pixels.astype(np.float64), self.options["band_px"])
+        self._band = band
+
+    @staticmethod
+    def _overlaps(prev, cur):
+        p = (float(prev[0, 0, 0]), float(prev[0, 0, 1]))
+        c = (float(cur[0, 0, 0]), float(cur[0, 0, 1]))
+        return cv2.pointPolygonTest(cur, p, False) >= 0 or cv2.pointPolygonTest(prev, c, False) >= 0
+
+    # -- pixels to mm ----------------------------------------------------------------
+
+    def _finish(self, loops, level_mm, where):
+        if not loops:
+            raise NoPartError(where, "no part above the liquid (only ink, glare or specks)")
+        out = []
+        for lp, pts in loops:
+            mm = self.to_mm(pts)
+            area = signed_area(mm)
+            if (area < 0) != lp.hole:          # outer CCW (area > 0), holes CW
+                mm = mm[::-1].copy()
+            out.append(mm)
+        return Waterline(float(level_mm), out)
+
+    def to_mm(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixel positions -> mm on the liquid plane (undistort the points, not the frame)."""
+        uv = np.asarray(uv, np.float64).reshape(-1, 2)
+        if self.K is not None and self.dist is not None and len(uv):
+            uv = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, P=self.K).reshape(-1, 2)
+        h = uv @ self.H[:, :2].T + self.H[:, 2]
+        return h[:, :2] / h[:, 2:3]
