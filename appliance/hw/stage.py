@@ -43,6 +43,7 @@ class SerialStage(Stage):
         self.counters = dict(commands=0, resends=0, damaged_lines=0, status_polls=0,
                              resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0)
         self._stop_requested = False
+        self._ready = False         # the boot banner seen while connecting is no reset
         self._lock = threading.RLock()
         self._seq = int.from_bytes(__import__("os").urandom(2), "big") % 60000 + 1
         self._target: int | None = None
@@ -62,6 +63,7 @@ class SerialStage(Stage):
         if not steps_per_mm > 0:
             raise SettingError("steps_per_mm", f"must be positive, got {steps_per_mm}")
         self.steps_per_mm = float(steps_per_mm)
+        self._ready = True
 
     # ---- low level -------------------------------------------------------
     def _where(self) -> str:
@@ -89,7 +91,8 @@ class SerialStage(Stage):
                 self.counters["damaged_lines"] += 1
 
     def _note_reset(self):
-        self.counters["resets_seen"] += 1
+        if self._ready:
+            self.counters["resets_seen"] += 1
 
     def transact(self, verb: str, *args) -> P.Reply:
         """Send one command until a reply to it arrives; return the reply (ok or error)."""

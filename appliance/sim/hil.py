@@ -61,6 +61,17 @@ class SimulatedBench:
             self._proc.kill()
             raise DeviceError("simulated bench", f"the harness did not start (said {first!r})")
         self.port = first[1]
+        self._wait_for_banner(0)
+
+    def _wait_for_banner(self, tx_before: int, timeout: float = 5.0) -> None:
+        """Return once the firmware has started sending its boot banner: its
+        UART and interrupts are then up, so no byte sent to it is lost."""
+        import time
+        deadline = time.monotonic() + timeout
+        while self.stats()["tx_bytes"] <= tx_before:
+            if time.monotonic() > deadline:
+                raise DeviceError("simulated bench", f"the firmware sent no boot banner within {timeout} s")
+            time.sleep(0.002)
 
     # ---- control channel ----
     def _ctl(self, line: str) -> str:
@@ -103,9 +114,13 @@ class SimulatedBench:
     def clear_faults(self) -> None:
         self.set_faults(0.0)
 
-    def reset_mcu(self) -> None:
-        """Pulse the MCU's reset pin: the firmware reboots, EEPROM survives, the stage stays where it is."""
+    def reset_mcu(self, wait_boot: bool = False) -> None:
+        """Pulse the MCU's reset pin: the firmware reboots, EEPROM survives, the
+        stage stays where it is.  wait_boot: return only once it has booted."""
+        before = self.stats()["tx_bytes"]
         self._ctl("reset")
+        if wait_boot:
+            self._wait_for_banner(before)
 
     def set_speed(self, speed: float) -> None:
         self._ctl(f"speed {speed}")

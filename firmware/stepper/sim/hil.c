@@ -241,6 +241,11 @@ static void mcu_reset(void)
   avr_reset(avr);
   /* simavr leaves MCUSR's reset-cause flags to the caller: this was the reset pin */
   avr_regbit_setto(avr, avr->reset_flags.extrf, 1);
+  /* the reset cleared the port's input latches, but simavr only passes an
+   * IRQ on when its value changes: wiggle both switch lines so the pins
+   * read the switches again (the firmware is not running yet) */
+  avr_raise_irq(irq_lim_bottom, !lim_bottom_level);
+  avr_raise_irq(irq_lim_top, !lim_top_level);
   lim_bottom_level = lim_top_level = -1;
   update_limits();
   resets++;

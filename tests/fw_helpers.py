@@ -1,0 +1,107 @@
+"""Shared pieces of the firmware tests (tests/test_fw_*.py).
+
+The fixtures build everything they need with make (CI starts from a clean
+clone): the AVR ELF and the simavr harness once per session, the cmocka and
+fuzzer binaries in their own tests.  RawLink speaks the line protocol by hand
+so the protocol tests can send exactly the bytes a spec case describes.
+"""
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from appliance.hw import protocol as P
+from appliance.sim.hil import FIRMWARE_DIR, SimulatedBench, build
+
+BUILD = FIRMWARE_DIR / "build"
+
+
+def make(*targets, check=True):
+    r = subprocess.run(["make", "-C", str(FIRMWARE_DIR), *targets], capture_output=True, text=True)
+    if check and r.returncode != 0:
+        raise AssertionError(f"make {' '.join(targets)} failed:\n{r.stdout}\n{r.stderr}")
+    return r
+
+
+@pytest.fixture(scope="session")
+def fw_build():
+    """The firmware ELF and the HIL harness, built once."""
+    return build()
+
+
+@pytest.fixture
+def bench(fw_build):
+    """A fresh simulated bench running flat out, stage 40 mm above the switch."""
+    with SimulatedBench(speed=0) as b:
+        yield b
+
+
+class RawLink:
+    """The protocol by hand: exact lines in, parsed lines out."""
+
+    def __init__(self, port, timeout=1.0):
+        self.ser = serial.Serial(port, 115200, timeout=timeout)
+        self.timeout = timeout
+
+    def send_raw(self, data: bytes):
+        self.ser.write(data)
+
+    def send(self, seq, verb, *args) -> bytes:
+        data = P.encode_command(seq, verb, *args)
+        self.ser.write(data)
+        return data
+
+    def line(self, timeout=None):
+        """The next intact line, parsed (Reply, Status or Banner)."""
+        deadline = time.monotonic() + (timeout or self.timeout)
+        while time.monotonic() < deadline:
+            raw = self.ser.readline()
+            if raw.endswith(b"\n"):
+                try:
+                    return P.parse_line(raw)
+                except P.ProtocolError:
+                    continue      # e.g. the tail of a boot banner sent before the port was opened
+        raise AssertionError("no line from the firmware")
+
+    def reply(self, seq=None, timeout=None):
+        while True:
+            item = self.line(timeout)
+            if isinstance(item, P.Reply) and (seq is None or item.seq == seq):
+                return item
+
+    def ask(self, seq, verb, *args) -> P.Reply:
+        self.send(seq, verb, *args)
+        return self.reply(seq)
+
+    def status(self) -> P.Status:
+        self.ser.reset_input_buffer()
+        self.ser.write(P.RT_STATUS)
+        while True:
+            item = self.line()
+            if isinstance(item, P.Status):
+                return item
+
+    def wait_idle(self, timeout=30.0) -> P.Status:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            st = self.status()
+            if st.state != "moving" and st.state != "homing":
+                return st
+            time.sleep(0.005)
+        raise AssertionError("the controller never became idle")
+
+    def close(self):
+        self.ser.close()
+
+
+@pytest.fixture
+def link(bench):
+    l = RawLink(bench.port)
+    yield l
+    l.close()
+
+
+def err(name):
+    return P.ERROR_NUMBER[name]
