@@ -1,0 +1,36 @@
+"""`inkslice render`: a simulated scan of a known part (the virtual bench)."""
+from __future__ import annotations
+
+import sys
+
+NAME = "render"
+HELP = "render a simulated scan folder of a known part (virtual bench)"
+ORDER = 60
+
+
+def add_arguments(p):
+    from ..sim.render import PRESETS
+    from ..sim.surfaces import SURFACES
+    p.add_argument("surface", choices=sorted(SURFACES), help="known part to scan")
+    p.add_argument("-o", "--output", required=True, metavar="SCAN", help="scan folder to write")
+    p.add_argument("--step", type=float, default=1.0, metavar="MM", help="level step (default 1.0)")
+    p.add_argument("--effects", default="clean", choices=sorted(PRESETS),
+                   help="image effects preset (default clean)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def run(args) -> int:
+    from ..sim.scanrender import render_scan, truth_path
+
+    def progress(i, n):
+        if not args.quiet:
+            print(f"\rframe {i}/{n}", end="", file=sys.stderr, flush=True)
+
+    scan = render_scan(args.surface, args.output, step_mm=args.step, effects=args.effects,
+                       seed=args.seed, progress=progress)
+    if not args.quiet:
+        print(file=sys.stderr)
+    print(f"{len(scan.frames)} frames of {args.surface} in {scan.folder} "
+          f"(truth: {truth_path(scan.folder)})")
+    return 0

@@ -1,0 +1,473 @@
+"""Render one camera frame of the virtual bench.
+
+What the camera sees through each pixel: its ray leaves the camera centre C,
+passes the liquid plane at P0 and, on the way, may meet the part where it
+stands above the ink. The ink is opaque, so anything below the liquid is never
+seen. Three layers:
+
+1. The waterline, anti-aliased analytically. Through the pixel's liquid-plane
+   point P0 the part covers a fraction a = clip(0.5 + sdf / (2 pix), 0, 1) where
+   sdf = Surface.level_sdf(P0, L) (mm) and pix the pixel's size on the plane.
+   The ramp is two pixels wide so that BOTH pixels straddling the waterline lie
+   on it: a row's 50 % crossing, found by linear interpolation between them, is
+   then exactly where sdf = 0. level_sdf is exact (analytic) in a band a few
+   pixels wide around the waterline; elsewhere a grid approximation decides
+   inside/outside.
+2. The part above the liquid, in perspective. The ray reaches height z at
+   P(z) = P0 + (C - P0) (z - L) / H. We sphere-trace it from the part's top
+   down to the liquid on cached grids of the part (footprint distance and top
+   height, bilinear): a step is safe when it keeps the ray out of every tier
+   (horizontal distance to the footprint / the ray's horizontal speed, or the
+   height gap / (1 + max slope * speed)). A ray that meets the part well away
+   from P0 is occluded by it: the part hides the waterline there (walls and
+   rims that face away from the optical axis).
+3. Lambertian shading of the part (normal from the grids), the flat ink with
+   glare and dust on it, then the camera: vignetting, blur, noise, salt and
+   pepper. Lens distortion is in the per-pixel map (each pixel of the
+   distorted image is traced along its true ray).
+
+Everything random is drawn from the `rng` passed in, so a frame is a pure
+function of (surface, level, rig, effects, rng state).
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import asdict, dataclass, replace
+
+import cv2
+import numpy as np
+
+from ..errors import SettingError
+from . import physics
+from . import surfaces as _surfaces
+from .rig import PixelMap, Rig, pixel_map
+
+TOL_Z = 1e-3          # mm: a ray this close to a top has met it
+MAX_TRACE_STEPS = 64
+
+
+@dataclass(frozen=True)
+class Effects:
+    """What degrades the ideal image. All off = the clean, exact image."""
+    blur_sigma_px: float = 0.0       # Gaussian optical blur
+    noise_sigma: float = 0.0         # sensor noise, DN (of 255)
+    salt_pepper: float = 0.0         # fraction of pixels stuck black or white
+    glare_spots: int = 0             # specular highlights on the liquid
+    glare_strength: float = 150.0    # DN added at a highlight's centre
+    vignetting: float = 0.0          # fractional fall-off of light at the image corners
+    lens_distortion: bool = False    # the frames carry the rig's lens distortion
+    dust_specks: int = 0             # dust specks and small bubbles floating on the ink
+    displacement: bool = False       # the ink level drops as the part emerges
+    meniscus: bool = False           # ink climbs the part at the contact line
+    capillary_length_mm: float = physics.CAPILLARY_LENGTH_MM
+    contact_angle_deg: float = 0.0
+    ripple_mm: float = 0.0           # amplitude of the free surface's oscillation just after a move
+    ripple_age_s: float = 0.0        # time since the move stopped (VirtualCamera sets it)
+    ripple_decay_s: float = 0.6
+
+    def to_json(self):
+        return asdict(self)
+
+
+PRESETS = {
+    "clean": Effects(),
+    "optics": Effects(blur_sigma_px=0.7, vignetting=0.25, lens_distortion=True),
+    "realistic": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
+                         vignetting=0.25, lens_distortion=True, dust_specks=30),
+    "physics": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
+                       vignetting=0.25, lens_distortion=True, dust_specks=30,
+                       displacement=True, meniscus=True),
+    "harsh": Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, glare_spots=8,
+                     glare_strength=200.0, vignetting=0.4, lens_distortion=True, dust_specks=120,
+                     displacement=True, meniscus=True, ripple_mm=0.05, ripple_age_s=0.5),
+}
+
+
+def effects_preset(name: str) -> Effects:
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise SettingError("effects", f"unknown effects preset {name!r}; known: {', '.join(PRESETS)}") from None
+
+
+# -- cached grids of a part ---------------------------------------------------
+
+
+@dataclass
+class TierGrid:
+    FT: np.ndarray        # (ny, nx, 2) float32: footprint sdf (mm, > 0 inside), top height
+    N: np.ndarray         # (ny, nx, 4) float32: d top/dx, d top/dy, d sdf/dx, d sdf/dy
+    slope_max: float      # max |grad top| over the footprint (bounds the safe step)
+
+
+@dataclass
+class SurfaceGrid:
+    x0: float
+    y0: float
+    step: float
+    margin: float
+    tiers: list
+    z_max: float
+
+    def coords(self, x, y):
+        return (((x - self.x0) / self.step).astype(np.float32),
+                ((y - self.y0) / self.step).astype(np.float32))
+
+
+@functools.lru_cache(maxsize=12)
+def surface_grid(surface) -> SurfaceGrid:
+    """Sample every tier of a part on a fine grid, once per process."""
+    xmin, xmax, ymin, ymax = surface.bounds
+    extent = max(xmax - xmin, ymax - ymin)
+    step = min(0.1, extent / 800.0)
+    margin = max(2.0, 20 * step)
+    xs = np.arange(xmin - margin, xmax + margin + step, step)
+    ys = np.arange(ymin - margin, ymax + margin + step, step)
+    X, Y = np.meshgrid(xs, ys)
+    tiers = []
+    z_max = 0.0
+    for t in surface.tiers:
+        F = np.asarray(t.footprint(X, Y), float)
+        T = np.broadcast_to(np.asarray(t.top(X, Y), float), X.shape)
+        Ty, Tx = np.gradient(T, step)
+        Fy, Fx = np.gradient(F, step)
+        near = F >= -2 * step
+        slope = float(np.max(np.hypot(Tx, Ty)[near])) if near.any() else 0.0
+        inside = F >= 0
+        if inside.any():
+            z_max = max(z_max, float(np.max(T[inside])))
+        FT = np.dstack([F, T]).astype(np.float32)
+        Nrm = np.dstack([Tx, Ty, Fx, Fy]).astype(np.float32)
+        tiers.append(TierGrid(FT, Nrm, slope * 1.05 + 1e-3))
+    return SurfaceGrid(float(xs[0]), float(ys[0]), step, margin, tiers, z_max)
+
+
+_REMAP_COLS = 4096
+
+
+def _lookup(img, gx, gy, border_value=None):
+    """Bilinear lookup of a (ny, nx, c) grid at fractional grid coordinates.
+
+    cv2.remap is ~10x faster than scipy here; it wants 2-D maps no larger than
+    32767 on a side, so the points are laid out in rows of 4096.
+    """
+    n = gx.size
+    if n == 0:
+        return np.zeros((0, img.shape[2] if img.ndim == 3 else 1), np.float32)
+    rows = -(-n // _REMAP_COLS)
+    pad = rows * _REMAP_COLS - n
+    mx = np.pad(gx, (0, pad)).reshape(rows, _REMAP_COLS)
+    my = np.pad(gy, (0, pad)).reshape(rows, _REMAP_COLS)
+    if border_value is None:
+        out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    else:
+        out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=border_value)
+    return out.reshape(rows * _REMAP_COLS, -1)[:n]
+
+
+def _lookup_FT(grid, tg, x, y):
+    gx, gy = grid.coords(x, y)
+    # Off the grid we are at least `margin` from any footprint: a safe, finite distance.
+    out = _lookup(tg.FT, gx, gy, (-grid.margin, 0.0, 0.0, 0.0))
+    return out[:, 0], out[:, 1]
+
+
+# -- the perspective ray march --------------------------------------------------
+
+
+def trace(grid: SurfaceGrid, px, py, kx, ky, level):
+    """Sphere-trace rays from the camera down to the liquid.
+
+    px, py: where each ray meets the liquid plane (mm); kx, ky: its horizontal
+    travel per mm of height. Returns (hit, z, tier, wall): whether the ray meets
+    the part at or above `level`, the height of the first meeting, the tier
+    index and whether it met a wall (side of a tier) rather than a top.
+    """
+    n = px.size
+    px = px.astype(np.float32, copy=False)
+    py = py.astype(np.float32, copy=False)
+    k = np.hypot(kx, ky).astype(np.float32)
+    kinv = 1.0 / np.maximum(k, 1e-6)
+    hit = np.zeros(n, bool)
+    zout = np.full(n, np.float32(level))
+    tier = np.full(n, -1, np.int16)
+    wall = np.zeros(n, bool)
+    if n == 0 or grid.z_max < level:
+        return hit, zout, tier, wall
+    idx = np.arange(n)
+    z = np.full(n, np.float32(grid.z_max + 2 * TOL_Z))
+    L = np.float32(level)
+    for _ in range(MAX_TRACE_STEPS):
+        if idx.size == 0:
+            break
+        dz = z - L
+        xs = px[idx] + kx[idx] * dz
+        ys = py[idx] + ky[idx] * dz
+        ka, kia = k[idx], kinv[idx]
+        step = np.full(idx.size, np.inf, np.float32)
+        best_T = np.full(idx.size, -np.inf, np.float32)
+        best_t = np.full(idx.size, -1, np.int16)
+        for ti, tg in enumerate(grid.tiers):
+            F, T = _lookup_FT(grid, tg, xs, ys)
+            in_fp = F >= 0
+            inside = in_fp & (z <= T + TOL_Z)
+            s = np.where(in_fp, (z - T) / (1.0 + tg.slope_max * ka), (1e-3 - F) * kia)
+            np.minimum(step, s, out=step)
+            better = inside & (T > best_T)
+            best_t[better] = ti
+            best_T[better] = T[better]
+        met = best_t >= 0
+        if met.any():
+            j = idx[met]
+            hit[j] = True
+            zout[j] = z[met]
+            tier[j] = best_t[met]
+            wall[j] = best_T[met] - z[met] > 2 * TOL_Z
+        z_next = z - np.maximum(step, 0)
+        # A safe step that would take the ray below the liquid proves it meets
+        # nothing above it: the pixel sees ink (or the waterline layer decides).
+        keep = ~met & (z_next > L)
+        stalled = keep & (step < 1e-5)
+        if stalled.any():        # grazing a top: accept the meeting
+            j = idx[stalled]
+            hit[j] = True
+            zout[j] = z[stalled]
+            tier[j] = best_t[stalled].clip(0)
+            keep &= ~stalled
+        idx = idx[keep]
+        z = z_next[keep]
+    if idx.size:                 # out of steps: still above the part, call it met
+        hit[idx] = True
+        zout[idx] = z
+        tier[idx] = 0
+    return hit, zout, tier, wall
+
+
+# -- shading -----------------------------------------------------------------------
+
+
+def _shade(grid, rig, x, y, tier, wall):
+    """Lambertian brightness (0..1) of the part at plane points x, y."""
+    out = np.zeros(x.size, np.float32)
+    light = rig.light_unit().astype(np.float32)
+    for ti, tg in enumerate(grid.tiers):
+        m = tier == ti
+        if not m.any():
+            continue
+        gx, gy = grid.coords(x[m], y[m])
+        d = _lookup(tg.N, gx, gy)
+        w = wall[m]
+        # top: n ~ (-dz/dx, -dz/dy, 1); wall: outward horizontal normal = -grad sdf
+        nx = np.where(w, -d[:, 2], -d[:, 0])
+        ny = np.where(w, -d[:, 3], -d[:, 1])
+        nz = np.where(w, 0.0, 1.0).astype(np.float32)
+        norm = np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-12
+        lam = (nx * light[0] + ny * light[1] + nz * light[2]) / norm
+        out[m] = rig.ambient + rig.diffuse * np.maximum(lam, 0)
+    return out
+
+
+def _approx_sdf(grid, x, y, level):
+    """Grid approximation of level_sdf and of which tier/kind of edge wins."""
+    best = np.full(x.size, -np.inf, np.float32)
+    tier = np.zeros(x.size, np.int16)
+    wall = np.zeros(x.size, bool)
+    slope = np.zeros(x.size, np.float32)
+    gx, gy = grid.coords(x, y)
+    for ti, tg in enumerate(grid.tiers):
+        ft = _lookup(tg.FT, gx, gy, (-grid.margin, 0.0, 0.0, 0.0))
+        d = _lookup(tg.N, gx, gy)
+        g = np.hypot(d[:, 0], d[:, 1])
+        F, T = ft[:, 0], ft[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dtop = np.where(g > 1e-6, (T - level) / g, np.where(T >= level, 1e3, -1e3)).astype(np.float32)
+        v = np.minimum(F, dtop)
+        better = v > best
+        best[better] = v[better]
+        tier[better] = ti
+        wall[better] = (F < dtop)[better]
+        slope[better] = g[better]
+    return best, tier, wall, slope
+
+
+# -- the frame -------------------------------------------------------------------------
+
+
+def liquid_level(surface, level_mm, rig: Rig, effects: Effects) -> float:
+    """The free surface's real level for a nominal `level_mm` (displacement)."""
+    if effects.displacement:
+        return physics.true_level(surface, level_mm, rig.tank_area_mm2)
+    return float(level_mm)
+
+
+def _roi(grid, surface, level, rig, pm: PixelMap):
+    """Pixel rectangle whose rays can meet the part above the liquid or its waterline."""
+    xmin, xmax, ymin, ymax = surface.bounds
+    pad = 1.0
+    box = np.array([[xmin - pad, ymin - pad], [xmax + pad, ymax + pad]])
+    C = rig.centre[:2]
+    t = np.clip((grid.z_max - level) / rig.height_mm, 0.0, 0.9)
+    scaled = C + (box - C) / (1.0 - t)
+    lo = np.minimum(box[0], scaled[0])
+    hi = np.maximum(box[1], scaled[1])
+    s = 8
+    xs, ys = pm.x0[::s, ::s], pm.y0[::s, ::s]
+    m = (xs >= lo[0]) & (xs <= hi[0]) & (ys >= lo[1]) & (ys <= hi[1])
+    if not m.any():
+        return None
+    rows = np.nonzero(m.any(axis=1))[0]
+    cols = np.nonzero(m.any(axis=0))[0]
+    r0 = max(0, (rows[0] - 1) * s)
+    r1 = min(rig.height, (rows[-1] + 2) * s)
+    c0 = max(0, (cols[0] - 1) * s)
+    c1 = min(rig.width, (cols[-1] + 2) * s)
+    return r0, r1, c0, c1
+
+
+def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
+    """Coverage (alpha) and brightness (shade) of the part, full frame, float32."""
+    pm = pm or pixel_map(rig, effects.lens_distortion)
+    grid = surface_grid(surface)
+    H, W = rig.height, rig.width
+    alpha = np.zeros((H, W), np.float32)
+    shade = np.zeros((H, W), np.float32)
+    roi = _roi(grid, surface, level, rig, pm)
+    if roi is None:
+        return alpha, shade
+    r0, r1, c0, c1 = roi
+    sl = (slice(r0, r1), slice(c0, c1))
+    x0 = pm.x0[sl].ravel()
+    y0 = pm.y0[sl].ravel()
+    kx = pm.kx[sl].ravel()
+    ky = pm.ky[sl].ravel()
+    pix = pm.pix[sl].ravel()
+
+    # the local free-surface level: flat, or rippling after a move
+    amp = physics.ripple_amplitude(effects.ripple_mm, effects.ripple_age_s, effects.ripple_decay_s)
+    if amp > 0:
+        lvl = level + physics.ripple_offset(x0, y0, effects.ripple_mm, effects.ripple_age_s,
+                                            effects.ripple_decay_s)
+    else:
+        lvl = np.full(x0.size, np.float32(level))
+
+    # -- layer 1: the waterline (or, with a meniscus, the contact line) ----------------
+    approx, wtier, wwall, wslope = _approx_sdf(grid, x0, y0, lvl)
+    xc, yc, lc = x0, y0, lvl
+    if effects.meniscus:
+        beta = np.where(wwall, np.pi / 2, np.arctan(wslope))
+        h = physics.meniscus_rise(beta, effects.capillary_length_mm,
+                                  math.radians(effects.contact_angle_deg)).astype(np.float32)
+        # the contact line is h above the free surface: seen in perspective from there
+        xc, yc, lc = x0 + kx * h, y0 + ky * h, lvl + h
+        approx, wtier, wwall, wslope = _approx_sdf(grid, xc, yc, lc)
+    band = np.abs(approx) < 4 * pix + 0.02
+    sdf = approx.copy()
+    if band.any():
+        sdf[band] = surface.level_sdf(xc[band].astype(np.float64), yc[band].astype(np.float64),
+                                      lc[band].astype(np.float64))
+    a_wl = np.clip(0.5 + sdf / (2 * pix), 0.0, 1.0).astype(np.float32)
+
+    # -- layer 2: the part above the liquid, in perspective ------------------------------
+    hit, zh, htier, hwall = trace(grid, x0, y0, kx, ky, level)
+    travel = (zh - level) * np.hypot(kx, ky)
+    occluded = hit & (travel > 2 * pix)
+    a = np.where(occluded, np.float32(1.0), a_wl)
+
+    # -- layer 3: shading of what is seen --------------------------------------------------
+    s = np.zeros(x0.size, np.float32)
+    if hit.any():
+        dz = zh[hit] - level
+        s[hit] = _shade(grid, rig, x0[hit] + kx[hit] * dz, y0[hit] + ky[hit] * dz,
+                        htier[hit], hwall[hit])
+    rest = ~hit & (a > 0)
+    if rest.any():
+        s[rest] = _shade(grid, rig, x0[rest], y0[rest], wtier[rest], wwall[rest])
+    alpha[sl] = a.reshape(r1 - r0, c1 - c0)
+    shade[sl] = s.reshape(r1 - r0, c1 - c0)
+    return alpha, shade
+
+
+def _liquid_layer(rig, effects, alpha, rng):
+    """The ink as the camera sees it: flat dark blue, plus glare and dust on it."""
+    H, W = rig.height, rig.width
+    ink = np.empty((H, W, 3), np.float32)
+    ink[:] = np.asarray(rig.ink_bgr, np.float32)
+    for _ in range(effects.glare_spots):
+        # a specular highlight: a soft, slightly elongated blob of the lamp's colour
+        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+        sx, sy = rng.uniform(15, 70), rng.uniform(15, 70)
+        peak = effects.glare_strength * rng.uniform(0.5, 1.0)
+        r = int(3.5 * max(sx, sy))
+        xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
+        ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
+        if xa >= xb or ya >= yb:
+            continue
+        u = np.arange(xa, xb, dtype=np.float32) - cx
+        v = np.arange(ya, yb, dtype=np.float32) - cy
+        blob = peak * np.exp(-0.5 * ((v[:, None] / sy) ** 2 + (u[None, :] / sx) ** 2))
+        ink[ya:yb, xa:xb] += blob[..., None] * np.array([1.0, 0.97, 0.95], np.float32)
+    for _ in range(effects.dust_specks):
+        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+        rad = rng.uniform(0.8, 3.5)
+        r = int(rad + 3)
+        xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
+        ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
+        if xa >= xb or ya >= yb:
+            continue
+        u = np.arange(xa, xb, dtype=np.float32) - cx
+        v = np.arange(ya, yb, dtype=np.float32) - cy
+        d = np.sqrt(v[:, None] ** 2 + u[None, :] ** 2)
+        cover = np.clip(rad + 0.5 - d, 0, 1)[..., None]
+        if rng.uniform() < 0.4:
+            # a bubble: bright rim around a dark centre
+            rim = np.clip(1.0 - np.abs(d - rad * 0.8) / max(rad * 0.35, 0.6), 0, 1)[..., None]
+            colour = np.asarray(rig.ink_bgr, np.float32) * 0.6 + 140.0 * rim
+        else:
+            # dust: grey-brown speck
+            colour = np.array([90, 100, 110], np.float32) * rng.uniform(0.6, 1.4)
+        patch = ink[ya:yb, xa:xb]
+        patch[:] = patch * (1 - cover) + colour * cover
+    return ink
+
+
+def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = None,
+                 rng: np.random.Generator = None) -> np.ndarray:
+    """One 8-bit BGR frame with the ink at nominal level `level_mm` above the base top.
+
+    With effects.displacement the ink's real level is lower than the nominal one
+    (physics.true_level); the truth file of a scan records the real levels.
+    """
+    if isinstance(surface, str):
+        surface = _surfaces.get(surface)
+    rig = rig or Rig()
+    effects = effects or Effects()
+    rng = rng if rng is not None else np.random.default_rng(0)
+    level = liquid_level(surface, level_mm, rig, effects)
+    pm = pixel_map(rig, effects.lens_distortion)
+    alpha, shade = part_layer(surface, level, rig, effects, pm)
+    part = np.asarray(rig.part_bgr, np.float32)
+    a3 = alpha[..., None]
+    liquid_effects = effects.glare_spots > 0 or effects.dust_specks > 0
+    if liquid_effects:
+        ink = _liquid_layer(rig, effects, alpha, rng)
+        img = ink * (1.0 - a3)
+    else:
+        img = (1.0 - a3) * np.asarray(rig.ink_bgr, np.float32)
+    img += (alpha * shade)[..., None] * part
+    if effects.vignetting > 0:
+        img *= (1.0 - effects.vignetting * pm.vignette_r2)[..., None]
+    if effects.blur_sigma_px > 0:
+        img = cv2.GaussianBlur(img, (0, 0), effects.blur_sigma_px)
+    if effects.noise_sigma > 0:
+        img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(effects.noise_sigma)
+    if effects.salt_pepper > 0:
+        n = int(rng.binomial(img.shape[0] * img.shape[1], effects.salt_pepper))
+        if n:
+            r = rng.integers(0, img.shape[0], n)
+            c = rng.integers(0, img.shape[1], n)
+            img[r, c] = np.where(rng.uniform(size=n) < 0.5, 0.0, 255.0)[:, None]
+    np.clip(img, 0, 255, out=img)
+    img += 0.5
+    return img.astype(np.uint8)
