@@ -1,0 +1,232 @@
+"""USB sticks: find a mounted mass-storage stick and copy a file onto it, verified.
+
+Detection reads the mount table (/proc/mounts) rather than talking to udisks
+over D-Bus: the box's udev rule (systemd/) or udisks mounts sticks under the
+usual places (/media/USER/LABEL, /run/media/USER/LABEL, /media/LABEL, /mnt/...),
+and the mount table is the one thing that is there on every image, readable
+without privileges and trivially faked in tests. A mount counts as a stick when
+  - its mount point is under one of the roots above,
+  - it is mounted read-write with a file system a stick uses (vfat, exfat,
+    ntfs, ext*, ...),
+  - and, when sysfs can tell, its block device is removable or on the USB bus.
+
+The copy (copy_verified):
+  1. refuse when the stick has less free space than the file (+1 MiB slack);
+  2. write to a temporary name on the stick, fsync the file;
+  3. rename to the final name (never overwriting: a suffix -1, -2 is added),
+     fsync the folder, so a half-written file never carries the real name;
+  4. drop the file's pages from the page cache (posix_fadvise DONTNEED) and
+     read it back, compare SHA-256 with the source;
+  5. only then report safe_to_remove. After fsync the data is on the device;
+     the operator may pull the stick (unmounting is still kinder to FAT, which
+     the udev rule's `sync`,`flush` options make safe).
+
+copy_latest_gcode() is what the bench's physical button (long press) calls:
+it takes any object with the BenchService's jobs() / job_file() methods.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import shutil
+import threading
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from ..errors import DeviceError
+
+STICK_FS = {"vfat", "msdos", "exfat", "ntfs", "ntfs3", "fuseblk", "ext2", "ext3", "ext4", "f2fs", "btrfs", "xfs", "hfsplus"}
+MOUNT_ROOTS = ("/media", "/run/media", "/mnt")
+SLACK = 1 << 20
+FAT_BAD = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
+
+
+@dataclass
+class Stick:
+    id: str             # stable while plugged: the device name (sda1)
+    mount: str
+    device: str
+    fstype: str
+    label: str
+    free_bytes: int
+
+    def to_json(self):
+        return asdict(self)
+
+
+@dataclass
+class CopyResult:
+    name: str
+    path: str
+    bytes: int
+    sha256: str
+    verified: bool
+    safe_to_remove: bool
+
+    def to_json(self):
+        return asdict(self)
+
+
+def _unescape(field: str) -> str:
+    # /proc/mounts escapes space, tab, newline and backslash as \040 \011 \012 \134
+    return re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), field)
+
+
+def _removable(device: str, sys_root: Path) -> bool | None:
+    """True/False when sysfs knows, None when it cannot tell (no sysfs entry)."""
+    name = os.path.basename(device)
+    if not name:
+        return None
+    block = sys_root / "class" / "block" / name
+    if not block.exists():
+        return None
+    # a partition's removable flag lives on its parent disk
+    disk = block if (block / "removable").exists() else block.resolve().parent
+    try:
+        if (disk / "removable").read_text().strip() == "1":
+            return True
+    except OSError:
+        pass
+    return "/usb" in str(block.resolve())
+
+
+def find_sticks(mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys") -> list[Stick]:
+    try:
+        text = Path(mounts_file).read_text()
+    except OSError:
+        return []
+    roots = tuple(str(Path(r)) for r in roots)
+    out = []
+    for line in text.splitlines():
+        parts = line.split()
+        if len(parts) < 4:
+            continue
+        device, mount, fstype, options = _unescape(parts[0]), _unescape(parts[1]), parts[2], parts[3].split(",")
+        if fstype not in STICK_FS or "rw" not in options:
+            continue
+        if not any(mount == r or mount.startswith(r + "/") for r in roots) or mount in roots:
+            continue
+        if _removable(device, Path(sys_root)) is False:
+            continue
+        if not os.path.isdir(mount) or not os.access(mount, os.W_OK):
+            continue
+        try:
+            free = shutil.disk_usage(mount).free
+        except OSError:
+            continue
+        out.append(Stick(id=os.path.basename(device) or mount, mount=mount, device=device, fstype=fstype,
+                         label=os.path.basename(mount), free_bytes=free))
+    return out
+
+
+def safe_name(name: str) -> str:
+    """A file name every stick file system accepts (FAT is the strictest)."""
+    name = FAT_BAD.sub("_", os.path.basename(name)).strip(" .") or "inkslice.gcode"
+    return name[:200]
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def copy_verified(src, folder, name=None) -> CopyResult:
+    src, folder = Path(src), Path(folder)
+    if not src.is_file():
+        raise DeviceError(src, "the file to copy does not exist")
+    size = src.stat().st_size
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError as e:
+        raise DeviceError(folder, f"the stick is gone ({e.strerror})") from None
+    if free < size + SLACK:
+        raise DeviceError(folder, f"not enough space on the stick ({free} bytes free, {size} needed)")
+    name = safe_name(name or src.name)
+    stem, dot, ext = name.rpartition(".")
+    if not dot:
+        stem, ext = name, ""
+    final = folder / name
+    i = 1
+    while final.exists():           # never overwrite what is on the operator's stick
+        final = folder / (f"{stem}-{i}.{ext}" if dot else f"{stem}-{i}")
+        i += 1
+    tmp = folder / f".{final.name}.inkslice-tmp"
+    want = hashlib.sha256()
+    try:
+        with open(src, "rb") as fin, open(tmp, "wb") as fout:
+            for chunk in iter(lambda: fin.read(1 << 20), b""):
+                want.update(chunk)
+                fout.write(chunk)
+            fout.flush()
+            os.fsync(fout.fileno())
+        os.rename(tmp, final)
+        dfd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError as e:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise DeviceError(folder, f"copy failed: {e.strerror or e}") from None
+    # Read back from the device, not from the page cache we just filled.
+    try:
+        fd = os.open(final, os.O_RDONLY)
+        try:
+            os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+        finally:
+            os.close(fd)
+    except (OSError, AttributeError):
+        pass
+    got = _sha256(final)
+    ok = got == want.hexdigest()
+    if not ok:
+        raise DeviceError(final, "verification failed: the copy on the stick differs from the job's file")
+    return CopyResult(name=final.name, path=str(final), bytes=size, sha256=got, verified=True, safe_to_remove=True)
+
+
+class UsbExporter:
+    """The small interface the web and the button use: sticks() and export()."""
+
+    def __init__(self, mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys", subfolder="inkslice"):
+        self.mounts_file, self.roots, self.sys_root, self.subfolder = mounts_file, roots, sys_root, subfolder
+        self._lock = threading.Lock()       # one copy at a time: sticks are slow and FAT is fragile
+
+    def sticks(self) -> list[Stick]:
+        return find_sticks(self.mounts_file, self.roots, self.sys_root)
+
+    def export(self, src, stick_id=None, name=None) -> CopyResult:
+        sticks = self.sticks()
+        stick = next((s for s in sticks if s.id == stick_id), None) if stick_id else (sticks[0] if sticks else None)
+        if stick is None:
+            raise DeviceError("usb", "no USB stick is plugged in" if not sticks else f"no stick {stick_id!r}")
+        folder = Path(stick.mount) / self.subfolder if self.subfolder else Path(stick.mount)
+        with self._lock:
+            try:
+                folder.mkdir(exist_ok=True)
+            except OSError as e:
+                raise DeviceError(stick.mount, f"cannot write to the stick ({e.strerror})") from None
+            return copy_verified(src, folder, name)
+
+
+GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap")
+
+
+def copy_latest_gcode(service, exporter: UsbExporter) -> CopyResult:
+    """The long-press action: the newest finished job's toolpath.gcode onto the stick."""
+    for job in service.jobs():          # newest first (the facade's order)
+        if job.get("status") != "done":
+            continue
+        outputs = job.get("outputs", [])
+        name = "toolpath.gcode" if "toolpath.gcode" in outputs else next(
+            (n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
+        if name:
+            job_id = job.get("id") or job.get("job_id")
+            return exporter.export(service.job_file(job_id, name), None, f"{job_id}-{name}")
+    raise DeviceError("usb", "no finished job with G-code to copy")

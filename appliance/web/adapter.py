@@ -1,0 +1,102 @@
+"""The one place that knows how the daemon's BenchService is spelled.
+
+The routes call only this wrapper. It passes the agreed facade through
+(state, start_scan, cancel, resume, jobs, job, job_file, latest_frame,
+settings, update_settings) and turns the optional extras into "not offered"
+when a service lacks them, so the UI can hide a feature instead of failing:
+
+  live_heightmap()       the height map so far (dashboard)
+  calibration(), calibrate(step)   guided calibration
+  import_scan(folder)    an uploaded scan folder becomes a job
+
+If the daemon's real API drifts from the facade, the translation goes here
+and nowhere else.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import InkSliceError
+
+ACTIVE = ("homing", "scanning", "processing")
+
+
+class NotOffered(InkSliceError):
+    """The service has no such feature (the route answers 501)."""
+
+
+class WebService:
+    def __init__(self, service):
+        self.inner = service
+
+    # -- the agreed facade -----------------------------------------------------------
+    def state(self) -> dict:
+        st = dict(self.inner.state())
+        st.setdefault("hardware", {})
+        for key in ("job_id", "level_mm", "eta_s", "message"):
+            st.setdefault(key, None)
+        st.setdefault("levels_done", 0)
+        st.setdefault("levels_total", 0)
+        return st
+
+    def start_scan(self, params: dict) -> str:
+        return self.inner.start_scan(params)
+
+    def cancel(self):
+        return self.inner.cancel()
+
+    def resume(self, job_id: str) -> str:
+        return self.inner.resume(job_id)
+
+    def jobs(self) -> list[dict]:
+        return [self._job(j) for j in self.inner.jobs()]
+
+    def job(self, job_id: str) -> dict:
+        return self._job(self.inner.job(job_id))
+
+    def job_file(self, job_id: str, name: str) -> Path:
+        return Path(self.inner.job_file(job_id, name))
+
+    def latest_frame(self):
+        got = self.inner.latest_frame()
+        if got is None:
+            return None
+        data, meta = got
+        return bytes(data), dict(meta or {})
+
+    def settings(self) -> dict:
+        return dict(self.inner.settings())
+
+    def update_settings(self, changes: dict) -> dict:
+        return dict(self.inner.update_settings(changes))
+
+    # -- optional extras ---------------------------------------------------------------
+    def offers(self, name: str) -> bool:
+        return callable(getattr(self.inner, name, None))
+
+    def _optional(self, name, *args):
+        fn = getattr(self.inner, name, None)
+        if not callable(fn):
+            raise NotOffered("bench", f"this bench service does not offer {name}")
+        return fn(*args)
+
+    def live_heightmap(self):
+        return self._optional("live_heightmap")
+
+    def calibration(self):
+        return self._optional("calibration")
+
+    def calibrate(self, step: str):
+        return self._optional("calibrate", step)
+
+    def import_scan(self, folder: Path) -> str:
+        return self._optional("import_scan", folder)
+
+    @staticmethod
+    def _job(j: dict) -> dict:
+        j = dict(j)
+        if "id" not in j and "job_id" in j:
+            j["id"] = j["job_id"]
+        j.setdefault("outputs", [])
+        j.setdefault("status", "unknown")
+        return j

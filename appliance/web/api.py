@@ -1,0 +1,463 @@
+"""The JSON API under /api/, used by the pages and by scripts (see static/openapi.json).
+
+Every route here is behind the login gate in app.py (session cookie + CSRF,
+or an API token), except /api/health and /api/openapi.json.
+Errors are JSON: {"error": "...", "where": "..."} with 400 (bad setting),
+404 (no such job/file), 409 (the bench is busy), 413 (upload too big),
+501 (the bench service lacks the feature).
+"""
+from __future__ import annotations
+
+import io
+import json
+import re
+import secrets
+import shutil
+import stat
+import time
+import zipfile
+from pathlib import Path, PurePosixPath
+
+from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session, stream_with_context
+
+from ..errors import DeviceError, InkSliceError, SettingError
+from .adapter import ACTIVE, NotOffered
+
+bp = Blueprint("api", __name__)
+
+# Job ids and file names are single path components of safe characters: no
+# slashes, no leading dot, no "..". The service checks again (job_file only
+# returns files inside the job's folder); this is the first of two locks.
+JOB_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,79}$")
+FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
+MAX_ZIP_MEMBERS = 20000
+
+
+def ext():
+    return current_app.extensions["inkslice"]
+
+
+def svc():
+    return ext()["service"]
+
+
+def err(message, code, where=None):
+    body = {"error": message}
+    if where:
+        body["where"] = where
+    return jsonify(body), code
+
+
+def _check_job_id(job_id):
+    if not JOB_ID.match(job_id or ""):
+        raise _Refused("bad job id", 400)
+
+
+def _check_name(name):
+    if not FILE_NAME.match(name or "") or ".." in name:
+        raise _Refused("bad file name", 400)
+
+
+class _Refused(Exception):
+    def __init__(self, message, code):
+        super().__init__(message)
+        self.message, self.code = message, code
+
+
+@bp.errorhandler(_Refused)
+def _refused(e):
+    return err(e.message, e.code)
+
+
+@bp.errorhandler(NotOffered)
+def _not_offered(e):
+    return err(e.problem, 501, e.where)
+
+
+@bp.errorhandler(SettingError)
+def _setting(e):
+    return err(e.problem, 400, e.where)
+
+
+@bp.errorhandler(DeviceError)
+def _device(e):
+    return err(e.problem, 409, e.where)
+
+
+@bp.errorhandler(InkSliceError)
+def _inkslice(e):
+    # The facade raises InkSliceError for an unknown job or output name.
+    return err(e.problem, 404, e.where)
+
+
+@bp.errorhandler(KeyError)
+def _missing(e):
+    return err(f"not found: {e}", 404)
+
+
+def _json_body():
+    data = request.get_json(silent=True)
+    if data is None:
+        if request.content_length:
+            raise _Refused("body must be JSON", 400)
+        data = {}
+    if not isinstance(data, dict):
+        raise _Refused("body must be a JSON object", 400)
+    return data
+
+
+# -- public ---------------------------------------------------------------------------
+
+@bp.get("/health")
+def health():
+    return jsonify(ok=True)
+
+
+@bp.get("/openapi.json")
+def openapi():
+    return current_app.send_static_file("openapi.json")
+
+
+# -- state and live view ------------------------------------------------------------------
+
+def state_dict():
+    st = svc().state()
+    st["eta_display_s"] = ext()["eta"].update(st)
+    return st
+
+
+@bp.get("/state")
+def state():
+    return jsonify(state_dict())
+
+
+@bp.get("/events")
+def events():
+    """Server-Sent Events: `state` on every change, `frame` when a new camera frame exists.
+
+    The stream polls the service every 0.25 s (cheap: a dict copy) rather than
+    holding a daemon subscription, and ends after sse_max_s; EventSource then
+    reconnects on its own (`retry: 1000`). Phones that sleep thus never pin a
+    server thread for long.
+    """
+    max_s = float(ext()["config"]["sse_max_s"])
+    service = svc()
+    smoother = ext()["eta"]
+
+    def stream():
+        yield "retry: 1000\n\n"
+        end = time.monotonic() + max_s
+        last_state = last_frame = None
+        beat = time.monotonic()
+        while time.monotonic() < end:
+            st = service.state()
+            st["eta_display_s"] = smoother.update(st)
+            key = json.dumps({k: v for k, v in st.items() if k != "eta_display_s"}, sort_keys=True, default=str)
+            if key != last_state:
+                last_state = key
+                yield f"event: state\ndata: {json.dumps(st, default=str)}\n\n"
+                beat = time.monotonic()
+            fr = service.latest_frame()
+            ftime = fr[1].get("time") if fr else None
+            if ftime != last_frame:
+                last_frame = ftime
+                yield f"event: frame\ndata: {json.dumps(_frame_meta(fr[1]) if fr else None)}\n\n"
+            if time.monotonic() - beat > 15:
+                yield ": keep-alive\n\n"
+                beat = time.monotonic()
+            time.sleep(0.25)
+
+    resp = Response(stream_with_context(stream()), mimetype="text/event-stream")
+    resp.headers["Cache-Control"] = "no-store"
+    resp.headers["X-Accel-Buffering"] = "no"
+    return resp
+
+
+def _frame_meta(meta):
+    return {k: v for k, v in meta.items() if isinstance(v, (int, float, str, type(None)))}
+
+
+@bp.get("/frame.jpg")
+def frame():
+    """The last camera frame (waterline drawn by the daemon). Behind the login like everything."""
+    got = svc().latest_frame()
+    if got is None:
+        return err("no frame yet", 404)
+    data, meta = got
+    etag = f'"{hash((meta.get("time"), len(data))) & 0xFFFFFFFF:08x}"'
+    if request.headers.get("If-None-Match") == etag:
+        return Response(status=304, headers={"ETag": etag})
+    resp = Response(data, mimetype="image/jpeg")
+    resp.headers["ETag"] = etag
+    resp.headers["Cache-Control"] = "no-cache, private"
+    if meta.get("level_mm") is not None:
+        resp.headers["X-Level-mm"] = str(meta["level_mm"])
+    return resp
+
+
+@bp.get("/heightmap/live")
+def live_heightmap():
+    hm = svc().live_heightmap()
+    if hm is None:
+        return err("no height map yet", 404)
+    return jsonify(hm)
+
+
+# -- scans ---------------------------------------------------------------------------
+
+@bp.post("/scan")
+def start_scan():
+    params = _json_body()
+    if svc().state().get("state") in ACTIVE:
+        return err("a scan is running; stop it first", 409, "scan")
+    job_id = svc().start_scan(params)
+    return jsonify(job_id=job_id), 201
+
+
+@bp.post("/scan/cancel")
+def cancel_scan():
+    svc().cancel()
+    return jsonify(state_dict())
+
+
+@bp.post("/jobs/<job_id>/resume")
+def resume(job_id):
+    _check_job_id(job_id)
+    if svc().state().get("state") in ACTIVE:
+        return err("a scan is running; stop it first", 409, "scan")
+    return jsonify(job_id=svc().resume(job_id)), 201
+
+
+@bp.get("/jobs")
+def jobs():
+    return jsonify(jobs=svc().jobs())
+
+
+@bp.get("/jobs/<job_id>")
+def job(job_id):
+    _check_job_id(job_id)
+    return jsonify(svc().job(job_id))
+
+
+def _job_path(job_id, name) -> Path:
+    _check_job_id(job_id)
+    _check_name(name)
+    if name not in svc().job(job_id).get("outputs", []):
+        raise _Refused(f"job {job_id} has no output {name!r}", 404)
+    path = svc().job_file(job_id, name)
+    if not path.is_file():
+        raise _Refused(f"job {job_id} has no output {name!r}", 404)
+    return path
+
+
+TEXT_TYPES = {".gcode", ".nc", ".ngc", ".tap", ".csv", ".md", ".json", ".txt", ".stl"}
+
+
+@bp.get("/jobs/<job_id>/files/<name>")
+def job_file(job_id, name):
+    path = _job_path(job_id, name)
+    inline = request.args.get("inline") == "1" and path.suffix.lower() in (".png", ".jpg", ".jpeg", ".json", ".md",
+                                                                          ".csv", ".gcode", ".nc", ".ngc")
+    mimetype = "text/plain; charset=utf-8" if path.suffix.lower() in TEXT_TYPES - {".json"} else None
+    resp = send_file(path, as_attachment=not inline, download_name=name, mimetype=mimetype, max_age=0)
+    resp.headers["Cache-Control"] = "private, no-cache"
+    return resp
+
+
+@bp.get("/jobs/<job_id>/archive.zip")
+def job_zip(job_id):
+    """Every output of the job in one zip (what the facade exposes of the job's folder)."""
+    _check_job_id(job_id)
+    info = svc().job(job_id)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for name in info.get("outputs", []):
+            if FILE_NAME.match(name):
+                z.write(svc().job_file(job_id, name), f"{job_id}/{name}")
+        z.writestr(f"{job_id}/job.json", json.dumps(info, indent=2, default=str))
+    buf.seek(0)
+    return send_file(buf, mimetype="application/zip", as_attachment=True, download_name=f"inkslice-{job_id}.zip")
+
+
+# -- settings -------------------------------------------------------------------------------
+
+@bp.get("/settings")
+def get_settings():
+    return jsonify(svc().settings())
+
+
+@bp.route("/settings", methods=["PATCH", "POST"])
+def patch_settings():
+    return jsonify(svc().update_settings(_json_body()))
+
+
+# -- calibration -------------------------------------------------------------------------------
+
+@bp.get("/calibration")
+def calibration():
+    return jsonify(svc().calibration())
+
+
+@bp.post("/calibration/<step>")
+def calibrate(step):
+    if not re.match(r"^[a-z_]{1,30}$", step):
+        raise _Refused("bad step name", 400)
+    return jsonify(svc().calibrate(step))
+
+
+# -- USB stick -----------------------------------------------------------------------------------
+
+def _usb():
+    u = ext()["usb"]
+    if u is None:
+        raise NotOffered("usb", "USB export is switched off on this box")
+    return u
+
+
+@bp.get("/usb")
+def usb_sticks():
+    u = ext()["usb"]
+    sticks = [s.to_json() for s in u.sticks()] if u is not None else []
+    return jsonify(available=bool(sticks), sticks=sticks)
+
+
+@bp.post("/jobs/<job_id>/usb")
+def usb_export(job_id):
+    body = _json_body()
+    name = str(body.get("file") or "toolpath.gcode")
+    path = _job_path(job_id, name)
+    u = _usb()
+    sticks = u.sticks()
+    if not sticks:
+        return err("no USB stick is plugged in", 409, "usb")
+    stick_id = body.get("stick") or sticks[0].id
+    result = u.export(path, stick_id, f"{job_id}-{name}")
+    return jsonify(result.to_json())
+
+
+# -- uploads ---------------------------------------------------------------------------------------
+
+@bp.post("/uploads/scan")
+def upload_scan():
+    """A scan folder as a zip (scan.json + frames/...). Validated, unpacked, handed to the daemon.
+
+    Refused, leaving nothing behind: not a zip, a member with an absolute path,
+    `..`, a backslash, a symlink or a device file; more than MAX_ZIP_MEMBERS
+    members; more than max_unzipped_bytes unpacked (counted while unpacking,
+    not trusted from the header); no scan.json, or one whose frames are not in
+    the zip. The size of the upload itself is capped by MAX_CONTENT_LENGTH (413).
+    """
+    if not svc().offers("import_scan"):
+        raise NotOffered("bench", "this bench service cannot import scans")
+    f = request.files.get("file")
+    blob = f.stream if f is not None else io.BytesIO(request.get_data(cache=False))
+    cfg = ext()["config"]
+    uploads = Path(cfg["data_dir"]) / "web" / "uploads"
+    uploads.mkdir(parents=True, exist_ok=True)
+    staging = uploads / f".incoming-{secrets.token_hex(6)}"
+    try:
+        folder = _unpack_scan_zip(blob, staging, int(cfg["max_unzipped_bytes"]))
+        job_id = svc().import_scan(folder)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    final = uploads / job_id
+    staging.rename(final)
+    return jsonify(job_id=job_id), 201
+
+
+def _unpack_scan_zip(blob, staging: Path, max_bytes: int) -> Path:
+    try:
+        z = zipfile.ZipFile(blob)
+    except (zipfile.BadZipFile, OSError, ValueError):
+        raise _Refused("not a zip file", 400) from None
+    with z:
+        infos = z.infolist()
+        if len(infos) > MAX_ZIP_MEMBERS:
+            raise _Refused(f"more than {MAX_ZIP_MEMBERS} files in the zip", 400)
+        names = []
+        for info in infos:
+            n = info.filename
+            p = PurePosixPath(n)
+            mode = info.external_attr >> 16
+            if not n or n.startswith("/") or "\\" in n or ":" in n or ".." in p.parts:
+                raise _Refused(f"unsafe path in zip: {n!r}", 400)
+            if mode and (stat.S_ISLNK(mode) or not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))):
+                raise _Refused(f"not a plain file in zip: {n!r}", 400)
+            if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
+                names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
+        # scan.json at the top, or inside one top-level folder
+        prefix = ""
+        if "scan.json" not in names:
+            tops = {PurePosixPath(n).parts[0] for n in names}
+            if len(tops) == 1 and f"{next(iter(tops))}/scan.json" in names:
+                prefix = next(iter(tops)) + "/"
+            else:
+                raise _Refused("no scan.json in the zip", 400)
+        try:
+            doc = json.loads(z.read(prefix + "scan.json"))
+        except (ValueError, UnicodeDecodeError):
+            raise _Refused("scan.json is not valid JSON", 400) from None
+        frames = doc.get("frames") if isinstance(doc, dict) else None
+        if not isinstance(frames, list) or not frames:
+            raise _Refused("scan.json has no frames", 400)
+        for i, fr in enumerate(frames):
+            if not isinstance(fr, dict) or not isinstance(fr.get("file"), str) or prefix + fr["file"] not in names:
+                raise _Refused(f"scan.json frames[{i}] names a file that is not in the zip", 400)
+        staging.mkdir(parents=True)
+        total = 0
+        for info in infos:
+            if info.is_dir() or info.filename not in names or not info.filename.startswith(prefix):
+                continue
+            dest = staging / info.filename[len(prefix):]
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            with z.open(info) as src, open(dest, "wb") as out:
+                while True:
+                    chunk = src.read(1 << 16)
+                    if not chunk:
+                        break
+                    total += len(chunk)
+                    if total > max_bytes:
+                        raise _Refused(f"the zip unpacks to more than {max_bytes} bytes", 400)
+                    out.write(chunk)
+    return staging
+
+
+# -- the admin's own account -------------------------------------------------------------------------
+
+@bp.post("/password")
+def change_password():
+    if g.auth != "session":
+        return err("change the password from a logged-in browser session", 403)
+    body = _json_body()
+    creds = ext()["creds"]
+    if not creds.check_password(body.get("current", "")):
+        return err("the current password is wrong", 403, "current")
+    try:
+        gen = creds.set_password(body.get("new", ""))
+    except ValueError as e:
+        return err(str(e), 400, "new")
+    session["gen"] = gen            # this session stays in; every other one is logged out
+    return jsonify(ok=True)
+
+
+@bp.get("/tokens")
+def list_tokens():
+    return jsonify(tokens=ext()["creds"].list_tokens())
+
+
+@bp.post("/tokens")
+def create_token():
+    if g.auth != "session":
+        return err("tokens are made from a logged-in browser session", 403)
+    rec, token = ext()["creds"].create_token(_json_body().get("name", ""))
+    return jsonify(token=token, **rec), 201
+
+
+@bp.delete("/tokens/<token_id>")
+def revoke_token(token_id):
+    if not re.match(r"^[0-9a-f]{8}$", token_id):
+        raise _Refused("bad token id", 400)
+    if not ext()["creds"].revoke_token(token_id):
+        return err("no such token", 404)
+    return jsonify(ok=True)

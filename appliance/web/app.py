@@ -1,0 +1,156 @@
+"""The Flask application factory: create_app(service, config).
+
+`service` is the daemon's BenchService (or FakeBenchService); the web room
+calls nothing else (architecture.md). `config` is a plain dict:
+
+  data_dir          folder for the web's own files (web/admin.json, tokens, key); required
+  https             True when served over HTTPS: session cookie gets `Secure` (default False)
+  session_hours     session lifetime (default 12)
+  login_attempts    failed logins allowed per address per window (default 5)
+  login_window_s    that window (default 300)
+  max_upload_bytes  largest accepted upload (default 256 MiB)
+  max_unzipped_bytes largest total size an uploaded zip may expand to (default 1 GiB)
+  usb               an object with sticks() and export(src, stick_id, name) (appliance.hw.usb);
+                    default: UsbExporter() on the real /proc/mounts; None disables USB
+  sse_max_s         how long one Server-Sent-Events connection stays open (default 50 s;
+                    the browser reconnects by itself, and a bounded stream keeps waitress's
+                    threads from being held forever by phones that went to sleep)
+  trusted_proxy     True to take the client address from X-Forwarded-For (default False)
+
+The first-run password, if one was just made, is in app.config["FIRST_RUN_PASSWORD"].
+"""
+from __future__ import annotations
+
+import time
+from datetime import timedelta
+from pathlib import Path
+
+from flask import Flask, g, jsonify, redirect, request, session, url_for
+
+from . import api, auth, pages
+from .adapter import WebService
+from .eta import EtaSmoother
+
+DEFAULTS = {
+    "https": False,
+    "session_hours": 12,
+    "login_attempts": 5,
+    "login_window_s": 300.0,
+    "max_upload_bytes": 256 * 1024 * 1024,
+    "max_unzipped_bytes": 1024 * 1024 * 1024,
+    "sse_max_s": 50.0,
+    "trusted_proxy": False,
+}
+
+# Paths anyone may fetch: the login page itself, the static assets it needs, a
+# liveness probe for systemd/monitoring, and the API's description (not secret).
+PUBLIC_ENDPOINTS = {"pages.login", "static", "api.health", "api.openapi", "pages.api_docs"}
+
+CSP = ("default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
+       "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+
+
+def create_app(service, config: dict | None = None) -> Flask:
+    cfg = dict(DEFAULTS)
+    cfg.update(config or {})
+    if not cfg.get("data_dir"):
+        raise ValueError("config['data_dir'] is required (the web keeps its password hash there)")
+    web_dir = Path(cfg["data_dir"]) / "web"
+
+    app = Flask(__name__)
+    creds = auth.Credentials(web_dir)
+    first_password = creds.ensure_admin()
+    if "usb" not in cfg:
+        from ..hw.usb import UsbExporter      # the stick is a device: its code lives in hw
+        cfg["usb"] = UsbExporter()
+
+    app.config.update(
+        SECRET_KEY=auth.secret_key(web_dir),
+        SESSION_COOKIE_NAME="inkslice_session",
+        SESSION_COOKIE_HTTPONLY=True,
+        SESSION_COOKIE_SAMESITE="Strict",
+        SESSION_COOKIE_SECURE=bool(cfg["https"]),
+        PERMANENT_SESSION_LIFETIME=timedelta(hours=float(cfg["session_hours"])),
+        # Werkzeug refuses bigger bodies with 413 before anything is read into memory or disk.
+        MAX_CONTENT_LENGTH=int(cfg["max_upload_bytes"]),
+        FIRST_RUN_PASSWORD=first_password,
+        INKSLICE=cfg,
+        TEMPLATES_AUTO_RELOAD=False,
+    )
+    app.extensions["inkslice"] = {
+        "service": WebService(service),
+        "creds": creds,
+        "limiter": auth.LoginLimiter(int(cfg["login_attempts"]), float(cfg["login_window_s"])),
+        "eta": EtaSmoother(),
+        "usb": cfg["usb"],
+        "config": cfg,
+    }
+    app.register_blueprint(pages.bp)
+    app.register_blueprint(api.bp, url_prefix="/api")
+
+    @app.before_request
+    def _gate():
+        g.auth = None
+        ext = app.extensions["inkslice"]
+        header = request.headers.get("Authorization", "")
+        if header.startswith("Bearer "):
+            tok = ext["creds"].token_valid(header[7:].strip())
+            if tok is None:
+                return _deny("invalid API token")
+            g.auth = "token"            # no CSRF for a header a browser never sends on its own
+            return None
+        if session.get("user") == "admin" and session.get("gen") == ext["creds"].generation():
+            if session.get("t", 0) + app.permanent_session_lifetime.total_seconds() < time.time():
+                session.clear()
+            else:
+                g.auth = "session"
+        if g.auth is None and request.endpoint not in PUBLIC_ENDPOINTS:
+            return _deny("log in first")
+        if request.method not in auth.SAFE_METHODS:
+            # Even the login form (login CSRF) checks the token.
+            given = request.headers.get("X-CSRF-Token") or request.form.get("csrf_token")
+            if not auth.csrf_ok(session.get("csrf"), given):
+                return _deny("missing or wrong CSRF token", 403)
+        return None
+
+    def _deny(why, code=401):
+        if request.path.startswith("/api/") or request.method not in auth.SAFE_METHODS:
+            return jsonify(error=why), code
+        return redirect(url_for("pages.login", next=request.full_path if request.query_string else request.path))
+
+    @app.after_request
+    def _headers(resp):
+        resp.headers.setdefault("Content-Security-Policy", CSP)
+        resp.headers["X-Content-Type-Options"] = "nosniff"
+        resp.headers["X-Frame-Options"] = "DENY"
+        resp.headers["Referrer-Policy"] = "same-origin"
+        if request.path.startswith("/api/") and "Cache-Control" not in resp.headers:
+            resp.headers["Cache-Control"] = "no-store"
+        return resp
+
+    @app.errorhandler(413)
+    def _too_big(e):
+        return jsonify(error=f"upload larger than {cfg['max_upload_bytes']} bytes"), 413
+
+    @app.context_processor
+    def _ctx():
+        if "csrf" not in session:
+            session["csrf"] = auth.new_csrf()
+        return {"csrf_token": session["csrf"], "logged_in": g.get("auth") is not None,
+                "must_change": g.get("auth") == "session" and creds.must_change()}
+
+    return app
+
+
+def client_address() -> str:
+    cfg = current_config()
+    if cfg.get("trusted_proxy"):
+        fwd = request.headers.get("X-Forwarded-For", "")
+        if fwd:
+            return fwd.split(",")[0].strip()
+    return request.remote_addr or "?"
+
+
+def current_config() -> dict:
+    from flask import current_app
+    return current_app.extensions["inkslice"]["config"]

@@ -1,0 +1,70 @@
+"""Serve the web UI with waitress: what `inkslice serve` and `make demo` call.
+
+    from appliance.web.demo import serve
+    serve(bench_service, data_dir="var/demo")          # blocks; Ctrl-C stops it
+
+prints the URL and, on first run, the admin password (it is also meant for
+the bench's display). start() does the same in a background thread and
+returns a handle with .url, .password and .stop(), for tests and benches.
+"""
+from __future__ import annotations
+
+import threading
+
+from waitress.server import create_server
+
+from .app import create_app
+
+# waitress's default of 4 threads is too few once phones hold Server-Sent-Events
+# streams open (one thread each); 24 threads cost a few MB on the Pi.
+THREADS = 24
+
+
+class Running:
+    def __init__(self, server, app, thread=None):
+        self.server, self.app, self.thread = server, app, thread
+        host, port = server.effective_host, server.effective_port
+        self.url = f"http://{host}:{port}"
+        self.password = app.config["FIRST_RUN_PASSWORD"]
+
+    def stop(self):
+        self.server.close()
+        if self.thread:
+            self.thread.join(timeout=5)
+
+
+def _server(service, data_dir, host, port, threads, config):
+    cfg = {"data_dir": str(data_dir)}
+    cfg.update(config or {})
+    app = create_app(service, cfg)
+    server = create_server(app, host=host, port=port, threads=threads, channel_timeout=60,
+                           connection_limit=200, ident="inkslice")
+    return server, app
+
+
+def banner(run: Running) -> str:
+    lines = [f"InkSlice web UI: {run.url}/"]
+    if run.password:
+        lines.append(f"First-run admin password: {run.password}   (change it under Settings)")
+    else:
+        lines.append("Admin password: already set (forgot it? delete DATA/web/admin.json and restart)")
+    return "\n".join(lines)
+
+
+def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, config=None, out=print):
+    """Run until interrupted."""
+    server, app = _server(service, data_dir, host, port, threads, config)
+    run = Running(server, app)
+    out(banner(run))
+    try:
+        server.run()
+    finally:
+        server.close()
+
+
+def start(service, data_dir, host="127.0.0.1", port=0, threads=THREADS, config=None) -> Running:
+    """Serve in a daemon thread (port 0: any free port); returns at once."""
+    server, app = _server(service, data_dir, host, port, threads, config)
+    t = threading.Thread(target=server.run, daemon=True, name="inkslice-web")
+    t.start()
+    return Running(server, app, t)

@@ -1,0 +1,119 @@
+"""The HTML pages. They are thin: the data comes from /api/ through static/app.js,
+so a page and a script see the same thing."""
+from __future__ import annotations
+
+import time
+from urllib.parse import urlparse
+
+from flask import Blueprint, current_app, g, redirect, render_template, request, session, url_for
+
+from ..errors import InkSliceError
+from . import auth
+from .api import FILE_NAME, JOB_ID
+
+bp = Blueprint("pages", __name__)
+
+
+def _ext():
+    return current_app.extensions["inkslice"]
+
+
+def _safe_next(target):
+    # Only a local path: an open redirect after login is a phishing gift.
+    if not target:
+        return url_for("pages.dashboard")
+    u = urlparse(target)
+    if u.scheme or u.netloc or not target.startswith("/") or target.startswith("//"):
+        return url_for("pages.dashboard")
+    return target
+
+
+@bp.route("/login", methods=["GET", "POST"])
+def login():
+    from .app import client_address
+    error = None
+    code = 200
+    if request.method == "POST":
+        who = client_address()
+        limiter = _ext()["limiter"]
+        wait = limiter.retry_after(who)
+        if wait:
+            error = f"Too many failed attempts. Try again in {int(wait) + 1} s."
+            resp = current_app.make_response((render_template("login.html", error=error), 429))
+            resp.headers["Retry-After"] = str(int(wait) + 1)
+            return resp
+        creds = _ext()["creds"]
+        if creds.check_password(request.form.get("password", "")):
+            limiter.succeeded(who)
+            session.clear()             # a fresh session (and CSRF token) at every login
+            session.permanent = True
+            session.update(user="admin", gen=creds.generation(), t=time.time(), csrf=auth.new_csrf())
+            return redirect(_safe_next(request.form.get("next")))
+        limiter.failed(who)
+        error, code = "Wrong password.", 401
+    return render_template("login.html", error=error, next=request.args.get("next", "")), code
+
+
+@bp.post("/logout")
+def logout():
+    session.clear()
+    return redirect(url_for("pages.login"))
+
+
+@bp.get("/")
+def dashboard():
+    return render_template("dashboard.html", page="dashboard")
+
+
+@bp.get("/jobs")
+def jobs():
+    return render_template("jobs.html", page="jobs", jobs=_ext()["service"].jobs())
+
+
+@bp.get("/jobs/<job_id>")
+def job(job_id):
+    if not JOB_ID.match(job_id):
+        return "bad job id", 400
+    svc = _ext()["service"]
+    info = svc.job(job_id)
+    outputs = [n for n in info.get("outputs", []) if FILE_NAME.match(n)]
+    report = None
+    if "report.json" in outputs:
+        import json
+        try:
+            report = json.loads(svc.job_file(job_id, "report.json").read_text())
+        except (OSError, ValueError):
+            report = None
+    gcode = [n for n in outputs if n.rsplit(".", 1)[-1] in ("gcode", "nc", "ngc", "tap")]
+    images = [n for n in outputs if n.endswith(".png")]
+    return render_template("job.html", page="job", job=info, outputs=outputs, report=report,
+                           gcode=gcode, images=images)
+
+
+@bp.get("/settings")
+def settings():
+    return render_template("settings.html", page="settings", settings=_ext()["service"].settings(),
+                           tokens=_ext()["creds"].list_tokens())
+
+
+@bp.get("/calibration")
+def calibration():
+    svc = _ext()["service"]
+    return render_template("calibration.html", page="calibration", offered=svc.offers("calibration"))
+
+
+@bp.get("/api/docs")
+def api_docs():
+    return render_template("api_docs.html", page="api")
+
+
+@bp.errorhandler(InkSliceError)
+def inkslice_error(e):
+    return render_template("error.html", message=str(e)), 404
+
+
+@bp.app_errorhandler(404)
+def not_found(e):
+    if request.path.startswith("/api/"):
+        return {"error": "not found"}, 404
+    return render_template("error.html", message="Not found."), 404

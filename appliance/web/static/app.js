@@ -1,0 +1,243 @@
+// InkSlice pages: every action goes through the JSON API with the session's CSRF token.
+"use strict";
+(function () {
+  const $ = (s) => document.querySelector(s);
+  const csrf = () => (document.querySelector('meta[name="csrf-token"]') || {}).content || "";
+  const ACTIVE = ["homing", "scanning", "processing"];
+
+  async function api(method, url, body) {
+    const opts = { method, headers: { "X-CSRF-Token": csrf() }, credentials: "same-origin" };
+    if (body instanceof FormData) opts.body = body;
+    else if (body !== undefined) { opts.body = JSON.stringify(body); opts.headers["Content-Type"] = "application/json"; }
+    const r = await fetch(url, opts);
+    let data = null;
+    try { data = await r.json(); } catch (e) { data = null; }
+    if (r.status === 401) { location.href = "/login?next=" + encodeURIComponent(location.pathname); }
+    if (!r.ok) {
+      const msg = data && data.error ? (data.where ? data.where + ": " : "") + data.error : r.status + " " + r.statusText;
+      throw new Error(msg);
+    }
+    return data;
+  }
+  function show(el, on) { if (el) el.classList.toggle("hidden", !on); }
+  function text(sel, t) { const e = $(sel); if (e) e.textContent = t; }
+  function fmtEta(s) {
+    if (s === null || s === undefined) return "";
+    s = Math.max(0, Math.round(s));
+    const m = Math.floor(s / 60), r = s % 60;
+    return "about " + (m ? m + " min " + String(r).padStart(2, "0") + " s" : r + " s") + " left";
+  }
+
+  // ---------------------------------------------------------------- dashboard
+  function dashboard() {
+    const btn = $("#startstop"), img = $("#frame");
+    let current = null, frameSeq = 0, mapBusy = false, lastMapKey = "";
+
+    function render(st) {
+      current = st;
+      const s = st.state || "unknown";
+      const badge = $("#state");
+      badge.textContent = s; badge.className = "badge s-" + s;
+      text("#message", st.message || "");
+      const active = ACTIVE.includes(s);
+      btn.disabled = false;
+      btn.textContent = active ? "Stop scan" : "Start scan";
+      btn.className = "big " + (active ? "stop" : "start");
+      const total = st.levels_total || 0, done = st.levels_done || 0;
+      const p = $("#progress"); p.max = Math.max(1, total); p.value = done;
+      text("#levels", done + " / " + total + " levels");
+      text("#level", st.level_mm !== null && st.level_mm !== undefined ? "level " + Number(st.level_mm).toFixed(2) + " mm" : "");
+      text("#eta", active ? fmtEta(st.eta_display_s) : (s === "done" ? "finished" : ""));
+      const link = $("#job-link");
+      if (st.job_id) { link.querySelector("a").href = "/jobs/" + encodeURIComponent(st.job_id); link.querySelector("a").textContent = (s === "done" ? "Open the report of " : "Job ") + st.job_id; }
+      show(link, !!st.job_id);
+      const hw = $("#hardware"); hw.innerHTML = "";
+      Object.entries(st.hardware || {}).forEach(([k, v]) => {
+        const li = document.createElement("li");
+        li.textContent = k + ": " + v;
+        li.className = v === "ok" ? "ok" : (String(v).startsWith("fault") ? "fault" : "missing");
+        hw.appendChild(li);
+      });
+      const key = st.job_id + ":" + done;
+      if (key !== lastMapKey) { lastMapKey = key; drawLiveMap(); }
+    }
+    function refreshFrame() {
+      // A new object URL per frame: the <img> shows the camera only via an authenticated fetch.
+      fetch("/api/frame.jpg?n=" + (frameSeq++), { credentials: "same-origin" }).then((r) => {
+        if (!r.ok) return null;
+        text("#frame-meta", r.headers.get("X-Level-mm") ? "level " + Number(r.headers.get("X-Level-mm")).toFixed(2) + " mm, waterline in red" : "");
+        return r.blob();
+      }).then((b) => {
+        if (!b) return;
+        const old = img.src; img.src = URL.createObjectURL(b);
+        if (old && old.startsWith("blob:")) URL.revokeObjectURL(old);
+        show(img, true); show($("#noframe"), false);
+      }).catch(() => {});
+    }
+    async function drawLiveMap() {
+      if (mapBusy) return; mapBusy = true;
+      try {
+        const r = await fetch("/api/heightmap/live", { credentials: "same-origin" });
+        if (r.status === 501) { text("#livemap-note", "This bench does not report a partial height map."); return; }
+        if (!r.ok) return;
+        const hm = await r.json();
+        const c = $("#livemap"), ctx = c.getContext("2d");
+        const ny = hm.z.length, nx = ny ? hm.z[0].length : 0;
+        let lo = Infinity, hi = -Infinity;
+        hm.z.forEach((row) => row.forEach((v) => { if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); } }));
+        ctx.fillStyle = "#0d1b2a"; ctx.fillRect(0, 0, c.width, c.height);
+        if (!nx || lo === Infinity) return;
+        const cw = c.width / nx, ch = c.height / ny;
+        for (let j = 0; j < ny; j++) for (let i = 0; i < nx; i++) {
+          const v = hm.z[j][i]; if (v === null) continue;
+          const t = hi > lo ? (v - lo) / (hi - lo) : 1;
+          ctx.fillStyle = "hsl(" + (240 - 200 * t) + ",75%," + (35 + 30 * t) + "%)";
+          ctx.fillRect(i * cw, c.height - (j + 1) * ch, Math.ceil(cw), Math.ceil(ch));
+        }
+        text("#livemap-note", "Heights " + lo.toFixed(1) + " to " + hi.toFixed(1) + " mm (blue low, yellow high).");
+      } finally { mapBusy = false; }
+    }
+    btn.addEventListener("click", async () => {
+      btn.disabled = true; show($("#action-error"), false);
+      try {
+        if (current && ACTIVE.includes(current.state)) await api("POST", "/api/scan/cancel");
+        else await api("POST", "/api/scan", {});
+      } catch (e) { text("#action-error", e.message); show($("#action-error"), true); }
+      poll();
+    });
+    async function poll() { try { render(await api("GET", "/api/state")); } catch (e) {} }
+
+    // Live updates: Server-Sent Events; if the stream breaks, poll every 2 s until it is back.
+    let fallback = null;
+    function startPolling() { if (!fallback) fallback = setInterval(() => { poll(); refreshFrame(); }, 2000); }
+    if (window.EventSource) {
+      const es = new EventSource("/api/events");
+      es.addEventListener("state", (ev) => render(JSON.parse(ev.data)));
+      es.addEventListener("frame", () => refreshFrame());
+      es.onopen = () => { if (fallback) { clearInterval(fallback); fallback = null; } };
+      es.onerror = () => startPolling();
+    } else startPolling();
+    poll(); refreshFrame();
+  }
+
+  // ---------------------------------------------------------------- jobs
+  function jobs() {
+    const f = $("#upload-form");
+    if (!f) return;
+    f.addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      text("#upload-result", "Uploading…");
+      try { const r = await api("POST", "/api/uploads/scan", new FormData(f)); location.href = "/jobs/" + r.job_id; }
+      catch (e) { text("#upload-result", "Refused: " + e.message); }
+    });
+  }
+
+  // ---------------------------------------------------------------- job
+  function job() {
+    const id = $("#job").dataset.job;
+    const resume = $("#resume");
+    if (resume) resume.addEventListener("click", async () => {
+      try { await api("POST", "/api/jobs/" + encodeURIComponent(id) + "/resume"); location.href = "/"; }
+      catch (e) { alert(e.message); }
+    });
+    const usb = $("#usb");
+    if (usb) {
+      let sticks = [];
+      async function check() {
+        try {
+          const r = await api("GET", "/api/usb");
+          sticks = r.sticks;
+          show(usb, r.available);          // the button exists only while a stick is there
+          if (r.available) text("#usb-stick", "Stick: " + (sticks[0].label || sticks[0].mount) + " (" + Math.round(sticks[0].free_bytes / 1e6) + " MB free)");
+        } catch (e) {}
+      }
+      check(); setInterval(check, 3000);
+      $("#usb-copy").addEventListener("click", async () => {
+        const b = $("#usb-copy"); b.disabled = true; text("#usb-result", "Copying and verifying…");
+        try {
+          const r = await api("POST", "/api/jobs/" + encodeURIComponent(id) + "/usb", { file: $("#usb-file").value, stick: sticks.length ? sticks[0].id : null });
+          text("#usb-result", "Copied " + r.name + " (" + r.bytes + " bytes, SHA-256 verified). Safe to remove the stick.");
+        } catch (e) { text("#usb-result", "Not copied: " + e.message); }
+        b.disabled = false;
+      });
+    }
+  }
+
+  // ---------------------------------------------------------------- settings
+  function settings() {
+    const f = $("#settings-form");
+    f.addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      const changes = {};
+      f.querySelectorAll("input[name]").forEach((inp) => {
+        let v = inp.value;
+        if (inp.dataset.kind === "number") v = Number(v);
+        else if (inp.dataset.kind === "bool") v = v === "true" || v === "True";
+        const path = inp.name.split(".");
+        if (path.length === 2) { changes[path[0]] = changes[path[0]] || {}; changes[path[0]][path[1]] = v; }
+        else changes[inp.name] = v;
+      });
+      try { await api("PATCH", "/api/settings", changes); text("#settings-result", "Saved."); }
+      catch (e) { text("#settings-result", "Not saved: " + e.message); }
+    });
+    $("#password-form").addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      const fd = new FormData(ev.target);
+      try { await api("POST", "/api/password", { current: fd.get("current"), new: fd.get("new") }); text("#password-result", "Password changed; other sessions are logged out."); ev.target.reset(); }
+      catch (e) { text("#password-result", "Not changed: " + e.message); }
+    });
+    $("#token-form").addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      try { const r = await api("POST", "/api/tokens", { name: new FormData(ev.target).get("name") }); text("#token-result", "New token (copy it now, it is not shown again): " + r.token); }
+      catch (e) { text("#token-result", e.message); }
+    });
+    document.querySelectorAll("button.revoke").forEach((b) => b.addEventListener("click", async () => {
+      try { await api("DELETE", "/api/tokens/" + b.dataset.id); b.parentElement.remove(); } catch (e) { alert(e.message); }
+    }));
+  }
+
+  // ---------------------------------------------------------------- calibration
+  function calibration() {
+    const list = $("#cal-steps");
+    if (!list) return;
+    let steps = [];
+    function render(c) {
+      steps = c.steps; list.innerHTML = "";
+      c.steps.forEach((s, i) => {
+        const li = document.createElement("li");
+        li.textContent = s.text; li.className = i === c.step ? "now" : (i < c.step ? "done" : "");
+        list.appendChild(li);
+      });
+      $("#cal-do").textContent = "Do step " + (c.step + 1) + ": " + c.steps[c.step].id;
+      $("#cal-do").dataset.step = c.steps[c.step].id;
+      text("#cal-detected", c.detected ? "Detected: " + Object.entries(c.detected).map(([k, v]) => k + " " + v).join(", ") : "");
+    }
+    function frame() {
+      fetch("/api/frame.jpg?c=" + Date.now(), { credentials: "same-origin" }).then((r) => r.ok ? r.blob() : null).then((b) => {
+        if (!b) return; const img = $("#cal-frame"); img.src = URL.createObjectURL(b); show(img, true); show($("#cal-noframe"), false);
+      });
+    }
+    $("#cal-do").addEventListener("click", async () => {
+      try { render(await api("POST", "/api/calibration/" + $("#cal-do").dataset.step)); text("#cal-result", "Done."); frame(); }
+      catch (e) { text("#cal-result", e.message); }
+    });
+    api("GET", "/api/calibration").then(render); frame();
+  }
+
+  // ---------------------------------------------------------------- API docs
+  function apidocs() {
+    fetch("/api/openapi.json").then((r) => r.json()).then((doc) => {
+      const box = $("#api-list");
+      Object.entries(doc.paths).forEach(([path, ops]) => Object.entries(ops).forEach(([m, op]) => {
+        const d = document.createElement("div"); d.className = "api-op";
+        const c = document.createElement("code"); c.className = "m-" + m; c.textContent = m.toUpperCase() + " /api" + path;
+        const p = document.createElement("div"); p.className = "small"; p.textContent = op.summary + (op.description ? " — " + op.description : "");
+        d.appendChild(c); d.appendChild(p); box.appendChild(d);
+      }));
+    });
+  }
+
+  const pages = { dashboard, jobs, job, settings, calibration, api: apidocs };
+  const init = pages[document.body.dataset.page];
+  if (init) init();
+})();
