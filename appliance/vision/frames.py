@@ -112,6 +112,40 @@ def glare_cut(hist: np.ndarray, split: Split) -> int:
     return SATURATED if saturated < 0.2 * part else 256
 
 
+@dataclass
+class Hue:
+    """A second, colour test against glare: part where (other - main) <= cut.
+
+    Glare is the lamp's light added to the ink: it lifts every channel, so in
+    the main (red) channel it can look as bright as a shaded part, but the ink
+    stays much bluer than red and the light grey part does not. The saturating
+    8-bit difference other - main (blue - red) separates them at any glare.
+    """
+    other: int
+    cut: int
+
+
+def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 24.0):
+    """The Hue test learned from a decimated colour sample, or None (gray frames, grey ink)."""
+    if sample_bgr.ndim == 2 or sample_bgr.shape[2] < 3:
+        return None
+    m = sample_bgr[:, :, main].astype(np.int16)
+    part = m >= split.threshold
+    ink = ~part
+    if part.sum() < 16 or ink.sum() < 16:
+        return None
+    best = None
+    for c in range(3):
+        if c == main:
+            continue
+        d = sample_bgr[:, :, c].astype(np.int16) - m
+        d_ink, d_part = float(np.median(d[ink])), float(np.median(d[part]))
+        gap = d_ink - d_part
+        if gap >= min_gap and d_ink > 0 and (best is None or gap > best[0]):
+            best = (gap, c, int(round(max(d_part, 0.0) + 0.5 * (d_ink - max(d_part, 0.0)))))
+    return Hue(best[1], best[2]) if best else None
+
+
 def histogram(img: np.ndarray) -> np.ndarray:
     return np.bincount(img.ravel(), minlength=256)
 

@@ -35,8 +35,8 @@ import numpy as np
 
 from ..errors import SettingError
 from .band import TileGrid
-from .frames import (AllPartError, FrameError, NoPartError, Split, best_channel, check_frame,
-                     glare_cut, histogram, otsu_split, part_mask)
+from .frames import (AllPartError, FrameError, Hue, NoPartError, Split, best_channel, check_frame,
+                     glare_cut, histogram, hue_split, otsu_split, part_mask)
 from .subpixel import refine
 from .types import Waterline, signed_area
 
@@ -93,7 +93,9 @@ class WaterlineExtractor:
         # channel (sampled by the sub-pixel step) and the binary part mask
         self._smooth = np.zeros((self.height, self.width), np.uint8)
         self._binary = np.zeros((self.height, self.width), np.uint8)
-        self._chan = None
+        self._bufs = {}
+        self.hue: Hue | None = None       # colour test against glare, learned on the first frame
+        self._hue_known = False
         self.reset()
 
     # -- state -----------------------------------------------------------------
@@ -141,14 +143,27 @@ class WaterlineExtractor:
             sub = sub[:, :, min(self._ch, sub.shape[2] - 1)]
         return np.ascontiguousarray(sub)
 
-    def _plane(self, frame, y0, y1, x0, x1):
+    def _buf(self, name, shape):
+        b = self._bufs.get(name)
+        if b is None or b.shape != shape:
+            b = self._bufs[name] = np.empty(shape, np.uint8)
+        return b
+
+    def _plane(self, frame, y0, y1, x0, x1, channel=None, name="main"):
         """One channel of a rectangle, into a reused contiguous buffer."""
         if frame.ndim == 2:
             return frame[y0:y1, x0:x1]
-        shape = (y1 - y0, x1 - x0)
-        if self._chan is None or self._chan.shape != shape:
-            self._chan = np.empty(shape, np.uint8)
-        return cv2.extractChannel(frame[y0:y1, x0:x1], min(self._ch, frame.shape[2] - 1), self._chan)
+        c = self._ch if channel is None else channel
+        return cv2.extractChannel(frame[y0:y1, x0:x1], min(c, frame.shape[2] - 1),
+                                  self._buf(name, (y1 - y0, x1 - x0)))
+
+    def _apply_hue(self, main, other, binary, name):
+        """binary &= (other - main <= cut): glare (bluish, bright) is ink, not part."""
+        if self.hue is None:
+            return binary
+        diff = cv2.subtract(other, main, dst=self._buf(name, main.shape))
+        cv2.threshold(diff, self.hue.cut, 255, cv2.THRESH_BINARY_INV, diff)
+        return cv2.bitwise_and(binary, diff, binary)
 
     def _check_split(self, split: Split, where):
         """Refuse a frame whose histogram has no ink/part split (all ink, all part, blank)."""
@@ -170,10 +185,17 @@ class WaterlineExtractor:
         self._check_split(split, where)
         self.split = split
         self.glare_cut = glare_cut(hist, split)
+        if not self._hue_known and frame.ndim == 3 and self.channel is not None:
+            self.hue = hue_split(self._sample(frame, 4, all_channels=True), self.channel, split)
+            self._hue_known = True
         x0, y0, x1, y1 = self.roi
         smooth = self._smooth[y0:y1, x0:x1]
-        cv2.medianBlur(self._plane(frame, y0, y1, x0, x1), 3, smooth)
-        part_mask(smooth, split, self.glare_cut, self._binary[y0:y1, x0:x1])
+        main = self._plane(frame, y0, y1, x0, x1)
+        cv2.medianBlur(main, 3, smooth)
+        binary = part_mask(smooth, split, self.glare_cut, self._binary[y0:y1, x0:x1])
+        if self.hue is not None:
+            other = self._plane(frame, y0, y1, x0, x1, self.hue.other, "other")
+            self._apply_hue(main, other, binary, "diff")
         read = np.ones(self.grid.shape, bool)
         return self._loops(self.roi, level_mm, read, full=True)
 
@@ -185,7 +207,7 @@ class WaterlineExtractor:
         ty, tx = np.nonzero(read)
         if len(ty) == 0:
             return None
-        strip = grid.gather(frame if frame.ndim == 2 else frame[:, :, min(self._ch, frame.shape[2] - 1)], ty, tx)
+        strip = grid.gather(self._channel_view(frame, self._ch), ty, tx)
         smooth = cv2.medianBlur(strip, 3)
         hist = cv2.calcHist([smooth], [0], None, [256], [0, 256]).ravel()
         split = otsu_split(hist)
@@ -195,6 +217,10 @@ class WaterlineExtractor:
         self.split = split
         self.glare_cut = glare_cut(hist, split)
         binary = part_mask(smooth, split, self.glare_cut)
+        if self.hue is not None:
+            other = grid.gather(self._channel_view(frame, self.hue.other), ty, tx)
+            cv2.bitwise_and(binary, cv2.threshold(cv2.subtract(other, strip), self.hue.cut, 255,
+                                                  cv2.THRESH_BINARY_INV)[1], binary)
         grid.scatter(smooth, self._smooth, ty, tx)
         grid.scatter(binary, self._binary, ty, tx)
         rows, cols = np.nonzero(read.any(axis=1))[0], np.nonzero(read.any(axis=0))[0]
@@ -203,15 +229,22 @@ class WaterlineExtractor:
                grid.ox + (cols[-1] + 1) * T, grid.oy + (rows[-1] + 1) * T)
         return self._loops(box, level_mm, read, full=False)
 
+    @staticmethod
+    def _channel_view(frame, c):
+        return frame if frame.ndim == 2 else frame[:, :, min(c, frame.shape[2] - 1)]
+
     def _lattice_changes(self, frame):
         """Tiles where a 1-in-8 lattice of the new frame disagrees with the kept binary image."""
         g = self.grid
         D = 8
         x0, y0, x1, y1 = g.covered
-        plane = frame if frame.ndim == 2 else frame[:, :, min(self._ch, frame.shape[2] - 1)]
-        now = cv2.medianBlur(np.ascontiguousarray(plane[y0:y1:D, x0:x1:D]), 3)
-        was = self._binary[y0:y1:D, x0:x1:D]
-        changed = ((now >= self.split.threshold) & (now < self.glare_cut)) != (was > 0)
+        raw = np.ascontiguousarray(self._channel_view(frame, self._ch)[y0:y1:D, x0:x1:D])
+        now = cv2.medianBlur(raw, 3)
+        part = (now >= self.split.threshold) & (now < self.glare_cut)
+        if self.hue is not None:
+            other = self._channel_view(frame, self.hue.other)[y0:y1:D, x0:x1:D]
+            part &= cv2.subtract(np.ascontiguousarray(other), raw) <= self.hue.cut
+        changed = part != (self._binary[y0:y1:D, x0:x1:D] > 0)
         changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
         changed[:, 0] = changed[:, -1] = False
         out = np.zeros(g.shape, bool)
