@@ -208,6 +208,7 @@ def trace(grid: SurfaceGrid, px, py, kx, ky, level):
         ka, kia = k[idx], kinv[idx]
         step = np.full(idx.size, np.inf, np.float32)
         best_T = np.full(idx.size, -np.inf, np.float32)
+        best_F = np.zeros(idx.size, np.float32)
         best_t = np.full(idx.size, -1, np.int16)
         for ti, tg in enumerate(grid.tiers):
             F, T = _lookup_FT(grid, tg, xs, ys)
@@ -218,13 +219,16 @@ def trace(grid: SurfaceGrid, px, py, kx, ky, level):
             better = inside & (T > best_T)
             best_t[better] = ti
             best_T[better] = T[better]
+            best_F[better] = F[better]
         met = best_t >= 0
         if met.any():
             j = idx[met]
             hit[j] = True
             zout[j] = z[met]
             tier[j] = best_t[met]
-            wall[j] = best_T[met] - z[met] > 2 * TOL_Z
+            # a wall: the ray has just crossed the footprint's edge below the top
+            # (not a top overshot by the grid's interpolation)
+            wall[j] = (best_T[met] - z[met] > 2 * TOL_Z) & (best_F[met] < 0.02)
         z_next = z - np.maximum(step, 0)
         # A safe step that would take the ray below the liquid proves it meets
         # nothing above it: the pixel sees ink (or the waterline layer decides).
@@ -267,6 +271,65 @@ def _shade(grid, rig, x, y, tier, wall):
         lam = (nx * light[0] + ny * light[1] + nz * light[2]) / norm
         out[m] = rig.ambient + rig.diffuse * np.maximum(lam, 0)
     return out
+
+
+def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall):
+    """Analytic coverage of pixels next to a silhouette (a rim hiding what is behind).
+
+    For each tier, find where the pixel's ray crosses the tier's top (Newton on
+    top(P(z)) = z, exact top function) and take the footprint's signed distance
+    there: the rim's silhouette is where it is zero, and, like the waterline, the
+    coverage is a 2 px linear ramp of it (pixel size scaled to that height). The
+    tiers are composited front to back over the waterline layer.
+    """
+    n = x0.size
+    x0d, y0d = x0.astype(np.float64), y0.astype(np.float64)
+    kxd, kyd = kx.astype(np.float64), ky.astype(np.float64)
+    k = np.hypot(kxd, kyd)
+    Hc = rig.height_mm
+    cover, zs, shades = [], [], []
+    eps = 1e-4
+    for ti, t in enumerate(surface.tiers):
+        top = lambda x, y, t=t: np.broadcast_to(np.asarray(t.top(x, y), float), x.shape)
+        z = top(x0d, y0d).copy()
+        for _ in range(8):
+            px, py = x0d + kxd * (z - level), y0d + kyd * (z - level)
+            g = top(px, py) - z
+            dgx = (top(px + eps, py) - top(px - eps, py)) / (2 * eps)
+            dgy = (top(px, py + eps) - top(px, py - eps)) / (2 * eps)
+            dg = dgx * kxd + dgy * kyd - 1.0
+            dg = np.where(np.abs(dg) < 0.05, -0.05, dg)    # grazing: damp the step
+            z = z - np.clip(g / dg, -5.0, 5.0)
+        px, py = x0d + kxd * (z - level), y0d + kyd * (z - level)
+        F = np.asarray(t.footprint(px, py), float)
+        pz = pix * (Hc - (z - level)) / Hc
+        c = np.clip(0.5 + F / (2 * pz), 0.0, 1.0)
+        # only a rim standing clear of its own waterline hides anything; nearer the
+        # liquid the waterline layer already draws the edge
+        c = np.where((z - level) * k > 2 * pix, c, 0.0)
+        cover.append(c)
+        zs.append(z)
+        sh = np.zeros(n, np.float32)
+        m = c > 0
+        if m.any():
+            sh[m] = _shade(grid, rig, px[m].astype(np.float32), py[m].astype(np.float32),
+                           np.full(int(m.sum()), ti, np.int16), np.zeros(int(m.sum()), bool))
+        shades.append(sh)
+    cover, zs, shades = np.array(cover), np.array(zs), np.array(shades)
+    order = np.argsort(-zs, axis=0)
+    remaining = np.ones(n)
+    colour = np.zeros(n)
+    cols = np.arange(n)
+    for rank in range(len(surface.tiers)):
+        ti = order[rank]
+        take = remaining * cover[ti, cols]
+        colour += take * shades[ti, cols]
+        remaining -= take
+    s_wl = _shade(grid, rig, x0, y0, wtier, wwall)
+    colour += remaining * a_wl * s_wl
+    alpha = 1.0 - remaining * (1.0 - a_wl)
+    shade = np.where(alpha > 1e-6, colour / np.maximum(alpha, 1e-6), s_wl)
+    return alpha.astype(np.float32), shade.astype(np.float32)
 
 
 def _approx_sdf(grid, x, y, level):
@@ -384,6 +447,25 @@ def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
     rest = ~hit & (a > 0)
     if rest.any():
         s[rest] = _shade(grid, rig, x0[rest], y0[rest], wtier[rest], wwall[rest])
+
+    # -- silhouettes: anti-alias where the part hides what lies behind it ---------------
+    h, w = r1 - r0, c1 - c0
+    label = np.where(occluded, htier, -1).astype(np.int16).reshape(h, w)
+    change = np.zeros((h, w), bool)
+    dh = label[:, 1:] != label[:, :-1]
+    change[:, 1:] |= dh
+    change[:, :-1] |= dh
+    dv = label[1:, :] != label[:-1, :]
+    change[1:, :] |= dv
+    change[:-1, :] |= dv
+    if change.any():
+        # the ramp is 2 px wide: every pixel within 1 px of a silhouette is on it
+        edge = cv2.dilate(change.view(np.uint8), np.ones((3, 3), np.uint8)).astype(bool).ravel()
+        b = np.nonzero(edge)[0]
+        ab, sb = _silhouette(surface, grid, rig, level, x0[b], y0[b], kx[b], ky[b], pix[b],
+                             a_wl[b], wtier[b], wwall[b])
+        a[b] = ab
+        s[b] = sb
     alpha[sl] = a.reshape(r1 - r0, c1 - c0)
     shade[sl] = s.reshape(r1 - r0, c1 - c0)
     return alpha, shade

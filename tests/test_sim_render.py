@@ -1,0 +1,213 @@
+"""The virtual bench's renderer: the waterline where the analytic level curve says,
+perspective as a pinhole camera says, and the effects deterministic."""
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from appliance.sim import surfaces as S
+from appliance.sim.render import Effects, PRESETS, part_layer, render_frame, surface_grid, trace
+from appliance.sim.rig import Rig, pixel_map
+
+RIG = Rig()
+
+
+def _crossings(gray, axis, reach=6, min_cos=0.5):
+    """50 % crossings between ink and part along rows (axis=1) or columns (axis=0).
+
+    The mid level is taken locally from the pixels 4 px either side, so the
+    part's shading does not bias it; both pixels straddling the crossing must
+    lie strictly inside the ramp (no clipped neighbour).
+    """
+    g = gray if axis == 1 else gray.T
+    pts = []
+    ink = float(np.median(g[:, :20]))
+    for r in range(0, g.shape[0], 3):
+        row = g[r]
+        brighter = row > ink + 20
+        edges = np.nonzero(brighter[1:] != brighter[:-1])[0]
+        for j in edges:
+            if j < reach + 2 or j > row.size - reach - 3:
+                continue
+            lo, hi = sorted((row[j - reach], row[j + reach + 1]))
+            if hi - lo < 60:
+                continue
+            mid = 0.5 * (lo + hi)
+            for i in range(j - 2, j + 3):
+                a, b = row[i], row[i + 1]
+                if (a - mid) * (b - mid) <= 0 and a != b:
+                    if min(a, b) <= lo + 1 or max(a, b) >= hi - 1:
+                        break          # a clipped neighbour: not a clean ramp
+                    if abs(b - a) < 0.5 * min_cos * (hi - lo):
+                        break          # grazing: too far off the normal
+                    t = (mid - a) / (b - a)
+                    pts.append((i + t, r) if axis == 1 else (r, i + t))
+                    break
+    return np.array(pts, float).reshape(-1, 2)
+
+
+def _gray(img):
+    return img.astype(np.float64).mean(axis=2)
+
+
+def _to_plane(rig, uv, undistort=False):
+    if undistort:
+        uv = cv2.undistortPoints(uv.reshape(-1, 1, 2), rig.K(), rig.dist_coeffs(), None, None, rig.K(),
+                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+                                     ).reshape(-1, 2)
+    Hm = rig.homography()
+    p = np.column_stack([uv, np.ones(len(uv))]) @ Hm.T
+    return p[:, :2] / p[:, 2:]
+
+
+def _waterline_errors(surface, level, effects, undistort=False, keep=None):
+    img = render_frame(surface, level, RIG, effects)
+    gray = _gray(img)
+    uv = np.vstack([_crossings(gray, 1), _crossings(gray, 0)])
+    xy = _to_plane(RIG, uv, undistort)
+    if keep is not None:
+        m = keep(xy)
+        uv, xy = uv[m], xy[m]
+    sdf = surface.level_sdf(xy[:, 0], xy[:, 1], level)
+    pix = float(np.median(pixel_map(RIG, False).pix))
+    return np.abs(sdf), np.abs(sdf) / pix, xy
+
+
+def test_homography_orientation_is_a_top_view():
+    Hm = RIG.homography()
+
+    def xy(u, v):
+        p = Hm @ [u, v, 1.0]
+        return p[:2] / p[2]
+    c = xy(1024, 768)
+    assert xy(1124, 768)[0] > c[0] + 7          # u right -> x right
+    assert xy(1024, 668)[1] > c[1] + 7          # v up the image -> y away from the viewer
+    assert 0.07 <= np.linalg.norm(xy(1025, 768) - c) <= 0.08
+    # not a pure scale: the stand is tilted
+    assert abs(Hm[2, 0]) + abs(Hm[2, 1]) > 1e-7
+    # covers a 100 x 100 mm part with margin
+    for u, v in [(0, 0), (2047, 0), (0, 1535), (2047, 1535)]:
+        x, y = xy(u, v)
+        assert (x < -5 or x > 105) and (y < -5 or y > 105)
+
+
+def test_camera_model_round_trip():
+    cm = RIG.camera_model()
+    P = np.array([[10.0, 20.0, 0.0], [70.0, 90.0, 0.0]])
+    uv = RIG.project(P)
+    p = np.column_stack([uv, np.ones(2)]) @ cm.homography.T
+    assert np.allclose(p[:, :2] / p[:, 2:], P[:, :2], atol=1e-9)
+    assert cm.height_mm == RIG.height_mm and cm.dist.shape == (5,)
+    # distorted projection agrees with OpenCV's
+    R = RIG.rotation()
+    rvec, _ = cv2.Rodrigues(R)
+    uvd, _ = cv2.projectPoints(P, rvec, -R @ RIG.centre, RIG.K(), RIG.dist_coeffs())
+    assert np.allclose(uvd.reshape(-1, 2), RIG.project(P, distorted=True), atol=1e-9)
+
+
+def _on_the_top(surface, margin=0.5):
+    """Points well inside the footprint: there the waterline runs on the sculptured
+    top. At the footprint's edge it runs on a wall, which faces away from the camera
+    and is hidden by the rim (see the ring test)."""
+    def keep(xy):
+        fp = np.max([t.footprint(xy[:, 0], xy[:, 1]) for t in surface.tiers], axis=0)
+        return fp > margin
+    return keep
+
+
+@pytest.mark.parametrize("name,level", [("sample1", 20.0), ("twin-peaks", 14.0), ("sample3", 40.0),
+                                        ("sample2", 30.0)])
+def test_waterline_is_the_analytic_level_curve(name, level):
+    err_mm, err_px, _ = _waterline_errors(S.get(name), level, Effects(), keep=_on_the_top(S.get(name)))
+    assert err_mm.size > 300
+    print(f"{name} L={level}: {err_mm.size} crossings, max {err_mm.max():.5f} mm "
+          f"({err_px.max():.4f} px), rms {np.sqrt(np.mean(err_mm ** 2)):.5f} mm")
+    assert err_mm.max() < 0.01
+    assert err_px.max() < 0.1
+
+
+def test_waterline_through_lens_distortion():
+    """Frames carry the lens distortion; undistorting the crossings recovers the curve."""
+    err_mm, err_px, _ = _waterline_errors(S.get("sample1"), 20.0, Effects(lens_distortion=True),
+                                          undistort=True)
+    assert err_mm.size > 500
+    print(f"distorted: max {err_mm.max():.5f} mm ({err_px.max():.4f} px)")
+    assert err_mm.max() < 0.01 and err_px.max() < 0.1
+    # and without undistorting it would be visibly wrong at the part's edge
+    img = render_frame(S.get("sample1"), 20.0, RIG, Effects(lens_distortion=True))
+    uv = _crossings(_gray(img), 1)
+    xy = _to_plane(RIG, uv, undistort=False)
+    assert np.abs(S.get("sample1").level_sdf(xy[:, 0], xy[:, 1], 20.0)).max() > 0.02
+
+
+def test_visible_wall_and_hidden_wall_of_the_ring():
+    """Level 1 on the ring (top 8 mm at both walls), camera 8 mm left of the hole's
+    centre. The hole's far wall faces the camera: its waterline is seen, with a
+    band of lit-from-the-side wall above it. The outer wall faces away: the rim
+    7 mm above the ink hides the waterline, and the edge seen there is the rim,
+    moved outwards by perspective exactly as the pinhole says."""
+    ring, level = S.get("ring"), 1.0
+    rig = Rig(camera_x_mm=42.0)
+    img = render_frame(ring, level, rig, Effects())
+    gray = _gray(img)
+    # the wall band is only ~7 px wide: take the plateaus 3-4 px out, rows near the normal
+    uv = np.vstack([_crossings(gray, 1, reach=3, min_cos=0.8), _crossings(gray, 0, reach=3, min_cos=0.8)])
+    xy = _to_plane(rig, uv)
+    r = np.hypot(xy[:, 0] - 50, xy[:, 1] - 50)
+    inner = (r < 30) & (xy[:, 0] > 58)
+    outer = r > 40
+    assert inner.sum() > 40 and outer.sum() > 500
+    sdf = np.abs(ring.level_sdf(xy[inner, 0], xy[inner, 1], level))
+    pix = float(np.median(pixel_map(rig, False).pix))
+    print(f"visible wall: {inner.sum()} crossings, max {sdf.max():.5f} mm")
+    assert sdf.max() < 0.01
+    # outer edge: the rim of the top (r = 45, z = 8), i.e. 7 mm above the liquid
+    o = xy[outer]
+    C = rig.centre
+    rim = o + (C[:2] - o) * (8.0 - level) / C[2]
+    r_rim = np.hypot(rim[:, 0] - 50, rim[:, 1] - 50)
+    print(f"rim silhouette: {o.shape[0]} crossings, max {np.abs(r_rim - 45).max():.5f} mm")
+    assert np.abs(r_rim - 45).max() < 0.01                # anti-aliased: as exact as the waterline
+    r_seen = np.hypot(o[:, 0] - 50, o[:, 1] - 50)
+    assert np.median(r_seen - 45) > 8 * pix              # the waterline itself is hidden
+
+
+def test_a_point_on_top_of_a_tall_part_appears_where_the_pinhole_says():
+    """Trace the pixels where the pinhole projects points of the sphere's cap: the ray
+    must meet the part exactly there (to a micrometre), 30 mm above the base."""
+    sph, level = S.get("sphere"), 2.0
+    grid = surface_grid(sph)
+    pts = np.array([[50, 50], [40, 55], [62, 45], [55, 68], [33, 40]], float)
+    Q = np.column_stack([pts, sph.height(pts[:, 0], pts[:, 1])])
+    uv = RIG.project_object(Q, level)
+    P0 = RIG.pixels_to_plane(uv)
+    C = RIG.centre
+    kx, ky = (C[0] - P0[:, 0]) / C[2], (C[1] - P0[:, 1]) / C[2]
+    hit, z, tier, wall = trace(grid, P0[:, 0], P0[:, 1], kx.astype(np.float32),
+                               ky.astype(np.float32), level)
+    assert hit.all() and not wall.any()
+    assert np.abs(z - Q[:, 2]).max() < 2e-3
+    xh = P0[:, 0] + kx * (z - level)
+    yh = P0[:, 1] + ky * (z - level)
+    assert np.hypot(xh - Q[:, 0], yh - Q[:, 1]).max() < 1e-3
+    # and in the image: the apex region is bright part where the ink would be
+    # without perspective the cap's edge would appear at r = 29 mm; it appears larger
+    img = render_frame(sph, level, RIG, Effects())
+    row = _gray(img)[int(round(RIG.project_object([[50, 50, 0]], level)[0, 1]))]
+    assert row.max() > 150
+
+
+def test_effects_are_deterministic_and_do_something():
+    s = S.get("cone")
+    a = render_frame(s, 10.0, RIG, PRESETS["realistic"], np.random.default_rng(3))
+    b = render_frame(s, 10.0, RIG, PRESETS["realistic"], np.random.default_rng(3))
+    c = render_frame(s, 10.0, RIG, PRESETS["realistic"], np.random.default_rng(4))
+    clean = render_frame(s, 10.0, RIG, Effects())
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+    d = np.abs(a.astype(int) - clean.astype(int))
+    assert d.mean() > 1.0
+    # glare brightens the ink somewhere far more than noise could
+    ink_region = clean[..., 0] < 80
+    assert (a[..., 0][ink_region].astype(int) - clean[..., 0][ink_region] > 40).sum() > 500
