@@ -1,0 +1,55 @@
+"""inkslice daemon: the bench box's scan service (systemd runs it as inkslice-daemon)."""
+import json
+
+from ..errors import SettingError
+
+NAME = "daemon"
+ORDER = 60
+HELP = "run the scan daemon (state machine, job store, recovery) on the real or a simulated bench"
+
+
+def add_arguments(p):
+    p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice)")
+    p.add_argument("--socket", default=None, help="control socket (default DATA/daemon.sock)")
+    p.add_argument("--wiring", default="/etc/inkslice/bench.json",
+                   help="the real bench's device paths and GPIO lines (JSON; see appliance/hw/devices.py)")
+    p.add_argument("--sim", choices=("fake", "simavr"), default=None,
+                   help="no hardware: 'fake' = in-memory stage and camera, 'simavr' = the firmware under "
+                        "simavr with the virtual camera")
+    p.add_argument("--surface", default="sphere", help="the part on the simulated bench (default sphere)")
+    p.add_argument("--frame", default="320x240", help="simulated frame size WxH (default 320x240)")
+    p.add_argument("--faults", default=None, help="fault switches for --sim fake, as JSON (see sim/fakes.py)")
+    p.add_argument("--processor", choices=("child", "inprocess"), default="child",
+                   help="process scans in a child process (default; protects the daemon's memory) or in-process")
+    p.add_argument("--log-level", default="INFO")
+
+
+def frame_size(text):
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SettingError("--frame", f"want WIDTHxHEIGHT, got {text!r}") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise SettingError("--frame", f"{w}x{h} is not a sensible frame size")
+    return w, h
+
+
+def make_factory(args):
+    if args.sim is None:
+        from ..hw.devices import HardwareBench, load_wiring
+        return HardwareBench(load_wiring(args.wiring))
+    from ..sim.fakes import FakeBench, SimulatedBenchFactory, small_rig
+    rig = small_rig(*frame_size(args.frame))
+    if args.sim == "fake":
+        try:
+            faults = json.loads(args.faults) if args.faults else {}
+        except json.JSONDecodeError as e:
+            raise SettingError("--faults", f"not valid JSON ({e})") from None
+        return FakeBench(args.surface, rig, faults)
+    return SimulatedBenchFactory(args.surface, rig)
+
+
+def run(args):
+    from ..daemon.main import run as run_daemon, setup_logging
+    setup_logging(args.log_level)
+    return run_daemon(make_factory(args), args.data, args.socket, args.processor)

@@ -1,0 +1,22 @@
+"""python -m appliance.daemon.process_child SCAN OUT OPTIONS_JSON (see processing.py)."""
+import json
+import sys
+
+from ..errors import InkSliceError
+
+
+def main(argv):
+    scan, out, options = argv[0], argv[1], json.loads(argv[2])
+    from ..process import process_scan
+    try:
+        result = process_scan(scan, out, **options)
+    except InkSliceError as e:
+        print(f"{e.where}: {e.problem}", file=sys.stderr)
+        return 2
+    print(json.dumps({"outputs": result["outputs"], "method": result.get("method"),
+                      "truth": result.get("truth")}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

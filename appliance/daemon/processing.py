@@ -1,0 +1,56 @@
+"""Processing a finished scan: appliance.process.process_scan, by default in
+a child process.
+
+Why a child: the height map and the toolpath need far more memory than the
+capture (every slice at once), a Pi has 1 GB, and an out-of-memory kill must
+take down the processing, not the daemon holding the stage. A child also
+stops at once on cancel. Its result comes back as JSON on stdout; an
+InkSliceError in it comes back as its one-line text on stderr, exit code 2.
+
+A processor is any callable (scan_folder, out_folder, options, stop_event)
+-> {"outputs": [file names], ...}; tests pass `in_process` or a fake.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+from ..errors import InkSliceError
+from .runner import Cancelled
+
+
+def in_process(scan_folder, out_folder, options, stop=None) -> dict:
+    from ..process import process_scan
+    return process_scan(scan_folder, out_folder, **options)
+
+
+def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0.2) -> dict:
+    cmd = [sys.executable, "-m", "appliance.daemon.process_child", str(scan_folder), str(out_folder),
+           json.dumps(options)]
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        while True:
+            try:
+                rc = proc.wait(timeout=poll_s)
+                break
+            except subprocess.TimeoutExpired:
+                if stop is not None and stop.is_set():
+                    proc.kill()
+                    proc.wait()
+                    raise Cancelled()
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
+    if rc == 0:
+        return json.loads(stdout.strip().splitlines()[-1])
+    if rc == 2 and stderr.strip():
+        where, _, problem = stderr.strip().splitlines()[-1].partition(": ")
+        raise InkSliceError(where or "processing", problem or stderr.strip())
+    if rc < 0:
+        raise InkSliceError("processing", f"the processing child was killed by signal {-rc} "
+                                          "(out of memory?); the scan is kept, process it again")
+    tail = stderr.strip().splitlines()[-1] if stderr.strip() else "no message"
+    raise InkSliceError("processing", f"failed with exit code {rc}: {tail}")

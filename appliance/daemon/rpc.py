@@ -1,0 +1,151 @@
+"""The facade over a Unix socket, so the web server can run as its own
+service (no device access at all) and tests can drive a daemon subprocess.
+
+One JSON object per line. Request: {"method": NAME, "args": [...],
+"kwargs": {...}}. Reply: {"ok": true, "result": ...} or {"ok": false,
+"error": {"type": "SettingError", "where": ..., "problem": ...}}.
+subscribe() streams {"event": state} lines and ends with {"end": true}.
+latest_frame's JPEG travels as base64; job_file returns the path (both
+services share the data folder's group).
+
+BenchClient has the facade's methods and raises the same error types, so
+the web UI cannot tell it from an in-process BenchService.
+"""
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import os
+import socket
+import socketserver
+import threading
+from pathlib import Path
+
+from .. import errors
+
+log = logging.getLogger("inkslice.rpc")
+METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
+           "settings", "update_settings", "events")
+_ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
+                                   errors.ScanError)}
+
+
+def _encode(method, result):
+    if method == "latest_frame" and result is not None:
+        jpeg, info = result
+        return {"jpeg": base64.b64encode(jpeg).decode(), "info": info}
+    if method == "job_file":
+        return str(result)
+    return result
+
+
+class _Handler(socketserver.StreamRequestHandler):
+    def handle(self):
+        service = self.server.service
+        for raw in self.rfile:
+            try:
+                req = json.loads(raw)
+                method, args, kwargs = req["method"], req.get("args", []), req.get("kwargs", {})
+            except (ValueError, KeyError, TypeError):
+                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "rpc",
+                                                   "problem": "malformed request"}})
+                continue
+            if method == "subscribe":
+                for state in service.subscribe(*args, **kwargs):
+                    self._send({"event": state})
+                self._send({"end": True})
+                continue
+            if method not in METHODS:
+                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "rpc",
+                                                   "problem": f"no method {method!r}"}})
+                continue
+            try:
+                result = getattr(service, method)(*args, **kwargs)
+                self._send({"ok": True, "result": _encode(method, result)})
+            except errors.InkSliceError as e:
+                self._send({"ok": False, "error": {"type": type(e).__name__, "where": e.where,
+                                                   "problem": e.problem}})
+            except Exception as e:
+                log.exception("rpc %s", method)
+                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "daemon",
+                                                   "problem": f"internal error: {type(e).__name__}: {e}"}})
+
+    def _send(self, obj):
+        self.wfile.write((json.dumps(obj) + "\n").encode())
+        self.wfile.flush()
+
+
+class _Server(socketserver.ThreadingMixIn, socketserver.UnixStreamServer):
+    daemon_threads = True
+
+
+def serve(service, path) -> _Server:
+    """Start serving `service` on the Unix socket `path` in a background thread."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)                    # a stale socket from a killed daemon
+    server = _Server(str(path), _Handler)
+    os.chmod(path, 0o660)                           # the daemon's user and group (the web service)
+    server.service = service
+    threading.Thread(target=server.serve_forever, name="inkslice-rpc", daemon=True).start()
+    return server
+
+
+class BenchClient:
+    """The BenchService facade, spoken over the daemon's socket."""
+
+    def __init__(self, path, timeout: float = 30.0):
+        self.path, self.timeout = str(path), timeout
+
+    def _connect(self, timeout):
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s.settimeout(timeout)
+        try:
+            s.connect(self.path)
+        except OSError as e:
+            s.close()
+            raise errors.DeviceError(f"daemon {self.path}", f"not reachable ({e.strerror or e}): "
+                                                             "is inkslice-daemon running?") from None
+        return s
+
+    def _call(self, method, *args, **kwargs):
+        with self._connect(self.timeout) as s, s.makefile("rwb") as f:
+            f.write((json.dumps({"method": method, "args": args, "kwargs": kwargs}) + "\n").encode())
+            f.flush()
+            line = f.readline()
+        if not line:
+            raise errors.DeviceError(f"daemon {self.path}", "closed the connection without a reply")
+        reply = json.loads(line)
+        if not reply["ok"]:
+            e = reply["error"]
+            raise _ERRORS.get(e["type"], errors.InkSliceError)(e["where"], e["problem"])
+        return reply["result"]
+
+    def state(self): return self._call("state")
+    def start_scan(self, params): return self._call("start_scan", params)
+    def cancel(self): return self._call("cancel")
+    def resume(self, job_id): return self._call("resume", job_id)
+    def jobs(self): return self._call("jobs")
+    def job(self, job_id): return self._call("job", job_id)
+    def job_file(self, job_id, name): return Path(self._call("job_file", job_id, name))
+    def settings(self): return self._call("settings")
+    def update_settings(self, changes): return self._call("update_settings", changes)
+    def events(self, job_id=None, limit=200): return self._call("events", job_id, limit)
+
+    def latest_frame(self):
+        r = self._call("latest_frame")
+        return None if r is None else (base64.b64decode(r["jpeg"]), r["info"])
+
+    def subscribe(self, timeout: float = 30.0):
+        with self._connect(timeout + 10) as s, s.makefile("rwb") as f:
+            f.write((json.dumps({"method": "subscribe", "args": [timeout]}) + "\n").encode())
+            f.flush()
+            for line in f:
+                msg = json.loads(line)
+                if msg.get("end"):
+                    return
+                yield msg["event"]
+
+    def close(self):
+        pass

@@ -1,0 +1,237 @@
+"""One scan, start to finish (or to a clear reason why not).
+
+    home -> for each level: move, check the stage, settle, light on, capture,
+    light off, write the frame -> processing -> done
+
+The frame PNG is written atomically first, then scan.json (atomically) with
+the new frame listed, then the job row: scan.json never lists a frame that is
+not fully on disk, and recovery only has to catch the row up with it.
+
+Every way out of `run` leaves the hardware safe: light off, and on any
+failure or cancel the motor stopped (an emergency stop; the next scan or the
+resume re-homes anyway). A resumed job re-homes, then continues from the
+frames in its scan.json, with the settings it started with.
+"""
+from __future__ import annotations
+
+import errno
+import logging
+import shutil
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from .. import atomicio
+from ..errors import DeviceError, InkSliceError
+from ..hw.devices import Devices
+from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
+from .levels import LevelPlan, part_mask, waterline_change
+
+log = logging.getLogger("inkslice.runner")
+
+
+class Cancelled(Exception):
+    pass
+
+
+def free_mb(path) -> float:
+    return shutil.disk_usage(path).free / 1e6
+
+
+class ScanRunner:
+    """Runs one job in the calling thread; `report(**state)` publishes progress."""
+
+    def __init__(self, store, job_id: str, devices: Devices, processor: Callable, report: Callable,
+                 stop: threading.Event, on_frame: Callable | None = None, disk_free_mb: Callable = free_mb):
+        self.store, self.job_id, self.dev = store, job_id, devices
+        self.processor, self.report, self.stop = processor, report, stop
+        self.on_frame = on_frame or (lambda image, info: None)
+        self.disk_free_mb = disk_free_mb
+        job = store.get_job(job_id)
+        self.settings = job["settings"]
+        self.params = job["params"]
+        self.job_dir = store.job_dir(job_id)
+        self.scan_dir = self.job_dir / "scan"
+        self.plan = LevelPlan(self.settings)
+        self._mask = None
+        self._level_times: list[float] = []
+
+    # -- the whole job ----------------------------------------------------------
+    def run(self) -> str:
+        """Returns the final status: done, failed or cancelled (also stored with the reason)."""
+        try:
+            scan = self._open_scan()
+            if self.plan.next_target(scan.frames) is not None:
+                self._home()
+                self._capture_all(scan)
+            self._light(False)
+            outputs = self._process()
+            self._finish("done", "", outputs=outputs)
+            return "done"
+        except Cancelled:
+            self._make_safe()
+            self._finish("cancelled", "cancelled by the operator; the frames so far are kept, resume to continue")
+            return "cancelled"
+        except InkSliceError as e:
+            self._make_safe()
+            self._finish("failed", str(e))
+            return "failed"
+        except OSError as e:
+            self._make_safe()
+            if e.errno in (errno.ENOSPC, errno.EDQUOT):
+                self._finish("failed", f"disk: full while writing ({e.strerror}); the frames so far are kept")
+            else:
+                self._finish("failed", f"file system: {e}")
+            return "failed"
+        except Exception as e:                      # a bug must still end the job cleanly
+            log.exception("scan %s crashed", self.job_id)
+            self._make_safe()
+            self._finish("failed", f"internal error: {type(e).__name__}: {e}")
+            return "failed"
+
+    def _finish(self, status, reason, outputs=None):
+        fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
+        if outputs is not None:
+            fields["outputs"] = outputs
+        self.store.update_job(self.job_id, **fields)
+        self.store.event(self.job_id, status, reason or "scan finished")
+        self.report(state=status, message=reason or "scan finished", eta_s=0 if status == "done" else None)
+
+    def _make_safe(self):
+        """Light off, motor stopped. Each step on its own: one failing must not skip the other."""
+        self._light(False)
+        try:
+            self.dev.stage.stop()
+        except Exception as e:
+            log.warning("could not stop the stage (%s): it may be unplugged or unpowered", e)
+
+    def _light(self, on):
+        if self.dev.light is not None:
+            try:
+                self.dev.light.set(on)
+            except Exception as e:
+                if on:
+                    raise DeviceError("light", f"cannot switch it on: {e}") from None
+                log.warning("could not switch the light off: %s", e)
+
+    def _check_stop(self):
+        if self.stop.is_set():
+            raise Cancelled()
+
+    # -- the scan folder --------------------------------------------------------
+    def _open_scan(self) -> Scan:
+        if (self.scan_dir / "scan.json").is_file():
+            scan = load_scan(self.scan_dir)         # a resume: continue from its frames
+            if scan.frames:
+                self._mask = part_mask(read_frame(scan, scan.frames[-1]))
+            return scan
+        camera = self.dev.camera_model or self._calibrated_camera()
+        self.scan_dir.mkdir(parents=True, exist_ok=True)
+        extra = {"job": self.job_id, "name": self.params.get("name", ""),
+                 "level_at_home_mm": self.settings["level_at_home_mm"]}
+        if self.params.get("surface"):
+            extra["surface"] = self.params["surface"]
+            atomicio.write_json(self.job_dir / "scan.truth.json", {"surface": self.params["surface"]})
+        # scan.json is written with the first frame: load_scan rejects an empty frame list
+        return Scan(self.scan_dir, camera, [], extra)
+
+    def _calibrated_camera(self) -> CameraModel:
+        from ..scanfile import _camera
+        cals = [c for c in self.store.calibrations() if "camera" in c]
+        if not cals:
+            raise DeviceError("camera", "no camera calibration stored: calibrate the bench before scanning")
+        return _camera("calibration", cals[0]["camera"])
+
+    # -- motion and capture -----------------------------------------------------
+    def _home(self):
+        self._check_stop()
+        self.report(state="homing", message="homing the stage")
+        self.store.update_job(self.job_id, status="homing")
+        self._light(False)
+        self.dev.stage.home()
+
+    def _capture_all(self, scan: Scan):
+        self.store.update_job(self.job_id, status="scanning")
+        while True:
+            self._check_stop()
+            nxt = self.plan.next_target(scan.frames)
+            if nxt is None:
+                return
+            t0 = time.monotonic()
+            target, step = nxt
+            total = self.plan.estimate_total(scan.frames)
+            self.report(state="scanning", level_mm=target, levels_done=len(scan.frames), levels_total=total,
+                        message=f"level {target:.3f} mm", eta_s=self._eta(len(scan.frames), total))
+            level = self._move_to_level(target)
+            if self.stop.wait(self.settings["settle_s"]):
+                raise Cancelled()
+            frame = self._capture()
+            mask = part_mask(frame)
+            change = waterline_change(self._mask, mask)
+            self._mask = mask
+            self._save_frame(scan, frame, FrameRef(
+                f"frames/{len(scan.frames) + 1:04d}.png", level,
+                {"target_mm": target, "step_mm": step, "change": round(change, 6)}))
+            self.on_frame(frame, {"level_mm": level, "time": time.time()})
+            del frame
+            self._level_times.append(time.monotonic() - t0)
+            total = self.plan.estimate_total(scan.frames)
+            self.store.update_job(self.job_id, levels_done=len(scan.frames), levels_total=total, level_mm=level)
+            self.report(levels_done=len(scan.frames), levels_total=total,
+                        eta_s=self._eta(len(scan.frames), total))
+
+    def _move_to_level(self, target: float) -> float:
+        """Move so the ink stands at `target`; return the nominal level the stage really reached."""
+        at_home = float(self.settings["level_at_home_mm"])
+        self.dev.stage.move_to(at_home - target)
+        st = self.dev.stage.status()
+        if not st.homed or st.flags.get("fresh_boot"):
+            raise DeviceError("stage", "the controller was reset during the scan (position lost); "
+                                       "the frames so far are kept, resume to re-home and continue")
+        if st.state in ("alarm", "estop"):
+            raise DeviceError("stage", f"the controller is in {st.state} ({st.flags.get('alarm', '')})")
+        return round(at_home - st.position_mm, 6)
+
+    def _capture(self) -> np.ndarray:
+        self._light(True)
+        try:
+            frame = self.dev.camera.capture()
+        finally:
+            self._light(False)
+        if frame is None or frame.ndim not in (2, 3):
+            raise DeviceError("camera", "returned no image")
+        return frame
+
+    def _save_frame(self, scan: Scan, frame: np.ndarray, ref: FrameRef):
+        need = float(self.settings["min_free_mb"])
+        free = self.disk_free_mb(self.scan_dir)
+        if free < need:
+            raise DeviceError("disk", f"nearly full: {free:.0f} MB free, scans stop below {need:.0f} MB; "
+                                      f"the {len(scan.frames)} frames so far are kept")
+        write_frame(self.scan_dir, ref.file, frame)
+        scan.frames.append(ref)
+        try:
+            write_scan_json(scan)
+        except BaseException:
+            scan.frames.pop()                       # scan.json on disk still lists the old frames
+            raise
+
+    def _eta(self, done, total):
+        if not self._level_times:
+            return None
+        per = sum(self._level_times[-10:]) / len(self._level_times[-10:])
+        return round(per * max(total - done, 0), 1)
+
+    # -- processing -------------------------------------------------------------
+    def _process(self) -> list[str]:
+        self._check_stop()
+        self.store.update_job(self.job_id, status="processing")
+        self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
+        options = {"method": self.settings["method"], "grid_n": int(self.settings["grid"])}
+        result = self.processor(self.scan_dir, self.job_dir, options, self.stop)
+        self._check_stop()
+        return sorted(result.get("outputs", []))

@@ -1,0 +1,324 @@
+"""BenchService: the daemon's public face. The web UI, the CLI and the tests
+use only this class (or its socket client, rpc.BenchClient, which has the same
+methods).
+
+    service = BenchService(data_dir, factory)      # factory: devices.py / sim.fakes
+    job_id = service.start_scan({"name": "mouse", "level_step_mm": 1.0})
+    for state in service.subscribe(timeout=30): ...
+    service.job(job_id)["outputs"]; service.job_file(job_id, "toolpath.gcode")
+
+Thread-safe: one lock guards the state; one background thread runs a scan at
+a time (runner.py); one panel thread polls the button and drives the status
+LED and display. Device factories are injected so the same service drives
+the real bench, the simulated one (firmware under simavr + virtual camera)
+or the in-memory fakes.
+
+A device factory has:
+    open(settings, params) -> runner.Devices    stage, camera, light, camera model...
+    open_panel() -> runner.Devices              led, display, button (may be missing)
+    check(params)                               SettingError for bad extra params
+    extra_params                                names start_scan accepts beyond settings
+"""
+from __future__ import annotations
+
+import copy
+import logging
+import queue
+import secrets
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from ..errors import InkSliceError, SettingError
+from . import settings as S
+from .levels import LevelPlan
+from .processing import child_process
+from .recovery import recover
+from ..hw.devices import Devices
+from .runner import ScanRunner, free_mb
+from .store import ACTIVE, Store
+
+log = logging.getLogger("inkslice.service")
+STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
+
+
+def lan_address() -> str:
+    """This box's LAN address, for the display (a UDP connect sends nothing)."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("10.255.255.255", 1))
+            return s.getsockname()[0]
+    except OSError:
+        return "no network"
+
+
+class BenchService:
+    def __init__(self, data_dir, factory, processor: Callable = child_process,
+                 disk_free_mb: Callable = free_mb, panel_interval_s: float = 0.25):
+        self.data_dir = Path(data_dir)
+        self.store = Store(self.data_dir)
+        self.factory = factory
+        self.processor = processor
+        self.disk_free_mb = disk_free_mb
+        self._lock = threading.RLock()
+        self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
+                       "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {}}
+        self._subscribers: list[queue.Queue] = []
+        self._frame = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._closing = threading.Event()
+        self.interrupted = recover(self.store)
+        if self.interrupted:
+            last = self.store.get_job(self.interrupted[0])
+            self._state.update(state="failed", job_id=last["id"], message=last["reason"],
+                               levels_done=last["levels_done"], levels_total=last["levels_total"])
+        self._panel = self._open_panel()
+        self._panel_thread = threading.Thread(target=self._panel_loop, args=(panel_interval_s,),
+                                              name="inkslice-panel", daemon=True)
+        self._panel_thread.start()
+        if self.interrupted and self.settings()["auto_resume"]:
+            self.resume(self.interrupted[0])
+
+    # == the facade ===============================================================
+    def state(self) -> dict:
+        with self._lock:
+            return copy.deepcopy(self._state)
+
+    def start_scan(self, params: dict) -> str:
+        params = dict(params or {})
+        extra = set(getattr(self.factory, "extra_params", ())) | {"name"}
+        for key in params:
+            if key not in S.DEFAULTS and key not in extra:
+                raise SettingError(key, "unknown scan parameter")
+        with self._lock:
+            self._refuse_if_busy()
+            settings = S.validate(self.settings(), {k: v for k, v in params.items() if k in S.DEFAULTS})
+            extras = {k: v for k, v in params.items() if k not in S.DEFAULTS}
+            if hasattr(self.factory, "check"):
+                extras = self.factory.check(extras) or extras     # may fill in defaults (the surface)
+            extras["name"] = str(params.get("name", ""))[:80]
+            job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
+            total = LevelPlan(settings).estimate_total([])
+            self.store.create_job(job_id, extras["name"], settings, extras, total)
+            self._launch(job_id, total, 0)
+            return job_id
+
+    def cancel(self, wait_s: float = 30.0) -> None:
+        with self._lock:
+            thread = self._thread
+            if thread is None or not thread.is_alive():
+                return
+            self._stop.set()
+            self._set(message="cancelling")
+        thread.join(timeout=wait_s)
+
+    def resume(self, job_id: str) -> str:
+        with self._lock:
+            self._refuse_if_busy()
+            job = self.store.get_job(job_id)
+            if job["status"] not in ("failed", "cancelled"):
+                raise SettingError("job", f"job {job_id} is {job['status']}; only a failed, cancelled or "
+                                          "interrupted scan can be resumed")
+            self.store.update_job(job_id, status="homing", reason="", interrupted=0, finished=None,
+                                  attempts=job["attempts"] + 1)
+            self.store.event(job_id, "resumed", f"resumed (attempt {job['attempts'] + 1})")
+            self._launch(job_id, job["levels_total"], job["levels_done"])
+            return job_id
+
+    def jobs(self) -> list[dict]:
+        return self.store.list_jobs()
+
+    def job(self, job_id: str) -> dict:
+        return self.store.get_job(job_id)
+
+    def job_file(self, job_id: str, name: str) -> Path:
+        """A file inside that job's folder (outputs, scan/scan.json, scan/frames/...); nothing else."""
+        self.store.get_job(job_id)                  # raises for an unknown job
+        folder = self.store.job_dir(job_id).resolve()
+        try:
+            path = (folder / str(name)).resolve()
+        except (OSError, ValueError):
+            path = None
+        if path is None or folder not in path.parents or not path.is_file() or path.name.endswith(".tmp"):
+            raise InkSliceError(f"job {job_id}", f"no file named {name!r} in this job")
+        return path
+
+    def latest_frame(self):
+        with self._lock:
+            return self._frame
+
+    def settings(self) -> dict:
+        return S.full(self.store.load_settings())
+
+    def update_settings(self, changes: dict) -> dict:
+        with self._lock:
+            new = S.validate(self.settings(), changes)
+            self.store.save_settings({k: new[k] for k in changes})
+            return new
+
+    def subscribe(self, timeout: float = 30.0):
+        """Yields the state dict now and on every change, for at most `timeout` seconds."""
+        q: queue.Queue = queue.Queue(maxsize=200)
+        with self._lock:
+            self._subscribers.append(q)
+            first = copy.deepcopy(self._state)
+        end = time.monotonic() + timeout
+        try:
+            yield first
+            while not self._closing.is_set():
+                left = end - time.monotonic()
+                if left <= 0:
+                    return
+                try:
+                    yield q.get(timeout=min(left, 1.0))
+                except queue.Empty:
+                    continue
+        finally:
+            with self._lock:
+                self._subscribers.remove(q)
+
+    def events(self, job_id=None, limit=200) -> list[dict]:
+        return self.store.events(job_id, limit)
+
+    def close(self) -> None:
+        self.cancel()
+        self._closing.set()
+        self._panel_thread.join(timeout=5)
+        self._panel.close()
+        self.store.close()
+
+    # == health (for the systemd watchdog) ==========================================
+    def healthy(self) -> bool:
+        try:
+            self.store.list_jobs(("none",))
+        except Exception:
+            return False
+        return self._panel_thread.is_alive()
+
+    # == internals ================================================================
+    def _refuse_if_busy(self):
+        if self._thread is not None and self._thread.is_alive():
+            raise SettingError("scan", f"a scan is already running ({self._state['job_id']}); "
+                                       "cancel it first")
+
+    def _set(self, **changes):
+        with self._lock:
+            self._state.update(changes)
+            snap = copy.deepcopy(self._state)
+            subs = list(self._subscribers)
+        for q in subs:
+            try:
+                q.put_nowait(snap)
+            except queue.Full:                      # a stalled client loses updates, never blocks us
+                pass
+
+    def _launch(self, job_id, total, done):
+        self._stop.clear()
+        self._frame = None
+        self._set(state="homing", job_id=job_id, level_mm=None, levels_done=done, levels_total=total,
+                  eta_s=None, message="starting")
+        self._thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"scan-{job_id}",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run_job(self, job_id):
+        job = self.store.get_job(job_id)
+        try:
+            devices = self.factory.open(job["settings"], job["params"])
+        except InkSliceError as e:
+            reason = f"cannot start: {e}"
+            self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
+            self.store.event(job_id, "failed", reason)
+            self._set(state="failed", message=reason)
+            return
+        self._set(hardware={**self._state["hardware"], **devices.hardware})
+        try:
+            runner = ScanRunner(self.store, job_id, devices, self.processor, self._set, self._stop,
+                                on_frame=self._keep_frame, disk_free_mb=self.disk_free_mb)
+            status = runner.run()
+            if status == "failed":
+                self._note_fault(self.store.get_job(job_id)["reason"])
+        finally:
+            devices.close()
+
+    def _note_fault(self, reason):
+        for name in ("stage", "camera", "disk", "light"):
+            if reason.startswith(name):
+                self._set(hardware={**self._state["hardware"], name: f"fault: {reason[len(name) + 2:]}"})
+
+    def _keep_frame(self, image: np.ndarray, info: dict):
+        """The preview for latest_frame(): downscaled, the waterline drawn in red."""
+        width = int(self.settings()["preview_width"])
+        h, w = image.shape[:2]
+        small = cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
+        if small.ndim == 2:
+            small = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
+        from .levels import PART_THRESHOLD
+        mask = (cv2.cvtColor(small, cv2.COLOR_BGR2GRAY) > PART_THRESHOLD).astype(np.uint8)
+        contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(small, contours, -1, (0, 0, 255), 1, cv2.LINE_AA)
+        ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        if ok:
+            with self._lock:
+                self._frame = (buf.tobytes(), {**info, "waterline": bool(contours)})
+
+    # -- the front panel: button, LED, display ---------------------------------------
+    def _open_panel(self) -> Devices:
+        try:
+            panel = self.factory.open_panel() if hasattr(self.factory, "open_panel") else Devices(None, None)
+        except InkSliceError as e:
+            log.warning("front panel unavailable: %s", e)
+            panel = Devices(None, None, hardware={"panel": f"fault: {e}"})
+        for name, status in panel.hardware.items():
+            if status != "ok":
+                log.warning("%s: %s (carrying on without it)", name, status)   # reported once
+        self._state["hardware"].update(panel.hardware)
+        return panel
+
+    def _panel_loop(self, interval):
+        tick = 0
+        last_lines = None
+        while not self._closing.wait(interval):
+            tick += 1
+            try:
+                self._poll_button()
+                st = self.state()
+                self._drive_led(st, tick)
+                lines = self._display_lines(st)
+                if lines != last_lines and self._panel.display is not None:
+                    self._panel.display.show(lines)
+                    last_lines = lines
+            except Exception as e:                 # a flaky I2C bus must not kill the panel
+                log.warning("front panel: %s", e)
+
+    def _poll_button(self):
+        if self._panel.button is None or not self._panel.button.poll():
+            return
+        if self._thread is not None and self._thread.is_alive():
+            log.info("button: cancelling the scan")
+            threading.Thread(target=self.cancel, daemon=True).start()
+        else:
+            log.info("button: starting a scan with the current settings")
+            self.start_scan({"name": "started at the bench"})
+
+    def _drive_led(self, st, tick):
+        if self._panel.led is None:
+            return
+        s = st["state"]
+        # steady on while working, slow blink when failed, off otherwise
+        on = s in ACTIVE or (s == "failed" and tick % 4 < 2)
+        self._panel.led.set(on)
+
+    @staticmethod
+    def _display_lines(st) -> list[str]:
+        level = f"level {st['level_mm']:.2f} mm" if st["level_mm"] is not None else ""
+        progress = f"{st['levels_done']}/{st['levels_total']}" if st["levels_total"] else ""
+        if st["eta_s"]:
+            progress += f"  {int(st['eta_s']) // 60}:{int(st['eta_s']) % 60:02d} left"
+        return [st["state"].upper(), level, progress, lan_address()]

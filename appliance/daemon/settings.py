@@ -1,0 +1,99 @@
+"""The daemon's settings: defaults, and validation that names the bad key.
+
+Bench settings (calibration, timing) and per-scan defaults share one flat
+namespace; a scan's parameters may override any per-scan key, and the job
+keeps its own copy so a resumed scan uses the settings it started with.
+"""
+from __future__ import annotations
+
+import math
+
+from ..errors import SettingError
+
+DEFAULTS = {
+    # the scan: levels from the top (part submerged) down to the bottom (fully exposed)
+    "levels_to_mm": 20.0,          # first level (top)
+    "levels_from_mm": 0.0,         # last level (bottom: the base top)
+    "step_mode": "fixed",          # fixed | adaptive
+    "level_step_mm": 0.5,          # fixed step; the adaptive step's starting value
+    "step_min_mm": 0.1,            # adaptive bounds
+    "step_max_mm": 2.0,
+    "adaptive_change": 0.02,       # adaptive target: fraction of the part's pixels changing per step
+    "settle_s": 0.5,               # wait after each move for ripples to die out
+    # the bench (found by calibration)
+    "level_at_home_mm": 60.0,      # liquid level above the base top with the stage at home
+    "min_free_mb": 200.0,          # stop a scan before the disk is this full
+    "preview_width": 480,          # latest_frame() JPEG width
+    "auto_resume": False,          # resume an interrupted scan when the daemon starts
+    # processing (passed to process_scan)
+    "method": "lsq3",
+    "grid": 50,
+    # the machine and cutter (kept with the job; used by the toolpath stage)
+    "cutter_type": "ball",
+    "cutter_diameter_mm": 6.0,
+    "stepover_mm": 1.0,
+    "feed_mm_min": 800.0,
+    "dialect": "linuxcnc",
+    "envelope_x_mm": 200.0,
+    "envelope_y_mm": 150.0,
+    "envelope_z_mm": 60.0,
+}
+CHOICES = {"step_mode": ("fixed", "adaptive"), "cutter_type": ("ball", "flat"),
+           "dialect": ("linuxcnc", "grbl", "fanuc"),
+           "method": ("captured", "spline", "nearest", "lsq1", "lsq2", "lsq3")}
+BOOLS = {"auto_resume"}
+INTS = {"grid": (3, 2000), "preview_width": (64, 2048)}
+MAY_BE_ZERO = {"levels_from_mm", "settle_s", "min_free_mb"}
+MAX_LEVELS = 5000
+
+
+def _check_value(key, value):
+    if key in CHOICES:
+        if value not in CHOICES[key]:
+            raise SettingError(key, f"must be one of {', '.join(CHOICES[key])}, got {value!r}")
+        return value
+    if key in BOOLS:
+        if not isinstance(value, bool):
+            raise SettingError(key, f"must be true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise SettingError(key, f"must be a number, got {value!r}")
+    if key in INTS:
+        lo, hi = INTS[key]
+        if int(value) != value or not lo <= value <= hi:
+            raise SettingError(key, f"must be a whole number in {lo}..{hi}, got {value!r}")
+        return int(value)
+    if value < 0 or (value == 0 and key not in MAY_BE_ZERO):
+        raise SettingError(key, f"must be positive, got {value!r}")
+    return float(value)
+
+
+def validate(current: dict, changes: dict) -> dict:
+    """current + changes, checked key by key and as a whole."""
+    if not isinstance(changes, dict):
+        raise SettingError("settings", "changes must be an object of key: value")
+    new = dict(current)
+    for key, value in changes.items():
+        if key not in DEFAULTS:
+            raise SettingError(key, "unknown setting")
+        new[key] = _check_value(key, value)
+    if new["levels_to_mm"] <= new["levels_from_mm"]:
+        raise SettingError("levels_to_mm", f"the top level {new['levels_to_mm']} must be above the bottom "
+                                           f"level {new['levels_from_mm']}")
+    if new["levels_to_mm"] > new["level_at_home_mm"]:
+        raise SettingError("levels_to_mm", f"{new['levels_to_mm']} mm is above the level with the stage at "
+                                           f"home ({new['level_at_home_mm']} mm): the stage cannot go below home")
+    if new["levels_to_mm"] > new["envelope_z_mm"]:
+        raise SettingError("levels_to_mm", "above the machine envelope's Z travel")
+    if new["step_min_mm"] > new["step_max_mm"]:
+        raise SettingError("step_min_mm", "must not exceed step_max_mm")
+    smallest = new["level_step_mm"] if new["step_mode"] == "fixed" else new["step_min_mm"]
+    n = (new["levels_to_mm"] - new["levels_from_mm"]) / smallest
+    if new["step_mode"] == "fixed" and n + 1 > MAX_LEVELS:
+        raise SettingError("level_step_mm", f"{int(n) + 1} levels is more than a scan may take ({MAX_LEVELS})")
+    return new
+
+
+def full(settings: dict) -> dict:
+    """Stored settings over the defaults (a newer version may add keys)."""
+    return {**DEFAULTS, **{k: v for k, v in settings.items() if k in DEFAULTS}}

@@ -1,0 +1,280 @@
+"""Device fakes for the daemon, in the style of OctoPrint's virtual printer:
+they behave like the real devices and their faults are switched on by config.
+
+    stage = FakeStage(faults={"reset_after_moves": 5})
+    camera = FakeCamera(surface, rig, level_mm=lambda: 60 - stage.position_mm,
+                        faults={"unplug_after": 3})
+
+FakeStage: an in-memory lifting stage with the firmware's observable rules
+(moves refused until homed, a reset forgets the home, an emergency stop
+needs a re-home). Faults:
+  unplug_after_moves N  every command after the N-th move raises DeviceError
+  reset_after_moves N   the MCU "resets" after the N-th move: homed=False,
+                        flags.fresh_boot=True, the next move is refused
+  seconds_per_mm S      real time a move takes (so a scan lasts long enough
+                        to be killed at random points)
+
+FakeCamera: renders a top view of a known surface at the level the callable
+returns at capture time. The frame is a pure function of the level (noise is
+seeded from the level, never from a counter) so a resumed scan captures
+exactly the frames an uninterrupted one would. It ignores the perspective of
+the part above the liquid (the renderer team's VirtualCamera models it).
+Faults: unplug_after N (captures after the N-th raise DeviceError).
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from ..errors import DeviceError, SettingError
+from ..hw.base import Camera, Display, OutputLine, Stage, StageStatus
+
+
+class FakeStage(Stage):
+    def __init__(self, steps_per_mm: float = 1600.0, travel_mm: float = 80.0, faults: dict | None = None):
+        self.steps_per_mm = float(steps_per_mm)
+        self.travel_steps = round(travel_mm * steps_per_mm)
+        self.faults = dict(faults or {})
+        self.position_steps = round(self.travel_steps / 2)   # somewhere; unknown until homed
+        self.homed = False
+        self.fresh_boot = True
+        self.estopped = False
+        self.moves = 0
+        self.calls: list[str] = []          # what was asked, for tests ("home", "move 12.5", "stop")
+        self._lock = threading.Lock()
+
+    @property
+    def position_mm(self) -> float:
+        return self.position_steps / self.steps_per_mm
+
+    def _check_plugged(self):
+        n = self.faults.get("unplug_after_moves")
+        if n is not None and self.moves >= n:
+            raise DeviceError("stage fake", "no reply from the controller (unplugged?)")
+
+    def identify(self) -> dict:
+        self._check_plugged()
+        return {"name": "inkslice-stepper", "fw": "fake", "proto": 1}
+
+    def home(self, timeout: float = 60.0) -> None:
+        with self._lock:
+            self.calls.append("home")
+            self._check_plugged()
+            self._travel(self.position_steps)
+            self.position_steps = 0
+            self.homed, self.fresh_boot, self.estopped = True, False, False
+
+    def move_to(self, position_mm: float, timeout: float = 60.0) -> None:
+        with self._lock:
+            self.calls.append(f"move {position_mm:.4f}")
+            self._check_plugged()
+            target = round(position_mm * self.steps_per_mm)
+            if not self.homed:
+                raise DeviceError("stage fake", "MOVE refused: not homed (the controller was reset?)")
+            if not 0 <= target <= self.travel_steps:
+                raise SettingError("stage move", f"{position_mm:.3f} mm is outside the travel")
+            self._travel(abs(target - self.position_steps))
+            self.position_steps = target
+            self.moves += 1
+            n = self.faults.get("reset_after_moves")
+            if n is not None and self.moves == n:
+                self.homed, self.fresh_boot = False, True
+
+    def _travel(self, steps):
+        s = self.faults.get("seconds_per_mm", 0.0)
+        if s:
+            time.sleep(s * steps / self.steps_per_mm)
+
+    def status(self) -> StageStatus:
+        self._check_plugged()
+        state = "estop" if self.estopped else "idle"
+        return StageStatus(state, self.position_steps, self.position_mm, self.homed,
+                           {"fresh_boot": self.fresh_boot})
+
+    def stop(self) -> None:
+        self.calls.append("stop")
+        self._check_plugged()
+        self.estopped, self.homed = True, False
+
+
+def small_rig(width=640, height=480):
+    """The virtual bench's rig scaled to a small frame (same field of view)."""
+    from .rig import Rig
+    base = Rig()
+    k = width / base.width
+    return Rig(width=width, height=height, focal_px=base.focal_px * k,
+               principal_u=base.principal_u * k, principal_v=base.principal_v * height / base.height)
+
+
+class FakeCamera(Camera):
+    def __init__(self, surface, rig, level_mm, faults: dict | None = None):
+        from .rig import pixel_map
+        self.surface, self.rig, self.level_mm = surface, rig, level_mm
+        self.faults = dict(faults or {})
+        self.captures = 0
+        self._map = pixel_map(rig, True)
+        self.closed = False
+
+    def capture(self) -> np.ndarray:
+        n = self.faults.get("unplug_after")
+        if self.closed or (n is not None and self.captures >= n):
+            raise DeviceError("camera fake", "no frame: the camera is gone (unplugged?)")
+        self.captures += 1
+        return self.render(float(self.level_mm()))
+
+    def render(self, level: float) -> np.ndarray:
+        m = self._map
+        sdf = self.surface.level_sdf(m.x0, m.y0, level)
+        cover = np.clip(0.5 + sdf / m.pix, 0.0, 1.0).astype(np.float32)[..., None]
+        ink = np.array(self.rig.ink_bgr, np.float32)
+        part = np.array(self.rig.part_bgr, np.float32)
+        img = ink + cover * (part - ink)
+        rng = np.random.default_rng(round(level * 10000) & 0xFFFFFFFF)   # seeded by the level
+        img += rng.normal(0.0, 2.0, img.shape[:2])[..., None].astype(np.float32)
+        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class FakeLine(OutputLine):
+    """An output line that remembers its history (light, LED, MCU reset)."""
+
+    def __init__(self, name="line"):
+        self.name, self.on, self.history = name, False, []
+
+    def set(self, on: bool) -> None:
+        self.on = bool(on)
+        self.history.append(self.on)
+
+
+class FakeButton:
+    """A push button; tests press it with .press()."""
+
+    def __init__(self):
+        self._presses = 0
+
+    def press(self):
+        self._presses += 1
+
+    def poll(self) -> bool:
+        if self._presses:
+            self._presses -= 1
+            return True
+        return False
+
+
+class FakeDisplay(Display):
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def show(self, lines: list[str]) -> None:
+        self.lines = list(lines)
+
+
+class FakeLevelSensor:
+    """A liquid-level sensor reading a callable (mm above the base top)."""
+
+    def __init__(self, level_mm):
+        self.level_mm = level_mm
+
+    def read_mm(self) -> float:
+        return float(self.level_mm())
+
+
+# -- device factories for BenchService (see appliance/daemon/service.py) --------
+
+class FakeBench:
+    """The whole bench in memory: FakeStage + FakeCamera over a known surface,
+    fake light, LED, button and display. `faults` switches faults on:
+
+        {"stage": {...FakeStage faults}, "camera": {...FakeCamera faults},
+         "panel": {"display": "missing"}}
+
+    `last` is the Devices of the latest open(), for tests to inspect.
+    """
+    extra_params = ("surface",)
+
+    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None):
+        self.surface = surface
+        self.rig = rig or small_rig(320, 240)
+        self.faults = dict(faults or {})
+        self.last = None
+        self.panel = None
+
+    def check(self, params):
+        from .surfaces import get
+        return {**params, "surface": get(params.get("surface") or self.surface).name}   # SettingError if unknown
+
+    def open(self, settings, params):
+        from ..hw.devices import Devices
+        from .surfaces import get
+        stage = FakeStage(faults=self.faults.get("stage"))
+        at_home = float(settings["level_at_home_mm"])
+        camera = FakeCamera(get(params.get("surface") or self.surface), self.rig,
+                            lambda: at_home - stage.position_mm, faults=self.faults.get("camera"))
+        light = FakeLine("light")
+        self.last = Devices(stage, camera, self.rig.camera_model(), light=light,
+                            hardware={"stage": "ok", "camera": "ok", "light": "ok"})
+        return self.last
+
+    def open_panel(self):
+        from ..hw.devices import Devices
+        missing = self.faults.get("panel", {})
+        hw, parts = {}, {}
+        for name, make in (("led", lambda: FakeLine("led")), ("button", FakeButton), ("display", FakeDisplay)):
+            if name in missing:
+                hw[name], parts[name] = "missing", None
+            else:
+                hw[name], parts[name] = "ok", make()
+        self.panel = Devices(None, None, hardware=hw, **parts)
+        return self.panel
+
+
+class SimulatedBenchFactory:
+    """The simulated bench: the real firmware under simavr (appliance/sim/hil.py)
+    driven by the real SerialStage, and the renderer's VirtualCamera looking at
+    where the simulated stage really is. Falls back to FakeCamera when the
+    renderer's module is not there. One SimulatedBench lives as long as the
+    factory; each job opens a fresh SerialStage on its pty."""
+    extra_params = ("surface",)
+
+    def __init__(self, surface: str = "sphere", rig=None, speed: float = 0.0, effects=None):
+        from .hil import SimulatedBench
+        self.surface, self.rig, self.effects = surface, rig or small_rig(320, 240), effects
+        self.bench = SimulatedBench(speed=speed)
+        self.last = None
+
+    def check(self, params):
+        return FakeBench.check(self, params)
+
+    def _camera(self, surface, level_mm):
+        try:
+            from .camera import VirtualCamera
+        except ImportError:
+            return FakeCamera(surface, self.rig, level_mm)
+        return VirtualCamera(surface, self.rig, level_mm, effects=self.effects)
+
+    def open(self, settings, params):
+        from ..hw.devices import Devices
+        from ..hw.stage import SerialStage
+        from .surfaces import get
+        stage = SerialStage(self.bench.port, auto_rehome=False)
+        at_home = float(settings["level_at_home_mm"])
+        camera = self._camera(get(params.get("surface") or self.surface),
+                              lambda: at_home - self.bench.stage_position_mm())
+        light = FakeLine("light")
+        self.last = Devices(stage, camera, self.rig.camera_model(), light=light,
+                            hardware={"stage": "ok", "camera": "ok", "light": "ok"},
+                            closers=[camera.close, stage.close])
+        return self.last
+
+    def open_panel(self):
+        return FakeBench.open_panel(self)
+
+    faults: dict = {}
+
+    def close(self):
+        self.bench.close()
