@@ -382,7 +382,9 @@ def _unpack_scan_zip(blob, staging: Path, max_bytes: int) -> Path:
             mode = info.external_attr >> 16
             if not n or n.startswith("/") or "\\" in n or ":" in n or ".." in p.parts:
                 raise _Refused(f"unsafe path in zip: {n!r}", 400)
-            if mode and (stat.S_ISLNK(mode) or not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))):
+            # type bits are optional in a zip (many tools set only permissions); when present,
+            # anything but a plain file or folder (a symlink above all) is refused
+            if stat.S_IFMT(mode) not in (0, stat.S_IFREG, stat.S_IFDIR):
                 raise _Refused(f"not a plain file in zip: {n!r}", 400)
             if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
                 names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused

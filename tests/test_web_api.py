@@ -1,0 +1,214 @@
+"""The JSON API against the fake bench: scans, jobs, downloads, settings, live view, docs."""
+import io
+import json
+import re
+import time
+import zipfile
+
+import pytest
+
+from appliance.web.eta import EtaSmoother
+from web_helpers import login, make_app, wait_state
+
+
+@pytest.fixture
+def client(tmp_path):
+    app, svc = make_app(tmp_path)
+    c = app.test_client()
+    csrf = login(c, app.config["FIRST_RUN_PASSWORD"])
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = csrf          # every request of this client carries it
+    yield c, svc, app
+    svc.close()
+
+
+def test_openapi_describes_exactly_the_api_routes(client):
+    c, svc, app = client
+    doc = c.get("/api/openapi.json").get_json()
+    assert doc["openapi"].startswith("3.")
+    documented = {(m.upper(), p) for p, ops in doc["paths"].items() for m in ops}
+    served = set()
+    for rule in app.url_map.iter_rules():
+        if not rule.rule.startswith("/api/") or rule.endpoint == "pages.api_docs":
+            continue
+        path = re.sub(r"<(?:\w+:)?(\w+)>", r"{\1}", rule.rule[len("/api"):])
+        for m in rule.methods - {"HEAD", "OPTIONS"}:
+            if m == "POST" and rule.endpoint == "api.patch_settings":
+                continue            # POST is an alias of PATCH for HTML forms; documented as PATCH
+            served.add((m, path))
+    assert served == documented, (served ^ documented)
+
+
+def test_a_scan_from_start_to_downloads(client):
+    c, svc, app = client
+    assert c.get("/api/state").get_json()["state"] == "idle"
+    r = c.post("/api/scan", json={"level_step_mm": 1.0})
+    assert r.status_code == 201
+    job_id = r.get_json()["job_id"]
+    assert c.post("/api/scan", json={}).status_code == 409          # one at a time
+    st = wait_state(c, {"done"})
+    assert st["job_id"] == job_id and st["levels_done"] == st["levels_total"] == 21
+    jobs = c.get("/api/jobs").get_json()["jobs"]
+    assert jobs[0]["id"] == job_id
+    info = c.get(f"/api/jobs/{job_id}").get_json()
+    assert {"toolpath.gcode", "surface.stl", "heightmap.csv", "report.json", "error.png"} <= set(info["outputs"])
+    for name in info["outputs"]:
+        r = c.get(f"/api/jobs/{job_id}/files/{name}")
+        assert r.status_code == 200
+        assert r.data == svc.job_file(job_id, name).read_bytes(), name
+        assert r.headers["Content-Disposition"].startswith("attachment")
+    assert c.get(f"/api/jobs/{job_id}/files/error.png?inline=1").headers["Content-Disposition"].startswith("inline")
+    z = zipfile.ZipFile(io.BytesIO(c.get(f"/api/jobs/{job_id}/archive.zip").data))
+    assert sorted(n.split("/", 1)[1] for n in z.namelist()) == sorted(info["outputs"] + ["job.json"])
+    assert z.read(f"{job_id}/toolpath.gcode") == svc.job_file(job_id, "toolpath.gcode").read_bytes()
+    assert c.get(f"/api/jobs/{job_id}/files/nothere.gcode").status_code == 404
+    assert c.get("/api/jobs/19990101-000000-0000").status_code == 404
+    page = c.get(f"/jobs/{job_id}").get_data(as_text=True)
+    assert "rms_mm" in page and 'id="view3d"' in page and "toolpath-grbl.nc" in page
+
+
+def test_cancel_and_resume(tmp_path):
+    app, svc = make_app(tmp_path, fast=False)
+    c = app.test_client()
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
+    job_id = c.post("/api/scan", json={}).get_json()["job_id"]
+    wait_state(c, {"scanning"})
+    time.sleep(0.4)
+    assert c.post("/api/scan/cancel").get_json()["state"] == "cancelled"
+    done_at_cancel = c.get(f"/api/jobs/{job_id}").get_json()["levels_done"]
+    assert 0 < done_at_cancel < 41
+    assert c.post("/api/jobs/19990101-000000-0000/resume").status_code == 404
+    assert c.post(f"/api/jobs/{job_id}/resume").status_code == 201
+    st = wait_state(c, {"scanning"})
+    assert st["levels_done"] >= done_at_cancel          # resumed, not restarted
+    c.post("/api/scan/cancel")
+    svc.close()
+
+
+def test_settings_are_validated_by_the_service_and_name_the_bad_key(client):
+    c, svc, app = client
+    s = c.get("/api/settings").get_json()
+    assert s["dialect"] == "linuxcnc"
+    r = c.patch("/api/settings", json={"cutter_diameter_mm": -3})
+    assert r.status_code == 400 and r.get_json()["where"] == "cutter_diameter_mm"
+    r = c.patch("/api/settings", json={"dialect": "heidenhain"})
+    assert r.status_code == 400 and r.get_json()["where"] == "dialect"
+    assert c.patch("/api/settings", data="not json", content_type="application/json").status_code == 400
+    r = c.patch("/api/settings", json={"dialect": "grbl", "cutter_diameter_mm": 3.175})
+    assert r.status_code == 200 and r.get_json()["dialect"] == "grbl"
+    assert c.get("/api/settings").get_json()["cutter_diameter_mm"] == 3.175
+    assert c.post("/api/scan", json={"level_step_mm": 0}).status_code == 400
+
+
+def test_live_view_frame_and_heightmap_and_sse(client):
+    c, svc, app = client
+    assert c.get("/api/frame.jpg").status_code == 404
+    c.post("/api/scan", json={})
+    wait_state(c, {"done"})
+    r = c.get("/api/frame.jpg")
+    assert r.status_code == 200 and r.data[:2] == b"\xff\xd8" and r.headers["X-Level-mm"] == "20.0"
+    assert c.get("/api/frame.jpg", headers={"If-None-Match": r.headers["ETag"]}).status_code == 304
+    hm = c.get("/api/heightmap/live").get_json()
+    seen = [v for row in hm["z"] for v in row if v is not None]
+    assert len(seen) > 100 and max(seen) <= 20.0
+    app.extensions["inkslice"]["config"]["sse_max_s"] = 0.6
+    body = c.get("/api/events").get_data(as_text=True)
+    assert body.startswith("retry: 1000")
+    events = re.findall(r"event: (\w+)\ndata: (.*)\n", body)
+    kinds = [k for k, _ in events]
+    assert "state" in kinds and "frame" in kinds
+    st = json.loads(dict(events)["state"])
+    assert st["state"] == "done" and "eta_display_s" in st
+
+
+def test_calibration_steps(client):
+    c, svc, app = client
+    cal = c.get("/api/calibration").get_json()
+    assert [s["id"] for s in cal["steps"]] == ["home", "target", "detect", "accept"] and cal["step"] == 0
+    assert c.post("/api/calibration/detect").status_code == 400        # out of order
+    c.post("/api/calibration/home")
+    c.post("/api/calibration/target")
+    cal = c.post("/api/calibration/detect").get_json()
+    assert cal["detected"]["dots"] == 49
+    assert c.get("/api/frame.jpg").status_code == 200                  # the preview
+
+
+def test_usb_export_through_the_api(client, tmp_path):
+    c, svc, app = client
+    from appliance.hw.usb import UsbExporter
+    stick = tmp_path / "media" / "pi" / "STICK"
+    stick.mkdir(parents=True)
+    mounts = tmp_path / "mounts"
+    mounts.write_text("")
+    app.extensions["inkslice"]["usb"] = UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),),
+                                                     sys_root=tmp_path / "nosys")
+    c.post("/api/scan", json={})
+    job_id = wait_state(c, {"done"})["job_id"]
+    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}
+    assert c.post(f"/api/jobs/{job_id}/usb", json={}).status_code == 409
+    mounts.write_text(f"/dev/sdb1 {stick} vfat rw,nosuid,nodev 0 0\n")
+    u = c.get("/api/usb").get_json()
+    assert u["available"] and u["sticks"][0]["id"] == "sdb1"
+    r = c.post(f"/api/jobs/{job_id}/usb", json={"file": "toolpath-grbl.nc", "stick": "sdb1"})
+    assert r.status_code == 200, r.get_json()
+    res = r.get_json()
+    assert res["safe_to_remove"] and res["verified"]
+    copied = stick / "inkslice" / res["name"]
+    assert copied.read_bytes() == svc.job_file(job_id, "toolpath-grbl.nc").read_bytes()
+
+
+# -- the ETA -----------------------------------------------------------------------------
+
+class Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def st(done, total=100, state="scanning", eta=None, job="j"):
+    return {"state": state, "job_id": job, "levels_done": done, "levels_total": total, "eta_s": eta}
+
+
+def test_eta_converges_on_a_steady_scan_and_counts_down_between_levels():
+    clk = Clock()
+    e = EtaSmoother(clock=clk)
+    e.update(st(0, state="homing", eta=999))
+    clk.t = 5
+    e.update(st(0))
+    shown = []
+    for i in range(1, 60):
+        clk.t += 2.0                   # a level every 2 s
+        shown.append(e.update(st(i)))
+        # asking often between levels only counts down, it does not re-estimate
+        clk.t += 1.0
+        a = e.update(st(i))
+        b = e.update(st(i))
+        assert a == b and a == pytest.approx(shown[-1] - 1.0, abs=0.11)
+        clk.t -= 1.0
+    assert shown[-1] == pytest.approx((100 - 59) * 2.0, rel=0.05)
+
+
+def test_eta_does_not_jump_on_one_slow_level():
+    clk = Clock()
+    e = EtaSmoother(clock=clk)
+    e.update(st(0))
+    for i in range(1, 30):
+        clk.t += 2.0
+        before = e.update(st(i))
+    clk.t += 30.0                      # one level takes 15 x longer (a re-focus, a bubble)
+    after = e.update(st(30))
+    counted = before - 30.0
+    assert after - counted <= max(3.0, 0.1 * counted) + 0.1
+    assert after < before              # it never goes back up above where it was
+
+
+def test_eta_resets_for_a_new_job_and_is_zero_when_done():
+    clk = Clock()
+    e = EtaSmoother(clock=clk)
+    e.update(st(0, job="a"))
+    clk.t += 1
+    e.update(st(1, job="a"))
+    assert e.update(st(100, state="done", job="a")) == 0.0
+    assert e.update(st(0, state="homing", job="b", eta=50)) == 50.0
+    assert e.update({"state": "idle"}) is None
