@@ -41,7 +41,8 @@ class SerialStage(Stage):
         self.auto_rehome = auto_rehome
         self.poll_interval = poll_interval
         self.counters = dict(commands=0, resends=0, damaged_lines=0, status_polls=0,
-                             resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0)
+                             resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0,
+                             idle_off_target=0, longest_command_s=0.0)
         self._stop_requested = False
         self._ready = False         # the boot banner seen while connecting is no reset
         self._lock = threading.RLock()
@@ -121,6 +122,9 @@ class SerialStage(Stage):
                     if item.seq == seq:
                         if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
                             break                           # our line arrived damaged: resend
+                        took = time.monotonic() - start
+                        if took > self.counters["longest_command_s"]:
+                            self.counters["longest_command_s"] = took
                         return item
                     if item.seq == 0 and not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
                         break                               # a damaged line, perhaps ours: resend
@@ -286,6 +290,7 @@ class SerialStage(Stage):
                         self._target = target
                         return
                     stuck += 1                      # idle elsewhere: a stale report, or a lost move
+                    self.counters["idle_off_target"] += 1
                     if stuck >= 3:
                         break
                     time.sleep(self.poll_interval)
