@@ -34,7 +34,7 @@ class TileGrid:
 
     def _offsets(self, margin):
         # steps of at most one tile, so every tile between the corners is hit
-        return np.append(np.arange(-margin, margin, self.tile, dtype=np.float64), margin)
+        return np.linspace(-margin, margin, int(np.ceil(2 * margin / self.tile)) + 1)
 
     def _tiles(self, pts, margin):
         T = self.tile
@@ -44,8 +44,19 @@ class TileGrid:
                 ty = np.floor((pts[:, 1] + e - self.oy) / T).astype(np.intp)
                 yield ty, tx
 
+    @staticmethod
+    def _thin(pts, margin, every=4):
+        """Every 4th point of a chain (<= 1.5 px apart) with the margin grown to match."""
+        if len(pts) > 4 * every:
+            return pts[::every], margin + 0.75 * every
+        return pts, margin
+
     def mark(self, mask: np.ndarray, pts: np.ndarray, margin: float):
-        """Set every tile that a square of half-side `margin` around any point touches."""
+        """Set every tile that a square of half-side `margin` around any point touches.
+
+        `pts` is a chain of contour pixels (consecutive points at most 1.5 px apart).
+        """
+        pts, margin = self._thin(pts, margin)
         for ty, tx in self._tiles(pts, margin):
             ok = (tx >= 0) & (tx < self.nx) & (ty >= 0) & (ty < self.ny)
             mask[ty[ok], tx[ok]] = True
@@ -53,6 +64,7 @@ class TileGrid:
 
     def all_marked(self, mask: np.ndarray, pts: np.ndarray, margin: float) -> bool:
         """Do the tiles around every point (within `margin`) all belong to `mask`?"""
+        pts, margin = self._thin(pts, margin)
         for ty, tx in self._tiles(pts, margin):
             ok = (tx >= 0) & (tx < self.nx) & (ty >= 0) & (ty < self.ny)
             if not ok.all() or not mask[ty, tx].all():
@@ -60,14 +72,18 @@ class TileGrid:
         return True
 
     def gather(self, image: np.ndarray, ty: np.ndarray, tx: np.ndarray) -> np.ndarray:
-        """Tiles (with a 1-pixel apron) of a 2-D uint8 image side by side: (tile+2, n*(tile+2))."""
+        """Tiles (with a 1-pixel apron) of a 2-D uint8 image side by side: (tile+2, n*(tile+2)).
+
+        A strided view puts the tile row first, so one fancy-indexed copy lays
+        the tiles out as one short, wide strip (wide rows keep OpenCV's
+        filters fast) without a second transposing copy.
+        """
         T, A = self.tile, self.tile + 2
         s0, s1 = image.strides
         base = image[self.oy - 1:, self.ox - 1:]
-        view = as_strided(base, shape=(self.ny, self.nx, A, A), strides=(s0 * T, s1 * T, s0, s1),
+        view = as_strided(base, shape=(A, self.ny, self.nx, A), strides=(s0, s0 * T, s1 * T, s1),
                           writeable=False)
-        tiles = view[ty, tx]                                   # (n, A, A), one copy
-        return np.ascontiguousarray(tiles.transpose(1, 0, 2)).reshape(A, -1)
+        return view[:, ty, tx].reshape(A, -1)
 
     def scatter(self, strip: np.ndarray, dst: np.ndarray, ty: np.ndarray, tx: np.ndarray):
         """Write the inner tile x tile of each strip tile back into the full-size `dst`."""

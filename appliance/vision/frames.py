@@ -139,7 +139,7 @@ def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 
         if c == main:
             continue
         d = sample_bgr[:, :, c].astype(np.int16) - m
-        d_ink, d_part = float(np.median(d[ink])), float(np.median(d[part]))
+        d_ink, d_part = float(d[ink].mean()), float(d[part].mean())
         gap = d_ink - d_part
         if gap >= min_gap and d_ink > 0 and (best is None or gap > best[0]):
             best = (gap, c, int(round(max(d_part, 0.0) + 0.5 * (d_ink - max(d_part, 0.0)))))
@@ -147,7 +147,7 @@ def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 
 
 
 def histogram(img: np.ndarray) -> np.ndarray:
-    return np.bincount(img.ravel(), minlength=256)
+    return cv2.calcHist([np.ascontiguousarray(img)], [0], None, [256], [0, 256]).ravel()
 
 
 def best_channel(sample_bgr: np.ndarray, min_contrast: float = 24.0):

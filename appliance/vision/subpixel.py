@@ -33,16 +33,18 @@ def normals(contour: np.ndarray, reach: int = 2) -> np.ndarray:
 def sample_q8(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear samples of an 8-bit image at float positions, as int32 in units of 1/256 grey."""
     h, w = img.shape
+    flat = img.reshape(-1) if img.flags.c_contiguous else img.ravel()
     x = np.clip(x, 0, w - 1.001)
     y = np.clip(y, 0, h - 1.001)
-    x0 = x.astype(np.intp)
-    y0 = y.astype(np.intp)
+    x0 = x.astype(np.int32)
+    y0 = y.astype(np.int32)
     fx = ((x - x0) * ONE).astype(np.int32)
     fy = ((y - y0) * ONE).astype(np.int32)
-    p00 = img[y0, x0].astype(np.int32)
-    p01 = img[y0, x0 + 1].astype(np.int32)
-    p10 = img[y0 + 1, x0].astype(np.int32)
-    p11 = img[y0 + 1, x0 + 1].astype(np.int32)
+    i = y0 * w + x0
+    p00 = flat.take(i).astype(np.int32)
+    p01 = flat.take(i + 1).astype(np.int32)
+    p10 = flat.take(i + w).astype(np.int32)
+    p11 = flat.take(i + (w + 1)).astype(np.int32)
     top = p00 * (ONE - fx) + p01 * fx
     bottom = p10 * (ONE - fx) + p11 * fx
     return (top * (ONE - fy) + bottom * fy) >> Q
