@@ -92,7 +92,7 @@ def test_band_mode_follows_a_shrinking_disc_like_a_full_read():
         assert np.sqrt(np.mean(radial_error(a.loops[0], 158.4, 121.7, r) ** 2)) < 0.1
         np.testing.assert_allclose(signed_area(a.loops[0]), signed_area(b.loops[0]), rtol=1e-3)
         modes.append(banded.last_mode)
-    assert modes[:4] == ["full", "band", "band", "band"]
+    assert modes[0] in ("coarse", "full") and modes[1:4] == ["band", "band", "band"]
     assert full.last_mode == "full"
 
 

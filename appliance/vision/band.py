@@ -51,12 +51,14 @@ class TileGrid:
             return pts[::every], margin + 0.75 * every
         return pts, margin
 
-    def mark(self, mask: np.ndarray, pts: np.ndarray, margin: float):
+    def mark(self, mask: np.ndarray, pts: np.ndarray, margin: float, thin=True):
         """Set every tile that a square of half-side `margin` around any point touches.
 
-        `pts` is a chain of contour pixels (consecutive points at most 1.5 px apart).
+        With `thin`, `pts` is a chain of contour pixels (consecutive points at
+        most 1.5 px apart) and only every 4th is used, with the margin grown.
         """
-        pts, margin = self._thin(pts, margin)
+        if thin:
+            pts, margin = self._thin(pts, margin)
         for ty, tx in self._tiles(pts, margin):
             ok = (tx >= 0) & (tx < self.nx) & (ty >= 0) & (ty < self.ny)
             mask[ty[ok], tx[ok]] = True

@@ -132,6 +132,8 @@ class WaterlineExtractor:
         loops = None
         if self._band is not None and self.options["band"]:
             loops = self._read_band(frame, level_mm, where)
+        elif self.options["band"]:
+            loops = self._read_coarse(frame, level_mm, where)
         if loops is None:
             loops = self._read_full(frame, level_mm, where)
         return self._finish(loops, level_mm, where)
@@ -206,11 +208,57 @@ class WaterlineExtractor:
         read = np.ones(self.grid.shape, bool)
         return self._loops(self.roi, level_mm, read, full=True)
 
-    def _read_band(self, frame, level_mm, where):
+    def _read_coarse(self, frame, level_mm, where):
+        """First frame: find the part on the 1-in-4 sample, then read only a band around it.
+
+        The kept binary image gets the coarse labels (blown up 4x) everywhere,
+        and the band read overwrites them where the waterline is. If the fine
+        waterline leaves that band the caller reads the whole tank.
+        """
+        x0, y0, x1, y1 = self.roi
+        dec = self._sample(frame, 4, all_channels=True)
+        main = np.ascontiguousarray(self._channel_view(dec, self._ch))
+        hist = histogram(main)
+        split = otsu_split(hist)
+        self._check_split(split, where)
+        self.split = split
+        self.glare_cut = glare_cut(hist, split)
+        if not self._hue_known and frame.ndim == 3 and self.channel is not None:
+            self.hue = hue_split(dec[::2, ::2], self.channel, split)
+            self._hue_known = True
+        smooth = cv2.medianBlur(main, 3)
+        coarse = part_mask(smooth, split, self.glare_cut)
+        if self.hue is not None:
+            other = np.ascontiguousarray(dec[:, :, self.hue.other])
+            cv2.bitwise_and(coarse, cv2.threshold(cv2.subtract(other, main), self.hue.cut, 255,
+                                                  cv2.THRESH_BINARY_INV)[1], coarse)
+        # the kept binary image: the coarse part outlines drawn filled at full
+        # size (holes too), a few pixels off at worst; the band read replaces
+        # the pixels near the waterline
+        contours, hier = cv2.findContours(coarse, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        big = self._binary[y0:y1, x0:x1]
+        big.fill(0)
+        band = np.zeros(self.grid.shape, bool)
+        if hier is None:
+            return None
+        scaled = [c * 4 + 2 for c in contours]
+        cv2.drawContours(big, scaled, -1, 255, cv2.FILLED, hierarchy=hier)
+        min_len = max(8, int(np.sqrt(self.options["min_area_px"])))
+        for c in scaled:
+            if len(c) * 4 >= min_len:
+                # chain points 4 to 5.7 px apart: 3 px more margin covers the gaps
+                pts = c.reshape(-1, 2).astype(np.float64) + (x0, y0)
+                self.grid.mark(band, pts, self.options["band_px"] + 6 + 3, thin=False)
+        if not band.any():
+            return None
+        return self._read_band(frame, level_mm, where, band, lattice=False, mode="coarse")
+
+    def _read_band(self, frame, level_mm, where, band=None, lattice=True, mode="band"):
         """Read the band tiles (+ tiles where the sparse lattice saw a change); None: read in full."""
-        self.last_mode = "band"
+        self.last_mode = mode
         grid = self.grid
-        read = self._lattice_changes(frame, self._band)
+        band = self._band if band is None else band
+        read = self._lattice_changes(frame, band) if lattice else band
         ty, tx = np.nonzero(read)
         if len(ty) == 0:
             return None
