@@ -65,12 +65,13 @@
 #include "avr_eeprom.h"
 
 #define F_CPU 16000000ULL
-#define STEP_PORT 'D'
-#define STEP_PIN 4
+#define STEP_PORT 'B'
+#define STEP_PIN 1
+#define DIR_PORT 'D'
 #define DIR_PIN 5
-#define LIMIT_PORT 'B'
-#define LIM_BOTTOM_PIN 1
-#define LIM_TOP_PIN 2
+#define LIMIT_PORT 'C'
+#define LIM_BOTTOM_PIN 0
+#define LIM_TOP_PIN 1
 #define POLL_CYCLES 4000      /* check the pty and stdin every 250 us of simulated time */
 
 static avr_t *avr;
@@ -424,7 +425,7 @@ int main(int argc, char **argv)
   irq_lim_top = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(LIMIT_PORT), LIM_TOP_PIN);
   irq_uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(STEP_PORT), STEP_PIN), on_step, NULL);
-  avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(STEP_PORT), DIR_PIN), on_dir, NULL);
+  avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(DIR_PORT), DIR_PIN), on_dir, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), on_uart_out, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), on_xon, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), on_xoff, NULL);

@@ -19,7 +19,8 @@
  * measures it from the recorded STEP edges.
  *
  * Timer1 counts at TICK_HZ (16 MHz / 8), so intervals are 0.5 us units and
- * fit 16 bits down to 31 steps/s. */
+ * fit 16 bits down to 31 steps/s.  MIN_INTERVAL keeps a step period longer
+ * than the STEP pulse plus the worst interrupt latency (stepper.c). */
 #ifndef PLANNER_H
 #define PLANNER_H
 #include <stdint.h>

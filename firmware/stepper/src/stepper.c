@@ -1,26 +1,30 @@
-/* stepper.c -- step generation from Timer1.
+/* stepper.c -- step generation by Timer1's output-compare hardware.
  *
- * Timer1 runs in CTC mode at 2 MHz: a compare match with OCR1A is a step.  In
- * CTC mode the counter restarts at every match, so the interval loaded into
- * OCR1A during one interrupt is exactly the time to the next step, however
- * late the interrupt itself ran; lateness shows up only as jitter of the
- * software edge, never as drift.
+ * Why the hardware makes the edges.  A STEP edge written by software in an
+ * interrupt lands whenever the interrupt gets to run: after the UART's
+ * interrupts, after any cli() section, after the instruction in flight.
+ * That is microseconds of jitter, and a driver turns jitter into vibration.
+ * So STEP sits on OC1A and Timer1 toggles it itself at the exact compare
+ * match (COM1A = toggle).  The interrupts only schedule the next compare;
+ * when one runs late, the edge it schedules is still exact, because times
+ * are absolute on the free-running 2 MHz counter:
  *
- * The interrupt is deliberately dumb (see planner.h for why the maths lives
- * elsewhere).  Per step it:
- *   1. checks the one limit switch ahead of the motion (stop before, not
- *      after, stepping into it);
- *   2. raises STEP and counts the step;
- *   3. when the current block of the plan is used up, loads the next block's
- *      count and interval (a table read);
- *   4. holds STEP high until pulse_us has passed since the rising edge,
- *      measured on the same timer, then lowers it.
- * Holding the pulse inside the interrupt costs pulse_us of CPU per step (2 us
- * of a 50 us step at 20 kHz) and saves a second interrupt and its jitter.
+ *   rise interrupt  (STEP just went high at time R):
+ *       schedule the fall at R + pulse (or as soon as possible, if late).
+ *   fall interrupt  (STEP just went low):
+ *       count the step; stop if the limit switch ahead is pressed;
+ *       take the next interval from the plan (a table read; planner.h says
+ *       why all the maths lives outside); schedule the rise at R + interval.
+ *
+ * A late interrupt only matters if it is later than the next compare it has
+ * to set up: for the fall that costs a longer pulse (never a shorter one), for
+ * the rise it would cost a step period, so an interval must exceed the pulse
+ * plus the worst interrupt latency: MIN_INTERVAL (20 us) covers that.
  *
  * DIR only changes between moves, in stepper_start(), which waits
  * dir_setup_us before starting the timer: the driver's setup time is met by
- * construction. */
+ * construction.  The limit switch ahead of the motion is checked before each
+ * step is scheduled, so a pressed switch is never stepped into. */
 #include <avr/interrupt.h>
 #include <util/delay.h>
 #include <util/atomic.h>
@@ -35,12 +39,18 @@ static const ramp_t *st_ramp;
 static plan_t st_plan;
 static uint8_t st_block;
 static uint32_t st_left;
+static uint16_t st_interval;   /* ticks from this rise to the next */
+static uint16_t st_rise;       /* timer time of the last rising edge */
+static uint8_t st_high;        /* the next compare is the fall */
 static int8_t st_dir;
 static uint8_t st_limit_mask, st_limit_xor;   /* (PIN ^ xor) & mask != 0: switch ahead pressed */
 static uint8_t pulse_ticks = 4, dir_setup = 1, invert_bits;
 
+#define LATE_MARGIN 6          /* ticks: time to write OCR1A before the counter passes it */
+
 void stepper_init(void)
 {
+  STEP_PORT &= (uint8_t)~_BV(STEP_BIT);
   STEP_DDR |= _BV(STEP_BIT);
   DIR_DDR |= _BV(DIR_BIT);
   EN_DDR |= _BV(EN_BIT);
@@ -68,12 +78,12 @@ uint8_t limits_pressed(void)
   return (uint8_t)(((pins >> LIMIT_BOTTOM_BIT) & 1) | (((pins >> LIMIT_TOP_BIT) & 1) << 1));
 }
 
+/* Make st_left/st_interval describe the next non-empty block; 0 left = done. */
 static void load_next_block(void)
 {
-  uint16_t iv;
   while (st_block <= 2 * st_plan.nseg) {
-    st_left = plan_block(st_ramp, &st_plan, st_block, &iv);
-    if (st_left) { OCR1A = iv; return; }
+    st_left = plan_block(st_ramp, &st_plan, st_block, &st_interval);
+    if (st_left) return;
     st_block++;
   }
   st_left = 0;
@@ -93,34 +103,45 @@ void stepper_start(const ramp_t *r, const plan_t *p, int8_t dir)
   st_block = 0;
   load_next_block();
   if (!st_left) return;
+  if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) { stop_reason = STOP_LIMIT; return; }
   for (uint8_t i = 0; i < dir_setup; i++) _delay_us(1);
-  stepper_running = 1;
+  /* reset the OC1A latch to low (FOC1A with "clear on match"), then toggle mode */
+  TCCR1A = _BV(COM1A1);
+  TCCR1C = _BV(FOC1A);
+  TCCR1A = _BV(COM1A0);
+  st_high = 0;
+  st_rise = st_interval;                     /* the first rise, one interval after start */
   TCNT1 = 0;
+  OCR1A = st_rise;
   TIFR1 = _BV(OCF1A);
-  TCCR1B = _BV(WGM12) | _BV(CS11);           /* CTC on OCR1A, clk/8 = 2 MHz */
+  stepper_running = 1;
+  TCCR1B = _BV(CS11);                        /* normal mode, clk/8 = 2 MHz */
 }
 
 ISR(TIMER1_COMPA_vect)
 {
-  if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) {
-    TCCR1B = 0;
-    stepper_running = 0;
-    stop_reason = STOP_LIMIT;
+  if (!st_high) {                            /* STEP rose at st_rise */
+    st_high = 1;
+    uint16_t fall = st_rise + pulse_ticks;
+    uint16_t soonest = TCNT1 + LATE_MARGIN;
+    OCR1A = ((int16_t)(fall - soonest) > 0) ? fall : soonest;
     return;
   }
-  STEP_PORT |= _BV(STEP_BIT);
-  uint16_t rise = TCNT1;
+  st_high = 0;                               /* STEP fell: the step is done */
   position += st_dir;
   if (--st_left == 0) {
     st_block++;
     load_next_block();
-    if (!st_left) { TCCR1B = 0; stepper_running = 0; }
+    if (!st_left) { TCCR1B = 0; TCCR1A = 0; stepper_running = 0; return; }
   }
-  while ((uint16_t)(TCNT1 - rise) <= pulse_ticks) {
-    if (!stepper_running) break;          /* timer stopped: TCNT1 frozen */
+  if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) {
+    TCCR1B = 0; TCCR1A = 0;
+    stepper_running = 0;
+    stop_reason = STOP_LIMIT;
+    return;
   }
-  if (!stepper_running) { uint8_t pt = pulse_ticks; while (pt--) _delay_us(0.5); }
-  STEP_PORT &= (uint8_t)~_BV(STEP_BIT);
+  st_rise += st_interval;
+  OCR1A = st_rise;
 }
 
 uint8_t stepper_stop_reason(void) { return stop_reason; }

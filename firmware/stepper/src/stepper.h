@@ -14,8 +14,9 @@ extern volatile uint8_t stepper_running;
  * further compare match, so no further step. */
 static inline void stepper_halt_now(void)
 {
-  TCCR1B = 0;
-  STEP_PORT &= (uint8_t)~_BV(STEP_BIT);
+  TCCR1B = 0;                              /* no clock: no further compare match */
+  TCCR1A = 0;                              /* hand the pin back to PORTB ... */
+  STEP_PORT &= (uint8_t)~_BV(STEP_BIT);    /* ... which holds it low */
   stepper_running = 0;
 }
 

@@ -1,0 +1,127 @@
+"""The Python side of the protocol, without simavr: framing, parsing, and the
+driver against a scripted fake controller on a pty (identify refusal,
+timeouts, resend on a damaged reply)."""
+import os
+import threading
+import time
+import tty
+
+import pytest
+
+from appliance.errors import DeviceError, SettingError
+from appliance.hw import protocol as P
+from appliance.hw.stage import SerialStage
+
+
+def test_crc_is_the_firmware_crc16_ccitt_false():
+    assert P.crc16(b"123456789") == 0x29B1
+
+
+def test_a_command_is_framed_with_a_leading_newline_and_its_crc():
+    assert P.encode_command(1, "ID") == b"\n1 ID*E74F\n"
+    with pytest.raises(ValueError):
+        P.encode_command(0, "ID")
+    with pytest.raises(ValueError, match="48"):
+        P.encode_command(1, "SET", "x" * 40, 1)
+
+
+def test_replies_status_reports_and_banners_parse():
+    r = P.parse_line(P.seal("17 error:7") + b"\n")
+    assert (r.seq, r.ok, r.error_name) == (17, False, "soft_limit")
+    st = P.parse_line(P.seal("<moving -120 03 0>") + b"\n")
+    assert (st.state, st.position, st.homed, st.flags["limit_bottom"]) == ("moving", -120, True, True)
+    b = P.parse_line(P.seal("# inkslice-stepper proto=1 reset=watchdog") + b"\n")
+    assert b.reset == "watchdog"
+    with pytest.raises(P.ProtocolError, match="checksum"):
+        P.parse_line(b"17 ok*0000\n")
+    with pytest.raises(P.ProtocolError):
+        P.parse_line(P.seal("<flying 1 00 0>") + b"\n")
+
+
+class FakeController:
+    """A pty whose far end answers like firmware, as scripted by `answer(body) -> list[bytes]`."""
+
+    def __init__(self, answer):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.port = os.ttyname(self.slave)
+        self.answer = answer
+        self.lines = []
+        self._stop = False
+        self._t = threading.Thread(target=self._run, daemon=True)
+        self._t.start()
+
+    def _run(self):
+        buf = b""
+        while not self._stop:
+            try:
+                data = os.read(self.master, 256)
+            except OSError:
+                return
+            buf += data
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                if not line:
+                    continue
+                self.lines.append(line)
+                for out in self.answer(P.unseal(line)):
+                    os.write(self.master, out)
+
+    def close(self):
+        self._stop = True
+        os.close(self.slave)
+        os.close(self.master)
+
+
+def firmware(proto=1, damage_first=0):
+    state = {"damaged": 0}
+
+    def answer(body):
+        seq, verb, *args = body.split()
+        if verb == "ID":
+            text = f"{seq} ok inkslice-stepper proto={proto} fw=9.9 reset=power_on settings=ok"
+        elif verb == "GET":
+            text = f"{seq} ok {P.SETTINGS[args[0]].default}"
+        else:
+            text = f"{seq} error:4"
+        line = P.seal(text) + b"\n"
+        if state["damaged"] < damage_first:
+            state["damaged"] += 1
+            line = line[:3] + b"X" + line[4:]
+        return [line]
+    return answer
+
+
+def test_a_firmware_speaking_another_protocol_version_is_refused_by_name():
+    fake = FakeController(firmware(proto=2))
+    try:
+        with pytest.raises(DeviceError, match="protocol 2 but this driver speaks protocol 1"):
+            SerialStage(fake.port)
+    finally:
+        fake.close()
+
+
+def test_a_silent_device_fails_within_the_timeout_with_a_clear_message():
+    fake = FakeController(lambda body: [])
+    try:
+        t = time.monotonic()
+        with pytest.raises(DeviceError, match="no reply to ID"):
+            SerialStage(fake.port, timeout=0.8)
+        assert time.monotonic() - t < 1.3
+        assert len(fake.lines) >= 3 and len(set(fake.lines)) == 1   # the same line, resent
+    finally:
+        fake.close()
+
+
+def test_a_damaged_reply_makes_the_driver_resend_the_same_line():
+    fake = FakeController(firmware(damage_first=2))
+    try:
+        stage = SerialStage(fake.port)
+        assert stage.info["proto"] == 1 and stage.steps_per_mm == 1600
+        assert stage.counters["resends"] == 2 and stage.counters["damaged_lines"] == 2
+        assert fake.lines[0] == fake.lines[1] == fake.lines[2]
+        with pytest.raises(SettingError, match="outside 1..20"):
+            stage.set_setting("pulse_us", 0)
+        stage.close()
+    finally:
+        fake.close()
