@@ -41,6 +41,7 @@ def test_openapi_describes_exactly_the_api_routes(client):
 def test_a_scan_from_start_to_downloads(client):
     c, svc, app = client
     assert c.get("/api/state").get_json()["state"] == "idle"
+    svc.home_s = 0.5            # long enough for the second start below to meet a running scan
     r = c.post("/api/scan", json={"level_step_mm": 1.0})
     assert r.status_code == 201
     job_id = r.get_json()["job_id"]
@@ -101,7 +102,8 @@ def test_settings_are_validated_by_the_service_and_name_the_bad_key(client):
 
 def test_live_view_frame_and_heightmap_and_sse(client):
     c, svc, app = client
-    assert c.get("/api/frame.jpg").status_code == 404
+    assert c.get("/api/frame.jpg").status_code == 204
+    assert c.get("/api/heightmap/live").status_code == 204
     c.post("/api/scan", json={})
     wait_state(c, {"done"})
     r = c.get("/api/frame.jpg")

@@ -105,7 +105,7 @@ def test_camera_and_live_stream_are_behind_the_login(env):
         assert c.get(path).status_code == 401, path
     assert c.get("/").status_code == 302 and "/login" in c.get("/").headers["Location"]
     login(c, pw)
-    assert c.get("/api/frame.jpg").status_code == 404      # logged in, but no frame yet
+    assert c.get("/api/frame.jpg").status_code == 204      # logged in, but no frame yet
     # public: login page, health, the API description
     anon = app.test_client()
     for path in ("/login", "/api/health", "/api/openapi.json", "/static/app.css"):

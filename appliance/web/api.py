@@ -182,7 +182,7 @@ def frame():
     """The last camera frame (waterline drawn by the daemon). Behind the login like everything."""
     got = svc().latest_frame()
     if got is None:
-        return err("no frame yet", 404)
+        return Response(status=204)      # no frame yet: not an error a browser should log
     data, meta = got
     etag = f'"{hash((meta.get("time"), len(data))) & 0xFFFFFFFF:08x}"'
     if request.headers.get("If-None-Match") == etag:
@@ -199,7 +199,7 @@ def frame():
 def live_heightmap():
     hm = svc().live_heightmap()
     if hm is None:
-        return err("no height map yet", 404)
+        return Response(status=204)
     return jsonify(hm)
 
 

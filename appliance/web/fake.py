@@ -284,7 +284,11 @@ class FakeBenchService:
 
     def _begin(self, job, levels, first):
         self._stop.clear()
+        # The state says "homing" before start_scan returns, so a second start is refused at once.
         self._state = self._blank_state()
+        self._state.update(state="homing", job_id=job["id"], levels_total=len(levels), levels_done=first,
+                           message="homing the stage")
+        job["status"] = "homing"
         if first == 0:
             n = 40
             self._live = {"x": [round(TANK_MM * (i + 0.5) / n, 3) for i in range(n)],

@@ -64,7 +64,7 @@
     function refreshFrame() {
       // A new object URL per frame: the <img> shows the camera only via an authenticated fetch.
       fetch("/api/frame.jpg?n=" + (frameSeq++), { credentials: "same-origin" }).then((r) => {
-        if (!r.ok) return null;
+        if (!r.ok || r.status === 204) return null;
         text("#frame-meta", r.headers.get("X-Level-mm") ? "level " + Number(r.headers.get("X-Level-mm")).toFixed(2) + " mm, waterline in red" : "");
         return r.blob();
       }).then((b) => {
@@ -79,7 +79,7 @@
       try {
         const r = await fetch("/api/heightmap/live", { credentials: "same-origin" });
         if (r.status === 501) { text("#livemap-note", "This bench does not report a partial height map."); return; }
-        if (!r.ok) return;
+        if (!r.ok || r.status === 204) return;
         const hm = await r.json();
         const c = $("#livemap"), ctx = c.getContext("2d");
         const ny = hm.z.length, nx = ny ? hm.z[0].length : 0;
@@ -213,7 +213,7 @@
       text("#cal-detected", c.detected ? "Detected: " + Object.entries(c.detected).map(([k, v]) => k + " " + v).join(", ") : "");
     }
     function frame() {
-      fetch("/api/frame.jpg?c=" + Date.now(), { credentials: "same-origin" }).then((r) => r.ok ? r.blob() : null).then((b) => {
+      fetch("/api/frame.jpg?c=" + Date.now(), { credentials: "same-origin" }).then((r) => r.status === 200 ? r.blob() : null).then((b) => {
         if (!b) return; const img = $("#cal-frame"); img.src = URL.createObjectURL(b); show(img, true); show($("#cal-noframe"), false);
       });
     }

@@ -18,7 +18,7 @@
 
   const VS = `attribute vec3 p; attribute vec3 n; attribute vec3 c; uniform mat4 mvp; uniform mat4 rot; varying vec3 vc; varying float li;
     void main(){ gl_Position = mvp * vec4(p,1.0); vec3 nn = normalize((rot * vec4(n,0.0)).xyz); li = 0.35 + 0.65 * abs(dot(nn, normalize(vec3(0.3,0.5,1.0)))); vc = c; }`;
-  const FS = `precision mediump float; varying vec3 vc; varying float li; uniform float lit; void main(){ gl_FragColor = vec4(vc * mix(1.0, li, lit), 1.0); }`;
+  const FS = `precision mediump float; varying vec3 vc; varying float li; uniform float lit; void main(){ gl_FragColor = vec4(lit > 0.5 ? vc * li : vc, 1.0); }`;
   function shader(type, src) { const s = gl.createShader(type); gl.shaderSource(s, src); gl.compileShader(s); if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s)); return s; }
   const prog = gl.createProgram();
   gl.attachShader(prog, shader(gl.VERTEX_SHADER, VS)); gl.attachShader(prog, shader(gl.FRAGMENT_SHADER, FS)); gl.linkProgram(prog);
@@ -31,7 +31,7 @@
   }
 
   let mesh = null, path = null, centre = [0, 0, 0], size = 50;
-  const view = { yaw: -0.6, pitch: 0.95, dist: 1.8 };
+  const view = { yaw: -0.6, pitch: 0.95, dist: 2.1 };
   const home = Object.assign({}, view);
 
   function parseHeightmap(text) {
@@ -78,7 +78,7 @@
     });
     const n = P.length / 3;
     const C = new Float32Array(n * 3); for (let i = 0; i < n; i++) { C[3 * i] = 1; C[3 * i + 1] = 0.25; C[3 * i + 2] = 0.2; }
-    return { count: n, p: buffer(new Float32Array(P)), n: buffer(new Float32Array(n * 3).fill(0)), c: buffer(C), moves };
+    return { count: n, p: buffer(new Float32Array(P)), n: buffer(new Float32Array(n * 3).fill(1)), c: buffer(C), moves };
   }
 
   function bind(obj) {
@@ -94,7 +94,10 @@
     const model = mul(rot, trans(-centre[0], -centre[1], -centre[2]));
     const mvp = mul(persp(0.8, w / Math.max(1, h), size * 0.05, size * 20), mul(trans(0, 0, -view.dist * size), model));
     gl.uniformMatrix4fv(loc.mvp, false, mvp); gl.uniformMatrix4fv(loc.rot, false, rot);
+    // the surface is pushed back a little in depth so that a toolpath lying on it stays visible
+    gl.enable(gl.POLYGON_OFFSET_FILL); gl.polygonOffset(2, 2);
     if (mesh && document.getElementById("show-surface").checked) { gl.uniform1f(loc.lit, 1); bind(mesh); gl.drawArrays(gl.TRIANGLES, 0, mesh.count); }
+    gl.disable(gl.POLYGON_OFFSET_FILL);
     if (path && document.getElementById("show-path").checked) { gl.uniform1f(loc.lit, 0); bind(path); gl.drawArrays(gl.LINES, 0, path.count); }
   }
   let queued = false;
