@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from . import atomicio, outputs, plots
@@ -74,6 +75,22 @@ def _seed_slices(scan):
     return slices
 
 
+def _part_outline_mm(lowest, camera):
+    """The part's outline in the most exposed frame: its largest bright blob.
+
+    The grid goes "over the part" (the dissertation drew it by hand); the
+    bounding box of all edge points would be stretched by glare and dust.
+    """
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(lowest.binary, connectivity=8)
+    if n < 2:
+        raise ScanError("scan", "the part is not visible in the lowest frame")
+    biggest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    contours, _ = cv2.findContours((labels == biggest).astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_NONE)
+    outline = np.vstack([c.reshape(-1, 2) for c in contours]).astype(float)
+    return seed_vision.pixels_to_mm(outline, camera)
+
+
 def run_seed(scan, grid_n=50):
     """All dissertation methods on one scan -> {method: HeightMap}."""
     slices = _seed_slices(scan)
@@ -81,7 +98,7 @@ def run_seed(scan, grid_n=50):
                      for s in slices])
     if len(pts) < 3:
         raise ScanError(scan.folder, "no waterline found in any frame (is the part in view?)")
-    x, y = seed_methods.seed_grid(pts[:, :2], grid_n)
+    x, y = seed_methods.seed_grid(_part_outline_mm(slices[-1], scan.camera), grid_n)
     X, Y = np.meshgrid(x, y)
     grid_px = seed_vision.mm_to_pixels(np.column_stack([X.ravel(), Y.ravel()]), scan.camera)
     exposed = np.stack([seed_vision.exposed_at(s.binary, grid_px).reshape(X.shape) for s in slices])

@@ -5,7 +5,7 @@ process it with every surface method, and print Ea / sigma / Ep (table form) /
 degree of matching per method beside the dissertation's numbers.
 
     .venv/bin/python benches/seed_table.py            # full run
-    .venv/bin/python benches/seed_table.py --quick    # 1 mm only, 1024 x 768 frames
+    .venv/bin/python benches/seed_table.py --quick    # 1 mm steps only
 """
 from __future__ import annotations
 
@@ -25,20 +25,11 @@ from appliance.surface.seedtables import TABLES            # noqa: E402
 TABLE_KEY = {"captured": "captured", "spline": "spline", "nearest": "nearest", "lsq3": "lsq"}
 
 
-def render(sample, folder, step, quick, effects):
+def render(sample, folder, step, effects):
+    from appliance.sim.levels import sculpture_levels
     from appliance.sim.scanrender import render_scan
-    from appliance.sim.rig import Rig
-    rig = Rig()
-    if quick:
-        rig = rig.scaled(0.5) if hasattr(rig, "scaled") else rig
-    render_scan(surfaces.get(sample), folder, step_mm=step, rig=rig, effects=effects, seed=1)
-
-
-def effects_named(name):
-    from appliance.sim import render as r
-    if name == "clean":
-        return r.Effects.clean() if hasattr(r.Effects, "clean") else r.Effects()
-    return r.Effects.realistic() if hasattr(r.Effects, "realistic") else r.Effects()
+    surface = surfaces.get(sample)
+    render_scan(surface, folder, levels=sculpture_levels(surface, step), effects=effects, seed=1)
 
 
 def row(label, s, ref=None):
@@ -55,13 +46,13 @@ def main():
     ap.add_argument("--samples", default="sample1,sample2,sample3,sample4")
     args = ap.parse_args()
     steps = (1.0,) if args.quick else (1.0, 2.0)
-    effects = effects_named(args.effects)
+    effects = args.effects
     with tempfile.TemporaryDirectory(prefix="seed-table-") as tmp:
         for sample in args.samples.split(","):
             for step in steps:
                 folder = Path(tmp) / f"{sample}-{step:g}"
                 t0 = time.perf_counter()
-                render(sample, folder, step, args.quick, effects)
+                render(sample, folder, step, effects)
                 t1 = time.perf_counter()
                 job = proc.process(folder, method="lsq3")
                 t2 = time.perf_counter()

@@ -99,6 +99,13 @@ class Surface:
         X, Y = self.sample_grid(401)
         return float(np.max(self.height(X, Y)))
 
+    @property
+    def z_min_top(self):
+        """Lowest point of the sculptured top: below it a scan sees only walls."""
+        X, Y = self.sample_grid(401)
+        inside = self.inside(X, Y)
+        return float(np.min(self.height(X, Y)[inside]))
+
     def sample_grid(self, n=50):
         xmin, xmax, ymin, ymax = self.bounds
         return np.meshgrid(np.linspace(xmin, xmax, n), np.linspace(ymin, ymax, n))
