@@ -106,7 +106,7 @@ def hammer_status(stage, stop):
 
 
 def measure_move(rate, accel, distance, speed, load=True):
-    with SimulatedBench(speed=speed) as bench, tempfile.TemporaryDirectory() as tmp:
+    with SimulatedBench(speed=speed, stage_mm=1.5) as bench, tempfile.TemporaryDirectory() as tmp:
         stage = SerialStage(bench.port, poll_interval=0.001)
         stage.set_setting("accel", accel)
         stage.set_setting("max_rate", rate)

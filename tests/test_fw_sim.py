@@ -9,6 +9,7 @@ import pytest
 from appliance.errors import DeviceError, SettingError
 from appliance.hw import protocol as P
 from appliance.hw.stage import SerialStage
+from appliance.sim.hil import SimulatedBench
 from fw_helpers import RawLink, bench, err, fw_build, link  # noqa: F401  (fixtures)
 
 pytestmark = pytest.mark.simavr
@@ -133,6 +134,15 @@ def test_hitting_the_top_switch_stops_the_move_and_raises_an_alarm(bench, link):
     home(link, 33)                                           # HOME clears the alarm
 
 
+def test_hitting_the_home_switch_outside_homing_is_a_bottom_hard_limit(bench, link):
+    home(link)
+    assert link.ask(34, "SET", "soft_min", -5000).ok
+    assert link.ask(35, "MOVE", -4000).ok
+    st = link.wait_idle()
+    assert (st.state, st.alarm, st.flags["limit_bottom"], st.homed) == ("alarm", "hard_limit_bottom", True, False)
+    assert bench.stage_position_steps() == 0                  # stopped where the switch closed
+
+
 def test_emergency_stop_halts_within_one_step_period(bench, link):
     home(link)
     assert link.ask(40, "MOVE", 140000).ok
@@ -235,14 +245,10 @@ def test_driver_gives_up_within_its_timeout_when_the_line_is_dead(bench):
         stage.close()
 
 
-def test_simulated_bench_starts_in_under_two_seconds(fw_build):
+def test_simulated_bench_at_real_time_starts_and_identifies_in_under_two_seconds(fw_build):
     t = time.monotonic()
-    with SimulatedBench_() as b:
+    with SimulatedBench(speed=1.0) as b:
         stage = SerialStage(b.port)
+        assert stage.info["proto"] == P.PROTO_VERSION
         stage.close()
     assert time.monotonic() - t < 2.0
-
-
-def SimulatedBench_():
-    from appliance.sim.hil import SimulatedBench
-    return SimulatedBench(speed=1.0)

@@ -20,6 +20,7 @@ The rules it follows (firmware/stepper/PROTOCOL.md has the whole contract):
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -46,7 +47,7 @@ class SerialStage(Stage):
         self._stop_requested = False
         self._ready = False         # the boot banner seen while connecting is no reset
         self._lock = threading.RLock()
-        self._seq = int.from_bytes(__import__("os").urandom(2), "big") % 60000 + 1
+        self._seq = int.from_bytes(os.urandom(2), "big") % 60000 + 1   # unlike a previous session's last seq
         self._target: int | None = None
         try:
             self._ser = serial.serial_for_url(port, BAUD, timeout=self.reply_timeout)
