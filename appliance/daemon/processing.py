@@ -27,11 +27,22 @@ def in_process(scan_folder, out_folder, options, stop=None) -> dict:
     return process_scan(scan_folder, out_folder, **options)
 
 
+def _die_with_parent():
+    """In the child, before exec: ask the kernel to SIGKILL it when the daemon dies,
+    so a kill -9 of the daemon cannot leave an orphan writing into the job folder."""
+    try:
+        import ctypes
+        import signal
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
 def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0.2) -> dict:
     cmd = [sys.executable, "-m", "appliance.daemon.process_child", str(scan_folder), str(out_folder),
            json.dumps(options)]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, preexec_fn=_die_with_parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
         while True:
             try:
                 rc = proc.wait(timeout=poll_s)

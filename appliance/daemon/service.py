@@ -70,6 +70,7 @@ class BenchService:
                        "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {}}
         self._subscribers: list[queue.Queue] = []
         self._frame = None
+        self._job_settings = {}
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._closing = threading.Event()
@@ -203,6 +204,10 @@ class BenchService:
 
     # == internals ================================================================
     def _refuse_if_busy(self):
+        current = self._state["job_id"]
+        if self._thread is not None and self._thread.is_alive() and current \
+                and self.store.get_job(current)["status"] in ("done", "failed", "cancelled"):
+            self._thread.join(timeout=5)           # the job is over; its thread is closing the devices
         if self._thread is not None and self._thread.is_alive():
             raise SettingError("scan", f"a scan is already running ({self._state['job_id']}); "
                                        "cancel it first")
@@ -229,6 +234,7 @@ class BenchService:
 
     def _run_job(self, job_id):
         job = self.store.get_job(job_id)
+        self._job_settings = job["settings"]
         try:
             devices = self.factory.open(job["settings"], job["params"])
         except InkSliceError as e:
@@ -238,14 +244,24 @@ class BenchService:
             self._set(state="failed", message=reason)
             return
         self._set(hardware={**self._state["hardware"], **devices.hardware})
+        final = {}
+
+        def report(**changes):
+            # the final state is published once the devices are closed, so a client that
+            # sees "done" can start the next scan at once
+            if changes.get("state") in ("done", "failed", "cancelled"):
+                final.update(changes)
+            else:
+                self._set(**changes)
         try:
-            runner = ScanRunner(self.store, job_id, devices, self.processor, self._set, self._stop,
+            runner = ScanRunner(self.store, job_id, devices, self.processor, report, self._stop,
                                 on_frame=self._keep_frame, disk_free_mb=self.disk_free_mb)
             status = runner.run()
             if status == "failed":
                 self._note_fault(self.store.get_job(job_id)["reason"])
         finally:
             devices.close()
+            self._set(**final)
 
     def _note_fault(self, reason):
         for name in ("stage", "camera", "disk", "light"):
@@ -254,15 +270,15 @@ class BenchService:
 
     def _keep_frame(self, image: np.ndarray, info: dict):
         """The preview for latest_frame(): downscaled, the waterline drawn in red."""
-        width = int(self.settings()["preview_width"])
         h, w = image.shape[:2]
+        width = min(w, int(self._job_settings.get("preview_width", S.DEFAULTS["preview_width"])))
         small = cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
         if small.ndim == 2:
             small = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
         from .levels import PART_THRESHOLD
         mask = (cv2.cvtColor(small, cv2.COLOR_BGR2GRAY) > PART_THRESHOLD).astype(np.uint8)
         contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
-        cv2.drawContours(small, contours, -1, (0, 0, 255), 1, cv2.LINE_AA)
+        cv2.drawContours(small, contours, -1, (0, 0, 255), 2, cv2.LINE_AA)
         ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
         if ok:
             with self._lock:

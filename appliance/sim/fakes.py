@@ -233,6 +233,25 @@ class FakeBench:
         return self.panel
 
 
+def LevelSeededCamera(surface, rig, level_mm, effects=None):
+    """The renderer's VirtualCamera, its noise seeded from the level instead of a
+    frame counter: a resumed scan then sees exactly the frames an uninterrupted
+    one saw (VirtualCamera counts frames from 0 in each process). The ripple
+    clock is not used: the daemon's settle time stands for it."""
+    from .camera import VirtualCamera
+    from .render import render_frame
+
+    class _Camera(VirtualCamera):
+        def capture(self):
+            level = float(self.level_mm())
+            rng = np.random.default_rng([self.seed, round(level * 10000) & 0xFFFFFFFF])
+            self.frames_taken += 1
+            self.last_level_mm = level
+            return render_frame(self.surface, level, self.rig, self.effects, rng)
+
+    return _Camera(surface, rig, level_mm, effects=effects)
+
+
 class SimulatedBenchFactory:
     """The simulated bench: the real firmware under simavr (appliance/sim/hil.py)
     driven by the real SerialStage, and the renderer's VirtualCamera looking at
@@ -251,11 +270,7 @@ class SimulatedBenchFactory:
         return FakeBench.check(self, params)
 
     def _camera(self, surface, level_mm):
-        try:
-            from .camera import VirtualCamera
-        except ImportError:
-            return FakeCamera(surface, self.rig, level_mm)
-        return VirtualCamera(surface, self.rig, level_mm, effects=self.effects)
+        return LevelSeededCamera(surface, self.rig, level_mm, effects=self.effects)
 
     def open(self, settings, params):
         from ..hw.devices import Devices
@@ -266,7 +281,8 @@ class SimulatedBenchFactory:
         camera = self._camera(get(params.get("surface") or self.surface),
                               lambda: at_home - self.bench.stage_position_mm())
         light = FakeLine("light")
-        self.last = Devices(stage, camera, self.rig.camera_model(), light=light,
+        model = self.rig.camera_model(distorted=camera.effects.lens_distortion)
+        self.last = Devices(stage, camera, model, light=light,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"},
                             closers=[camera.close, stage.close])
         return self.last

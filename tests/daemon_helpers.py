@@ -1,0 +1,34 @@
+"""Shared bits of the daemon tests: a small fast scan on the fake bench."""
+import time
+
+import numpy as np
+
+from appliance.daemon.processing import in_process
+from appliance.daemon.service import BenchService
+from appliance.sim.fakes import FakeBench
+
+FINAL = ("done", "failed", "cancelled")
+# the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm
+SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 22.0, "levels_from_mm": 2.0,
+        "level_step_mm": 2.0, "settle_s": 0.0}
+
+
+def service(tmp_path, faults=None, processor=in_process, **kw):
+    bench = FakeBench("cone", faults=faults)
+    return BenchService(tmp_path / "data", bench, processor=processor, panel_interval_s=0.02, **kw), bench
+
+
+def wait_final(svc, job_id, timeout=60.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        job = svc.job(job_id)
+        if job["status"] in FINAL and svc.state()["state"] in FINAL:
+            return job
+        time.sleep(0.02)
+    raise AssertionError(f"job {job_id} did not finish in {timeout} s: {svc.job(job_id)}")
+
+
+def read_heightmap(path):
+    """heightmap.csv -> the grid of z (NaN off the part)."""
+    from appliance.outputs import read_heightmap_csv
+    return np.asarray(read_heightmap_csv(path).z, float)
