@@ -1,4 +1,10 @@
-"""inkslice serve: the web UI on the LAN (waitress)."""
+"""inkslice serve: the web UI on the LAN (waitress).
+
+By default it talks to the running daemon over its Unix socket
+(rpc.BenchClient), so the web server needs no device access and can run as
+its own, less privileged service. --fake serves the web room's simulated
+bench instead (UI work, demos without the daemon).
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,30 +17,35 @@ HELP = "serve the web UI (phone/desktop) with waitress"
 def add_arguments(p):
     p.add_argument("--host", default="0.0.0.0", help="address to listen on (default: all, for the LAN)")
     p.add_argument("--port", type=int, default=8080)
-    p.add_argument("--data", default="var", help="data folder (jobs, settings, the web's password hash)")
+    p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice); "
+                                                "the web keeps its password hash in DATA/web/")
+    p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
     p.add_argument("--https", action="store_true",
                    help="mark the session cookie Secure (use when a TLS proxy fronts the box)")
     p.add_argument("--fake", action="store_true",
-                   help="run against the simulated FakeBenchService instead of the daemon (UI work, demos)")
+                   help="serve the simulated FakeBenchService instead of the daemon (UI work, demos)")
     p.add_argument("--no-usb", action="store_true", help="hide USB stick export")
 
 
-def _service(args):
+def run(args):
+    from ..daemon.main import data_dir
+    from ..web.demo import serve
+    data = data_dir(args.data)
     if args.fake:
         from ..web.fake import FakeBenchService
-        return FakeBenchService(Path(args.data) / "fake", level_s=0.5)
-    from ..daemon.service import BenchService     # the daemon team's facade
-    return BenchService.from_data_dir(args.data) if hasattr(BenchService, "from_data_dir") else BenchService(args.data)
-
-
-def run(args):
-    from ..web.demo import serve
-    service = _service(args)
+        service = FakeBenchService(Path(data) / "fake-bench", level_s=0.5)
+    else:
+        from ..daemon.rpc import BenchClient
+        from ..errors import DeviceError
+        sock = Path(args.socket or Path(data) / "daemon.sock")
+        if not sock.exists():
+            raise DeviceError(sock, "no daemon socket here; start `inkslice daemon` first (or use --fake)")
+        service = BenchClient(sock)
     config = {"https": args.https}
     if args.no_usb:
         config["usb"] = None
     try:
-        serve(service, args.data, host=args.host, port=args.port, config=config)
+        serve(service, data, host=args.host, port=args.port, config=config)
     finally:
         service.close()
     return 0

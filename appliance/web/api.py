@@ -264,19 +264,50 @@ def job_file(job_id, name):
     return resp
 
 
+SCAN_FILE = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*(/[A-Za-z0-9_-][A-Za-z0-9_.-]*)*$")
+
+
+def _scan_files(job_id):
+    """scan/scan.json and the frames it lists, when the service keeps the scan in the job's folder.
+
+    The facade has no "list the folder" call; scan.json is the scan's own table of contents.
+    """
+    try:
+        doc_path = svc().job_file(job_id, "scan/scan.json")
+        doc = json.loads(doc_path.read_text())
+    except (InkSliceError, OSError, ValueError):
+        return []
+    files = [("scan/scan.json", doc_path)]
+    for fr in doc.get("frames", []) if isinstance(doc, dict) else []:
+        rel = fr.get("file") if isinstance(fr, dict) else None
+        if isinstance(rel, str) and SCAN_FILE.match(rel) and ".." not in rel.split("/"):
+            try:
+                files.append((f"scan/{rel}", svc().job_file(job_id, f"scan/{rel}")))
+            except InkSliceError:
+                pass
+    return files
+
+
 @bp.get("/jobs/<job_id>/archive.zip")
 def job_zip(job_id):
-    """Every output of the job in one zip (what the facade exposes of the job's folder)."""
+    """The job's outputs and, where the service keeps it, the scan folder (scan.json + frames).
+
+    Written to a temporary file, not memory: a 2048 x 1536 scan is a few hundred MB of PNGs and
+    the Pi has 1 GB. Frames are PNGs already, so they are stored, not deflated again.
+    """
+    import tempfile
     _check_job_id(job_id)
     info = svc().job(job_id)
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+    tmp = tempfile.TemporaryFile()
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         for name in info.get("outputs", []):
             if FILE_NAME.match(name):
                 z.write(svc().job_file(job_id, name), f"{job_id}/{name}")
+        for arc, path in _scan_files(job_id):
+            z.write(path, f"{job_id}/{arc}", compress_type=zipfile.ZIP_STORED if arc.endswith(".png") else None)
         z.writestr(f"{job_id}/job.json", json.dumps(info, indent=2, default=str))
-    buf.seek(0)
-    return send_file(buf, mimetype="application/zip", as_attachment=True, download_name=f"inkslice-{job_id}.zip")
+    tmp.seek(0)
+    return send_file(tmp, mimetype="application/zip", as_attachment=True, download_name=f"inkslice-{job_id}.zip")
 
 
 # -- settings -------------------------------------------------------------------------------

@@ -51,7 +51,11 @@ def banner(run: Running) -> str:
     return "\n".join(lines)
 
 
-def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, config=None, out=print):
+def _say(text):
+    print(text, flush=True)         # flushed: a supervisor or a test reads it through a pipe
+
+
+def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, config=None, out=_say):
     """Run until interrupted."""
     server, app = _server(service, data_dir, host, port, threads, config)
     run = Running(server, app)

@@ -1,0 +1,42 @@
+"""`inkslice serve --fake` as a real process: prints the URL and the first-run password, serves over HTTP."""
+import http.cookiejar
+import re
+import subprocess
+import sys
+import urllib.error
+import urllib.parse
+import urllib.request
+
+import pytest
+
+
+def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "serve", "--fake", "--host", "127.0.0.1",
+                             "--port", "0", "--data", str(tmp_path), "--no-usb"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url_line = proc.stdout.readline()
+        pw_line = proc.stdout.readline()
+        url = re.search(r"(http://127\.0\.0\.1:\d+)/", url_line).group(1)
+        password = re.search(r"password: (\S+)", pw_line).group(1)
+        assert urllib.request.urlopen(url + "/api/health", timeout=5).status == 200
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(url + "/api/state", timeout=5)
+        assert e.value.code == 401
+        jar = http.cookiejar.CookieJar()
+        opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(jar))
+        page = opener.open(url + "/login", timeout=5).read().decode()
+        csrf = re.search(r'name="csrf-token" content="([^"]+)"', page).group(1)
+        form = urllib.parse.urlencode({"password": password, "csrf_token": csrf}).encode()
+        opener.open(url + "/login", data=form, timeout=10)
+        state = opener.open(url + "/api/state", timeout=5).read().decode()
+        assert '"state": "idle"' in state or '"state":"idle"' in state
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    # a second start on the same data folder makes no new password
+    out = subprocess.run([sys.executable, "-c", "from appliance.web.app import create_app;"
+                          "from appliance.web.fake import FakeBenchService as F;"
+                          f"a=create_app(F({str(tmp_path / 'x')!r}),{{'data_dir':{str(tmp_path)!r},'usb':None}});"
+                          "print(a.config['FIRST_RUN_PASSWORD'])"], capture_output=True, text=True)
+    assert out.stdout.strip() == "None", out.stderr
