@@ -1,0 +1,127 @@
+"""The two things users ask of this room, as plain functions the commands call.
+
+`finishing_gcode` / `roughing_gcode`: height map in, G-code text and a small
+summary out. `verify_gcode`: G-code text and height map in, a verification
+report (and its deviation map) out. No files: the command modules read and
+write them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InkSliceError, SettingError
+from ..surface.heightmap import HeightMap
+from .cutters import Cutter, parse_cutter
+from .dissertation import dissertation_gcode
+from .feeds import DEFAULT_MATERIAL, conditions
+from .gcodeparse import parse_gcode
+from .limits import Machine, check_envelope, limit_feeds
+from .millsim import new_stock, report, simulate
+from .posts import DEFAULT_DIALECT, render
+from .program import DEFAULT_CLEARANCE, build_program
+from .roughing import RoughSettings, roughing
+from .sampling import Sampler, check_heightmap
+from .zigzag import FinishSettings, finishing
+
+
+@dataclass
+class Job:
+    text: str
+    runtime_s: float
+    summary: dict = field(default_factory=dict)
+
+
+def _post(hm, runs, cutter, cond, stock_top, title, dialect, clearance, z_offset, machine, chord, notes):
+    prog = build_program(runs, cutter, cond, stock_top, title, clearance, z_offset)
+    check_envelope(prog, machine)
+    slowed = limit_feeds(prog, machine)
+    rt = prog.runtime(machine.rapid)
+    text = render(prog, dialect, rt, chord, notes)
+    return prog, text, rt, slowed
+
+
+def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, material=DEFAULT_MATERIAL, feed=None,
+                    plunge=None, rpm=None, dialect=DEFAULT_DIALECT, clearance=DEFAULT_CLEARANCE,
+                    z_offset=0.0, machine: Machine = Machine(), stock_top=None) -> Job:
+    check_heightmap(hm)
+    if dialect == "dissertation":
+        text = dissertation_gcode(hm)
+        return Job(text, float("nan"), {"dialect": "dissertation", "lines": text.count("\n")})
+    sampler = Sampler(hm, edge_step=settings.resolution / 2)
+    fin = finishing(sampler, settings)
+    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
+    target = (f"scallop {settings.scallop:g} mm" if settings.stepover is None
+              else f"stepover {settings.stepover:g} mm")
+    notes = [f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
+             f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"]
+    prog, text, rt, slowed = _post(hm, fin.runs, settings.cutter, cond, top, "InkSlice finishing program",
+                                   dialect, clearance, z_offset, machine, settings.chord, notes)
+    so = fin.stepovers
+    return Job(text, rt, {"passes": int(len(fin.passes)), "runs": len(fin.runs),
+                          "points": int(sum(len(r) for r in fin.runs)),
+                          "stepover_min": float(so.min()) if so.size else 0.0,
+                          "stepover_max": float(so.max()) if so.size else 0.0,
+                          "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
+                          "slowed_moves": slowed, "lines": text.count("\n")})
+
+
+def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_MATERIAL, feed=None,
+                   plunge=None, rpm=None, dialect=DEFAULT_DIALECT, clearance=DEFAULT_CLEARANCE,
+                   z_offset=0.0, machine: Machine = Machine()) -> Job:
+    check_heightmap(hm)
+    if dialect == "dissertation":
+        raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
+    sampler = Sampler(hm, edge_step=settings.resolution / 2)
+    runs = roughing(sampler, settings)
+    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    notes = [f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
+             f"stepover {settings.stepover_mm:g} mm, stock to leave {settings.leave:g} mm"]
+    prog, text, rt, slowed = _post(hm, runs, settings.cutter, cond, settings.stock_top,
+                                   "InkSlice roughing program", dialect, clearance, z_offset, machine,
+                                   settings.chord, notes)
+    return Job(text, rt, {"runs": len(runs), "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
+                          "slowed_moves": slowed, "lines": text.count("\n")})
+
+
+def cutter_from_program(parsed, default=None) -> Cutter:
+    """The cutter our header names (`inkslice cutter: ball D6.000 CR3.000 FL48.0`), else `default`."""
+    meta = parsed.meta("inkslice cutter")
+    if meta:
+        try:
+            parts = meta.upper().split()
+            vals = {p[:2]: float(p[2:]) for p in parts[1:] if p[:2] in ("CR", "FL")}
+            dia = float(parts[1][1:])
+            return Cutter(dia, vals["CR"], vals.get("FL", 8 * dia))
+        except (ValueError, KeyError, IndexError):
+            raise InkSliceError("G-code", f"cannot read the cutter header {meta!r}") from None
+    if default is None:
+        raise SettingError("--cutter", "the program does not name its cutter; give --cutter (e.g. ball6)")
+    return parse_cutter(default) if isinstance(default, str) else default
+
+
+def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resolution=0.1,
+                 reach_tol=0.005, edge_band=0.5, uncut_tol=0.1, where="G-code"):
+    """Simulate `text` over a flat block and compare with `hm`. Returns (Report, summary dict).
+
+    z_zero: object height of program Z0 (None: from our header, else 0). The
+    block's top is the part's top + 1 mm, or the program's safe height if lower.
+    """
+    check_heightmap(hm)
+    if not np.isfinite(resolution) or resolution <= 0:
+        raise SettingError("resolution", f"must be > 0 mm, got {resolution}")
+    parsed = parse_gcode(text, where)
+    if cutter is not None and not isinstance(cutter, Cutter):
+        cutter = parse_cutter(cutter)
+    cut = cutter if cutter is not None else cutter_from_program(parsed)
+    if z_zero is None:
+        m = parsed.meta("inkslice z_offset")
+        z_zero = -float(m) if m else 0.0
+    sampler = Sampler(hm)
+    top = sampler.z_max + 1.0
+    stock = new_stock(sampler, resolution, top)
+    sim = simulate(parsed, cut, stock, z_zero)
+    rep = report(sampler, cut, sim, reach_tol, edge_band, uncut_tol)
+    return rep, {"cutter": cut.describe(), "moves": sim.moves, "z_zero": z_zero}

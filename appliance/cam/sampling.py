@@ -1,0 +1,182 @@
+"""Reading a height map between its samples, and where the part is.
+
+Every CAM step reads the height map at points that are not lattice nodes
+(toolpath points, the dilation's offsets, simulation cells). We use ONE
+interpolation everywhere so that the drop-cutter, the planner and the
+verification agree on what "the design surface" is: piecewise linear on two
+triangles per cell, split along the diagonal from (i, j) to (i+1, j+1).
+That is exactly the triangle mesh we hand OpenCAMLib in the benchmark and the
+surface an STL export of the same map describes, so "agrees with OpenCAMLib"
+is a statement about the same surface, not about two interpolations.
+
+Off the part (a NaN corner, or outside the lattice) the surface is the floor:
+the base top, z = 0, on which the part stands. A cutter may go down there but
+never below it.
+
+The part's outer edge is a cliff, and a drop-cutter that only sees the
+surface on its offset lattice misses the edge itself whenever the lattice
+straddles it, and dips past it (we measured 0.05 mm gouges along the edge of
+sample 3 that way). So the sampler also offers the footprint's boundary as a
+dense row of 3-D points (`edges`, spacing `edge_step`, heights taken from
+the part's side), which the drop-cutter tests as contacts in their own right.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import InkSliceError
+from ..surface.heightmap import HeightMap
+
+FLOOR = 0.0
+
+
+def check_heightmap(hm: HeightMap, where="height map"):
+    """Refuse maps the CAM cannot mill sensibly, naming the problem."""
+    if hm.x.size < 2 or hm.y.size < 2:
+        raise InkSliceError(where, f"needs at least 2 x 2 samples, has {hm.x.size} x {hm.y.size}")
+    for name, v in (("x", hm.x), ("y", hm.y)):
+        d = np.diff(v)
+        if np.any(d <= 0) or np.ptp(d) > 1e-6 * max(1.0, float(np.max(np.abs(v)))):
+            raise InkSliceError(where, f"{name} axis is not regular and increasing")
+    on = hm.on_part
+    if not on.any():
+        raise InkSliceError(where, "has no cell with a height (nothing to mill)")
+    if np.nanmin(hm.z) < FLOOR - 1e-9:
+        raise InkSliceError(where, f"has heights below the base top (min {np.nanmin(hm.z):.3f} mm)")
+    holes = interior_holes(on)
+    if holes.any():
+        j, i = np.argwhere(holes)[0]
+        raise InkSliceError(where, f"has {int(holes.sum())} cells with no height inside the part "
+                                   f"(first at x={hm.x[i]:.2f}, y={hm.y[j]:.2f} mm): fill the holes "
+                                   "(re-scan or interpolate) before making a toolpath")
+
+
+def interior_holes(on_part):
+    """Off-part cells not connected to the lattice border: gaps inside the part."""
+    off = ~on_part
+    lab, n = ndimage.label(off)
+    if n == 0:
+        return np.zeros_like(off)
+    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    return off & ~np.isin(lab, border)
+
+
+class Sampler:
+    """z(x, y) of a height map, piecewise linear on triangles, floor off the part."""
+
+    def __init__(self, hm: HeightMap, floor: float = FLOOR, edge_step: float | None = None):
+        self.hm = hm
+        self.edge_step = edge_step
+        self.x0, self.y0 = float(hm.x[0]), float(hm.y[0])
+        self.dx, self.dy = hm.spacing
+        self.nx, self.ny = hm.x.size, hm.y.size
+        self.floor = float(floor)
+        z = hm.z
+        # corners of each cell; a cell is on the part when all four are
+        z00, z10, z01, z11 = z[:-1, :-1], z[:-1, 1:], z[1:, :-1], z[1:, 1:]
+        cell_on = np.isfinite(z00) & np.isfinite(z10) & np.isfinite(z01) & np.isfinite(z11)
+        self.cell_on = cell_on
+        f = lambda a: np.where(cell_on, a, floor)
+        self._g00, self._g10, self._g01, self._g11 = f(z00), f(z10), f(z01), f(z11)
+        self._z00, self._z10, self._z01, self._z11 = (g.ravel() for g in
+                                                      (self._g00, self._g10, self._g01, self._g11))
+        # distance (mm) from each cell to the nearest on-part cell, for margins
+        step = min(self.dx, self.dy)
+        self._dist = ndimage.distance_transform_edt(~cell_on, sampling=(self.dy, self.dx))
+        self._dist = np.where(cell_on, 0.0, np.maximum(self._dist - 0.5 * step, 0.0))
+
+    def _cell(self, x, y):
+        fx = (np.asarray(x, float) - self.x0) / self.dx
+        fy = (np.asarray(y, float) - self.y0) / self.dy
+        i = np.floor(fx)
+        j = np.floor(fy)
+        inside = (i >= 0) & (j >= 0) & (i <= self.nx - 2) & (j <= self.ny - 2)
+        # the far edges belong to the last cell
+        i = np.where((fx >= self.nx - 1) & (fx <= self.nx - 1 + 1e-9), self.nx - 2, i)
+        j = np.where((fy >= self.ny - 1) & (fy <= self.ny - 1 + 1e-9), self.ny - 2, j)
+        inside = (i >= 0) & (j >= 0) & (i <= self.nx - 2) & (j <= self.ny - 2) & (fx >= 0) & (fy >= 0)
+        ic = np.clip(i, 0, self.nx - 2).astype(np.intp)
+        jc = np.clip(j, 0, self.ny - 2).astype(np.intp)
+        return fx - ic, fy - jc, ic, jc, inside
+
+    def z(self, x, y):
+        u, v, i, j, inside = self._cell(x, y)
+        k = j * (self.nx - 1) + i
+        z00, z10, z01, z11 = self._z00[k], self._z10[k], self._z01[k], self._z11[k]
+        upper = u >= v
+        out = np.where(upper, z00 + u * (z10 - z00) + v * (z11 - z10),
+                       z00 + v * (z01 - z00) + u * (z11 - z01))
+        return np.where(inside, out, self.floor)
+
+    def z_grid(self, xs, ys):
+        """z on the lattice xs x ys, shape (len(ys), len(xs)); cheaper than z() on a mesh."""
+        xs = np.asarray(xs, float)
+        ys = np.asarray(ys, float)
+        u, _, i, _, in_x = self._cell(xs, np.full(xs.shape, self.y0))
+        _, v, _, j, in_y = self._cell(np.full(ys.shape, self.x0), ys)
+        J, I = j[:, None], i[None, :]
+        z00, z10, z01, z11 = self._g00[J, I], self._g10[J, I], self._g01[J, I], self._g11[J, I]
+        U, V = u[None, :], v[:, None]
+        out = np.where(U >= V, z00 + U * (z10 - z00) + V * (z11 - z10),
+                       z00 + V * (z01 - z00) + U * (z11 - z01))
+        return np.where(in_y[:, None] & in_x[None, :], out, self.floor)
+
+    def on_part(self, x, y):
+        u, v, i, j, inside = self._cell(x, y)
+        return inside & self.cell_on[j, i]
+
+    def part_distance(self, x, y):
+        """How far (mm, approximately to one cell) a point is outside the footprint; 0 inside."""
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        u, v, i, j, inside = self._cell(x, y)
+        d = self._dist[j, i]
+        # outside the lattice: add the distance to the lattice's edge
+        xl, xh = self.x0, self.x0 + self.dx * (self.nx - 1)
+        yl, yh = self.y0, self.y0 + self.dy * (self.ny - 1)
+        ex = np.maximum(np.maximum(xl - x, x - xh), 0.0)
+        ey = np.maximum(np.maximum(yl - y, y - yh), 0.0)
+        return np.where(self.cell_on[j, i] & inside, 0.0, np.hypot(d + 0 * ex, 0) + np.hypot(ex, ey))
+
+    @property
+    def edges(self):
+        """Segments (ax, ay, az, bx, by, bz) along the footprint's boundary, or None.
+
+        Only when the sampler was made with `edge_step` (any value: it now only
+        switches the edges on; the contacts are exact per segment).
+        """
+        if self.edge_step is None:
+            return None
+        if getattr(self, "_edges", None) is None:
+            self._edges = self._edge_segments()
+        return self._edges
+
+    def _edge_segments(self):
+        on = np.pad(self.cell_on, 1)
+        z = np.where(np.isfinite(self.hm.z), self.hm.z, self.floor)
+        X = self.x0 + self.dx * np.arange(self.nx)
+        Y = self.y0 + self.dy * np.arange(self.ny)
+        segs = []
+        jj, ii = np.nonzero(self.cell_on)
+        # (neighbour offset, start node offset, end node offset) per side of a cell;
+        # along a side the triangles interpolate linearly between its two nodes
+        for (dj, di), (a, b) in (((-1, 0), ((0, 0), (0, 1))), ((1, 0), ((1, 0), (1, 1))),
+                                 ((0, -1), ((0, 0), (1, 0))), ((0, 1), ((0, 1), (1, 1)))):
+            side = ~on[jj + 1 + dj, ii + 1 + di]
+            j, i = jj[side], ii[side]
+            segs.append(np.column_stack([X[i + a[1]], Y[j + a[0]], z[j + a[0], i + a[1]],
+                                         X[i + b[1]], Y[j + b[0]], z[j + b[0], i + b[1]]]))
+        segs = np.vstack(segs)
+        return None if segs.size == 0 else segs
+
+    @property
+    def bounds(self):
+        """(xmin, xmax, ymin, ymax) of the footprint's cells."""
+        jj, ii = np.nonzero(self.cell_on)
+        return (self.x0 + self.dx * ii.min(), self.x0 + self.dx * (ii.max() + 1),
+                self.y0 + self.dy * jj.min(), self.y0 + self.dy * (jj.max() + 1))
+
+    @property
+    def z_max(self):
+        return float(np.nanmax(self.hm.z))

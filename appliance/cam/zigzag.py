@@ -1,0 +1,441 @@
+"""Zig-zag finishing: cutter-compensated passes over the part, scallop held.
+
+A pass is a straight line of tool positions at spacing `resolution` (0.1 mm)
+along the direction `angle` (0 = along X, 90 = along Y, anything between);
+its tip heights come from the drop-cutter, so the cutter touches the design
+surface (plus `leave`) and never cuts into it. Passes alternate direction.
+
+Stepover
+--------
+Either fixed (`stepover`), or chosen pass by pass so the scallop is the
+requested height (`scallop`, default 0.01 mm). The planner does not trust the
+flat-surface formula: for a candidate next pass it drops the cutter along it,
+then measures the actual scallop between it and the previous pass with the
+swept cutter (scallop.py) at 15 cross-sections between them, on every third
+point along the pass, against the design surface. It searches (secant on
+s^2, bracketed) for the largest stepover whose scallop is within 90-98 % of
+the request, which also holds the scallop on slopes across the passes and on
+curved surfaces where the formula errs by 10-15 %.
+
+Columns are left out of that measure where the cutter physically cannot
+reach the surface under its axis (a concave region tighter than the cutter,
+or the wall of a step): there the residue is set by the cutter's size, not by
+the stepover, and no stepover would help. Such columns are recognised by the
+swept cutter standing more than 30 % of the scallop above the surface right
+under its own pass.
+
+Boundary
+--------
+Tool positions are kept where the axis lies within `margin` of the footprint
+(0: the axis never leaves the part; the cutter's flank finishes the edge).
+Off the part the surface is the base top, so a larger margin lets the cutter
+roll down over the edge. A pass broken by a hole or a bay of the footprint
+becomes several runs; the program builder retracts between them.
+
+Neighbouring runs that end and start within two stepovers are linked by a
+move that follows the surface (dropped like the passes), so the cutter stays
+down between passes instead of retracting 200 times.
+
+Point reduction
+---------------
+Each run is thinned with Ramer-Douglas-Peucker in (along, z) to the chord
+tolerance (0.002 mm by default): collinear points disappear, and no dropped
+point is further than the tolerance from the move that replaces it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SettingError
+from .cutters import Cutter
+from .dropcutter import DEFAULT_RESOLUTION, drop_lines, drop_points
+from .sampling import Sampler
+from .scallop import flat_stepover, swept_offset
+
+DEFAULT_SCALLOP = 0.01      # mm
+DEFAULT_CHORD = 0.002       # mm
+PLAN_SPACING = 0.3          # mm between the points the planner measures along a pass
+_CROSS = 15                 # cross-sections measured between two passes
+
+
+@dataclass
+class FinishSettings:
+    cutter: Cutter
+    scallop: float | None = DEFAULT_SCALLOP
+    stepover: float | None = None
+    angle: float = 0.0
+    resolution: float = DEFAULT_RESOLUTION
+    chord: float = DEFAULT_CHORD
+    margin: float = 0.0
+    leave: float = 0.0
+
+    def check(self):
+        R = self.cutter.radius
+        if self.stepover is not None:
+            if not np.isfinite(self.stepover) or self.stepover <= 0:
+                raise SettingError("stepover", f"must be > 0 mm, got {self.stepover}")
+            if self.stepover >= self.cutter.diameter:
+                raise SettingError("stepover", f"{self.stepover:g} mm is not less than the cutter "
+                                               f"diameter {self.cutter.diameter:g} mm: strips would be left uncut")
+        else:
+            if self.scallop is None or not np.isfinite(self.scallop) or self.scallop <= 0:
+                raise SettingError("scallop", f"must be > 0 mm, got {self.scallop}")
+            if self.scallop >= R:
+                raise SettingError("scallop", f"{self.scallop:g} mm is not less than the cutter radius {R:g} mm")
+        if not np.isfinite(self.resolution) or self.resolution <= 0:
+            raise SettingError("resolution", f"must be > 0 mm, got {self.resolution}")
+        if self.resolution > R / 3:
+            raise SettingError("resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius "
+                                             f"{R:g} mm (at most {R / 3:.3g} mm)")
+        if not np.isfinite(self.chord) or self.chord <= 0:
+            raise SettingError("chord tolerance", f"must be > 0 mm, got {self.chord}")
+        if not np.isfinite(self.margin) or self.margin < 0:
+            raise SettingError("margin", f"must be >= 0 mm, got {self.margin}")
+        if self.margin > R:
+            raise SettingError("margin", f"{self.margin:g} mm is more than the cutter radius {R:g} mm: "
+                                         "the cutter would drop off the part's edge to the base")
+        if not np.isfinite(self.leave) or self.leave < 0:
+            raise SettingError("stock to leave", f"must be >= 0 mm, got {self.leave}")
+
+
+@dataclass
+class Finish:
+    runs: list            # list of (k, 3) arrays of tool-tip positions, cutting order
+    linked: list          # linked[i]: run i is joined to run i-1 without a retract
+    passes: np.ndarray    # across-position of every pass (mm)
+    stepovers: np.ndarray
+
+
+def check_fits(sampler: Sampler, cutter: Cutter):
+    x0, x1, y0, y1 = sampler.bounds
+    w = min(x1 - x0, y1 - y0)
+    if cutter.diameter > w:
+        raise SettingError("cutter", f"diameter {cutter.diameter:g} mm is larger than the part "
+                                     f"({x1 - x0:.1f} x {y1 - y0:.1f} mm): choose a smaller cutter")
+
+
+def _frame(sampler: Sampler, angle_deg, margin):
+    th = np.radians(angle_deg)
+    e1 = np.array([np.cos(th), np.sin(th)])
+    e2 = np.array([-e1[1], e1[0]])
+    jj, ii = np.nonzero(sampler.cell_on)
+    # corners of every on-part cell
+    cx = sampler.x0 + sampler.dx * np.concatenate([ii, ii + 1, ii, ii + 1])
+    cy = sampler.y0 + sampler.dy * np.concatenate([jj, jj, jj + 1, jj + 1])
+    t = cx * e1[0] + cy * e1[1]
+    s = cx * e2[0] + cy * e2[1]
+    return e1, e2, (t.min() - margin, t.max() + margin), (s.min() - margin, s.max() + margin)
+
+
+def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
+    """Passes over the part; give `sampler` an edge_step (resolution / 2) so edges are contacts."""
+    st.check()
+    check_fits(sampler, st.cutter)
+    d = st.resolution
+    e1, e2, (t0, t1), (s0, s1) = _frame(sampler, st.angle, st.margin)
+    n = int(np.ceil((t1 - t0) / d - 1e-9)) + 1
+    origin = lambda s: t0 * e1 + s * e2
+    drop_cutter = st.cutter.offset(st.leave) if st.leave > 0 else st.cutter
+    if st.stepover is not None:
+        k = int(np.ceil((s1 - s0) / st.stepover - 1e-9))
+        passes = np.linspace(s0, s1, k + 1) if k > 0 else np.array([s0])
+    else:
+        passes = _plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
+    origins = np.array([origin(s) for s in passes])
+    tips = drop_lines(sampler, drop_cutter, origins, e1, n, d) + st.leave
+    # tips half-way between points, to catch where the tip height is concave
+    # (the cutter rolling over an edge) and a straight move would cut in
+    mids = drop_lines(sampler, drop_cutter, origins + 0.5 * d * e1[None, :], e1, n - 1, d) + st.leave
+    along = t0 + d * np.arange(n)
+    tol = refine_tolerance(st.chord)
+    ordered = []
+    for k, s in enumerate(passes):
+        pts = along[:, None] * e1[None, :] + s * e2[None, :]
+        keep = sampler.part_distance(pts[:, 0], pts[:, 1]) <= st.margin + 1e-9
+        xyz = np.column_stack([pts, tips[k]])
+        mid = np.column_stack([(along[:-1] + 0.5 * d)[:, None] * e1[None, :] + s * e2[None, :], mids[k]])
+        pass_runs = [_insert_mids(xyz[a:b], mid[a:b - 1], tol) for a, b in _true_runs(keep)]
+        if k % 2 == 1:
+            pass_runs = [(r[::-1], len(r) - 2 - c) for r, c in pass_runs[::-1]]
+        ordered.extend(pass_runs)
+    ordered = refine(sampler, drop_cutter, [r for r, _ in ordered], tol, st.leave, d,
+                     cand=[np.sort(c) for _, c in ordered])
+    links = _links(sampler, drop_cutter, st, ordered, passes)
+    runs, keeps, linked = [], [], []
+    for i, r in enumerate(ordered):
+        kr = np.zeros(len(r), bool)
+        kr[[0, -1]] = True
+        if i > 0 and links[i - 1] is not None:
+            runs[-1] = np.vstack([runs[-1], links[i - 1], r])
+            keeps[-1] = np.concatenate([keeps[-1], np.ones(len(links[i - 1]), bool), kr])
+        else:
+            runs.append(r)
+            keeps.append(kr)
+            linked.append(False)
+    runs = [reduce_polyline(r, st.chord, k) for r, k in zip(runs, keeps)]
+    steps = np.diff(passes) if passes.size > 1 else np.zeros(0)
+    return Finish(runs, linked, passes, steps)
+
+
+def refine_tolerance(chord):
+    return min(chord / 4, 0.0005)
+
+
+def _insert_mids(pts, mid, tol):
+    """Insert the midpoints whose tip is above the straight move by more than tol."""
+    """Returns the points and the segments (halves of the split ones) to check further."""
+    if len(pts) < 2:
+        return pts, np.zeros(0, int)
+    chord = 0.5 * (pts[:-1, 2] + pts[1:, 2])
+    up = np.flatnonzero(mid[:, 2] - chord > tol)
+    if up.size == 0:
+        return pts, np.zeros(0, int)
+    first = up + np.arange(up.size)
+    return np.insert(pts, up + 1, mid[up], axis=0), np.concatenate([first, first + 1])
+
+
+def refine(sampler, cutter, runs, tol, leave, d, max_levels=12, cand=None):
+    """Split every move whose middle the cutter must pass above the straight line.
+
+    The drop-cutter gives exact tips at the points; between them the tool
+    moves in a straight line. Where the tip height is concave (the cutter
+    rolling over a convex edge or corner, or a link between passes) the
+    straight move runs below the tips it passes over and would cut in. Every
+    move's midpoint is dropped; where it lies more than `tol` above the
+    move, the midpoint is inserted and both halves are checked again. All
+    runs are refined together, one drop_points call per level.
+    """
+    runs = [np.asarray(r, float) for r in runs]
+    # candidates: (run index, segment index); start with every segment
+    if cand is None:
+        cand = [np.arange(max(len(r) - 1, 0)) for r in runs]
+    for _ in range(max_levels):
+        which = [(i, c) for i, c in enumerate(cand) if c.size]
+        if not which:
+            break
+        mids = [0.5 * (runs[i][c] + runs[i][c + 1]) for i, c in which]
+        allm = np.vstack(mids)
+        long_enough = np.hypot(*(np.vstack([runs[i][c + 1] - runs[i][c] for i, c in which])[:, :2].T)) > 1e-4
+        z = drop_points(sampler, cutter, allm[:, 0], allm[:, 1], d) + leave
+        up_all = (z - allm[:, 2] > tol) & long_enough
+        cand = [np.zeros(0, int) for _ in runs]
+        pos = 0
+        for (i, c), m in zip(which, mids):
+            up = up_all[pos:pos + len(c)]
+            zz = z[pos:pos + len(c)]
+            pos += len(c)
+            if not up.any():
+                continue
+            seg = c[up]
+            new = m[up].copy()
+            new[:, 2] = zz[up]
+            runs[i] = np.insert(runs[i], seg + 1, new, axis=0)
+            # after insertion, segment seg+k (k inserted before it) splits into two
+            shift = np.arange(seg.size)
+            first = seg + shift
+            cand[i] = np.concatenate([first, first + 1])
+    return runs
+
+
+def _true_runs(mask):
+    m = np.concatenate([[False], mask, [False]])
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(edges[0::2], edges[1::2]))
+
+
+def _links(sampler, cutter, st, runs, passes):
+    """Surface-following moves between consecutive runs that are neighbours, else None.
+
+    Links in the same direction are dropped together (one drop_lines call), so
+    the ~200 links of a program cost about as much as one pass.
+    """
+    d = st.resolution
+    limit = min(2.0 * (np.max(np.diff(passes)) if passes.size > 1 else st.cutter.radius),
+                st.cutter.diameter)
+    out = [None] * max(len(runs) - 1, 0)
+    groups = {}
+    for i in range(len(runs) - 1):
+        p, q = runs[i][-1], runs[i + 1][0]
+        gap = float(np.hypot(*(q[:2] - p[:2])))
+        if gap > limit + 1e-9:
+            continue
+        if gap < 1e-9:
+            out[i] = np.empty((0, 3))
+            continue
+        e = (q[:2] - p[:2]) / gap
+        k = int(np.ceil(gap / d - 1e-9))          # points p + j d e, j = 1..k-1, then q
+        xy = p[None, :2] + d * np.arange(1, k)[:, None] * e[None, :]
+        if len(xy) and np.any(sampler.part_distance(xy[:, 0], xy[:, 1]) > st.margin + 1e-9):
+            continue
+        key = (round(e[0], 9), round(e[1], 9))
+        groups.setdefault(key, []).append((i, p, k))
+    for key, items in groups.items():
+        e = np.array(key)
+        n = max(k for _, _, k in items)
+        if n <= 1:
+            for i, _, _ in items:
+                out[i] = np.empty((0, 3))
+            continue
+        origins = np.array([p[:2] + d * e for _, p, _ in items])
+        z = drop_lines(sampler, cutter, origins, e, n - 1, d) + st.leave
+        for row, (i, p, k) in enumerate(items):
+            xy = origins[row][None, :] + d * np.arange(k - 1)[:, None] * e[None, :]
+            out[i] = np.column_stack([xy, z[row, :k - 1]])
+    # a link runs across the passes, where the tip height may be concave: refine it
+    # together with its end points, then keep only its inner points
+    todo = [i for i, l in enumerate(out) if l is not None]
+    full = [np.vstack([runs[i][-1:], out[i], runs[i + 1][:1]]) for i in todo]
+    full = refine(sampler, cutter, full, refine_tolerance(st.chord), st.leave, d)
+    for i, f in zip(todo, full):
+        out[i] = f[1:-1]
+    return out
+
+
+# -- stepover planning ------------------------------------------------------------
+
+
+class _PassProbe:
+    """Tip heights and along-slopes of a candidate pass, on the planner's sparse points."""
+
+    def __init__(self, sampler, st, e1, e2, t0, n):
+        self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
+        self.stride = max(1, int(round(PLAN_SPACING / st.resolution)))
+        self.along = t0 + st.resolution * np.arange(0, n, self.stride)
+        self.step = st.resolution * self.stride
+
+    def pass_at(self, s):
+        o = self.t0 * self.e1 + s * self.e2
+        tip = drop_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
+                         self.st.resolution, self.stride)[0]
+        slope = np.gradient(tip, self.step) if tip.size > 1 else np.zeros_like(tip)
+        return s, tip, slope
+
+    def points(self, s):
+        return (self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
+                self.along[None, :] * self.e1[1] + np.asarray(s)[:, None] * self.e2[1])
+
+    def scallop(self, done, b):
+        """Largest scallop the candidate pass b leaves against the passes already placed.
+
+        In the cross-section at each sparse column, each pass cuts down to its
+        swept profile; the stock is the lowest of them. The cusp that b closes
+        lies between the *contact points* of the last pass and of b (on a
+        slope across the passes the cutter touches uphill of its axis, up to
+        R sin(slope) away), so that interval is where the scallop is measured.
+        Columns where either pass touches nothing in the cross-section (a
+        concave region tighter than the cutter) are left out.
+        """
+        cut = self.st.cutter
+        R = cut.radius
+        a = done[-1]
+        sa, sb = a[0], b[0]
+        step = min(0.05, max(sb - sa, 1e-3) / 8)
+        ys = np.arange(sa - R, sb + R + step / 2, step)
+        X, Y = self.points(ys)
+        Z = self.sampler.z(X, Y)
+        on = self.sampler.on_part(X, Y)
+        envs = []
+        for p in [q for q in done[-8:] if q[0] >= sa - 2 * R] + [b]:
+            envs.append(p[1][None, :] + swept_offset(cut, (ys - p[0])[:, None], p[2][None, :]))
+        stock = np.min(envs, axis=0)
+        gap_a = np.where(on, envs[-2] - Z, np.inf)
+        gap_b = np.where(on, envs[-1] - Z, np.inf)
+        ca, cb = np.argmin(gap_a, axis=0), np.argmin(gap_b, axis=0)
+        cols = np.arange(Z.shape[1])
+        touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
+        lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+        rows = np.arange(ys.size)[:, None]
+        inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
+        if not inside.any():
+            return 0.0
+        return float(np.max((stock - Z)[inside]))
+
+
+def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
+    h = st.scallop
+    lo_ok, hi_ok, aim = 0.90 * h, 0.98 * h, 0.95 * h
+    probe = _PassProbe(sampler, st, e1, e2, t0, n)
+    s_cap = 0.95 * st.cutter.diameter
+    s_min = max(0.02 * flat_stepover(st.cutter, h), st.resolution / 10)
+    guess = flat_stepover(st.cutter, h)
+    done = [probe.pass_at(s0)]
+    passes = [s0]
+    while passes[-1] < s1 - 1e-9:
+        sa = passes[-1]
+        best_ok, best_p, worst = None, None, np.inf
+        s = min(guess, s1 - sa)
+        for _ in range(10):
+            cand = probe.pass_at(sa + s)
+            sc = probe.scallop(done, cand)
+            if sc <= hi_ok:
+                if best_ok is None or s > best_ok:
+                    best_ok, best_p = s, cand
+                if sc >= lo_ok or sa + s >= s1 - 1e-9 or s >= s_cap - 1e-9:
+                    break
+            else:
+                worst = min(worst, s)
+            if sc > 1e-12:
+                nxt = s * np.sqrt(aim / sc)
+            else:
+                nxt = 2 * s
+            lo_b = best_ok if best_ok is not None else s_min
+            nxt = min(nxt, s_cap, s1 - sa, worst)
+            if not (lo_b < nxt < worst) or abs(nxt - s) < 1e-4:
+                nxt = 0.5 * (lo_b + min(worst, s_cap, s1 - sa))
+            if abs(nxt - s) < 1e-5:
+                break
+            s = nxt
+        if best_ok is None:
+            best_ok = s_min
+            best_p = probe.pass_at(sa + s_min)
+        passes.append(min(sa + best_ok, s1))
+        done.append(best_p)
+        guess = best_ok
+    return np.array(passes)
+
+
+# -- point reduction ----------------------------------------------------------------
+
+
+def reduce_polyline(p, tol, keep=None):
+    """Ramer-Douglas-Peucker on a 3-D polyline: no dropped point is more than `tol`
+    from its replacing move, vertically at the same xy nor sideways.
+
+    Level-synchronous: every round splits *all* segments whose farthest point
+    is beyond the tolerance at once, so the work is a few vectorised passes
+    over the points (about log2 of their number), not one Python call per
+    kept point. `keep` marks points that must stay (the ends of passes and
+    links of a linked run), which also splits the work into independent pieces.
+    """
+    p = np.asarray(p, float)
+    n = len(p)
+    if n <= 2:
+        return p
+    keep = np.zeros(n, bool) if keep is None else np.array(keep, bool, copy=True)
+    keep[0] = keep[-1] = True
+    idx = np.arange(n)
+    while True:
+        kept = np.flatnonzero(keep)
+        seg = np.searchsorted(kept, idx, side="right") - 1
+        seg = np.minimum(seg, len(kept) - 2)
+        a, b = kept[seg], kept[seg + 1]
+        A, B = p[a], p[b]
+        AB = B[:, :2] - A[:, :2]
+        L2 = np.einsum("ij,ij->i", AB, AB)
+        AP = p[:, :2] - A[:, :2]
+        t = np.einsum("ij,ij->i", AP, AB) / np.where(L2 > 0, L2, 1.0)
+        t = np.clip(np.where(L2 > 0, t, 0.0), 0, 1)
+        D = AP - t[:, None] * AB
+        # vertical error at the same xy (what gouges), and any sideways error (corners)
+        dz = np.abs(p[:, 2] - (A[:, 2] + t * (B[:, 2] - A[:, 2])))
+        dist = np.maximum(np.sqrt(np.einsum("ij,ij->i", D, D)), dz)
+        dist[keep] = 0.0
+        segmax = np.maximum.reduceat(dist, kept[:-1])
+        far = (dist > tol) & (dist == segmax[seg])
+        if not far.any():
+            return p[keep]
+        cand = np.flatnonzero(far)
+        _, first = np.unique(seg[cand], return_index=True)
+        keep[cand[first]] = True

@@ -1,0 +1,107 @@
+"""inkslice toolpath HEIGHTMAP -o toolpath.gcode [--rough-out rough.gcode]"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .. import atomicio
+from ..errors import InkSliceError
+from ..outputs import read_heightmap_csv
+
+NAME = "toolpath"
+ORDER = 30
+HELP = "turn heightmap.csv into a cutter-compensated finishing (and roughing) G-code program"
+
+
+def add_arguments(p):
+    from ..cam.feeds import DEFAULT_MATERIAL, MATERIALS
+    from ..cam.posts import DEFAULT_DIALECT, DIALECT_NAMES
+    p.add_argument("heightmap", help="heightmap.csv (x,y,z in mm, z above the base top)")
+    p.add_argument("-o", "--out", required=True, help="finishing program to write")
+    g = p.add_argument_group("cutter and material")
+    g.add_argument("--cutter", default="ball6", help="ball6, flat3, bull6r1, ... (default ball6)")
+    g.add_argument("--flute-length", type=float, default=None, help="usable length below the holder, mm "
+                   "(default 8 x diameter)")
+    g.add_argument("--flutes", type=int, default=2)
+    g.add_argument("--material", default=DEFAULT_MATERIAL, choices=sorted(MATERIALS))
+    g.add_argument("--feed", type=float, default=None, help="cutting feed, mm/min (default from the material)")
+    g.add_argument("--plunge-feed", type=float, default=None, help="plunge feed, mm/min")
+    g.add_argument("--spindle", type=float, default=None, help="spindle speed, rpm")
+    g = p.add_argument_group("finishing")
+    g.add_argument("--scallop", type=float, default=0.01, help="target scallop height, mm (default 0.01)")
+    g.add_argument("--stepover", type=float, default=None, help="fixed stepover, mm (instead of --scallop)")
+    g.add_argument("--angle", type=float, default=0.0, help="pass direction, degrees from X (default 0)")
+    g.add_argument("--resolution", type=float, default=0.1, help="point spacing along a pass, mm")
+    g.add_argument("--chord", type=float, default=0.002, help="chord tolerance for point reduction, mm")
+    g.add_argument("--margin", type=float, default=0.0, help="how far the cutter axis may go past the "
+                   "part's edge, mm (0..radius)")
+    g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
+    g = p.add_argument_group("roughing (optional, written to its own program)")
+    g.add_argument("--rough-out", default=None, help="also write a z-level roughing program here")
+    g.add_argument("--rough-cutter", default="flat6")
+    g.add_argument("--stock-top", type=float, default=None, help="top of the raw block above the base, mm "
+                   "(default: part top + 2)")
+    g.add_argument("--stepdown", type=float, default=1.0)
+    g.add_argument("--rough-leave", type=float, default=0.3)
+    g.add_argument("--rough-stepover", type=float, default=None)
+    g = p.add_argument_group("program and machine")
+    g.add_argument("--dialect", default=DEFAULT_DIALECT, choices=DIALECT_NAMES)
+    g.add_argument("--clearance", type=float, default=5.0, help="safe height above the stock top, mm")
+    g.add_argument("--z-offset", type=float, default=0.0, help="work offset: program Z of the base top, mm")
+    g.add_argument("--travel", default=None, help="xmin,xmax,ymin,ymax,zmin,zmax in program coordinates, mm")
+    g.add_argument("--max-feed", default=None, help="fx,fy,fz, mm/min")
+    g.add_argument("--rapid", type=float, default=None, help="rapid rate for the run-time estimate, mm/min")
+
+
+def _machine(args):
+    from ..cam.limits import Machine, parse_feeds, parse_travel
+    kw = {}
+    if args.travel:
+        kw["travel"] = parse_travel(args.travel)
+    if args.max_feed:
+        kw["max_feed"] = parse_feeds(args.max_feed)
+    if args.rapid is not None:
+        kw["rapid"] = args.rapid
+    return Machine(**kw)
+
+
+def run(args):
+    from ..cam.cutters import parse_cutter
+    from ..cam.jobs import finishing_gcode, roughing_gcode
+    from ..cam.roughing import RoughSettings
+    from ..cam.zigzag import FinishSettings
+    hm = read_heightmap_csv(args.heightmap)
+    machine = _machine(args)
+    common = dict(material=args.material, feed=args.feed, plunge=args.plunge_feed, rpm=args.spindle,
+                  dialect=args.dialect, clearance=args.clearance, z_offset=args.z_offset, machine=machine)
+    cutter = parse_cutter(args.cutter, args.flute_length, args.flutes)
+    st = FinishSettings(cutter, scallop=None if args.stepover is not None else args.scallop,
+                        stepover=args.stepover, angle=args.angle, resolution=args.resolution,
+                        chord=args.chord, margin=args.margin, leave=args.leave)
+    if args.rough_out:
+        import numpy as np
+        rc = parse_cutter(args.rough_cutter, args.flute_length, args.flutes)
+        top = float(np.nanmax(hm.z)) + 2.0 if args.stock_top is None else args.stock_top
+        rs = RoughSettings(rc, top, args.stepdown, args.rough_leave, args.rough_stepover)
+        rough = roughing_gcode(hm, rs, **common)
+        _write(args.rough_out, rough.text)
+        print(f"{args.rough_out}: roughing, {rough.summary['runs']} runs, "
+              f"estimated run time {rough.runtime_s / 60:.1f} min")
+    job = finishing_gcode(hm, st, **{k: v for k, v in common.items()})
+    _write(args.out, job.text)
+    if args.dialect == "dissertation":
+        print(f"{args.out}: dissertation format, {job.summary['lines']} lines (no cutter compensation)")
+        return 0
+    s = job.summary
+    print(f"{args.out}: finishing, {s['passes']} passes, stepover {s['stepover_min']:.3f}-{s['stepover_max']:.3f} mm, "
+          f"{s['lines']} lines, feed {s['feed']:.0f} mm/min, spindle {s['rpm']:.0f} rpm")
+    if s["slowed_moves"]:
+        print(f"{s['slowed_moves']} moves slowed to the machine's axis feed limits")
+    print(f"estimated run time {job.runtime_s / 60:.1f} min")
+    return 0
+
+
+def _write(path, text):
+    path = Path(path)
+    if path.exists() and path.is_dir():
+        raise InkSliceError(path, "is a folder; give a file name for the program")
+    atomicio.write_text(path, text)
