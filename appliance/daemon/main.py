@@ -16,6 +16,7 @@ from pathlib import Path
 from . import rpc
 from .notify import notify, watchdog_interval
 from .processing import child_process, in_process
+from .runner import free_mb
 from .service import BenchService
 
 log = logging.getLogger("inkslice.daemon")
@@ -39,7 +40,8 @@ def run(factory, data, socket_path=None, processor="child") -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    service = BenchService(data, factory, processor=child_process if processor == "child" else in_process)
+    service = BenchService(data, factory, processor=child_process if processor == "child" else in_process,
+                           disk_free_mb=getattr(factory, "disk_free_mb", free_mb))
     server = rpc.serve(service, socket_path)
     if service.interrupted:
         log.warning("interrupted jobs found at start: %s", ", ".join(service.interrupted))

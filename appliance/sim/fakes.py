@@ -191,7 +191,8 @@ class FakeBench:
     fake light, LED, button and display. `faults` switches faults on:
 
         {"stage": {...FakeStage faults}, "camera": {...FakeCamera faults},
-         "panel": {"display": "missing"}}
+         "panel": {"display": "missing"},
+         "disk": {"after_frames": 3, "free_mb": 150}}   # the disk "fills up" after 3 frames
 
     `last` is the Devices of the latest open(), for tests to inspect.
     """
@@ -203,6 +204,16 @@ class FakeBench:
         self.faults = dict(faults or {})
         self.last = None
         self.panel = None
+        self._disk_checks = 0
+
+    def disk_free_mb(self, path) -> float:
+        """Free space as the daemon sees it (BenchService's disk_free_mb hook)."""
+        import shutil
+        disk = self.faults.get("disk")
+        self._disk_checks += 1
+        if disk and self._disk_checks > disk.get("after_frames", 0):
+            return float(disk["free_mb"])
+        return shutil.disk_usage(path).free / 1e6
 
     def check(self, params):
         from .surfaces import get

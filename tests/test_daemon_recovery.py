@@ -1,0 +1,161 @@
+"""The daemon as a real process: SIGKILL at random points of a scan, ten
+times; each restart finds a consistent store and intact files, and the
+resumed scan equals an uninterrupted one. Device faults injected into the
+daemon process end the job with a clear reason."""
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from appliance.daemon.recovery import audit
+from appliance.daemon.rpc import BenchClient
+from appliance.daemon.store import Store
+from appliance.errors import DeviceError
+from daemon_helpers import SCAN, read_heightmap, service, wait_final
+
+# moves and settling take real time (a level ~0.3 s, homing ~0.5 s), so kills land in every phase
+SLOW_STAGE = {"stage": {"seconds_per_mm": 0.01}}
+PARAMS = {**SCAN, "settle_s": 0.15}
+
+
+class Daemon:
+    def __init__(self, tmp_path, faults=None):
+        self.data, self.sock = tmp_path / "data", tmp_path / "d.sock"
+        self.log = open(tmp_path / "daemon.log", "ab")
+        cmd = [sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake", "--surface", "cone",
+               "--data", str(self.data), "--socket", str(self.sock), "--faults", json.dumps(faults or {})]
+        self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log)
+        self.client = BenchClient(self.sock, timeout=10)
+        end = time.monotonic() + 30
+        while True:
+            try:
+                self.client.state()
+                return
+            except DeviceError:
+                if self.proc.poll() is not None or time.monotonic() > end:
+                    raise AssertionError(f"daemon did not come up: {(tmp_path / 'daemon.log').read_text()}")
+                time.sleep(0.05)
+
+    def kill(self):
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait()
+        self.log.close()
+
+    def stop(self):
+        self.proc.terminate()
+        assert self.proc.wait(timeout=30) == 0          # SIGTERM is a clean stop
+        self.log.close()
+
+
+def wait_job(client, job_id, timeout=60):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        job = client.job(job_id)
+        if job["status"] in ("done", "failed", "cancelled") and client.state()["state"] == job["status"]:
+            return job
+        time.sleep(0.05)
+    raise AssertionError(f"job not finished: {client.job(job_id)}")
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The same scan, uninterrupted, in-process."""
+    svc, _ = service(tmp_path_factory.mktemp("ref"))
+    try:
+        job = wait_final(svc, svc.start_scan(PARAMS))
+        assert job["status"] == "done"
+        scan = json.loads(svc.job_file(job["id"], "scan/scan.json").read_text())
+        return read_heightmap(svc.job_file(job["id"], "heightmap.csv")), [f["level_mm"] for f in scan["frames"]]
+    finally:
+        svc.close()
+
+
+@pytest.mark.slow
+def test_sigkill_ten_times_then_resume_equals_an_uninterrupted_scan(tmp_path, reference):
+    ref_map, ref_levels = reference
+    rng = random.Random(20131)
+    daemon = Daemon(tmp_path, SLOW_STAGE)
+    job_id = daemon.client.start_scan(PARAMS)
+    phases = []
+    for kill in range(10):
+        time.sleep(rng.uniform(0.3, 4.5))
+        st = daemon.client.state()
+        phases.append(f"{st['state']}@{st['levels_done']}")
+        daemon.kill()
+        # whatever it was doing, the store and the files are consistent before anything runs again
+        store = Store(daemon.data)
+        try:
+            assert audit(store) == [] or store.get_job(job_id)["status"] in ("homing", "scanning", "processing")
+        finally:
+            store.close()
+        daemon = Daemon(tmp_path, SLOW_STAGE)
+        job = daemon.client.job(job_id)
+        store = Store(daemon.data)
+        try:
+            assert audit(store) == [], f"after kill {kill + 1} ({phases[-1]})"
+        finally:
+            store.close()
+        if job["status"] == "done":
+            break                                       # killed after the end: nothing to resume
+        assert job["status"] == "failed" and job["interrupted"], job
+        assert job["reason"].startswith("interrupted")
+        daemon.client.resume(job_id)
+    else:
+        job = wait_job(daemon.client, job_id)
+    print("killed at:", ", ".join(phases))
+    job = wait_job(daemon.client, job_id)
+    assert job["status"] == "done", job["reason"]
+    assert len(phases) == 10, f"the scan ended before the tenth kill: {phases}"
+    scan = json.loads(daemon.client.job_file(job_id, "scan/scan.json").read_text())
+    assert [f["level_mm"] for f in scan["frames"]] == ref_levels
+    got = read_heightmap(daemon.client.job_file(job_id, "heightmap.csv"))
+    assert got.shape == ref_map.shape
+    assert np.nanmax(np.abs(got - ref_map)) <= 0.005
+    assert np.array_equal(np.isnan(got), np.isnan(ref_map))
+    daemon.stop()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("faults, text", [
+    ({"camera": {"unplug_after": 3}}, "camera"),
+    ({"stage": {"reset_after_moves": 4}}, "stage: the controller was reset"),
+    ({"disk": {"after_frames": 2, "free_mb": 150}}, "disk: nearly full"),
+])
+def test_faults_in_the_daemon_process_end_with_a_clear_reason(tmp_path, faults, text):
+    daemon = Daemon(tmp_path, faults)
+    try:
+        job_id = daemon.client.start_scan(PARAMS)
+        job = wait_job(daemon.client, job_id)
+        assert job["status"] == "failed" and job["reason"].startswith(text), job["reason"]
+        assert "kept" in job["reason"] or "frames" in job["reason"] or text == "camera"
+        assert job["levels_done"] >= 2
+        assert daemon.client.state()["hardware"][text.split(":")[0]].startswith("fault")
+    finally:
+        daemon.stop()
+    store = Store(daemon.data)
+    try:
+        assert audit(store) == []
+    finally:
+        store.close()
+
+
+def test_sigterm_cancels_the_scan_cleanly(tmp_path):
+    daemon = Daemon(tmp_path, SLOW_STAGE)
+    job_id = daemon.client.start_scan(PARAMS)
+    for st in daemon.client.subscribe(timeout=20):
+        if st["levels_done"] >= 2:
+            break
+    daemon.stop()
+    store = Store(daemon.data)
+    try:
+        job = store.get_job(job_id)
+        assert job["status"] == "cancelled" and not job["interrupted"]
+        assert audit(store) == []
+    finally:
+        store.close()
