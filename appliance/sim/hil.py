@@ -12,10 +12,12 @@ talks to its control channel (stdin/stdout lines) and exposes the fault
 switches.  The firmware and the harness are built with make on first use
 (a no-op when they are up to date).
 
-speed: simulated seconds per wall-clock second.  1.0 (default) behaves like
-the real bench and costs ~5 % of a core; 0 runs flat out (tens of times
-faster than real time while the firmware sleeps, one core busy): for soak
-tests and benches.
+speed: simulated seconds per wall-clock second.  The default 10 homes the
+stage in about a second and still sleeps most of the time (a few % of a
+core); 1.0 behaves exactly like the real bench; 0 runs flat out (a busy
+core; thousands of times real time while the firmware sleeps, ~3x while it
+steps): for soak tests and benches.  Stepping never runs faster than the
+host can simulate it (~3x real time), whatever the speed.
 """
 from __future__ import annotations
 
@@ -46,7 +48,7 @@ def build(targets=("all",)) -> Path:
 class SimulatedBench:
     FAULT_KINDS = ("drop", "corrupt", "dup")
 
-    def __init__(self, speed: float = 1.0, stage_mm: float = 40.0, seed: int = 1,
+    def __init__(self, speed: float = 10.0, stage_mm: float = 40.0, seed: int = 1,
                  elf: str | Path | None = None, steps_per_mm: float = STEPS_PER_MM):
         build_dir = build()
         self.elf = Path(elf) if elf else build_dir / "inkslice-stepper.elf"

@@ -139,10 +139,11 @@ static void raise_alarm(uint8_t st, uint8_t why)
 /* Homing, as a sequence of plain moves, one phase per finished move:
  *   CLEAR    only if the switch is already pressed: back off it first
  *   SEEK     fast towards the switch, at most home_travel, stop on it
- *   BACKOFF  off the switch by home_backoff
+ *   BACKOFF  off the switch by home_backoff (fast: nothing is measured here)
  *   LOCATE   slowly back onto it (at most 2 x home_backoff); the step where
- *            the switch closes is position 0, the origin of all positions
- *   PULLOFF  up by home_pulloff, clear of the switch: homed. */
+ *            the switch closes is position 0, the origin of all positions.
+ *            Only this approach is slow, because only its end is measured.
+ *   PULLOFF  up to home_pulloff, clear of the switch: homed. */
 enum { H_NONE, H_CLEAR, H_SEEK, H_BACKOFF, H_LOCATE, H_PULLOFF };
 static uint8_t home_phase;
 
@@ -159,7 +160,7 @@ static void home_begin(void)
   homed = 0;
   if (limits_pressed() & 1) {
     home_phase = H_CLEAR;
-    start_move(stepper_position() + cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_slow]);
+    start_move(stepper_position() + cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_fast]);
   } else {
     home_seek();
   }
@@ -177,7 +178,7 @@ static void home_step(void)
   case H_SEEK:
     if (!hit) { raise_alarm(STATE_alarm, ALARM_home_switch_not_found); return; }
     home_phase = H_BACKOFF;
-    start_move(stepper_position() + cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_slow]);
+    start_move(stepper_position() + cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_fast]);
     return;
   case H_BACKOFF:
     if (bottom || hit) { raise_alarm(STATE_alarm, ALARM_home_switch_stuck); return; }
@@ -188,7 +189,7 @@ static void home_step(void)
     if (!hit) { raise_alarm(STATE_alarm, ALARM_home_switch_not_found); return; }
     stepper_set_position(0);
     home_phase = H_PULLOFF;
-    start_move(cfg.v[SET_home_pulloff], (uint32_t)cfg.v[SET_home_slow]);
+    start_move(cfg.v[SET_home_pulloff], (uint32_t)cfg.v[SET_home_fast]);
     return;
   case H_PULLOFF:
     if (hit) { raise_alarm(STATE_alarm, ALARM_hard_limit_top); return; }

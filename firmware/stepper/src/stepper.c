@@ -140,7 +140,11 @@ ISR(TIMER1_COMPA_vect)
     stop_reason = STOP_LIMIT;
     return;
   }
-  st_rise += st_interval;
+  /* never schedule into the past: the counter would have to wrap (32 ms)
+   * before the compare came round; a late step is better than a stall */
+  uint16_t rise = st_rise + st_interval;
+  uint16_t soonest = TCNT1 + LATE_MARGIN;
+  st_rise = ((int16_t)(rise - soonest) > 0) ? rise : soonest;
   OCR1A = st_rise;
 }
 
