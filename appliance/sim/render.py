@@ -629,6 +629,12 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
     else:
         img = (1.0 - a3) * np.asarray(rig.ink_bgr, np.float32)
     img += (alpha * shade)[..., None] * part
+    return camera_effects(img, rig, effects, pm, rng)
+
+
+def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.ndarray:
+    """What the lens and sensor do to the light: vignetting, blur, noise, stuck pixels.
+    `img` is float32 BGR (0..255), modified in place; returns 8-bit BGR."""
     if effects.vignetting > 0:
         img *= (1.0 - effects.vignetting * pm.vignette_r2)[..., None]
     if effects.blur_sigma_px > 0:
