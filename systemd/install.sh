@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Install InkSlice as services on Raspberry Pi OS (Debian-based):
+#   sudo systemd/install.sh            install, enable and start
+#   systemd/install.sh --root DIR      only lay the files out under DIR (packaging, tests)
+#
+# What it does: a system user `inkslice` in the dialout, video, gpio and i2c
+# groups; the checkout copied to /opt/inkslice with a venv; the two units, the
+# udev rules and an example /etc/inkslice/bench.json (never overwritten);
+# I2C switched on; udev reloaded; the services enabled and started.
+set -euo pipefail
+SRC=$(cd "$(dirname "$0")/.." && pwd)
+ROOT=""
+if [ "${1:-}" = "--root" ]; then ROOT=${2:?--root needs a folder}; fi
+PREFIX=/opt/inkslice
+
+install -d "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d" "$ROOT/etc/inkslice" "$ROOT$PREFIX"
+install -m 0644 "$SRC/systemd/inkslice-daemon.service" "$SRC/systemd/inkslice-web.service" "$ROOT/etc/systemd/system/"
+install -m 0644 "$SRC/systemd/99-inkslice.rules" "$ROOT/etc/udev/rules.d/"
+[ -e "$ROOT/etc/inkslice/bench.json" ] || install -m 0644 "$SRC/systemd/bench.json" "$ROOT/etc/inkslice/bench.json"
+
+# the code: a copy (not the checkout itself: a `git pull` must not change a running box)
+tar -C "$SRC" --exclude=.git --exclude=.venv --exclude='__pycache__' --exclude='*.egg-info' \
+    --exclude=firmware/stepper/build --exclude=demo-out --exclude=benches/out --exclude=tests/artifacts \
+    -cf - . | tar -C "$ROOT$PREFIX" -xf -
+
+if [ -n "$ROOT" ]; then
+  echo "install: files laid out under $ROOT"
+  exit 0
+fi
+
+[ "$(id -u)" = 0 ] || { echo "install: run as root (sudo $0)" >&2; exit 1; }
+for g in dialout video gpio i2c; do getent group "$g" >/dev/null || groupadd --system "$g"; done
+if ! id inkslice >/dev/null 2>&1; then
+  useradd --system --no-create-home --home-dir /var/lib/inkslice --shell /usr/sbin/nologin \
+          --groups dialout,video,gpio,i2c inkslice
+fi
+apt-get install -y -qq --no-install-recommends python3-venv python3-dev >/dev/null
+[ -x "$PREFIX/.venv/bin/python" ] || python3 -m venv "$PREFIX/.venv"
+"$PREFIX/.venv/bin/python" -m pip install -q "$PREFIX"
+command -v raspi-config >/dev/null && raspi-config nonint do_i2c 0 || true
+udevadm control --reload-rules
+udevadm trigger --subsystem-match=tty --subsystem-match=video4linux --subsystem-match=gpio --subsystem-match=i2c-dev
+systemctl daemon-reload
+systemctl enable --now inkslice-daemon.service inkslice-web.service
+echo "install: done. Logs: journalctl -u inkslice-daemon -u inkslice-web -f"
