@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test setup setup-test bench clean
+.PHONY: demo test setup setup-test bench clean install
 
 demo: setup
 	$(VENV)/bin/inkslice demo
@@ -19,6 +19,10 @@ setup-test:
 
 bench: setup-test
 	for b in benches/*.py; do $(PY) $$b --quick || exit 1; done
+
+# On the bench box (Raspberry Pi OS): services, udev rules, user; see systemd/install.sh
+install:
+	sudo systemd/install.sh
 
 clean:
 	rm -rf demo-out benches/out tests/artifacts
