@@ -271,10 +271,10 @@ class SimulatedBenchFactory:
     factory; each job opens a fresh SerialStage on its pty."""
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, speed: float = 0.0, effects=None):
+    def __init__(self, surface: str = "sphere", rig=None, speed: float | None = None, effects=None):
         from .hil import SimulatedBench
         self.surface, self.rig, self.effects = surface, rig or small_rig(320, 240), effects
-        self.bench = SimulatedBench(speed=speed)
+        self.bench = SimulatedBench() if speed is None else SimulatedBench(speed=speed)
         self.last = None
 
     def check(self, params):
