@@ -1,0 +1,88 @@
+"""Displacement and meniscus: the shared definitions, and the renderer obeying them."""
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import brentq
+
+from appliance.sim import physics
+from appliance.sim import surfaces as S
+from appliance.sim.render import Effects, render_frame
+from appliance.sim.rig import Rig
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_sim_render import _crossings, _gray, _to_plane  # noqa: E402
+
+
+def _cone_volume_above(L):
+    """Exact: the cone's tip above level L (height 3 + tan30 (35 - r))."""
+    t = math.tan(math.radians(30))
+    top = 3 + t * 35
+    if L >= top:
+        return 0.0
+    if L <= 3:
+        return math.pi * 35 ** 2 * (top - 3) / 3 + math.pi * 35 ** 2 * (3 - L)
+    h = top - L
+    r = h / t
+    return math.pi * r * r * h / 3
+
+
+def test_meniscus_rise_matches_the_brief():
+    h = physics.meniscus_rise(np.radians([5, 15, 30, 90]))
+    assert np.allclose(h[:3], [0.24, 0.71, 1.40], atol=0.006)
+    assert math.isclose(h[3], 2 * 2.7 * math.sin(math.pi / 4))
+    assert physics.meniscus_rise(np.radians(20), theta=np.radians(20)) == 0.0
+
+
+def test_emerged_volume_and_true_level_on_the_cone():
+    cone = S.get("cone")
+    for L in (5.0, 12.0, 20.0):
+        assert abs(physics.emerged_volume(cone, L) - _cone_volume_above(L)) < 2e-3 * _cone_volume_above(L) + 1
+    A = 22500.0
+    for nominal in (6.0, 15.0, 22.0):
+        want = brentq(lambda L: L - nominal + _cone_volume_above(L) / A, nominal - 10, nominal)
+        got = physics.true_level(cone, nominal, A)
+        assert abs(got - want) < 0.002, (nominal, got, want)
+        assert got < nominal
+    # ~30 % of a step on a 50 cm^2 waterline in a 225 cm^2 tank (seed brief)
+    assert abs(physics.emerged_area(S.get("sample1"), 2.0) / A - 0.44) < 0.01
+
+
+def test_ripple_decays():
+    a0 = physics.ripple_amplitude(0.2, 0.0, 0.5)
+    a1 = physics.ripple_amplitude(0.2, 1.0, 0.5)
+    assert a0 == 0.2 and math.isclose(a1, 0.2 * math.exp(-2))
+    off = physics.ripple_offset(np.array([10.0, 60.0]), np.array([20.0, 80.0]), 0.2, 3.0)
+    assert np.abs(off).max() <= 0.2 * math.exp(-3 / 0.6) + 1e-9
+
+
+def test_rendered_meniscus_is_the_contact_line_in_perspective():
+    """Cone (30 degrees everywhere): the ink climbs h = 2 l_c sin(15 deg) = 1.398 mm.
+    The edge seen is the contact line at L + h, projected from that height."""
+    cone, L, rig = S.get("cone"), 8.0, Rig()
+    img = render_frame(cone, L, rig, Effects(meniscus=True))
+    uv = np.vstack([_crossings(_gray(img), 1), _crossings(_gray(img), 0)])
+    P0 = _to_plane(rig, uv)
+    r = np.hypot(P0[:, 0] - 50, P0[:, 1] - 50)
+    assert uv.shape[0] > 500
+    h = float(physics.meniscus_rise(math.radians(30)))
+    C = rig.centre
+    Pc = P0 + (C[:2] - P0) * h / C[2]
+    err = np.abs(cone.level_sdf(Pc[:, 0], Pc[:, 1], L + h))
+    print(f"meniscus contact line: max {err.max():.5f} mm; boundary moved "
+          f"{np.median(np.abs(cone.level_sdf(P0[:, 0], P0[:, 1], L))):.3f} mm inwards")
+    assert err.max() < 0.01
+    # and it really moved: the free-surface waterline is h / tan(30) = 2.4 mm further out
+    assert np.median(cone.level_sdf(P0[:, 0], P0[:, 1], L)) > 2.0
+
+
+def test_rendered_displacement_lowers_the_waterline():
+    cone, rig = S.get("cone"), Rig()
+    nominal = 10.0
+    true = physics.true_level(cone, nominal, rig.tank_area_mm2)
+    img = render_frame(cone, nominal, rig, Effects(displacement=True))
+    uv = _crossings(_gray(img), 1)
+    P0 = _to_plane(rig, uv)
+    assert np.abs(cone.level_sdf(P0[:, 0], P0[:, 1], true)).max() < 0.01
+    assert np.median(np.abs(cone.level_sdf(P0[:, 0], P0[:, 1], nominal))) > 0.1

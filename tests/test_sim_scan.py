@@ -1,0 +1,91 @@
+"""Scan folders from the virtual bench, the virtual camera, and `inkslice render`."""
+import json
+
+import numpy as np
+import pytest
+
+from appliance.cli import main
+from appliance.hw.base import Camera
+from appliance.scanfile import load_scan, read_frame
+from appliance.sim import physics
+from appliance.sim import surfaces as S
+from appliance.sim.camera import VirtualCamera
+from appliance.sim.render import Effects, render_frame
+from appliance.sim.rig import Rig
+from appliance.sim.scanrender import render_scan, scan_levels, truth_path
+
+
+def test_levels_run_from_above_the_top_down_to_the_base():
+    lv = scan_levels(S.get("sample1"), 1.0)
+    assert lv[0] == 38.0 and lv[0] > S.get("sample1").z_max
+    assert lv[-1] == 1.0 and all(a - b == 1.0 for a, b in zip(lv, lv[1:]))
+    lv = scan_levels(S.get("cone"), 2.5)
+    assert lv[0] == 25.0 and min(lv) >= 0.5 and min(lv) < 3.0
+
+
+def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
+    folder = tmp_path / "scan"
+    scan = render_scan("cone", folder, levels=[24.0, 15.0, 6.0],
+                       effects=Effects(displacement=True, lens_distortion=True), seed=7)
+    assert sorted(p.name for p in folder.iterdir()) == ["frames", "scan.json"]
+    loaded = load_scan(folder)
+    assert [f.level_mm for f in loaded.frames] == [24.0, 15.0, 6.0]
+    assert loaded.extra["tank"]["inner_area_mm2"] == 22500.0
+    rig = Rig()
+    assert np.allclose(loaded.camera.homography, rig.homography())
+    assert np.allclose(loaded.camera.dist, rig.dist_coeffs()) and loaded.camera.height_mm == 300.0
+    img = read_frame(loaded, loaded.frames[1])
+    assert img.shape == (1536, 2048, 3)
+    truth = json.loads(truth_path(folder).read_text())
+    assert truth["surface"] == "cone"
+    want = [physics.true_level(S.get("cone"), L, 22500.0) for L in (24.0, 15.0, 6.0)]
+    assert np.allclose(truth["levels_true_mm"], want)
+    assert truth["levels_true_mm"][0] == 24.0 and truth["levels_true_mm"][2] < 6.0 - 0.5
+    assert truth["effects"]["displacement"] is True and truth["meniscus"]["enabled"] is False
+    # the frame is the one render_frame gives for that level and seed
+    again = render_frame("cone", 15.0, rig, Effects(displacement=True, lens_distortion=True),
+                         np.random.default_rng([7, 1]))
+    assert np.array_equal(again, img)
+    # no distortion in the frames -> no distortion in scan.json
+    s2 = render_scan("cone", tmp_path / "s2", levels=[10.0])
+    assert np.allclose(load_scan(s2.folder).camera.dist, 0)
+
+
+def test_virtual_camera_renders_the_level_at_capture_time():
+    level = {"mm": 20.0}
+    cam = VirtualCamera("cone", level_mm=lambda: level["mm"])
+    assert isinstance(cam, Camera)
+    a = cam.capture()
+    level["mm"] = 5.0
+    b = cam.capture()
+    assert cam.last_level_mm == 5.0
+    bright = lambda im: int((im[..., 1] > 100).sum())
+    assert bright(b) > 3 * bright(a) > 0       # more of the cone stands out of the ink
+
+
+def test_virtual_camera_ripple_settles():
+    t = {"now": 0.0}
+    level = {"mm": 10.0}
+    fx = Effects(ripple_mm=0.3, ripple_decay_s=0.5)
+    cam = VirtualCamera("cone", level_mm=lambda: level["mm"], effects=fx, clock=lambda: t["now"])
+    settled = cam.capture()                      # first frame: long settled
+    level["mm"] = 10.0 + 1e-3                    # a move (tiny, so the part hardly changes)
+    t["now"] = 100.0
+    ringing = cam.capture()
+    assert cam.last_ripple_age_s == 0.0
+    t["now"] = 105.0
+    later = cam.capture()
+    d_ring = np.abs(ringing.astype(int) - settled.astype(int)).sum()
+    d_later = np.abs(later.astype(int) - settled.astype(int)).sum()
+    assert d_ring > 20 * max(d_later, 1)
+
+
+def test_cli_render(tmp_path, capsys):
+    out = tmp_path / "s4"
+    rc = main(["render", "sample4", "-o", str(out), "--step", "10", "--effects", "realistic",
+               "--seed", "3", "--quiet"])
+    assert rc == 0
+    scan = load_scan(out)
+    assert len(scan.frames) == 4 and truth_path(out).is_file()
+    assert "4 frames" in capsys.readouterr().out
+    assert main(["render", "sample4", "-o", str(tmp_path / "x"), "--step", "0", "--quiet"]) == 2
