@@ -18,6 +18,9 @@ def add_arguments(p):
                         "simavr with the virtual camera")
     p.add_argument("--surface", default="sphere", help="the part on the simulated bench (default sphere)")
     p.add_argument("--frame", default="320x240", help="simulated frame size WxH (default 320x240)")
+    p.add_argument("--replay", default=None,
+                   help="--sim fake: serve frames rendered beforehand from this folder (one PNG per level, "
+                        "see sim/fakes.py ReplayCamera) instead of rendering in the daemon")
     p.add_argument("--faults", default=None, help="fault switches for --sim fake, as JSON (see sim/fakes.py)")
     p.add_argument("--processor", choices=("child", "inprocess"), default="child",
                    help="process scans in a child process (default; protects the daemon's memory) or in-process")
@@ -45,7 +48,7 @@ def make_factory(args):
             faults = json.loads(args.faults) if args.faults else {}
         except json.JSONDecodeError as e:
             raise SettingError("--faults", f"not valid JSON ({e})") from None
-        return FakeBench(args.surface, rig, faults)
+        return FakeBench(args.surface, rig, faults, replay=args.replay)
     return SimulatedBenchFactory(args.surface, rig)
 
 

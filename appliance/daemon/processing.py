@@ -17,6 +17,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 
 from ..errors import InkSliceError
 from .runner import Cancelled
@@ -44,24 +45,27 @@ def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, preexec_fn=_die_with_parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
         while True:
-            try:
-                rc = proc.wait(timeout=poll_s)
+            # wait4, not wait: it also gives the child's peak memory, which the job records
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                proc.returncode = rc = os.waitstatus_to_exitcode(status)
                 break
-            except subprocess.TimeoutExpired:
-                if stop is not None and stop.is_set():
-                    proc.kill()
-                    proc.wait()
-                    raise Cancelled()
+            if stop is not None and stop.is_set():
+                proc.kill()
+                proc.wait()
+                raise Cancelled()
+            time.sleep(poll_s)
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
+    peak_mb = usage.ru_maxrss / 1024                # Linux reports kB
     if rc == 0:
-        return json.loads(stdout.strip().splitlines()[-1])
+        return {**json.loads(stdout.strip().splitlines()[-1]), "peak_rss_mb": round(peak_mb, 1)}
     if rc == 2 and stderr.strip():
         where, _, problem = stderr.strip().splitlines()[-1].partition(": ")
         raise InkSliceError(where or "processing", problem or stderr.strip())
     if rc < 0:
-        raise InkSliceError("processing", f"the processing child was killed by signal {-rc} "
-                                          "(out of memory?); the scan is kept, process it again")
+        raise InkSliceError("processing", f"the processing child was killed by signal {-rc} after reaching "
+                                          f"{peak_mb:.0f} MB (out of memory?); the scan is kept, process it again")
     tail = stderr.strip().splitlines()[-1] if stderr.strip() else "no message"
     raise InkSliceError("processing", f"failed with exit code {rc}: {tail}")

@@ -234,4 +234,6 @@ class ScanRunner:
         options = {"method": self.settings["method"], "grid_n": int(self.settings["grid"])}
         result = self.processor(self.scan_dir, self.job_dir, options, self.stop)
         self._check_stop()
+        if "peak_rss_mb" in result:
+            self.store.event(self.job_id, "processed", f"processing peak memory {result['peak_rss_mb']} MB")
         return sorted(result.get("outputs", []))

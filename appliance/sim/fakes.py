@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -139,6 +140,28 @@ class FakeCamera(Camera):
         self.closed = True
 
 
+def replay_name(level_mm: float) -> str:
+    return f"{round(level_mm * 1000):07d}.png"
+
+
+class ReplayCamera(Camera):
+    """Frames rendered beforehand, one PNG per level (replay_name), served at the
+    level the callable returns: the daemon then holds one decoded frame at a
+    time, as with the real V4L2 camera, and a memory figure of the daemon is not
+    inflated by a renderer running inside it."""
+
+    def __init__(self, folder, level_mm):
+        self.folder, self.level_mm = Path(folder), level_mm
+
+    def capture(self) -> np.ndarray:
+        import cv2
+        path = self.folder / replay_name(float(self.level_mm()))
+        frame = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if frame is None:
+            raise DeviceError("camera replay", f"no frame {path.name} for level {self.level_mm():.3f} mm")
+        return frame
+
+
 class FakeLine(OutputLine):
     """An output line that remembers its history (light, LED, MCU reset)."""
 
@@ -195,11 +218,13 @@ class FakeBench:
          "disk": {"after_frames": 3, "free_mb": 150}}   # the disk "fills up" after 3 frames
 
     `last` is the Devices of the latest open(), for tests to inspect.
+    `replay`: a folder of frames rendered beforehand (ReplayCamera) instead
+    of rendering in this process.
     """
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None):
-        self.surface = surface
+    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None, replay=None):
+        self.surface, self.replay = surface, replay
         self.rig = rig or small_rig(320, 240)
         self.faults = dict(faults or {})
         self.last = None
@@ -224,8 +249,12 @@ class FakeBench:
         from .surfaces import get
         stage = FakeStage(faults=self.faults.get("stage"))
         at_home = float(settings["level_at_home_mm"])
-        camera = FakeCamera(get(params.get("surface") or self.surface), self.rig,
-                            lambda: at_home - stage.position_mm, faults=self.faults.get("camera"))
+        level = lambda: at_home - stage.position_mm          # noqa: E731
+        if self.replay:
+            camera = ReplayCamera(self.replay, level)
+        else:
+            camera = FakeCamera(get(params.get("surface") or self.surface), self.rig, level,
+                                faults=self.faults.get("camera"))
         light = FakeLine("light")
         self.last = Devices(stage, camera, self.rig.camera_model(), light=light,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"})
