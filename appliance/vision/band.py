@@ -14,14 +14,19 @@ from numpy.lib.stride_tricks import as_strided
 
 
 class TileGrid:
-    """Square tiles of side `tile` covering the region of interest, one pixel in from its edge."""
+    """Square tiles of side `tile` covering the region of interest, `apron` pixels in from its edge.
 
-    def __init__(self, roi, tile: int):
+    Each tile is read with an apron of `apron` pixels so that the 3x3 median
+    (1 px) sees true neighbours.
+    """
+
+    def __init__(self, roi, tile: int, apron: int = 1):
         x0, y0, x1, y1 = roi
         self.tile = tile
-        self.ox, self.oy = x0 + 1, y0 + 1
-        self.nx = max(0, (x1 - x0 - 2) // tile)
-        self.ny = max(0, (y1 - y0 - 2) // tile)
+        self.apron = apron
+        self.ox, self.oy = x0 + apron, y0 + apron
+        self.nx = max(0, (x1 - x0 - 2 * apron) // tile)
+        self.ny = max(0, (y1 - y0 - 2 * apron) // tile)
 
     @property
     def shape(self):
@@ -74,23 +79,25 @@ class TileGrid:
         return True
 
     def gather(self, image: np.ndarray, ty: np.ndarray, tx: np.ndarray) -> np.ndarray:
-        """Tiles (with a 1-pixel apron) of a 2-D uint8 image side by side: (tile+2, n*(tile+2)).
+        """Tiles (with their apron) of a 2-D uint8 image side by side: (A, n*A), A = tile + 2 apron.
 
         A strided view puts the tile row first, so one fancy-indexed copy lays
         the tiles out as one short, wide strip (wide rows keep OpenCV's
         filters fast) without a second transposing copy.
         """
-        T, A = self.tile, self.tile + 2
+        T, a = self.tile, self.apron
+        A = T + 2 * a
         s0, s1 = image.strides
-        base = image[self.oy - 1:, self.ox - 1:]
+        base = image[self.oy - a:, self.ox - a:]
         view = as_strided(base, shape=(A, self.ny, self.nx, A), strides=(s0, s0 * T, s1 * T, s1),
                           writeable=False)
         return view[:, ty, tx].reshape(A, -1)
 
     def scatter(self, strip: np.ndarray, dst: np.ndarray, ty: np.ndarray, tx: np.ndarray):
         """Write the inner tile x tile of each strip tile back into the full-size `dst`."""
-        T, A = self.tile, self.tile + 2
+        T, a = self.tile, self.apron
+        A = T + 2 * a
         n = len(ty)
-        inner = strip.reshape(A, n, A)[1:-1, :, 1:-1].transpose(1, 0, 2)     # (n, T, T)
+        inner = strip.reshape(A, n, A)[a:-a, :, a:-a].transpose(1, 0, 2)     # (n, T, T)
         x0, y0, x1, y1 = self.covered
         dst[y0:y1, x0:x1].reshape(self.ny, T, self.nx, T)[ty, :, tx, :] = inner

@@ -66,6 +66,7 @@ class Split:
     part: float           # mean grey level of the part class
     part_fraction: float
     separability: float   # Otsu's between-class / total variance, 0..1
+    otsu: int = -1        # Otsu's own threshold, when `threshold` was moved towards the ink
 
     @property
     def contrast(self):
@@ -92,6 +93,20 @@ def otsu_split(hist: np.ndarray) -> Split:
     part = (m0[-1] - m0[k]) / w1[k] if w1[k] > 0 else 255.0
     sep = float(between[k] / var) if var > 0 else 0.0
     return Split(k + 1, float(ink), float(part), float(w1[k] / total), sep)
+
+
+def towards_ink(split: Split, fraction: float) -> Split:
+    """Move the threshold to `fraction` of the way from the ink level to the part level.
+
+    Otsu splits the two classes by variance, and a part shaded from the lamp
+    (Lambertian, down to the ambient level) spreads the part class so widely
+    that its threshold can fall inside it and cut a peak's dark side off. The
+    ink is flat and dark; a threshold just above it keeps every lit or shaded
+    part pixel (glare is dealt with by colour, specks by size).
+    """
+    t = int(np.ceil(split.ink + fraction * (split.part - split.ink)))
+    return Split(max(1, min(t, split.threshold)), split.ink, split.part, split.part_fraction,
+                 split.separability, split.threshold)
 
 
 def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
@@ -126,24 +141,77 @@ class Hue:
 
 
 def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 24.0):
-    """The Hue test learned from a decimated colour sample, or None (gray frames, grey ink)."""
+    """The Hue test learned from a decimated colour sample, or None (gray frames, grey ink).
+
+    Among the bright pixels there may be more glare than part (a small part, big
+    highlights), so the part's colour is found as the less-blue of two classes
+    of the bright pixels' (other - main), not as their mean.
+    """
     if sample_bgr.ndim == 2 or sample_bgr.shape[2] < 3:
         return None
-    m = sample_bgr[:, :, main].astype(np.int16)
-    part = m >= split.threshold
-    ink = ~part
-    if part.sum() < 16 or ink.sum() < 16:
+    m = np.ascontiguousarray(sample_bgr[:, :, main])
+    bright = m >= (split.otsu if split.otsu >= 0 else split.threshold)
+    if bright.sum() < 16 or (~bright).sum() < 16:
         return None
     best = None
     for c in range(3):
         if c == main:
             continue
-        d = sample_bgr[:, :, c].astype(np.int16) - m
-        d_ink, d_part = float(d[ink].mean()), float(d[part].mean())
+        d = cv2.subtract(np.ascontiguousarray(sample_bgr[:, :, c]), m)      # saturates at 0
+        d_ink = float(d[~bright].mean())
+        inner = otsu_split(np.bincount(d[bright], minlength=256))
+        # (a small part among big highlights is a small lower class: still a class)
+        lower = (1 - inner.part_fraction) * bright.sum()
+        d_part = inner.ink if inner.contrast >= min_gap and lower >= 4 else float(d[bright].mean())
         gap = d_ink - d_part
-        if gap >= min_gap and d_ink > 0 and (best is None or gap > best[0]):
-            best = (gap, c, int(round(max(d_part, 0.0) + 0.5 * (d_ink - max(d_part, 0.0)))))
+        if gap >= min_gap and (best is None or gap > best[0]):
+            best = (gap, c, int(round(d_part + 0.5 * gap)))
     return Hue(best[1], best[2]) if best else None
+
+
+def towards_ink(split: Split, fraction: float) -> Split:
+    """Move the threshold to `fraction` of the way from the ink level to the part level.
+
+    Otsu splits the two classes by variance, and a part shaded from the lamp
+    (Lambertian, down to the ambient level) spreads the part class so widely
+    that its threshold can fall inside it and cut a peak's dark side off. The
+    ink is flat and dark; a threshold just above it keeps every lit or shaded
+    part pixel (glare is dealt with by colour, specks by size).
+    """
+    t = int(np.ceil(split.ink + fraction * (split.part - split.ink)))
+    return Split(max(1, min(t, split.threshold)), split.ink, split.part, split.part_fraction,
+                 split.separability, split.threshold)
+
+
+def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
+    """0/255 part mask: at or above the threshold, and below `glare_cut`.
+
+    Specular glare on the liquid clips at the top of the range while a diffuse
+    part does not; pixels at or above `glare_cut` (256 disables it) count as
+    ink so that a highlight beside the part cannot bulge its waterline.
+    """
+    return cv2.inRange(smooth, split.threshold, glare_cut - 1, out)
+
+
+def glare_cut(hist: np.ndarray, split: Split) -> int:
+    """Where glare starts, or 256 when the part itself is what saturates."""
+    h = np.asarray(hist, np.float64)
+    saturated = h[SATURATED:].sum()
+    part = h[split.threshold:SATURATED].sum()
+    return SATURATED if saturated < 0.2 * part else 256
+
+
+@dataclass
+class Hue:
+    """A second, colour test against glare: part where (other - main) <= cut.
+
+    Glare is the lamp's light added to the ink: it lifts every channel, so in
+    the main (red) channel it can look as bright as a shaded part, but the ink
+    stays much bluer than red and the light grey part does not. The saturating
+    8-bit difference other - main (blue - red) separates them at any glare.
+    """
+    other: int
+    cut: int
 
 
 def histogram(img: np.ndarray) -> np.ndarray:
@@ -161,6 +229,6 @@ def best_channel(sample_bgr: np.ndarray, min_contrast: float = 24.0):
     for c in range(min(3, sample_bgr.shape[2])):
         s = otsu_split(histogram(sample_bgr[:, :, c]))
         # separability alone likes a tiny bright class; weigh in the contrast
-        ok = s.separability >= 0.75 and s.contrast >= min_contrast
+        ok = s.separability >= 0.5 and s.contrast >= min_contrast
         scores.append(s.separability * s.contrast if ok else 0.0)
     return int(np.argmax(scores)) if max(scores) > 0 else None

@@ -36,8 +36,8 @@ import numpy as np
 from ..errors import SettingError
 from .band import TileGrid
 from .frames import (AllPartError, FrameError, Hue, NoPartError, Split, best_channel, check_frame,
-                     glare_cut, histogram, hue_split, otsu_split, part_mask)
-from .subpixel import refine
+                     glare_cut, histogram, hue_split, otsu_split, part_mask, towards_ink)
+from .subpixel import bumps, refine, refine_colour
 from .types import Waterline, signed_area
 
 __all__ = ["WaterlineExtractor", "FrameError", "NoPartError", "AllPartError", "Event"]
@@ -70,21 +70,23 @@ class WaterlineExtractor:
       min_new_island_px: smallest island kept that is not connected to the
         part of the previous frame (default 400);
       min_contrast: smallest part/ink grey-level difference trusted (default 24);
-      half_width: samples each side of the contour along the normal (default 4).
+      half_width: samples each side of the contour along the normal (default 4);
+      threshold_fraction: where the part/ink threshold sits between the ink and
+        the part levels (default 0.3: near the flat ink, below shaded part faces).
     """
 
     def __init__(self, camera, **options):
         self.camera = camera
         self.width, self.height = int(camera.width), int(camera.height)
         opts = dict(channel="auto", roi=None, band=True, band_px=13, tile_px=32, min_area_px=60,
-                    min_new_island_px=400, min_contrast=24, half_width=4)
+                    min_new_island_px=400, min_contrast=24, half_width=4, threshold_fraction=0.3)
         unknown = set(options) - set(opts)
         if unknown:
             raise SettingError("vision", f"unknown WaterlineExtractor option(s): {', '.join(sorted(unknown))}")
         opts.update(options)
         self.options = opts
         self.roi = self._check_roi(opts["roi"])
-        self.grid = TileGrid(self.roi, int(opts["tile_px"]))
+        self.grid = TileGrid(self.roi, int(opts["tile_px"]), apron=1)
         self.channel = None if opts["channel"] == "auto" else int(opts["channel"])
         self.K = None if camera.K is None else np.asarray(camera.K, np.float64)
         self.dist = None if camera.dist is None else np.asarray(camera.dist, np.float64)
@@ -95,8 +97,7 @@ class WaterlineExtractor:
         self._binary = np.zeros((self.height, self.width), np.uint8)
         self._bufs = {}
         self._decimated = None
-        self.hue: Hue | None = None       # colour test against glare, learned on the first frame
-        self._hue_known = False
+        self.hue: Hue | None = None       # colour test against glare, learned on the first frame showing it
         self.reset()
 
     # -- state -----------------------------------------------------------------
@@ -174,6 +175,51 @@ class WaterlineExtractor:
         cv2.threshold(diff, self.hue.cut, 255, cv2.THRESH_BINARY_INV, diff)
         return cv2.bitwise_and(binary, diff, binary)
 
+    def _learn(self, frame, where):
+        """Channel levels, threshold and (once) the glare colour test, from the 1-in-4 sample.
+
+        Returns the sample's main channel, its not-glare mask (or None) and the split.
+        Glare pixels are left out of the histogram: big highlights on the ink
+        would otherwise make a third class that blurs the ink/part split.
+        """
+        dec = self._sample(frame, 4, all_channels=True)
+        main = np.ascontiguousarray(self._channel_view(dec, self._ch))
+        hist = histogram(main)
+        if self.hue is None and dec.ndim == 3 and self.channel is not None:
+            self.hue = hue_split(dec[::2, ::2], self.channel, self._split(hist))
+        not_glare = None
+        if self.hue is not None:
+            not_glare = self._not_glare(np.ascontiguousarray(dec[:, :, self.hue.other]), main)
+            hist = self._glare_free(hist, main, not_glare)
+        split = self._split(hist)
+        self._check_split(split, where)
+        self.split = split
+        self.glare_cut = glare_cut(hist, split)
+        return main, not_glare, split
+
+    @staticmethod
+    def _glare_free(hist, main, not_glare):
+        """The histogram as if every blue pixel (ink, with or without glare on it) were plain ink.
+
+        Big highlights on the ink would otherwise make a third class between ink
+        and part and drag Otsu's split. Blue pixels count at the ink level: the
+        lower quartile of their grey levels (glare only ever brightens).
+        """
+        ok = cv2.calcHist([main], [0], not_glare, [256], [0, 256]).ravel()
+        blue = hist - ok
+        n = blue.sum()
+        if n > 0:
+            ink = int(np.searchsorted(np.cumsum(blue), 0.25 * n))
+            ok[ink] += n
+        return ok
+
+    def _not_glare(self, other, main):
+        """255 where (other - main) <= cut: not the ink's blue, so not ink or glare on it."""
+        return cv2.threshold(cv2.subtract(other, main), self.hue.cut, 255, cv2.THRESH_BINARY_INV)[1]
+
+    def _split(self, hist):
+        return towards_ink(otsu_split(hist), self.options["threshold_fraction"])
+
     def _check_split(self, split: Split, where):
         """Refuse a frame whose histogram has no ink/part split (all ink, all part, blank)."""
         mc = self.options["min_contrast"]
@@ -189,14 +235,7 @@ class WaterlineExtractor:
 
     def _read_full(self, frame, level_mm, where):
         self.last_mode = "full"
-        hist = histogram(self._sample(frame, 4))
-        split = otsu_split(hist)
-        self._check_split(split, where)
-        self.split = split
-        self.glare_cut = glare_cut(hist, split)
-        if not self._hue_known and frame.ndim == 3 and self.channel is not None:
-            self.hue = hue_split(self._sample(frame, 8, all_channels=True), self.channel, split)
-            self._hue_known = True
+        split = self._learn(frame, where)[2]
         x0, y0, x1, y1 = self.roi
         smooth = self._smooth[y0:y1, x0:x1]
         main = self._plane(frame, y0, y1, x0, x1)
@@ -206,7 +245,7 @@ class WaterlineExtractor:
             other = self._plane(frame, y0, y1, x0, x1, self.hue.other, "other")
             self._apply_hue(main, other, binary, "diff")
         read = np.ones(self.grid.shape, bool)
-        return self._loops(self.roi, level_mm, read, full=True)
+        return self._loops(frame, self.roi, level_mm, read, full=True)
 
     def _read_coarse(self, frame, level_mm, where):
         """First frame: find the part on the 1-in-4 sample, then read only a band around it.
@@ -216,22 +255,11 @@ class WaterlineExtractor:
         waterline leaves that band the caller reads the whole tank.
         """
         x0, y0, x1, y1 = self.roi
-        dec = self._sample(frame, 4, all_channels=True)
-        main = np.ascontiguousarray(self._channel_view(dec, self._ch))
-        hist = histogram(main)
-        split = otsu_split(hist)
-        self._check_split(split, where)
-        self.split = split
-        self.glare_cut = glare_cut(hist, split)
-        if not self._hue_known and frame.ndim == 3 and self.channel is not None:
-            self.hue = hue_split(dec[::2, ::2], self.channel, split)
-            self._hue_known = True
+        main, not_glare, split = self._learn(frame, where)
         smooth = cv2.medianBlur(main, 3)
         coarse = part_mask(smooth, split, self.glare_cut)
-        if self.hue is not None:
-            other = np.ascontiguousarray(dec[:, :, self.hue.other])
-            cv2.bitwise_and(coarse, cv2.threshold(cv2.subtract(other, main), self.hue.cut, 255,
-                                                  cv2.THRESH_BINARY_INV)[1], coarse)
+        if not_glare is not None:
+            cv2.bitwise_and(coarse, not_glare, coarse)
         # the kept binary image: the coarse part outlines drawn filled at full
         # size (holes too), a few pixels off at worst; the band read replaces
         # the pixels near the waterline
@@ -264,25 +292,28 @@ class WaterlineExtractor:
             return None
         strip = grid.gather(self._channel_view(frame, self._ch), ty, tx)
         smooth = cv2.medianBlur(strip, 3)
+        not_glare = None
+        if self.hue is not None:
+            not_glare = self._not_glare(grid.gather(self._channel_view(frame, self.hue.other), ty, tx), strip)
         hist = cv2.calcHist([smooth], [0], None, [256], [0, 256]).ravel()
-        split = otsu_split(hist)
+        if not_glare is not None:
+            hist = self._glare_free(hist, smooth, not_glare)
+        split = self._split(hist)
         mc = self.options["min_contrast"]
         if split.separability < 0.6 or split.contrast < mc:
             return None                       # the band lost the edge: read everything
         self.split = split
         self.glare_cut = glare_cut(hist, split)
         binary = part_mask(smooth, split, self.glare_cut)
-        if self.hue is not None:
-            other = grid.gather(self._channel_view(frame, self.hue.other), ty, tx)
-            cv2.bitwise_and(binary, cv2.threshold(cv2.subtract(other, strip), self.hue.cut, 255,
-                                                  cv2.THRESH_BINARY_INV)[1], binary)
+        if not_glare is not None:
+            cv2.bitwise_and(binary, not_glare, binary)
         grid.scatter(smooth, self._smooth, ty, tx)
         grid.scatter(binary, self._binary, ty, tx)
         rows, cols = np.nonzero(read.any(axis=1))[0], np.nonzero(read.any(axis=0))[0]
         T = grid.tile
         box = (grid.ox + cols[0] * T, grid.oy + rows[0] * T,
                grid.ox + (cols[-1] + 1) * T, grid.oy + (rows[-1] + 1) * T)
-        return self._loops(box, level_mm, read, full=False)
+        return self._loops(frame, box, level_mm, read, full=False)
 
     @staticmethod
     def _channel_view(frame, c):
@@ -317,7 +348,7 @@ class WaterlineExtractor:
 
     # -- contours ------------------------------------------------------------------
 
-    def _loops(self, box, level_mm, read, full):
+    def _loops(self, frame, box, level_mm, read, full):
         x0, y0, x1, y1 = box
         contours, hierarchy = cv2.findContours(self._binary[y0:y1, x0:x1], cv2.RETR_CCOMP,
                                                cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
@@ -325,7 +356,9 @@ class WaterlineExtractor:
         refined = []
         half = self.options["half_width"]
         for lp in loops:
-            pts, _ = refine(self._smooth, lp.pixels, self.split.threshold, half, self.options["min_contrast"] / 2)
+            pts = self._refine(frame, lp.pixels)
+            for _ in range(2):              # a bump's tip shows once its flanks are gone
+                pts = pts[~bumps(pts)]
             refined.append(pts)
         if not full:
             # every point and its sampling reach must lie in tiles read this frame
@@ -335,6 +368,18 @@ class WaterlineExtractor:
                 return None
         self._remember(loops, level_mm)
         return [(lp, pts) for lp, pts in zip(loops, refined) if len(pts) >= 8]
+
+    def _refine(self, frame, pixels):
+        """Sub-pixel points of one contour, in contour order (see subpixel.py)."""
+        half, mc = self.options["half_width"], self.options["min_contrast"] / 2
+        pts, idx = refine(self._smooth, pixels, self.split.threshold, half, mc)
+        if self.hue is not None and frame.ndim == 3 and len(idx) < len(pixels):
+            missing = np.setdiff1d(np.arange(len(pixels)), idx)
+            more, midx = refine_colour(frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc)
+            if len(midx):
+                order = np.argsort(np.concatenate([idx, midx]), kind="stable")
+                pts = np.vstack([pts, more])[order]
+        return pts
 
     def _filter(self, contours, hierarchy, level_mm):
         """Outer boundaries and their holes, without specks, glare and impossible islands."""

@@ -50,39 +50,112 @@ def sample_q8(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (top * (ONE - fy) + bottom * fy) >> Q
 
 
-def refine(img: np.ndarray, contour: np.ndarray, threshold: float, half: int = 4,
-           min_contrast: float = 20.0):
-    """Sub-pixel points (M, 2) (u, v) and the indices of the contour pixels they came from.
-
-    `threshold` is the global ink/part split: a profile whose dark end is above it
-    (glare on the ink beside the part) or whose bright end is below it (a
-    shadow, a speck on the part) has no trustworthy mid-level and is dropped
-    rather than allowed to bend the line.
-    """
+def _profiles(contour, half, subset=None):
     c = contour.reshape(-1, 2).astype(np.float32)
     n = normals(contour.reshape(-1, 2))
+    if subset is not None:
+        c, n = c[subset], n[subset]
     s = np.arange(-half, half + 1, dtype=np.float32)
-    x = c[:, :1] + n[:, :1] * s
-    y = c[:, 1:] + n[:, 1:] * s
-    p = sample_q8(img, x, y).astype(np.float32) * (1.0 / ONE)
+    return c, n, s, c[:, :1] + n[:, :1] * s, c[:, 1:] + n[:, 1:] * s
+
+
+def _crossing(p, s, threshold, min_contrast, max_shift):
+    """Offset along each profile where it passes half-way between its two ends, and which to trust.
+
+    The part is the bright end. A profile whose dark end is above `threshold`
+    (glare on the ink beside the part) or whose bright end is below it (a
+    shadow, a speck on the part) has no trustworthy mid-level; a crossing more
+    than `max_shift` px from where the binary edge is (half a pixel from the
+    contour pixel towards the dark end) is the edge of something else.
+    """
     a = 0.5 * (p[:, 0] + p[:, 1])
     b = 0.5 * (p[:, -1] + p[:, -2])
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    mid = 0.5 * (a + b)
-    d = p - mid[:, None]
+    d = p - (0.5 * (a + b))[:, None]
     d0, d1 = d[:, :-1], d[:, 1:]
     crosses = (d0 * d1 <= 0) & (d0 != d1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(crosses, d0 / (d0 - d1), np.nan)
-    where = s[:-1] + frac
-    # the crossing nearest where the binary edge is: half a pixel from the
-    # contour pixel (a part pixel) towards the dark end of the profile
+        where = s[:-1] + np.where(crosses, d0 / (d0 - d1), np.nan)
     dist = np.where(crosses, np.abs(where + 0.5 * np.sign(b - a)[:, None]), np.inf)
     j = np.argmin(dist, axis=1)
-    rows = np.arange(len(c))
-    t = where[rows, j]
-    ok = (np.isfinite(dist[rows, j]) & (hi - lo >= min_contrast)
-          & (lo < threshold) & (hi >= threshold) & (np.abs(t) <= half - 1.5))
+    rows = np.arange(len(p))
+    ok = ((dist[rows, j] <= max_shift) & (hi - lo >= min_contrast) & (lo < threshold) & (hi >= threshold))
+    return where[rows, j], ok
+
+
+def refine(img: np.ndarray, contour: np.ndarray, threshold: float, half: int = 4,
+           min_contrast: float = 20.0, max_shift: float = 1.5):
+    """Sub-pixel points (M, 2) (u, v) and the indices of the contour pixels they came from.
+
+    Profiles are read from the 8-bit median-filtered main channel `img`.
+    """
+    c, n, s, x, y = _profiles(contour, half)
+    p = sample_q8(img, x, y).astype(np.float32) * (1.0 / ONE)
+    t, ok = _crossing(p, s, threshold, min_contrast, max_shift)
     t = t[ok]
     pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
     return pts, np.nonzero(ok)[0]
+
+
+def refine_colour(frame: np.ndarray, contour: np.ndarray, subset: np.ndarray, main: int, other: int,
+                  cut: float, half: int = 4, min_contrast: float = 20.0, max_shift: float = 1.5):
+    """Like `refine`, on (main - other) of the raw colour frame: for the points glare took.
+
+    Where a highlight on the ink beside the part is as bright as the part, the
+    grey level has no edge left, but the colour has: lamp light added to blue
+    ink stays blue. Used only for the few points `refine` dropped, so the
+    cost stays with the frames that have glare.
+    """
+    c, n, s, x, y = _profiles(contour, half, subset)
+    h, w = frame.shape[:2]
+    flat = frame.reshape(-1)
+    x = np.clip(x, 0, w - 1.001)
+    y = np.clip(y, 0, h - 1.001)
+    x0, y0 = x.astype(np.int32), y.astype(np.int32)
+    fx, fy = x - x0, y - y0
+    base = (y0 * w + x0) * 3
+
+    def channel(k):
+        i = base + k
+        p00, p01 = flat.take(i).astype(np.float32), flat.take(i + 3).astype(np.float32)
+        p10, p11 = flat.take(i + 3 * w).astype(np.float32), flat.take(i + 3 * w + 3).astype(np.float32)
+        return (p00 * (1 - fx) + p01 * fx) * (1 - fy) + (p10 * (1 - fx) + p11 * fx) * fy
+
+    p = channel(main) - channel(other)
+    t, ok = _crossing(p, s, -cut, min_contrast, max_shift)
+    t = t[ok]
+    pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
+    return pts, subset[ok]
+
+
+def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 0.5) -> np.ndarray:
+    """Mask of points on a short excursion from an otherwise smooth line (a speck stuck to it).
+
+    A dust speck or bubble touching the waterline bends the binary contour round
+    itself and the sub-pixel step follows the speck's edge. On either side of a
+    bump the loop carries on along one smooth curve: a quadratic (in the frame
+    of the chord from 2k points before to 2k points after) through the points
+    k..2k before and after fits them to `max_resid` px while the point itself
+    is more than `min_dev` px off it. At a corner of the part the quadratic
+    cannot fit both legs, so corners are kept. Loops shorter than 16k points
+    (radius under ~2.5k px) curve too much within the window and are left alone.
+    """
+    n = len(pts)
+    if n < 16 * k:
+        return np.zeros(n, bool)
+    o = np.array([-2 * k, -(3 * k) // 2, -k, k, (3 * k) // 2, 2 * k])
+    Y = pts[(np.arange(n)[:, None] + o[None, :]) % n]                       # (n, 6, 2)
+    chord = Y[:, -1] - Y[:, 0]
+    u = chord / (np.hypot(*chord.T)[:, None] + 1e-9)
+    v = np.column_stack([-u[:, 1], u[:, 0]])
+    rel = Y - Y[:, :1]
+    x = np.einsum("njc,nc->nj", rel, u)
+    y = np.einsum("njc,nc->nj", rel, v)
+    A = np.stack([np.ones_like(x), x, x * x], axis=2)                        # (n, 6, 3)
+    M = np.einsum("nji,njk->nik", A, A) + 1e-6 * np.eye(3)
+    coef = np.linalg.solve(M, np.einsum("nji,nj->ni", A, y)[..., None])[..., 0]
+    resid = np.sqrt(np.mean((y - np.einsum("nji,ni->nj", A, coef)) ** 2, axis=1))
+    p = pts - Y[:, 0]
+    xi, yi = np.einsum("nc,nc->n", p, u), np.einsum("nc,nc->n", p, v)
+    dev = np.abs(yi - (coef[:, 0] + coef[:, 1] * xi + coef[:, 2] * xi * xi))
+    return (dev > min_dev) & (resid < max_resid)

@@ -1,0 +1,79 @@
+"""The frame pipeline on the virtual bench's rendered frames (rig scaled to 640 x 480).
+
+The truth is Surface.level_sdf: the exact signed distance (mm) from the level
+curve, so each point's error is |level_sdf| at its mm position.
+"""
+import numpy as np
+import pytest
+
+from appliance.sim import surfaces
+from appliance.sim.fakes import small_rig
+from appliance.sim.render import PRESETS, Effects, render_frame
+from appliance.vision import seed
+from appliance.vision.pipeline import WaterlineExtractor
+from appliance.vision.types import signed_area
+
+RIG = small_rig(640, 480)
+MM_PER_PX = RIG.height_mm / RIG.focal_px
+GLARE_NOISE = Effects(glare_spots=4, noise_sigma=2.5, salt_pepper=3e-4, dust_specks=20)
+
+
+def measure(name, level, effects, seed_=0):
+    surf = surfaces.get(name)
+    frame = render_frame(surf, level, RIG, effects, np.random.default_rng(seed_))
+    cam = RIG.camera_model(distorted=effects.lens_distortion)
+    wl = WaterlineExtractor(cam).extract(frame, level)
+    err = np.abs(surf.level_sdf(wl.points[:, 0], wl.points[:, 1], level)) / MM_PER_PX
+    return wl, err, frame, cam
+
+
+def rms(e):
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def test_clean_dome_to_a_tenth_of_a_pixel_and_better_than_canny():
+    wl, err, frame, cam = measure("sample1", 25.0, Effects())
+    assert len(wl.loops) == 1 and signed_area(wl.loops[0]) > 0
+    assert rms(err) < 0.1
+    edges = seed.seed_slice(frame, 25.0, cam).edges_mm
+    canny = np.abs(surfaces.get("sample1").level_sdf(edges[:, 0], edges[:, 1], 25.0)) / MM_PER_PX
+    assert rms(canny[canny < 5]) > 3 * rms(err)
+
+
+def test_ring_keeps_its_hole_under_glare_and_noise():
+    wl, err, _, _ = measure("ring", 14.0, GLARE_NOISE)
+    areas = sorted(signed_area(lp) for lp in wl.loops)
+    assert len(areas) == 2 and areas[0] < 0 < areas[1]
+    assert rms(err) < 0.25
+
+
+def test_two_peaks_are_two_islands_and_glare_is_none():
+    wl, err, _, _ = measure("twin-peaks", 22.0, GLARE_NOISE)
+    assert len(wl.loops) == 2 and all(signed_area(lp) > 0 for lp in wl.loops)
+    assert rms(err) < 0.25
+    assert err.max() < 1.0
+
+
+def test_realistic_preset_with_lens_distortion():
+    wl, err, _, _ = measure("sample1", 25.0, PRESETS["realistic"])
+    assert len(wl.loops) == 1
+    assert rms(err) < 0.25
+
+
+@pytest.mark.slow
+def test_a_short_rendered_scan_in_band_mode_matches_full_reads():
+    surf = surfaces.get("twin-peaks")
+    cam = RIG.camera_model(distorted=False)
+    banded, full = WaterlineExtractor(cam), WaterlineExtractor(cam, band=False)
+    for k, level in enumerate(np.arange(26.0, 21.0, -0.5)):
+        frame = render_frame(surf, level, RIG, GLARE_NOISE, np.random.default_rng(k))
+        a, b = banded.extract(frame, level), full.extract(frame, level)
+        # every banded loop is one the full read found too; a new peak may show
+        # a frame or two later in band mode (the lattice samples every 16 px)
+        areas_full = [signed_area(lp) for lp in b.loops]
+        for lp in a.loops:
+            assert min(abs(signed_area(lp) - af) for af in areas_full) < 0.01 * abs(signed_area(lp))
+        ea = np.abs(surf.level_sdf(a.points[:, 0], a.points[:, 1], level)) / MM_PER_PX
+        assert rms(ea) < 0.25
+    assert len(a.loops) == 2                   # both peaks by the end
+    assert banded.last_mode == "band"
