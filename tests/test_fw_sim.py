@@ -2,6 +2,7 @@
 
 Each test reads as one clause of firmware/stepper/PROTOCOL.md and checks it
 on the unmodified ELF through the HIL harness (a fresh MCU per test)."""
+import threading
 import time
 
 import pytest
@@ -253,3 +254,20 @@ def test_simulated_bench_at_real_time_starts_and_identifies_in_under_two_seconds
         assert stage.info["proto"] == P.PROTO_VERSION
         stage.close()
     assert time.monotonic() - t < 2.0
+
+
+def test_driver_recovers_from_an_emergency_stop_byte_forged_by_line_noise(bench):
+    """PROTOCOL.md rule 6: a Ctrl-X the driver never sent is handled like a reset."""
+    stage = SerialStage(bench.port)
+    noise = RawLink(bench.port)                # a second writer on the same line
+    try:
+        stage.home()
+        t = threading.Timer(0.02, noise.send_raw, args=(P.RT_ESTOP,))
+        t.start()
+        stage.move_to(60.0)
+        t.join()
+        assert bench.stage_position_mm() == pytest.approx(60.0, abs=1e-9)
+        assert stage.counters["spurious_estops"] == 1 and stage.counters["rehomes"] == 1
+    finally:
+        noise.close()
+        stage.close()
