@@ -46,6 +46,11 @@ def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
     again = render_frame("cone", 15.0, rig, Effects(displacement=True, lens_distortion=True),
                          np.random.default_rng([7, 1]))
     assert np.array_equal(again, img)
+    # the same scan from two processes is the same scan
+    par = render_scan("cone", tmp_path / "par", levels=[24.0, 15.0, 6.0],
+                      effects=Effects(displacement=True, lens_distortion=True), seed=7, workers=2)
+    assert np.array_equal(read_frame(par, par.frames[1]), img)
+    assert json.loads(truth_path(par.folder).read_text())["levels_true_mm"] == truth["levels_true_mm"]
     # no distortion in the frames -> no distortion in scan.json
     s2 = render_scan("cone", tmp_path / "s2", levels=[10.0])
     assert np.allclose(load_scan(s2.folder).camera.dist, 0)

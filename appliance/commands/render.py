@@ -17,6 +17,8 @@ def add_arguments(p):
     p.add_argument("--effects", default="clean", choices=sorted(PRESETS),
                    help="image effects preset (default clean)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="render frames in N processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -28,7 +30,7 @@ def run(args) -> int:
             print(f"\rframe {i}/{n}", end="", file=sys.stderr, flush=True)
 
     scan = render_scan(args.surface, args.output, step_mm=args.step, effects=args.effects,
-                       seed=args.seed, progress=progress)
+                       seed=args.seed, progress=progress, workers=args.workers)
     if not args.quiet:
         print(file=sys.stderr)
     print(f"{len(scan.frames)} frames of {args.surface} in {scan.folder} "

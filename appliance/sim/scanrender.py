@@ -18,8 +18,8 @@ from .. import atomicio
 from ..errors import SettingError
 from ..scanfile import FrameRef, Scan, write_frame, write_scan_json
 from . import surfaces as _surfaces
-from .render import Effects, effects_preset, liquid_level, render_frame
-from .rig import Rig
+from .render import Effects, effects_preset, liquid_level, render_frame, surface_grid
+from .rig import Rig, pixel_map
 
 
 def scan_levels(surface, step_mm: float) -> list[float]:
@@ -42,13 +42,27 @@ def truth_path(folder) -> Path:
     return folder.parent / (folder.name + ".truth.json")
 
 
+_FORKED = {}      # what forked workers inherit (a Surface holds closures: not picklable)
+
+
+def _render_one(job):
+    surface, folder, rel, level, rig, effects, seed, i = job
+    if surface is None:
+        surface = _FORKED["surface"]
+    img = render_frame(surface, level, rig, effects, np.random.default_rng([seed, i]))
+    write_frame(folder, rel, img)
+    return liquid_level(surface, level, rig, effects)
+
+
 def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=None,
-                seed: int = 0, levels=None, progress=None) -> Scan:
+                seed: int = 0, levels=None, progress=None, workers: int = 1) -> Scan:
     """Render frames at each level into `folder` and write scan.json and the truth file.
 
     surface: a Surface or its name; effects: an Effects or a preset name.
     Frame i uses the random stream default_rng([seed, i]), so any frame can be
-    re-rendered on its own and scans are reproducible.
+    re-rendered on its own and scans are reproducible - also with `workers` > 1,
+    which renders frames in forked processes (the per-rig and per-part caches
+    are built first, so the children inherit them instead of rebuilding them).
     """
     if isinstance(surface, str):
         surface = _surfaces.get(surface)
@@ -63,16 +77,30 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
     if not levels:
         raise SettingError("levels", "no levels to render")
     folder.mkdir(parents=True, exist_ok=True)
-    frames, true_levels = [], []
     t0 = time.perf_counter()
-    for i, lv in enumerate(levels):
-        rel = f"frames/{i + 1:04d}.png"
-        img = render_frame(surface, lv, rig, effects, np.random.default_rng([seed, i]))
-        write_frame(folder, rel, img)
-        frames.append(FrameRef(rel, lv))
-        true_levels.append(liquid_level(surface, lv, rig, effects))
-        if progress:
-            progress(i + 1, len(levels))
+    jobs = [(surface, folder, f"frames/{i + 1:04d}.png", lv, rig, effects, seed, i)
+            for i, lv in enumerate(levels)]
+    frames = [FrameRef(j[2], j[3]) for j in jobs]
+    true_levels = []
+    if workers and workers > 1 and len(jobs) > 1:
+        import multiprocessing as mp
+        pixel_map(rig, effects.lens_distortion)
+        surface_grid(surface)
+        _FORKED["surface"] = surface
+        try:
+            pool = mp.get_context("fork").Pool(min(workers, len(jobs)))
+        finally:
+            _FORKED.clear()    # the children have their copy; keep no reference here
+        with pool:
+            for i, t in enumerate(pool.imap(_render_one, [(None,) + j[1:] for j in jobs])):
+                true_levels.append(t)
+                if progress:
+                    progress(i + 1, len(jobs))
+    else:
+        for i, job in enumerate(jobs):
+            true_levels.append(_render_one(job))
+            if progress:
+                progress(i + 1, len(jobs))
     scan = Scan(folder, rig.camera_model(distorted=effects.lens_distortion), frames,
                 extra={"tank": {"inner_area_mm2": float(rig.tank_area_mm2)},
                        "source": {"kind": "simulated", "renderer": "appliance.sim.render"}})
