@@ -74,7 +74,8 @@ class ScanRunner:
             return "done"
         except Cancelled:
             self._make_safe()
-            self._finish("cancelled", "cancelled by the operator; the frames so far are kept, resume to continue")
+            reason = getattr(self.stop, "reason", "cancelled by the operator")
+            self._finish("cancelled", f"{reason}; the frames so far are kept, resume to continue")
             return "cancelled"
         except InkSliceError as e:
             self._make_safe()
@@ -173,9 +174,9 @@ class ScanRunner:
             mask = part_mask(frame)
             change = waterline_change(self._mask, mask)
             self._mask = mask
-            self._save_frame(scan, frame, FrameRef(
-                f"frames/{len(scan.frames) + 1:04d}.png", level,
-                {"target_mm": target, "step_mm": step, "change": round(change, 6)}))
+            extra = {"target_mm": target, "step_mm": step, "change": round(change, 6)}
+            extra.update(self._sensor_reading(level))
+            self._save_frame(scan, frame, FrameRef(f"frames/{len(scan.frames) + 1:04d}.png", level, extra))
             self.on_frame(frame, {"level_mm": level, "time": time.time()})
             del frame
             self._level_times.append(time.monotonic() - t0)
@@ -205,6 +206,18 @@ class ScanRunner:
         if frame is None or frame.ndim not in (2, 3):
             raise DeviceError("camera", "returned no image")
         return frame
+
+    def _sensor_reading(self, nominal: float) -> dict:
+        """The liquid-level sensor's reading, kept with the frame to cross-check the
+        displacement model (the ink drops as the part emerges). Never fails a scan."""
+        if self.dev.level_sensor is None:
+            return {}
+        try:
+            measured = float(self.dev.level_sensor.read_mm())
+        except Exception as e:
+            log.warning("level sensor: %s", e)
+            return {}
+        return {"sensor_level_mm": round(measured, 3), "sensor_minus_nominal_mm": round(measured - nominal, 3)}
 
     def _save_frame(self, scan: Scan, frame: np.ndarray, ref: FrameRef):
         need = float(self.settings["min_free_mb"])

@@ -110,11 +110,12 @@ class BenchService:
             self._launch(job_id, total, 0)
             return job_id
 
-    def cancel(self, wait_s: float = 30.0) -> None:
+    def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
         with self._lock:
             thread = self._thread
             if thread is None or not thread.is_alive():
                 return
+            self._stop.reason = reason
             self._stop.set()
             self._set(message="cancelling")
         thread.join(timeout=wait_s)
@@ -188,7 +189,7 @@ class BenchService:
         return self.store.events(job_id, limit)
 
     def close(self) -> None:
-        self.cancel()
+        self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
         self._closing.set()
         self._panel_thread.join(timeout=5)
         self._panel.close()

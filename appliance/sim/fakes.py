@@ -223,8 +223,9 @@ class FakeBench:
     """
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None, replay=None):
-        self.surface, self.replay = surface, replay
+    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None, replay=None,
+                 level_sensor: bool = False):
+        self.surface, self.replay, self.level_sensor = surface, replay, level_sensor
         self.rig = rig or small_rig(320, 240)
         self.faults = dict(faults or {})
         self.last = None
@@ -256,7 +257,13 @@ class FakeBench:
             camera = FakeCamera(get(params.get("surface") or self.surface), self.rig, level,
                                 faults=self.faults.get("camera"))
         light = FakeLine("light")
-        self.last = Devices(stage, camera, self.rig.camera_model(), light=light,
+        sensor = None
+        if self.level_sensor:
+            # reads the ink's true level: the nominal one lowered by the emerged volume
+            from .physics import true_level
+            part, area = get(params.get("surface") or self.surface), self.rig.tank_area_mm2
+            sensor = FakeLevelSensor(lambda: true_level(part, level(), area))
+        self.last = Devices(stage, camera, self.rig.camera_model(), light=light, level_sensor=sensor,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"})
         return self.last
 
