@@ -14,6 +14,9 @@ and nowhere else.
 """
 from __future__ import annotations
 
+import copy
+import threading
+import time
 from pathlib import Path
 
 from ..errors import InkSliceError
@@ -26,11 +29,48 @@ class NotOffered(InkSliceError):
 
 
 class WebService:
-    def __init__(self, service):
+    """`state()` and `latest_frame()` are cached for a moment (STATE_TTL_S, FRAME_TTL_S).
+
+    Why: fifty phones polling once a second, plus every live-view stream checking
+    for a new frame four times a second, would otherwise each be a call into the
+    daemon (over its socket: a connect, JSON, and for frames a base64 JPEG), all
+    competing with the scan for the Pi's two cores. A tenth of a second of
+    staleness is invisible on a screen; any command (start, cancel, resume,
+    settings) drops the cache so its effect shows at once.
+    """
+    STATE_TTL_S = 0.1
+    FRAME_TTL_S = 0.2
+
+    def __init__(self, service, clock=time.monotonic):
         self.inner = service
+        self.clock = clock
+        self._cache: dict[str, tuple[float, object]] = {}
+        self._cache_lock = threading.Lock()
+        self._fetch_locks = {"state": threading.Lock(), "frame": threading.Lock()}
+
+    def _cached(self, key, ttl, fetch):
+        # Single flight: when the entry is stale, one request thread fetches while the others
+        # wait for it, so a burst of 50 polls is still one call into the daemon.
+        with self._fetch_locks.setdefault(key, threading.Lock()):
+            now = self.clock()
+            with self._cache_lock:
+                hit = self._cache.get(key)
+                if hit is not None and now - hit[0] < ttl:
+                    return hit[1]
+            value = fetch()
+            with self._cache_lock:
+                self._cache[key] = (self.clock(), value)
+            return value
+
+    def _drop_cache(self):
+        with self._cache_lock:
+            self._cache.clear()
 
     # -- the agreed facade -----------------------------------------------------------
     def state(self) -> dict:
+        return copy.deepcopy(self._cached("state", self.STATE_TTL_S, self._fetch_state))
+
+    def _fetch_state(self) -> dict:
         st = dict(self.inner.state())
         st.setdefault("hardware", {})
         for key in ("job_id", "level_mm", "eta_s", "message"):
@@ -40,13 +80,22 @@ class WebService:
         return st
 
     def start_scan(self, params: dict) -> str:
-        return self.inner.start_scan(params)
+        try:
+            return self.inner.start_scan(params)
+        finally:
+            self._drop_cache()
 
     def cancel(self):
-        return self.inner.cancel()
+        try:
+            return self.inner.cancel()
+        finally:
+            self._drop_cache()
 
     def resume(self, job_id: str) -> str:
-        return self.inner.resume(job_id)
+        try:
+            return self.inner.resume(job_id)
+        finally:
+            self._drop_cache()
 
     def jobs(self) -> list[dict]:
         return [self._job(j) for j in self.inner.jobs()]
@@ -58,6 +107,9 @@ class WebService:
         return Path(self.inner.job_file(job_id, name))
 
     def latest_frame(self):
+        return self._cached("frame", self.FRAME_TTL_S, self._fetch_frame)
+
+    def _fetch_frame(self):
         got = self.inner.latest_frame()
         if got is None:
             return None
@@ -68,7 +120,10 @@ class WebService:
         return dict(self.inner.settings())
 
     def update_settings(self, changes: dict) -> dict:
-        return dict(self.inner.update_settings(changes))
+        try:
+            return dict(self.inner.update_settings(changes))
+        finally:
+            self._drop_cache()
 
     # -- optional extras ---------------------------------------------------------------
     def offers(self, name: str) -> bool:

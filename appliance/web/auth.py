@@ -63,6 +63,7 @@ class Credentials:
         self.admin_file = self.folder / "admin.json"
         self.tokens_file = self.folder / "tokens.json"
         self._lock = threading.Lock()
+        self._files: dict[Path, tuple] = {}
 
     # -- the password -----------------------------------------------------------
     def ensure_admin(self) -> str | None:
@@ -76,8 +77,22 @@ class Credentials:
                                                   "set": time.time()})
             return password
 
+    def _read_json(self, path: Path, default):
+        """Parsed file contents, re-read only when the file changes (every request checks the
+        password generation; a stat is far cheaper than reading and parsing JSON)."""
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            return default
+        key = (st.st_mtime_ns, st.st_size, st.st_ino)
+        hit = self._files.get(path)
+        if hit is None or hit[0] != key:
+            hit = (key, json.loads(path.read_text()))
+            self._files[path] = hit
+        return hit[1]
+
     def _admin(self) -> dict:
-        return json.loads(self.admin_file.read_text())
+        return dict(self._read_json(self.admin_file, None))
 
     def generation(self) -> int:
         return int(self._admin()["generation"])
@@ -100,9 +115,7 @@ class Credentials:
 
     # -- API tokens ---------------------------------------------------------------
     def _tokens(self) -> list[dict]:
-        if not self.tokens_file.exists():
-            return []
-        return json.loads(self.tokens_file.read_text())
+        return list(self._read_json(self.tokens_file, []))
 
     def create_token(self, name: str) -> tuple[dict, str]:
         name = str(name or "").strip()[:60] or "script"
