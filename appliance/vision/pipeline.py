@@ -65,7 +65,7 @@ class WaterlineExtractor:
       roi: (x0, y0, x1, y1) pixels of the tank in the frame (default: the frame);
       band: read only a band around last frame's waterline (default True);
       band_px: half-width of that band in pixels (default 13, ~1 mm);
-      tile_px: tile side of the band (default 32);
+      tile_px: tile side of the band (default 24);
       min_area_px: smallest island or hole kept, pixels (default 60);
       min_new_island_px: smallest island kept that is not connected to the
         part of the previous frame (default 400);
@@ -78,7 +78,7 @@ class WaterlineExtractor:
     def __init__(self, camera, **options):
         self.camera = camera
         self.width, self.height = int(camera.width), int(camera.height)
-        opts = dict(channel="auto", roi=None, band=True, band_px=13, tile_px=32, min_area_px=60,
+        opts = dict(channel="auto", roi=None, band=True, band_px=13, tile_px=24, min_area_px=60,
                     min_new_island_px=400, min_contrast=24, half_width=4, threshold_fraction=0.3)
         unknown = set(options) - set(opts)
         if unknown:

@@ -141,10 +141,19 @@ def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 
     (radius under ~2.5k px) curve too much within the window and are left alone.
     """
     n = len(pts)
+    out = np.zeros(n, bool)
     if n < 16 * k:
-        return np.zeros(n, bool)
+        return out
+    # cheap screen: off the chord between the k-th neighbours (a smooth line of
+    # radius > 4k px is within 0.5 px of it); only those get the quadratic test
+    a, b = np.roll(pts, k, axis=0), np.roll(pts, -k, axis=0)
+    c = b - a
+    off = np.abs(c[:, 0] * (pts[:, 1] - a[:, 1]) - c[:, 1] * (pts[:, 0] - a[:, 0])) / (np.hypot(c[:, 0], c[:, 1]) + 1e-9)
+    cand = np.nonzero(off > 0.5 * min_dev)[0]
+    if len(cand) == 0:
+        return out
     o = np.array([-2 * k, -(3 * k) // 2, -k, k, (3 * k) // 2, 2 * k])
-    Y = pts[(np.arange(n)[:, None] + o[None, :]) % n]                       # (n, 6, 2)
+    Y = pts[(cand[:, None] + o[None, :]) % n]                               # (m, 6, 2)
     chord = Y[:, -1] - Y[:, 0]
     u = chord / (np.hypot(*chord.T)[:, None] + 1e-9)
     v = np.column_stack([-u[:, 1], u[:, 0]])
@@ -155,7 +164,8 @@ def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 
     M = np.einsum("nji,njk->nik", A, A) + 1e-6 * np.eye(3)
     coef = np.linalg.solve(M, np.einsum("nji,nj->ni", A, y)[..., None])[..., 0]
     resid = np.sqrt(np.mean((y - np.einsum("nji,ni->nj", A, coef)) ** 2, axis=1))
-    p = pts - Y[:, 0]
+    p = pts[cand] - Y[:, 0]
     xi, yi = np.einsum("nc,nc->n", p, u), np.einsum("nc,nc->n", p, v)
     dev = np.abs(yi - (coef[:, 0] + coef[:, 1] * xi + coef[:, 2] * xi * xi))
-    return (dev > min_dev) & (resid < max_resid)
+    out[cand] = (dev > min_dev) & (resid < max_resid)
+    return out
