@@ -160,6 +160,15 @@ def test_password_storage_and_cookie_flags(tmp_path):
     app2, svc2 = make_app(tmp_path)
     assert app2.config["FIRST_RUN_PASSWORD"] is None
     login(app2.test_client(), pw)
+    # the demo's reset: a new printed password, the old one and its sessions are over
+    c2 = app2.test_client()
+    login(c2, pw, addr="127.0.0.9")
+    app4, svc4 = make_app(tmp_path, reset_password=True)
+    new = app4.config["FIRST_RUN_PASSWORD"]
+    assert new and new != pw
+    assert c2.get("/api/state").status_code == 401
+    login(app4.test_client(), new, addr="127.0.0.10")
+    svc4.close()
     app3, svc3 = make_app(tmp_path / "https", https=True)
     assert "Secure" in app3.test_client().get("/login").headers["Set-Cookie"]
     for s in (svc, svc2, svc3):

@@ -16,6 +16,8 @@ calls nothing else (architecture.md). `config` is a plain dict:
                     the browser reconnects by itself, and a bounded stream keeps waitress's
                     threads from being held forever by phones that went to sleep)
   trusted_proxy     True to take the client address from X-Forwarded-For (default False)
+  reset_password    True to replace the admin password by a fresh generated one at start
+                    (the demo does, so it can always print one); other sessions end
 
 The first-run password, if one was just made, is in app.config["FIRST_RUN_PASSWORD"].
 """
@@ -60,6 +62,8 @@ def create_app(service, config: dict | None = None) -> Flask:
     app = Flask(__name__)
     creds = auth.Credentials(web_dir)
     first_password = creds.ensure_admin()
+    if first_password is None and cfg.get("reset_password"):
+        first_password = creds.reset_generated()
     if "usb" not in cfg:
         from ..hw.usb import UsbExporter      # the stick is a device: its code lives in hw
         cfg["usb"] = UsbExporter()

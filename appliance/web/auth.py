@@ -77,6 +77,16 @@ class Credentials:
                                                   "set": time.time()})
             return password
 
+    def reset_generated(self) -> str:
+        """A fresh generated password (the demo prints one every start); old sessions end."""
+        with self._lock:
+            old = self._read_json(self.admin_file, None) or {"generation": 0}
+            password = "-".join(secrets.token_urlsafe(12)[i:i + 4] for i in (0, 4, 8))
+            _private_write_json(self.admin_file, {"hash": generate_password_hash(password, "scrypt"),
+                                                  "generation": int(old["generation"]) + 1,
+                                                  "must_change": True, "set": time.time()})
+            return password
+
     def _read_json(self, path: Path, default):
         """Parsed file contents, re-read only when the file changes (every request checks the
         password generation; a stat is far cheaper than reading and parsing JSON)."""

@@ -253,7 +253,8 @@ class FakeBenchService:
         n = int(math.floor((b - a) / s + 1e-9)) + 1
         if n > 5000:
             raise SettingError("level_step_mm", f"{n} levels is more than the bench can take (5000)")
-        return [round(a + i * s, 6) for i in range(n)]
+        # from the top down, as the daemon scans: the part emerges from the ink
+        return [round(b - i * s, 6) for i in range(n)]
 
     def _get(self, job_id):
         job = self._jobs.get(job_id)
