@@ -8,8 +8,9 @@ from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 
 FINAL = ("done", "failed", "cancelled")
-# the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm
-SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 22.0, "levels_from_mm": 2.0,
+# the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm; the first level
+# shows a tip 5.5 mm across (a smaller one is taken for a speck by the vision pipeline)
+SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
         "level_step_mm": 2.0, "settle_s": 0.0}
 
 

@@ -24,7 +24,7 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
                 break
         job = wait_final(svc, job_id)
         assert job["status"] == "done", job["reason"]
-        assert job["levels_done"] == job["levels_total"] == 11
+        assert job["levels_done"] == job["levels_total"] == 10
         assert {"heightmap.csv", "toolpath.gcode", "report.md"} <= set(job["outputs"])
         # the states in order, as the UI sees them
         order = [s for i, s in enumerate(seen) if i == 0 or seen[i - 1] != s]
@@ -32,7 +32,7 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
         # the scan folder: levels from the top down, every frame listed and on disk
         scan_dir = svc.store.job_dir(job_id) / "scan"
         doc = json.loads((scan_dir / "scan.json").read_text())
-        assert [f["level_mm"] for f in doc["frames"]] == [22.0 - 2 * k for k in range(11)]
+        assert [f["level_mm"] for f in doc["frames"]] == [20.0 - 2 * k for k in range(10)]
         assert audit(svc.store) == []
         # the same folder through `inkslice process` gives the same files
         ref = tmp_path / "ref"
@@ -41,7 +41,7 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
             assert (ref / name).read_bytes() == svc.job_file(job_id, name).read_bytes(), name
         # the light was on only while capturing, and is off now
         light = bench.last.light
-        assert light.on is False and light.history.count(True) == 11
+        assert light.on is False and light.history.count(True) == 10
         assert "stop" not in bench.last.stage.calls
     finally:
         svc.close()
@@ -132,7 +132,7 @@ def test_cancel_stops_the_motor_and_resume_matches_an_uninterrupted_scan(tmp_pat
         svc.cancel()
         job = svc.job(job_id)
         assert job["status"] == "cancelled" and "frames so far are kept" in job["reason"]
-        assert 4 <= job["levels_done"] < 11 and job["outputs"] == []
+        assert 4 <= job["levels_done"] < 10 and job["outputs"] == []
         assert bench.last.stage.calls[-1] == "stop" and bench.last.light.on is False
         svc.resume(job_id)
         job = wait_final(svc, job_id)
@@ -222,7 +222,7 @@ def test_a_processing_error_fails_the_job_and_keeps_the_scan(tmp_path):
     try:
         job = wait_final(svc, svc.start_scan(SCAN))
         assert job["status"] == "failed" and "no waterline" in job["reason"]
-        assert job["levels_done"] == 11
+        assert job["levels_done"] == 10
     finally:
         svc.close()
 
@@ -281,5 +281,24 @@ def test_panel_reports_missing_hardware_and_the_button_starts_and_cancels(tmp_pa
             if st["state"] == "cancelled":
                 break
         assert svc.jobs()[0]["status"] == "cancelled"
+    finally:
+        svc.close()
+
+
+def test_cancel_interrupts_a_long_move_at_once(tmp_path):
+    import time
+    svc, bench = service(tmp_path, faults={"stage": {"seconds_per_mm": 1.0}})   # homing takes ~40 s
+    try:
+        job_id = svc.start_scan(SCAN)
+        for st in svc.subscribe(timeout=10):
+            if st["state"] == "homing" and st["message"] == "homing the stage":
+                break
+        time.sleep(0.2)
+        t0 = time.monotonic()
+        svc.cancel()
+        assert time.monotonic() - t0 < 5
+        job = svc.job(job_id)
+        assert job["status"] == "cancelled", job["reason"]
+        assert "stop" in bench.last.stage.calls and bench.last.light.on is False
     finally:
         svc.close()

@@ -16,7 +16,7 @@ from daemon_helpers import read_heightmap, wait_final
 pytestmark = [pytest.mark.simavr,
               pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
                                  reason="needs gcc-avr and simavr (scripts/setup.sh)")]
-PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 22.0, "levels_from_mm": 2.0,
+PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
           "level_step_mm": 2.0, "settle_s": 0.0}
 
 
@@ -44,7 +44,7 @@ def test_a_whole_scan_on_simavr_matches_inkslice_process(reference, factory, tmp
     job_dir = svc.store.job_dir(job["id"])
     scan = json.loads((job_dir / "scan/scan.json").read_text())
     # nominal levels come from the position the firmware reports: exact steps of 1/1600 mm
-    assert [f["level_mm"] for f in scan["frames"]] == [22.0 - 2 * k for k in range(11)]
+    assert [f["level_mm"] for f in scan["frames"]] == [20.0 - 2 * k for k in range(10)]
     # the stage really went there: the last level's position, counted from STEP edges
     at_home = job["settings"]["level_at_home_mm"]
     assert abs(factory.bench.stage_position_mm() - (at_home - 2.0)) < 1e-9
@@ -70,7 +70,7 @@ def test_an_mcu_reset_mid_scan_stops_the_job_and_resume_finishes_it(reference, f
         job = wait_final(svc, job_id, timeout=120)
         assert job["status"] == "failed", job
         assert job["reason"].startswith("stage") and "reset" in job["reason"], job["reason"]
-        assert 3 <= job["levels_done"] < 11
+        assert 3 <= job["levels_done"] < 10
         assert factory.last.light.on is False
         assert svc.state()["hardware"]["stage"].startswith("fault")
         assert audit(svc.store) == []
