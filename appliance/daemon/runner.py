@@ -74,11 +74,11 @@ class ScanRunner:
             return "done"
         except Cancelled:
             self._make_safe()
-            reason = getattr(self.stop, "reason", "cancelled by the operator")
-            self._finish("cancelled", f"{reason}; the frames so far are kept, resume to continue")
-            return "cancelled"
+            return self._cancelled()
         except InkSliceError as e:
             self._make_safe()
+            if self.stop.is_set():                  # the stop we asked for interrupted a move
+                return self._cancelled()
             self._finish("failed", str(e))
             return "failed"
         except OSError as e:
@@ -94,12 +94,22 @@ class ScanRunner:
             self._finish("failed", f"internal error: {type(e).__name__}: {e}")
             return "failed"
 
+    def _cancelled(self) -> str:
+        reason = getattr(self.stop, "reason", "cancelled by the operator")
+        self._finish("cancelled", f"{reason}; the frames so far are kept, resume to continue")
+        return "cancelled"
+
     def _finish(self, status, reason, outputs=None):
         fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
         if outputs is not None:
             fields["outputs"] = outputs
-        self.store.update_job(self.job_id, **fields)
-        self.store.event(self.job_id, status, reason or "scan finished")
+        try:
+            self.store.update_job(self.job_id, **fields)
+            self.store.event(self.job_id, status, reason or "scan finished")
+        except Exception:
+            # e.g. the disk is so full SQLite cannot commit: the job stays "active" in the
+            # store, and the next start's recovery marks it interrupted. Say so, carry on.
+            log.exception("could not record the end of job %s (%s: %s)", self.job_id, status, reason)
         self.report(state=status, message=reason or "scan finished", eta_s=0 if status == "done" else None)
 
     def _make_safe(self):

@@ -71,6 +71,7 @@ class BenchService:
         self._subscribers: list[queue.Queue] = []
         self._frame = None
         self._job_settings = {}
+        self._devices = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._closing = threading.Event()
@@ -118,6 +119,12 @@ class BenchService:
             self._stop.reason = reason
             self._stop.set()
             self._set(message="cancelling")
+            devices = self._devices
+        if devices is not None and devices.stage is not None:
+            try:
+                devices.stage.stop()                # preempts a long move or homing at once
+            except Exception as e:
+                log.warning("stop on cancel: %s", e)
         thread.join(timeout=wait_s)
 
     def resume(self, job_id: str) -> str:
@@ -238,13 +245,15 @@ class BenchService:
         self._job_settings = job["settings"]
         try:
             devices = self.factory.open(job["settings"], job["params"])
-        except InkSliceError as e:
+        except Exception as e:                      # missing stage or camera, a bad wiring file ...
             reason = f"cannot start: {e}"
+            self._note_fault(str(e))
             self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
             self.store.event(job_id, "failed", reason)
             self._set(state="failed", message=reason)
             return
         self._set(hardware={**self._state["hardware"], **devices.hardware})
+        self._devices = devices
         final = {}
 
         def report(**changes):
@@ -261,6 +270,8 @@ class BenchService:
             if status == "failed":
                 self._note_fault(self.store.get_job(job_id)["reason"])
         finally:
+            with self._lock:
+                self._devices = None
             devices.close()
             self._set(**final)
 

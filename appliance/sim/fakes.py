@@ -63,8 +63,8 @@ class FakeStage(Stage):
         with self._lock:
             self.calls.append("home")
             self._check_plugged()
-            self._travel(self.position_steps)
-            self.position_steps = 0
+            self.estopped = False
+            self._travel(self.position_steps, 0)
             self.homed, self.fresh_boot, self.estopped = True, False, False
 
     def move_to(self, position_mm: float, timeout: float = 60.0) -> None:
@@ -76,17 +76,25 @@ class FakeStage(Stage):
                 raise DeviceError("stage fake", "MOVE refused: not homed (the controller was reset?)")
             if not 0 <= target <= self.travel_steps:
                 raise SettingError("stage move", f"{position_mm:.3f} mm is outside the travel")
-            self._travel(abs(target - self.position_steps))
-            self.position_steps = target
+            self._travel(self.position_steps, target)
             self.moves += 1
             n = self.faults.get("reset_after_moves")
             if n is not None and self.moves == n:
                 self.homed, self.fresh_boot = False, True
 
-    def _travel(self, steps):
+    def _travel(self, start, target):
+        """Go from start to target in real time (seconds_per_mm); an emergency stop
+        halts it where it is, like the firmware."""
         s = self.faults.get("seconds_per_mm", 0.0)
-        if s:
-            time.sleep(s * steps / self.steps_per_mm)
+        duration = s * abs(target - start) / self.steps_per_mm
+        t0 = time.monotonic()
+        while s and time.monotonic() - t0 < duration:
+            if self.estopped:
+                frac = (time.monotonic() - t0) / duration
+                self.position_steps = round(start + frac * (target - start))
+                raise DeviceError("stage fake", "move stopped: emergency stop")
+            time.sleep(min(0.01, duration))
+        self.position_steps = target
 
     def status(self) -> StageStatus:
         self._check_plugged()
