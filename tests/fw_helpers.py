@@ -101,6 +101,7 @@ def link(bench):
     l = RawLink(bench.port)
     yield l
     l.close()
+    assert bench.stats()["rx_overruns"] == 0, "the firmware let its 2-byte receive FIFO overflow"
 
 
 def err(name):

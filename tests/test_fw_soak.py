@@ -61,6 +61,7 @@ def test_1000_moves_through_a_noisy_line_and_3_resets_each_execute_exactly_once(
     assert c["idle_off_target"] == 0                   # no acknowledged move was ever found not done
     assert c["longest_command_s"] <= stage.timeout     # no command outlived its timeout
     assert s["stalls"] == 0
+    assert s["rx_overruns"] == 0                       # a real 2-byte receive FIFO would have kept up
     injected = sum(v for k, v in faults.items() if not k.endswith("bytes"))
     total = s["rx_bytes"] + s["tx_bytes"]
     assert 0.005 < injected / total < 0.02             # the line really was that bad

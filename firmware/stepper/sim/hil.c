@@ -11,6 +11,9 @@
  *     end stop are lost, and counted as stalls);
  *   - the two limit switches, closed (pin low) at and beyond their trigger
  *     points: bottom at position <= 0, top at position >= --top-switch;
+ *   - the wire's pace and the chip's 2-byte receive buffer: bytes are fed
+ *     one frame apart, and a byte that would have overrun the real buffer
+ *     is counted (rx_overruns), since simavr's own 64-byte FIFO hides it;
  *   - faults on the wire, by rate, each direction: dropped, corrupted (one
  *     byte XOR a random non-zero value) and duplicated bytes; and resets of
  *     the MCU (the reset pin), which keep EEPROM like the real chip.
@@ -101,7 +104,9 @@ static uint64_t rng = 0x9E3779B97F4A7C15ULL;
 static uint8_t inq[4096];
 static size_t inq_head, inq_len;
 static int uart_xoff;
-static uint64_t estop_feed_cycle, resets, run_calls, sleep_calls;
+static avr_uart_t *uart0;                      /* simavr's UART, to see its receive FIFO */
+static uint64_t next_feed_cycle, rx_overruns;
+static uint64_t estop_feed_cycle, resets;
 
 static double wall_now(void)
 {
@@ -200,10 +205,28 @@ static void on_uart_out(struct avr_irq_t *irq, uint32_t value, void *param)
 static void on_xon(struct avr_irq_t *irq, uint32_t value, void *param) { (void)irq; (void)value; (void)param; uart_xoff = 0; }
 static void on_xoff(struct avr_irq_t *irq, uint32_t value, void *param) { (void)irq; (void)value; (void)param; uart_xoff = 1; }
 
+/* The wire delivers one byte per frame time, and the real chip holds at most
+ * two received bytes (UDR0 and one more) while a third shifts in.  simavr's
+ * UART would buffer 64, hiding a firmware that reads too slowly.  So bytes
+ * are fed one frame apart, and a byte that completes while three are still
+ * unread in simavr's FIFO is counted as an overrun: on the chip it would be
+ * lost (DOR).  rx_overruns must stay 0. */
+static uint64_t frame_cycles(void)
+{
+  return uart0 && uart0->cycles_per_byte ? uart0->cycles_per_byte : F_CPU * 10 / 115200;
+}
+
+static unsigned unread_bytes(void)
+{
+  return (unsigned)(uart0->input.write - uart0->input.read) & (uart_fifo_fifo_size - 1);
+}
+
 static void feed_uart(void)
 {
-  /* a few bytes at a time: simavr paces them at the baud rate itself */
-  for (int i = 0; i < 8 && inq_len && !uart_xoff; i++) {
+  if (avr->cycle < next_feed_cycle) return;
+  if (uart0 && inq_len && unread_bytes() >= 3) rx_overruns++;
+  for (int i = 0; i < 1 && inq_len && !uart_xoff; i++) {
+    next_feed_cycle = avr->cycle + frame_cycles();
     uint8_t c = inq[inq_head];
     inq_head = (inq_head + 1) % sizeof inq;
     inq_len--;
@@ -306,7 +329,7 @@ static void control(char *line)
           "min_pulse_cycles=%lld min_dir_setup_cycles=%lld last_step_cycle=%llu estop_feed_cycle=%llu "
           "rx_bytes=%llu rx_dropped=%llu rx_corrupted=%llu rx_duplicated=%llu "
           "tx_bytes=%llu tx_dropped=%llu tx_corrupted=%llu tx_duplicated=%llu resets=%llu "
-          "limit_bottom=%d limit_top=%d run_calls=%llu sleep_calls=%llu",
+          "limit_bottom=%d limit_top=%d rx_overruns=%llu",
           (unsigned long long)avr->cycle, (long long)stage_pos, (unsigned long long)steps_up,
           (unsigned long long)steps_down, (unsigned long long)stalls,
           min_pulse == UINT64_MAX ? -1LL : (long long)min_pulse,
@@ -316,7 +339,7 @@ static void control(char *line)
           (unsigned long long)count[0][F_CORRUPT], (unsigned long long)count[0][F_DUP],
           (unsigned long long)bytes[1], (unsigned long long)count[1][F_DROP],
           (unsigned long long)count[1][F_CORRUPT], (unsigned long long)count[1][F_DUP],
-          (unsigned long long)resets, !lim_bottom_level, !lim_top_level, (unsigned long long)run_calls, (unsigned long long)sleep_calls);
+          (unsigned long long)resets, !lim_bottom_level, !lim_top_level, (unsigned long long)rx_overruns);
   } else if (!strcmp(a, "speed") && args >= 2) {
     speed = atof(b);
     pace_wall0 = wall_now();
@@ -434,6 +457,9 @@ int main(int argc, char **argv)
   avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
   flags &= ~AVR_UART_FLAG_STDIO;
   avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+  for (avr_io_t *io = avr->io_port; io; io = io->next)
+    if (io->kind && !strcmp(io->kind, "uart") && ((avr_uart_t *)io)->name == '0') uart0 = (avr_uart_t *)io;
+  if (!uart0) fprintf(stderr, "hil: simavr's UART0 not found: overruns will not be detected\n");
   update_limits();
 
   if (open_pty()) { fprintf(stderr, "hil: cannot open a pty: %s\n", strerror(errno)); return 2; }
@@ -442,7 +468,6 @@ int main(int argc, char **argv)
   uint64_t next_poll = 0;
   for (;;) {
     int st = avr_run(avr);
-    run_calls++; if (avr->state == cpu_Sleeping) sleep_calls++;
     if (st == cpu_Done || st == cpu_Crashed) {
       reply("crashed state=%d pc=0x%x cycle=%llu", st, avr->pc, (unsigned long long)avr->cycle);
       fflush(rec);
@@ -450,7 +475,8 @@ int main(int argc, char **argv)
     }
     if (avr->cycle >= next_poll) {
       pace();
-      next_poll = avr->cycle + POLL_CYCLES;
+      /* while bytes wait for the wire, come back once per frame */
+      next_poll = avr->cycle + (inq_len && frame_cycles() < POLL_CYCLES ? frame_cycles() : POLL_CYCLES);
     }
   }
 }
