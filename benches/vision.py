@@ -38,6 +38,11 @@ from appliance.vision import seed  # noqa: E402
 from appliance.vision.pipeline import WaterlineExtractor  # noqa: E402
 
 
+def replace_effects(e, **kw):
+    from dataclasses import replace
+    return replace(e, **kw)
+
+
 def timed(fn):
     """(wall s, CPU s of this thread) of one call."""
     w0, c0 = time.perf_counter(), time.thread_time()
@@ -175,11 +180,6 @@ def speed(rig, quick):
     print("the band makes a full read of the tank.")
 
 
-def replace_effects(e, **kw):
-    from dataclasses import replace
-    return replace(e, **kw)
-
-
 # -- accuracy ----------------------------------------------------------------------------------
 
 
@@ -190,6 +190,9 @@ CONDITIONS = {
     "vignetting": Effects(vignetting=0.4),
     "glare+noise": Effects(glare_spots=8, glare_strength=200.0, noise_sigma=2.5, salt_pepper=3e-4, dust_specks=60),
     "realistic": PRESETS["realistic"],
+    # the 'harsh' preset's optics without its physics (displacement and meniscus
+    # move the true waterline off the nominal level: the surface team's correction)
+    "harsh optics": replace_effects(PRESETS["harsh"], displacement=False, meniscus=False, ripple_mm=0.0),
 }
 CASES = [("sample1", 25.0), ("twin-peaks", 22.0), ("ring", 14.0)]
 

@@ -120,11 +120,19 @@ def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
 
 
 def glare_cut(hist: np.ndarray, split: Split) -> int:
-    """Where glare starts, or 256 when the part itself is what saturates."""
+    """Grey level from which a pixel is too bright to be part, or 256 when the part itself clips.
+
+    The lit part has a top level (its brightest, fully lit face); glare on the
+    ink is added light and climbs past it to white. Anything a little above the
+    part's 99.5th percentile is glare, so a clipped highlight and the
+    near-white ring round it cannot pose as part.
+    """
     h = np.asarray(hist, np.float64)
-    saturated = h[SATURATED:].sum()
-    part = h[split.threshold:SATURATED].sum()
-    return SATURATED if saturated < 0.2 * part else 256
+    part = h[split.threshold:SATURATED]
+    if part.sum() <= 0:
+        return 256
+    top = split.threshold + int(np.searchsorted(np.cumsum(part), 0.995 * part.sum()))
+    return 256 if top >= SATURATED - 6 else top + 6
 
 
 @dataclass
@@ -167,51 +175,6 @@ def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 
         if gap >= min_gap and (best is None or gap > best[0]):
             best = (gap, c, int(round(d_part + 0.5 * gap)))
     return Hue(best[1], best[2]) if best else None
-
-
-def towards_ink(split: Split, fraction: float) -> Split:
-    """Move the threshold to `fraction` of the way from the ink level to the part level.
-
-    Otsu splits the two classes by variance, and a part shaded from the lamp
-    (Lambertian, down to the ambient level) spreads the part class so widely
-    that its threshold can fall inside it and cut a peak's dark side off. The
-    ink is flat and dark; a threshold just above it keeps every lit or shaded
-    part pixel (glare is dealt with by colour, specks by size).
-    """
-    t = int(np.ceil(split.ink + fraction * (split.part - split.ink)))
-    return Split(max(1, min(t, split.threshold)), split.ink, split.part, split.part_fraction,
-                 split.separability, split.threshold)
-
-
-def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
-    """0/255 part mask: at or above the threshold, and below `glare_cut`.
-
-    Specular glare on the liquid clips at the top of the range while a diffuse
-    part does not; pixels at or above `glare_cut` (256 disables it) count as
-    ink so that a highlight beside the part cannot bulge its waterline.
-    """
-    return cv2.inRange(smooth, split.threshold, glare_cut - 1, out)
-
-
-def glare_cut(hist: np.ndarray, split: Split) -> int:
-    """Where glare starts, or 256 when the part itself is what saturates."""
-    h = np.asarray(hist, np.float64)
-    saturated = h[SATURATED:].sum()
-    part = h[split.threshold:SATURATED].sum()
-    return SATURATED if saturated < 0.2 * part else 256
-
-
-@dataclass
-class Hue:
-    """A second, colour test against glare: part where (other - main) <= cut.
-
-    Glare is the lamp's light added to the ink: it lifts every channel, so in
-    the main (red) channel it can look as bright as a shaded part, but the ink
-    stays much bluer than red and the light grey part does not. The saturating
-    8-bit difference other - main (blue - red) separates them at any glare.
-    """
-    other: int
-    cut: int
 
 
 def histogram(img: np.ndarray) -> np.ndarray:

@@ -55,6 +55,7 @@ class _Loop:
     pixels: np.ndarray      # (N, 2) int32 contour pixels (u, v)
     hole: bool
     parent: int             # index of the outer loop a hole belongs to, else -1
+    grey: float = 1.0       # fraction of its pixels placed by the grey-level step
 
 
 class WaterlineExtractor:
@@ -303,7 +304,8 @@ class WaterlineExtractor:
         if split.separability < 0.6 or split.contrast < mc:
             return None                       # the band lost the edge: read everything
         self.split = split
-        self.glare_cut = glare_cut(hist, split)
+        # (the glare cut stays as the whole-tank sample set it: the band is
+        # where glare next to the part is, the worst place to learn the part's top)
         binary = part_mask(smooth, split, self.glare_cut)
         if not_glare is not None:
             cv2.bitwise_and(binary, not_glare, binary)
@@ -356,10 +358,12 @@ class WaterlineExtractor:
         refined = []
         half = self.options["half_width"]
         for lp in loops:
-            pts = self._refine(frame, lp.pixels)
+            pts, grey = self._refine(frame, lp.pixels)
             for _ in range(2):              # a bump's tip shows once its flanks are gone
                 pts = pts[~bumps(pts)]
             refined.append(pts)
+            lp.grey = grey
+        loops, refined = self._drop_glare_islands(loops, refined, level_mm)
         if not full:
             # every point and its sampling reach must lie in tiles read this frame
             edge = np.vstack([lp.pixels for lp in loops]) if loops else np.zeros((0, 2))
@@ -369,8 +373,25 @@ class WaterlineExtractor:
         self._remember(loops, level_mm)
         return [(lp, pts) for lp, pts in zip(loops, refined) if len(pts) >= 8]
 
+    def _drop_glare_islands(self, loops, refined, level_mm):
+        """An island whose whole edge is against glare-lit ink is a highlight, not part.
+
+        A clipped highlight's near-white rim is not blue and passes the colour
+        test; but nowhere along its edge is there plain dark ink, so (almost)
+        none of its points come from the grey-level step. A real island with
+        a highlight beside it keeps plain ink along most of its edge.
+        """
+        bad = {i for i, lp in enumerate(loops) if not lp.hole and lp.grey < 0.25}
+        if not bad:
+            return loops, refined
+        for i in bad:
+            self.events.append(Event(level_mm, "rejected-island", "edged by glare all round"))
+        keep = [i for i, lp in enumerate(loops) if i not in bad and not (lp.hole and lp.parent in bad)]
+        return [loops[i] for i in keep], [refined[i] for i in keep]
+
     def _refine(self, frame, pixels):
-        """Sub-pixel points of one contour, in contour order (see subpixel.py)."""
+        """Sub-pixel points of one contour in contour order (see subpixel.py), and the
+        fraction of its pixels the grey-level step placed (the rest: colour, or none)."""
         half, mc = self.options["half_width"], self.options["min_contrast"] / 2
         pts, idx = refine(self._smooth, pixels, self.split.threshold, half, mc)
         if self.hue is not None and frame.ndim == 3 and len(idx) < len(pixels):
@@ -379,7 +400,7 @@ class WaterlineExtractor:
             if len(midx):
                 order = np.argsort(np.concatenate([idx, midx]), kind="stable")
                 pts = np.vstack([pts, more])[order]
-        return pts
+        return pts, len(idx) / max(1, len(pixels))
 
     def _filter(self, contours, hierarchy, level_mm):
         """Outer boundaries and their holes, without specks, glare and impossible islands."""
