@@ -42,6 +42,12 @@ def _encode(method, result):
 
 class _Handler(socketserver.StreamRequestHandler):
     def handle(self):
+        try:
+            self._serve()
+        except (BrokenPipeError, ConnectionResetError):
+            pass                                    # the client went away (e.g. left a subscription early)
+
+    def _serve(self):
         service = self.server.service
         for raw in self.rfile:
             try:
