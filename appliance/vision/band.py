@@ -43,10 +43,11 @@ class TileGrid:
 
     def _tiles(self, pts, margin):
         T = self.tile
-        for d in self._offsets(margin):
-            tx = np.floor((pts[:, 0] + d - self.ox) / T).astype(np.intp)
-            for e in self._offsets(margin):
-                ty = np.floor((pts[:, 1] + e - self.oy) / T).astype(np.intp)
+        offs = self._offsets(margin)
+        txs = [np.floor((pts[:, 0] + d - self.ox) / T).astype(np.intp) for d in offs]
+        tys = [np.floor((pts[:, 1] + e - self.oy) / T).astype(np.intp) for e in offs]
+        for tx in txs:
+            for ty in tys:
                 yield ty, tx
 
     @staticmethod

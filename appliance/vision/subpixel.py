@@ -34,18 +34,19 @@ def sample_q8(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear samples of an 8-bit image at float positions, as int32 in units of 1/256 grey."""
     h, w = img.shape
     flat = img.reshape(-1) if img.flags.c_contiguous else img.ravel()
-    x = np.clip(x, 0, w - 1.001)
-    y = np.clip(y, 0, h - 1.001)
-    x0 = x.astype(np.int32)
-    y0 = y.astype(np.int32)
-    fx = ((x - x0) * ONE).astype(np.int32)
-    fy = ((y - y0) * ONE).astype(np.int32)
-    i = y0 * w + x0
-    p00 = flat.take(i).astype(np.int32)
-    p01 = flat.take(i + 1).astype(np.int32)
-    p10 = flat.take(i + w).astype(np.int32)
-    p11 = flat.take(i + (w + 1)).astype(np.int32)
-    top = p00 * (ONE - fx) + p01 * fx
+    if x.min() < 0 or y.min() < 0 or x.max() >= w - 1 or y.max() >= h - 1:
+        x = np.clip(x, 0, w - 1.001)
+        y = np.clip(y, 0, h - 1.001)
+    xq = (x * ONE).astype(np.int32)            # Q8 positions: integer part and fraction in one
+    yq = (y * ONE).astype(np.int32)
+    fx = xq & (ONE - 1)
+    fy = yq & (ONE - 1)
+    i = (yq >> Q) * w + (xq >> Q)
+    p00 = flat.take(i)
+    p01 = flat.take(i + 1)
+    p10 = flat.take(i + w)
+    p11 = flat.take(i + (w + 1))
+    top = p00 * (ONE - fx) + p01 * fx          # uint8 * int32 -> int32
     bottom = p10 * (ONE - fx) + p11 * fx
     return (top * (ONE - fy) + bottom * fy) >> Q
 
