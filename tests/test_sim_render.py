@@ -173,6 +173,34 @@ def test_visible_wall_and_hidden_wall_of_the_ring():
     assert np.median(r_seen - 45) > 8 * pix              # the waterline itself is hidden
 
 
+def test_a_low_rim_near_the_axis_hides_the_waterline():
+    """The steps' boss (top ~21.7 mm at its y = 55 edge) with the ink at 15 mm: that
+    wall faces away from the camera, which is only ~6 mm from it, so the rim 6.7 mm
+    above the ink sits just 1.6 px outside the hidden waterline. The edge seen must
+    be the rim's, not the waterline's."""
+    steps, level = S.get("steps"), 15.0
+    boss = steps.tiers[1]
+    img = render_frame(steps, level, RIG, Effects())
+    gray = _gray(img)
+    uv = np.vstack([_crossings(gray, 1), _crossings(gray, 0)])
+    xy = _to_plane(RIG, uv)
+    near = (xy[:, 0] > 32) & (xy[:, 0] < 58) & (np.abs(xy[:, 1] - 55) < 1.5)
+    assert near.sum() > 50
+    P0 = xy[near]
+    C = RIG.centre
+    z = np.full(len(P0), level)
+    for _ in range(30):                    # the ray meets the boss's top: z = top(P(z))
+        P = P0 + (C[:2] - P0) * ((z - level) / C[2])[:, None]
+        z = boss.top(P[:, 0], P[:, 1])
+    P = P0 + (C[:2] - P0) * ((z - level) / C[2])[:, None]
+    err = np.abs(boss.footprint(P[:, 0], P[:, 1]))
+    pix = float(np.median(pixel_map(RIG, False).pix))
+    print(f"low rim near the axis: {near.sum()} crossings, max {err.max():.5f} mm from the rim; "
+          f"waterline {np.median(P0[:, 1] - 55) / pix:.2f} px inside")
+    assert err.max() < 0.01
+    assert np.median(P0[:, 1] - 55) > 1.2 * pix
+
+
 def test_a_point_on_top_of_a_tall_part_appears_where_the_pinhole_says():
     """Trace the pixels where the pinhole projects points of the sphere's cap: the ray
     must meet the part exactly there (to a micrometre), 30 mm above the base."""

@@ -115,7 +115,7 @@ class SurfaceGrid:
                 ((y - self.y0) / self.step).astype(np.float32))
 
 
-@functools.lru_cache(maxsize=12)
+@functools.lru_cache(maxsize=4)     # ~25 MB per tier of a 100 mm part
 def surface_grid(surface) -> SurfaceGrid:
     """Sample every tier of a part on a fine grid, once per process."""
     xmin, xmax, ymin, ymax = surface.bounds
@@ -330,7 +330,7 @@ def _shade(grid, rig, x, y, tier, wall):
     return out
 
 
-def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall):
+def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall, hidden_tier):
     """Analytic coverage of pixels next to a silhouette (a rim hiding what is behind).
 
     For each tier, find where the pixel's ray crosses the tier's top (Newton on
@@ -363,9 +363,16 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
         F = np.asarray(t.footprint(px, py), float)
         pz = pix * (Hc - (z - level)) / Hc
         c = np.clip(0.5 + F / (2 * pz), 0.0, 1.0)
-        # only a rim standing clear of its own waterline hides anything; nearer the
-        # liquid the waterline layer already draws the edge
-        c = np.where((z - level) * k > 2 * pix, c, 0.0)
+        # The tier's top covers the pixel wherever the ray meets it above the
+        # liquid - except on the ramp of a waterline that runs on this tier's
+        # smooth top: there the ray meets the top just above the liquid and the
+        # waterline layer draws the edge. A rim that stands clear of its own
+        # waterline, or whose waterline runs on a wall facing away (hidden; the
+        # rim's edge then meets the waterline continuously as the rim sinks to
+        # the liquid), always covers.
+        top_ramp = (wtier == ti) & ~wwall & (a_wl < 1.0)
+        clear = ~top_ramp | ((z - level) * k > 2 * pix) | (hidden_tier == ti)
+        c = np.where(clear & (z > level), c, 0.0)
         cover.append(c)
         zs.append(z)
         sh = np.zeros(n, np.float32)
@@ -385,6 +392,7 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
         colour += take * shades[ti, cols]
         remaining -= take
     s_wl = _shade(grid, rig, x0, y0, wtier, wwall)
+    a_wl = np.where(hidden_tier >= 0, 0.0, a_wl)        # hidden: the rim layer replaces it
     colour += remaining * a_wl * s_wl
     alpha = 1.0 - remaining * (1.0 - a_wl)
     shade = np.where(alpha > 1e-6, colour / np.maximum(alpha, 1e-6), s_wl)
@@ -430,6 +438,8 @@ def _approx_sdf(grid, x, y, level):
     tier = np.zeros(x.size, np.int16)
     wall = np.zeros(x.size, bool)
     slope = np.zeros(x.size, np.float32)
+    fgx = np.zeros(x.size, np.float32)
+    fgy = np.zeros(x.size, np.float32)
     gx, gy = grid.coords(x, y)
     for ti, tg in enumerate(grid.tiers):
         ft = _lookup(tg.FT, gx, gy, (-grid.margin, 0.0, 0.0, 0.0))
@@ -444,7 +454,9 @@ def _approx_sdf(grid, x, y, level):
         tier[better] = ti
         wall[better] = (F < dtop)[better]
         slope[better] = g[better]
-    return best, tier, wall, slope
+        fgx[better] = d[better, 2]
+        fgy[better] = d[better, 3]
+    return best, tier, wall, slope, fgx, fgy
 
 
 # -- the frame -------------------------------------------------------------------------
@@ -508,7 +520,7 @@ def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
         lvl = np.full(x0.size, np.float32(level))
 
     # -- layer 1: the waterline (or, with a meniscus, the contact line) ----------------
-    approx, wtier, wwall, wslope = _approx_sdf(grid, x0, y0, lvl)
+    approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, x0, y0, lvl)
     xc, yc, lc = x0, y0, lvl
     if effects.meniscus:
         beta = np.where(wwall, np.pi / 2, np.arctan(wslope))
@@ -516,7 +528,7 @@ def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
                                   math.radians(effects.contact_angle_deg)).astype(np.float32)
         # the contact line is h above the free surface: seen in perspective from there
         xc, yc, lc = x0 + kx * h, y0 + ky * h, lvl + h
-        approx, wtier, wwall, wslope = _approx_sdf(grid, xc, yc, lc)
+        approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, xc, yc, lc)
     band = np.abs(approx) < 4 * pix + 0.02
     sdf = approx.copy()
     if band.any():
@@ -549,12 +561,18 @@ def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
     dv = label[1:, :] != label[:-1, :]
     change[1:, :] |= dv
     change[:-1, :] |= dv
-    if change.any():
+    # A waterline on a wall that faces away from the camera (the camera is on the
+    # part's side of it: grad footprint . k > 0) is hidden by the wall's rim,
+    # however low the rim: the edge seen is the rim's, drawn by _silhouette.
+    hidden = wwall & ((fgx * kx + fgy * ky) > 0) & band
+    if change.any() or hidden.any():
         # the ramp is 2 px wide: every pixel within 1 px of a silhouette is on it
         edge = cv2.dilate(change.view(np.uint8), np.ones((3, 3), np.uint8)).astype(bool).ravel()
+        edge |= hidden
         b = np.nonzero(edge)[0]
+        hidden_tier = np.where(hidden[b], wtier[b], -1)
         ab, sb = _silhouette(surface, grid, rig, level, x0[b], y0[b], kx[b], ky[b], pix[b],
-                             a_wl[b], wtier[b], wwall[b])
+                             a_wl[b], wtier[b], wwall[b], hidden_tier)
         a[b] = ab
         s[b] = sb
     alpha[sl] = a.reshape(r1 - r0, c1 - c0)

@@ -208,7 +208,7 @@ class PixelMap:
     vignette_r2: np.ndarray     # squared distance from the image centre / half-diagonal^2
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=2)     # ~75 MB each at 2048 x 1536
 def pixel_map(rig: Rig, distorted: bool) -> PixelMap:
     v, u = np.mgrid[0:rig.height, 0:rig.width].astype(np.float64)
     x = (u - rig.principal_u) / rig.focal_px
