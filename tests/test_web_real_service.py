@@ -12,7 +12,7 @@ from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
 from web_helpers import NoUsb, login, wait_state
 
-SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 22.0, "levels_from_mm": 2.0,
+SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
         "level_step_mm": 2.0, "settle_s": 0.0}
 
 
@@ -50,7 +50,7 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     job_id = r.get_json()["job_id"]
     st = wait_state(c, {"done", "failed"}, timeout=60)
     assert st["state"] == "done", st
-    assert st["levels_done"] == st["levels_total"] == 11
+    assert st["levels_done"] == st["levels_total"] == 10
     info = c.get(f"/api/jobs/{job_id}").get_json()
     assert {"heightmap.csv", "toolpath.gcode", "report.json"} <= set(info["outputs"])
     for name in info["outputs"]:
@@ -63,7 +63,7 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     z = zipfile.ZipFile(io.BytesIO(c.get(f"/api/jobs/{job_id}/archive.zip").data))
     names = set(z.namelist())
     doc = json.loads(z.read(f"{job_id}/scan/scan.json"))
-    assert len(doc["frames"]) == 11
+    assert len(doc["frames"]) == 10
     assert {f"{job_id}/scan/{f['file']}" for f in doc["frames"]} <= names
     assert {f"{job_id}/{n}" for n in info["outputs"]} <= names
     r = c.get("/api/frame.jpg")
