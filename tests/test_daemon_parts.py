@@ -217,3 +217,23 @@ def test_the_display_picture_is_in_ssd1306_page_order():
     assert pages[0] == 1 and pages[128 + 5] == 2 and pages[7 * 128 + 127] == 128 and sum(pages) == 131
     lit = render_lines(["SCANNING", "level 12.40 mm", "12/80", "192.168.1.20"])
     assert lit.max() == 1 and lit[:16].sum() > 20 and lit[48:].sum() > 20
+
+
+def test_auto_resume_continues_an_interrupted_scan_at_start(tmp_path):
+    from appliance.daemon.processing import in_process
+    from appliance.daemon.service import BenchService
+    from appliance.sim.fakes import FakeBench
+    store = Store(tmp_path / "data")                   # what a killed daemon leaves behind
+    settings = S.validate(S.DEFAULTS, {k: v for k, v in SCAN.items() if k in S.DEFAULTS})
+    store.create_job("j1", "cone", settings, {"name": "cone", "surface": "cone"}, 10)
+    store.update_job("j1", status="scanning")
+    store.save_settings({"auto_resume": True})
+    store.close()
+    svc = BenchService(tmp_path / "data", FakeBench("cone"), processor=in_process)
+    try:
+        assert svc.interrupted == ["j1"]
+        job = wait_final(svc, "j1")
+        assert job["status"] == "done" and job["attempts"] == 2 and job["levels_done"] == 10
+        assert [e["kind"] for e in svc.events("j1")][:3] == ["done", "resumed", "interrupted"]
+    finally:
+        svc.close()
