@@ -3,18 +3,23 @@
     frame (BGR/gray, uint8)
       -> one channel (the one that best separates part from dark-blue ink)
       -> 3x3 median (salt-and-pepper, sensor noise)        uint8
-      -> threshold from this frame's histogram             uint8 0/255
+      -> threshold from this frame's histogram, 30 % of    uint8 0/255
+         the way from the flat ink to the part, and a
+         colour test (glare is lamp light on blue ink)
       -> contours with topology (outer boundaries, holes)  findContours RETR_CCOMP
       -> drop specks, glare and islands that cannot be real
       -> grey-level crossing along each contour normal     Q8 fixed point, band pixels only
+         (colour-difference crossing where glare drowns
+         the grey edge; speck bumps dropped)
       -> undistort the points (not the frame), homography  mm on the liquid plane
 
-The first frame (and any frame where the waterline jumps) is read over the
-whole region of interest. After that only a band of tiles around the last
-waterline is read, plus a sparse 1-in-8 lattice over the rest that catches a
-new island or a flood; if the new waterline reaches the edge of the band the
-frame is simply read again in full. So a scan costs little more than reading
-the band, and never silently loses a piece of the part.
+The first frame finds the part on a 1-in-4 sample of the region of interest
+and reads only a band of tiles around that outline. After that only a band
+of tiles around the last waterline is read, plus a sparse 1-in-16 lattice
+over the rest that catches a new island or a flood; if the new waterline
+reaches the edge of the band the frame is simply read again in full. So a
+scan costs little more than reading the band, and never silently loses a
+piece of the part (a new peak shows once it is ~16 px across).
 
 What a contour that appears in one frame and not the next means. Across a
 scan the part above the liquid is nested: at a lower level it contains what
@@ -111,7 +116,7 @@ class WaterlineExtractor:
         self._islands = []                # previous frame's outer loops, pixel contours
         self._level = None
         self.events: list[Event] = []
-        self.last_mode = None             # "full" or "band": how the last frame was read
+        self.last_mode = None             # "coarse", "band" or "full": how the last frame was read
 
     LATTICE = 16                          # px between the samples that watch the rest of the tank
 
