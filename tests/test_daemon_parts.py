@@ -237,3 +237,22 @@ def test_auto_resume_continues_an_interrupted_scan_at_start(tmp_path):
         assert [e["kind"] for e in svc.events("j1")][:3] == ["done", "resumed", "interrupted"]
     finally:
         svc.close()
+
+
+def test_the_settle_time_waits_out_the_virtual_inks_ripple(tmp_path):
+    """With ripple on, a frame taken at once sees a ringing surface; after the
+    settle time (several decay times) it equals the still frame."""
+    import time
+
+    from appliance.sim.fakes import LevelSeededCamera, small_rig
+    from appliance.sim.render import Effects
+    rig = small_rig(320, 240)
+    still = LevelSeededCamera("cone", rig, lambda: 10.0).capture()
+    rippling = LevelSeededCamera("cone", rig, lambda: 10.0, effects=Effects(ripple_mm=0.3, ripple_decay_s=0.1),
+                                 clock=time.monotonic)
+    rippling.note_move_finished()
+    at_once = rippling.capture()
+    time.sleep(2.0)                                   # 20 decay times: the daemon's settle_s
+    settled = rippling.capture()
+    assert np.abs(at_once.astype(int) - still).max() > 20
+    assert np.abs(settled.astype(int) - still).max() <= 1

@@ -81,3 +81,4 @@ def test_an_mcu_reset_mid_scan_stops_the_job_and_resume_finishes_it(reference, f
         assert np.nanmax(np.abs(got - ref_map)) <= 0.005
     finally:
         svc.close()
+

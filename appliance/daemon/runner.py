@@ -199,6 +199,9 @@ class ScanRunner:
         """Move so the ink stands at `target`; return the nominal level the stage really reached."""
         at_home = float(self.settings["level_at_home_mm"])
         self.dev.stage.move_to(at_home - target)
+        hint = getattr(self.dev.camera, "note_move_finished", None)
+        if hint is not None:
+            hint()                                  # the virtual bench starts its ripple clock here
         st = self.dev.stage.status()
         if not st.homed or st.flags.get("fresh_boot"):
             raise DeviceError("stage", "the controller was reset during the scan (position lost); "

@@ -288,23 +288,25 @@ class FakeBench:
         return self.panel
 
 
-def LevelSeededCamera(surface, rig, level_mm, effects=None):
+def LevelSeededCamera(surface, rig, level_mm, effects=None, clock=None):
     """The renderer's VirtualCamera, its noise seeded from the level instead of a
     frame counter: a resumed scan then sees exactly the frames an uninterrupted
-    one saw (VirtualCamera counts frames from 0 in each process). The ripple
-    clock is not used: the daemon's settle time stands for it."""
+    one saw (VirtualCamera counts frames from 0 in each process). With a clock
+    and effects with ripple_mm > 0 the ink rings after each move (the daemon
+    tells it when a move finished) and the settle time has something to wait out."""
     from .camera import VirtualCamera
     from .render import render_frame
 
     class _Camera(VirtualCamera):
         def capture(self):
             level = float(self.level_mm())
+            effects = self._effects_now(level)
             rng = np.random.default_rng([self.seed, round(level * 10000) & 0xFFFFFFFF])
             self.frames_taken += 1
             self.last_level_mm = level
-            return render_frame(self.surface, level, self.rig, self.effects, rng)
+            return render_frame(self.surface, level, self.rig, effects, rng)
 
-    return _Camera(surface, rig, level_mm, effects=effects)
+    return _Camera(surface, rig, level_mm, effects=effects, clock=clock)
 
 
 class SimulatedBenchFactory:
@@ -315,9 +317,10 @@ class SimulatedBenchFactory:
     factory; each job opens a fresh SerialStage on its pty."""
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, speed: float | None = None, effects=None):
+    def __init__(self, surface: str = "sphere", rig=None, speed: float | None = None, effects=None,
+                 clock=None):
         from .hil import SimulatedBench
-        self.surface, self.rig, self.effects = surface, rig or small_rig(320, 240), effects
+        self.surface, self.rig, self.effects, self.clock = surface, rig or small_rig(320, 240), effects, clock
         self.bench = SimulatedBench() if speed is None else SimulatedBench(speed=speed)
         self.last = None
 
@@ -325,7 +328,7 @@ class SimulatedBenchFactory:
         return FakeBench.check(self, params)
 
     def _camera(self, surface, level_mm):
-        return LevelSeededCamera(surface, self.rig, level_mm, effects=self.effects)
+        return LevelSeededCamera(surface, self.rig, level_mm, effects=self.effects, clock=self.clock)
 
     def open(self, settings, params):
         from ..hw.devices import Devices
