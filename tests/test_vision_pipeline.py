@@ -177,6 +177,16 @@ def test_an_all_ink_frame_mid_scan_is_an_error_and_the_next_frame_still_works():
     assert np.sqrt(np.mean(radial_error(wl.loops[0], 160, 120, 29) ** 2)) < 0.1
 
 
+def test_all_ink_can_be_an_empty_waterline_for_the_top_of_a_scan():
+    u, v = grid(W, H)
+    ex = WaterlineExtractor(pixel_camera(W, H), no_part="empty")
+    wl = ex.extract(draw(np.full((H, W), -50.0)), 30.0)
+    assert wl.level_mm == 30.0 and wl.loops == []
+    with pytest.raises(FrameError):                      # bad frames still raise
+        ex.extract(draw(np.full((H, W), -50.0))[:10], 29.0)
+    assert len(ex.extract(draw(disc(u, v, 160, 120, 30)), 28.0).loops) == 1
+
+
 def test_unknown_option_is_a_setting_error():
     with pytest.raises(InkSliceError, match="bogus"):
         WaterlineExtractor(pixel_camera(W, H), bogus=1)

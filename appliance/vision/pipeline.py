@@ -78,19 +78,24 @@ class WaterlineExtractor:
       min_contrast: smallest part/ink grey-level difference trusted (default 24);
       half_width: samples each side of the contour along the normal (default 4);
       threshold_fraction: where the part/ink threshold sits between the ink and
-        the part levels (default 0.3: near the flat ink, below shaded part faces).
+        the part levels (default 0.3: near the flat ink, below shaded part faces);
+      no_part: "raise" (default: NoPartError) or "empty" (an empty Waterline) for
+        a frame with no part above the liquid - a scan's top frames are like that.
     """
 
     def __init__(self, camera, **options):
         self.camera = camera
         self.width, self.height = int(camera.width), int(camera.height)
         opts = dict(channel="auto", roi=None, band=True, band_px=13, tile_px=24, min_area_px=60,
-                    min_new_island_px=400, min_contrast=24, half_width=4, threshold_fraction=0.3)
+                    min_new_island_px=400, min_contrast=24, half_width=4, threshold_fraction=0.3,
+                    no_part="raise")
         unknown = set(options) - set(opts)
         if unknown:
             raise SettingError("vision", f"unknown WaterlineExtractor option(s): {', '.join(sorted(unknown))}")
         opts.update(options)
         self.options = opts
+        if opts["no_part"] not in ("raise", "empty"):
+            raise SettingError("vision.no_part", f"must be 'raise' or 'empty', got {opts['no_part']!r}")
         self.roi = self._check_roi(opts["roi"])
         self.grid = TileGrid(self.roi, int(opts["tile_px"]), apron=1)
         self.channel = None if opts["channel"] == "auto" else int(opts["channel"])
@@ -131,6 +136,14 @@ class WaterlineExtractor:
     # -- the frame ---------------------------------------------------------------
 
     def extract(self, frame: np.ndarray, level_mm: float) -> Waterline:
+        try:
+            return self._extract(frame, level_mm)
+        except NoPartError:
+            if self.options["no_part"] == "empty":
+                return Waterline(float(level_mm), [])
+            raise
+
+    def _extract(self, frame, level_mm):
         where = f"frame at level {level_mm:g} mm"
         check_frame(frame, self.width, self.height, where)
         self._decimated = None
