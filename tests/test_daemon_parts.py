@@ -256,3 +256,21 @@ def test_the_settle_time_waits_out_the_virtual_inks_ripple(tmp_path):
     settled = rippling.capture()
     assert np.abs(at_once.astype(int) - still).max() > 20
     assert np.abs(settled.astype(int) - still).max() <= 1
+
+
+def test_processing_options_are_what_process_scan_takes():
+    import inspect
+
+    from appliance import process as P
+    from appliance.daemon.processing import options_for
+    accepted = set(inspect.signature(P.process).parameters) | set(inspect.signature(P.process_scan).parameters)
+    opts = options_for(S.DEFAULTS)
+    assert set(opts) <= accepted and opts["grid_n"] == 50 and "method" not in opts   # "" = its default
+    methods = [m for m in S.surface_methods() if m]
+    opts = options_for(S.validate(S.DEFAULTS, {"method": methods[-1], "cutter_diameter_mm": 3.0}))
+    assert opts["method"] == methods[-1]
+    if "cam_options" in accepted:
+        assert opts["cam_options"]["cutter"] == "ball3" and opts["cam_options"]["dialect"] == "linuxcnc"
+    with pytest.raises(SettingError) as e:
+        S.validate(S.DEFAULTS, {"method": "bicubic-magic"})
+    assert e.value.where == "method"

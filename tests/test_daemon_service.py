@@ -9,6 +9,7 @@ import pytest
 
 from appliance.daemon.recovery import audit
 from appliance.errors import InkSliceError, SettingError
+from appliance.cli import main as cli_main
 from appliance.process import process_scan
 from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
@@ -34,9 +35,9 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
         doc = json.loads((scan_dir / "scan.json").read_text())
         assert [f["level_mm"] for f in doc["frames"]] == [20.0 - 2 * k for k in range(10)]
         assert audit(svc.store) == []
-        # the same folder through `inkslice process` gives the same files
+        # the same folder through `inkslice process` (its defaults = the daemon's) gives the same files
         ref = tmp_path / "ref"
-        process_scan(scan_dir, ref, method="lsq3", grid_n=50)
+        assert cli_main(["process", str(scan_dir), "-o", str(ref)]) == 0
         for name in ("heightmap.csv", "toolpath.gcode"):
             assert (ref / name).read_bytes() == svc.job_file(job_id, name).read_bytes(), name
         # the light was on only while capturing, and is off now

@@ -23,6 +23,22 @@ from ..errors import InkSliceError
 from .runner import Cancelled
 
 
+def options_for(settings: dict) -> dict:
+    """The job's settings as process_scan's options, offering only what this
+    version of process_scan takes (its signature is asked, not assumed)."""
+    import inspect
+
+    from .. import process as P
+    accepted = set(inspect.signature(P.process).parameters) | set(inspect.signature(P.process_scan).parameters)
+    options = {"grid_n": int(settings["grid"])}
+    if settings.get("method"):
+        options["method"] = settings["method"]
+    if "cam_options" in accepted:
+        options["cam_options"] = {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
+                                  "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])}
+    return {k: v for k, v in options.items() if k in accepted}
+
+
 def in_process(scan_folder, out_folder, options, stop=None) -> dict:
     from ..process import process_scan
     return process_scan(scan_folder, out_folder, **options)

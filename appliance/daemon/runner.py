@@ -29,6 +29,7 @@ from .. import atomicio
 from ..errors import DeviceError, InkSliceError
 from ..hw.devices import Devices
 from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
+from . import settings as S
 from .levels import LevelPlan, part_mask, waterline_change
 
 log = logging.getLogger("inkslice.runner")
@@ -257,7 +258,8 @@ class ScanRunner:
         self._check_stop()
         self.store.update_job(self.job_id, status="processing")
         self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
-        options = {"method": self.settings["method"], "grid_n": int(self.settings["grid"])}
+        from .processing import options_for        # (processing imports Cancelled from here)
+        options = options_for(S.full(self.settings))
         result = self.processor(self.scan_dir, self.job_dir, options, self.stop)
         self._check_stop()
         if "peak_rss_mb" in result:

@@ -25,9 +25,10 @@ DEFAULTS = {
     "min_free_mb": 200.0,          # stop a scan before the disk is this full
     "preview_width": 480,          # latest_frame() JPEG width
     "auto_resume": False,          # resume an interrupted scan when the daemon starts
-    # processing (passed to process_scan)
-    "method": "lsq3",
+    # processing (passed to process_scan; "" = its own default)
+    "method": "",
     "grid": 50,
+    "scallop_mm": 0.01,            # finishing: scallop height the stepover is chosen for
     # the machine and cutter (kept with the job; used by the toolpath stage)
     "cutter_type": "ball",
     "cutter_diameter_mm": 6.0,
@@ -39,8 +40,16 @@ DEFAULTS = {
     "envelope_z_mm": 60.0,
 }
 CHOICES = {"step_mode": ("fixed", "adaptive"), "cutter_type": ("ball", "flat"),
-           "dialect": ("linuxcnc", "grbl", "fanuc"),
-           "method": ("captured", "spline", "nearest", "lsq1", "lsq2", "lsq3")}
+           "dialect": ("linuxcnc", "grbl", "fanuc")}
+
+
+def surface_methods() -> tuple:
+    """The surface methods processing knows ("" = its default), asked of the pure room."""
+    try:
+        from ..surface.reconstruct import METHODS
+    except ImportError:
+        from ..surface.seed import METHODS
+    return ("",) + tuple(METHODS)
 BOOLS = {"auto_resume"}
 INTS = {"grid": (3, 2000), "preview_width": (64, 2048)}
 MAY_BE_ZERO = {"levels_from_mm", "settle_s", "min_free_mb"}
@@ -48,6 +57,11 @@ MAX_LEVELS = 5000
 
 
 def _check_value(key, value):
+    if key == "method":
+        if value not in surface_methods():
+            raise SettingError(key, f"must be one of {', '.join(m for m in surface_methods() if m)} "
+                                    f"(or empty for the default), got {value!r}")
+        return value
     if key in CHOICES:
         if value not in CHOICES[key]:
             raise SettingError(key, f"must be one of {', '.join(CHOICES[key])}, got {value!r}")
