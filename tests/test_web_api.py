@@ -221,3 +221,22 @@ def test_eta_resets_for_a_new_job_and_is_zero_when_done():
     assert e.update(st(100, state="done", job="a")) == 0.0
     assert e.update(st(0, state="homing", job="b", eta=50)) == 50.0
     assert e.update({"state": "idle"}) is None
+
+
+def test_live_streams_are_capped_and_the_rest_get_503(tmp_path):
+    app, svc = make_app(tmp_path, max_streams=2, sse_max_s=5)
+    c = app.test_client()
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
+    open_streams = [c.get("/api/events", buffered=False) for _ in range(2)]
+    for r in open_streams:
+        assert r.status_code == 200
+        assert next(iter(r.response)).startswith(b"retry:")
+    third = c.get("/api/events")
+    assert third.status_code == 503 and "poll" in third.get_json()["error"]
+    assert c.get("/api/state").status_code == 200       # everything else still answers
+    open_streams[0].close()                            # a stream that ends frees its slot
+    again = c.get("/api/events", buffered=False)
+    assert again.status_code == 200
+    again.close()
+    open_streams[1].close()
+    svc.close()

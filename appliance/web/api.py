@@ -18,7 +18,7 @@ import time
 import zipfile
 from pathlib import Path, PurePosixPath
 
-from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session, stream_with_context
+from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session
 
 from ..errors import DeviceError, InkSliceError, SettingError
 from .adapter import ACTIVE, NotOffered
@@ -143,34 +143,50 @@ def events():
     max_s = float(ext()["config"]["sse_max_s"])
     service = svc()
     smoother = ext()["eta"]
+    slots = ext()["streams"]
+    # Each open stream holds one of waitress's threads. Past max_streams the answer is 503 at
+    # once: EventSource gives up and the page polls /api/state instead, so thirty phones on
+    # the dashboard cannot starve everyone else's requests.
+    if not slots.acquire(blocking=False):
+        return err("too many live streams; poll /api/state instead", 503)
 
     def stream():
-        yield "retry: 1000\n\n"
-        end = time.monotonic() + max_s
-        last_state = last_frame = None
-        beat = time.monotonic()
-        while time.monotonic() < end:
-            st = service.state()
-            st["eta_display_s"] = smoother.update(st)
-            key = json.dumps({k: v for k, v in st.items() if k != "eta_display_s"}, sort_keys=True, default=str)
-            if key != last_state:
-                last_state = key
-                yield f"event: state\ndata: {json.dumps(st, default=str)}\n\n"
-                beat = time.monotonic()
-            fr = service.latest_frame()
-            ftime = fr[1].get("time") if fr else None
-            if ftime != last_frame:
-                last_frame = ftime
-                yield f"event: frame\ndata: {json.dumps(_frame_meta(fr[1]) if fr else None)}\n\n"
-            if time.monotonic() - beat > 15:
-                yield ": keep-alive\n\n"
-                beat = time.monotonic()
-            time.sleep(0.25)
+        try:
+            yield from _events(service, smoother, max_s)
+        finally:
+            slots.release()
 
-    resp = Response(stream_with_context(stream()), mimetype="text/event-stream")
+    # no stream_with_context: the body needs nothing from the request, and holding the request
+    # context for 50 s would only pin memory
+    resp = Response(stream(), mimetype="text/event-stream")
     resp.headers["Cache-Control"] = "no-store"
     resp.headers["X-Accel-Buffering"] = "no"
     return resp
+
+
+def _events(service, smoother, max_s):
+    """The stream's body: `state` on every change, `frame` on a new frame, a comment every 15 s."""
+    yield "retry: 1000\n\n"
+    end = time.monotonic() + max_s
+    last_state = last_frame = None
+    beat = time.monotonic()
+    while time.monotonic() < end:
+        st = service.state()
+        st["eta_display_s"] = smoother.update(st)
+        key = json.dumps({k: v for k, v in st.items() if k != "eta_display_s"}, sort_keys=True, default=str)
+        if key != last_state:
+            last_state = key
+            yield f"event: state\ndata: {json.dumps(st, default=str)}\n\n"
+            beat = time.monotonic()
+        fr = service.latest_frame()
+        ftime = fr[1].get("time") if fr else None
+        if ftime != last_frame:
+            last_frame = ftime
+            yield f"event: frame\ndata: {json.dumps(_frame_meta(fr[1]) if fr else None)}\n\n"
+        if time.monotonic() - beat > 15:
+            yield ": keep-alive\n\n"
+            beat = time.monotonic()
+        time.sleep(0.25)
 
 
 def _frame_meta(meta):

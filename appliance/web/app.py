@@ -15,6 +15,8 @@ calls nothing else (architecture.md). `config` is a plain dict:
   sse_max_s         how long one Server-Sent-Events connection stays open (default 50 s;
                     the browser reconnects by itself, and a bounded stream keeps waitress's
                     threads from being held forever by phones that went to sleep)
+  max_streams       live-event streams open at once (default 8; waitress has 24 threads);
+                    past that /api/events answers 503 and the page falls back to polling
   trusted_proxy     True to take the client address from X-Forwarded-For (default False)
   reset_password    True to replace the admin password by a fresh generated one at start
                     (the demo does, so it can always print one); other sessions end
@@ -23,6 +25,7 @@ The first-run password, if one was just made, is in app.config["FIRST_RUN_PASSWO
 """
 from __future__ import annotations
 
+import threading
 import time
 from datetime import timedelta
 from pathlib import Path
@@ -41,6 +44,7 @@ DEFAULTS = {
     "max_upload_bytes": 256 * 1024 * 1024,
     "max_unzipped_bytes": 1024 * 1024 * 1024,
     "sse_max_s": 50.0,
+    "max_streams": 8,
     "trusted_proxy": False,
 }
 
@@ -86,6 +90,7 @@ def create_app(service, config: dict | None = None) -> Flask:
         "creds": creds,
         "limiter": auth.LoginLimiter(int(cfg["login_attempts"]), float(cfg["login_window_s"])),
         "eta": EtaSmoother(),
+        "streams": threading.BoundedSemaphore(int(cfg["max_streams"])),
         "usb": cfg["usb"],
         "config": cfg,
     }
