@@ -495,14 +495,25 @@ def _roi(grid, surface, level, rig, pm: PixelMap):
 
 def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
     """Coverage (alpha) and brightness (shade) of the part, full frame, float32."""
-    pm = pm or pixel_map(rig, effects.lens_distortion)
-    grid = surface_grid(surface)
     H, W = rig.height, rig.width
     alpha = np.zeros((H, W), np.float32)
     shade = np.zeros((H, W), np.float32)
+    res = part_layer_roi(surface, level, rig, effects, pm)
+    if res is not None:
+        (r0, r1, c0, c1), a, s = res
+        alpha[r0:r1, c0:c1] = a
+        shade[r0:r1, c0:c1] = s
+    return alpha, shade
+
+
+def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
+    """part_layer on the pixel rectangle that can see the part: ((r0, r1, c0, c1),
+    alpha, shade) or None. Outside it the frame is ink."""
+    pm = pm or pixel_map(rig, effects.lens_distortion)
+    grid = surface_grid(surface)
     roi = _roi(grid, surface, level, rig, pm)
     if roi is None:
-        return alpha, shade
+        return None
     r0, r1, c0, c1 = roi
     sl = (slice(r0, r1), slice(c0, c1))
     x0 = pm.x0[sl].ravel()
@@ -575,9 +586,7 @@ def part_layer(surface, level, rig: Rig, effects: Effects, pm: PixelMap = None):
                              a_wl[b], wtier[b], wwall[b], hidden_tier)
         a[b] = ab
         s[b] = sb
-    alpha[sl] = a.reshape(r1 - r0, c1 - c0)
-    shade[sl] = s.reshape(r1 - r0, c1 - c0)
-    return alpha, shade
+    return roi, a.reshape(r1 - r0, c1 - c0), s.reshape(r1 - r0, c1 - c0)
 
 
 def _liquid_layer(rig, effects, alpha, rng):
@@ -637,16 +646,19 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
     rng = rng if rng is not None else np.random.default_rng(0)
     level = liquid_level(surface, level_mm, rig, effects)
     pm = pixel_map(rig, effects.lens_distortion)
-    alpha, shade = part_layer(surface, level, rig, effects, pm)
-    part = np.asarray(rig.part_bgr, np.float32)
-    a3 = alpha[..., None]
-    liquid_effects = effects.glare_spots > 0 or effects.dust_specks > 0
-    if liquid_effects:
-        ink = _liquid_layer(rig, effects, alpha, rng)
-        img = ink * (1.0 - a3)
+    res = part_layer_roi(surface, level, rig, effects, pm)
+    if effects.glare_spots > 0 or effects.dust_specks > 0:
+        img = _liquid_layer(rig, effects, None, rng)
     else:
-        img = (1.0 - a3) * np.asarray(rig.ink_bgr, np.float32)
-    img += (alpha * shade)[..., None] * part
+        img = np.empty((rig.height, rig.width, 3), np.float32)
+        img[:] = np.asarray(rig.ink_bgr, np.float32)
+    if res is not None:
+        # only the part's rectangle needs compositing; the rest is ink
+        (r0, r1, c0, c1), alpha, shade = res
+        view = img[r0:r1, c0:c1]
+        a3 = alpha[..., None]
+        view *= 1.0 - a3
+        view += (alpha * shade)[..., None] * np.asarray(rig.part_bgr, np.float32)
     return camera_effects(img, rig, effects, pm, rng)
 
 
@@ -665,6 +677,6 @@ def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.nda
             r = rng.integers(0, img.shape[0], n)
             c = rng.integers(0, img.shape[1], n)
             img[r, c] = np.where(rng.uniform(size=n) < 0.5, 0.0, 255.0)[:, None]
-    np.clip(img, 0, 255, out=img)
-    img += 0.5
-    return img.astype(np.uint8)
+    # round and saturate to 8 bits (convertScaleAbs would fold negatives up: clamp first)
+    cv2.max(img, 0.0, dst=img)
+    return cv2.convertScaleAbs(img)

@@ -168,8 +168,9 @@ def _distort(x, y, dist):
     return xd, yd
 
 
-def _undistort(xd, yd, dist, iterations=12):
-    """Invert _distort by OpenCV's fixed point; converges to ~1e-12 for our lenses."""
+def _undistort(xd, yd, dist, iterations=8):
+    """Invert _distort by OpenCV's fixed point. Each step shrinks the error ~50x for
+    our lenses (|d distortion / dx| ~ 0.02 at the frame corners): 8 steps reach ~1e-13."""
     k1, k2, p1, p2, k3 = (list(dist) + [0.0] * 5)[:5]
     x, y = xd.copy(), yd.copy()
     for _ in range(iterations):
