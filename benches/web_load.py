@@ -144,7 +144,7 @@ class Crowd:
                 r = conn.getresponse()
                 event = None
                 while not self.stop.is_set():
-                    line = r.fp.readline()
+                    line = r.readline()          # de-chunked by http.client
                     if not line:
                         break                   # the server ends streams after ~50 s; reconnect
                     line = line.decode().rstrip("\n")

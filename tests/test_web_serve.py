@@ -40,3 +40,42 @@ def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
                           f"a=create_app(F({str(tmp_path / 'x')!r}),{{'data_dir':{str(tmp_path)!r},'usb':None}});"
                           "print(a.config['FIRST_RUN_PASSWORD'])"], capture_output=True, text=True)
     assert out.stdout.strip() == "None", out.stderr
+
+
+def test_a_closed_live_stream_frees_its_slot_under_waitress(tmp_path):
+    import http.client
+    import time
+
+    from appliance.web.auth import Credentials
+    from appliance.web.demo import start
+    from appliance.web.fake import FakeBenchService
+    svc = FakeBenchService(tmp_path / "bench")
+    run = start(svc, tmp_path / "data", config={"usb": None, "max_streams": 1})
+    token = Credentials(tmp_path / "data" / "web").create_token("t")[1]
+    port = int(run.url.rsplit(":", 1)[1])
+
+    def open_stream():
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+        c.request("GET", "/api/events", headers={"Authorization": f"Bearer {token}"})
+        return c, c.getresponse()
+
+    try:
+        c1, r1 = open_stream()
+        assert r1.status == 200 and r1.readline().startswith(b"retry:")
+        c2, r2 = open_stream()
+        assert r2.status == 503             # the one slot is taken
+        c2.close()
+        r1.close()
+        c1.close()                          # the phone goes away mid-stream
+        end = time.monotonic() + 5
+        while True:
+            c3, r3 = open_stream()
+            if r3.status == 200 or time.monotonic() > end:
+                break
+            c3.close()
+            time.sleep(0.2)
+        assert r3.status == 200, "the slot of a closed stream must come back within seconds, not at 50 s"
+        c3.close()
+    finally:
+        run.stop()
+        svc.close()

@@ -150,9 +150,13 @@ def events():
     if not slots.acquire(blocking=False):
         return err("too many live streams; poll /api/state instead", 503)
 
+    # waitress tells us when the phone has gone (needs channel_request_lookahead, see demo.py),
+    # so a closed tab frees its slot within a quarter second, not at the next write
+    gone = request.environ.get("waitress.client_disconnected") or (lambda: False)
+
     def stream():
         try:
-            yield from _events(service, smoother, max_s)
+            yield from _events(service, smoother, max_s, gone)
         finally:
             slots.release()
 
@@ -164,13 +168,13 @@ def events():
     return resp
 
 
-def _events(service, smoother, max_s):
+def _events(service, smoother, max_s, gone=lambda: False):
     """The stream's body: `state` on every change, `frame` on a new frame, a comment every 15 s."""
     yield "retry: 1000\n\n"
     end = time.monotonic() + max_s
     last_state = last_frame = None
     beat = time.monotonic()
-    while time.monotonic() < end:
+    while time.monotonic() < end and not gone():
         st = service.state()
         st["eta_display_s"] = smoother.update(st)
         key = json.dumps({k: v for k, v in st.items() if k != "eta_display_s"}, sort_keys=True, default=str)

@@ -37,8 +37,10 @@ def _server(service, data_dir, host, port, threads, config):
     cfg = {"data_dir": str(data_dir)}
     cfg.update(config or {})
     app = create_app(service, cfg)
+    # channel_request_lookahead lets waitress notice a client that hung up while its request is
+    # still running (the live-event streams check waitress.client_disconnected)
     server = create_server(app, host=host, port=port, threads=threads, channel_timeout=60,
-                           connection_limit=200, ident="inkslice")
+                           connection_limit=200, channel_request_lookahead=5, ident="inkslice")
     return server, app
 
 
