@@ -17,8 +17,11 @@ The part's outer edge is a cliff, and a drop-cutter that only sees the
 surface on its offset lattice misses the edge itself whenever the lattice
 straddles it, and dips past it (we measured 0.05 mm gouges along the edge of
 sample 3 that way). So the sampler also offers the footprint's boundary as a
-dense row of 3-D points (`edges`, spacing `edge_step`, heights taken from
-the part's side), which the drop-cutter tests as contacts in their own right.
+set of straight 3-D segments (`edges`: the lattice sides on the boundary,
+heights from the part's side, plus every side inside the part steeper than
+45 degrees, i.e. walls), which the drop-cutter tests exactly as contacts in
+their own right (segments.py). Steep *facets* are still only seen on the
+lattice: on very steep surfaces use a finer resolution (sample 4 gets 0.02 mm).
 """
 from __future__ import annotations
 
@@ -167,6 +170,14 @@ class Sampler:
             j, i = jj[side], ii[side]
             segs.append(np.column_stack([X[i + a[1]], Y[j + a[0]], z[j + a[0], i + a[1]],
                                          X[i + b[1]], Y[j + b[0]], z[j + b[0], i + b[1]]]))
+        # steep sides inside the part too: a wall between two lattice rows is a
+        # cliff for the lattice just like the outer edge (slope above 1, 45 deg)
+        zz = np.where(np.isfinite(self.hm.z), self.hm.z, np.nan)
+        for axis, step in ((1, self.dx), (0, self.dy)):
+            dz = np.abs(np.diff(zz, axis=axis))
+            j, i = np.nonzero(np.nan_to_num(dz, nan=0.0) > step)
+            j2, i2 = (j, i + 1) if axis == 1 else (j + 1, i)
+            segs.append(np.column_stack([X[i], Y[j], z[j, i], X[i2], Y[j2], z[j2, i2]]))
         segs = np.vstack(segs)
         return None if segs.size == 0 else segs
 

@@ -38,9 +38,12 @@ down between passes instead of retracting 200 times.
 
 Point reduction
 ---------------
-Each run is thinned with Ramer-Douglas-Peucker in (along, z) to the chord
-tolerance (0.002 mm by default): collinear points disappear, and no dropped
-point is further than the tolerance from the move that replaces it.
+Each run is thinned with Ramer-Douglas-Peucker to the chord tolerance:
+collinear points disappear, and no dropped point is further than the
+tolerance from the move that replaces it (vertically, or sideways at links).
+A move above the tips it replaces adds to the scallop, one below them cuts
+in: the default tolerance is 0.002 mm or a twentieth of the requested
+scallop, whichever is smaller (0.0005 mm for the default 0.01 mm).
 """
 from __future__ import annotations
 
@@ -67,9 +70,16 @@ class FinishSettings:
     stepover: float | None = None
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
-    chord: float = DEFAULT_CHORD
+    chord: float | None = None
     margin: float = 0.0
     leave: float = 0.0
+
+    def __post_init__(self):
+        if self.chord is None:
+            # a straight move may stand this far above the tips it replaces, which
+            # adds directly to the scallop: keep it a twentieth of the request
+            h = self.scallop if self.stepover is None and self.scallop else DEFAULT_SCALLOP
+            self.chord = min(DEFAULT_CHORD, h / 20) if np.isfinite(h) and h > 0 else DEFAULT_CHORD
 
     def check(self):
         R = self.cutter.radius

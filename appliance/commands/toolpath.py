@@ -31,7 +31,8 @@ def add_arguments(p):
     g.add_argument("--stepover", type=float, default=None, help="fixed stepover, mm (instead of --scallop)")
     g.add_argument("--angle", type=float, default=0.0, help="pass direction, degrees from X (default 0)")
     g.add_argument("--resolution", type=float, default=0.1, help="point spacing along a pass, mm")
-    g.add_argument("--chord", type=float, default=0.002, help="chord tolerance for point reduction, mm")
+    g.add_argument("--chord", type=float, default=None, help="chord tolerance for point reduction, mm "
+                   "(default: 0.002 or scallop / 20, the smaller)")
     g.add_argument("--margin", type=float, default=0.0, help="how far the cutter axis may go past the "
                    "part's edge, mm (0..radius)")
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")

@@ -1,0 +1,67 @@
+"""Scallop: the formulas against the simulation, and the planner holding the requested height."""
+import numpy as np
+import pytest
+
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.jobs import finishing_gcode, verify_gcode
+from appliance.cam.scallop import ball_scallop, ball_stepover, swept_offset
+from appliance.cam.zigzag import FinishSettings
+from cam_helpers import grid_map
+
+BALL = parse_cutter("ball6")
+
+
+def test_formulas_invert_each_other():
+    s = ball_stepover(3, 0.01)
+    assert s == pytest.approx(2 * np.sqrt(0.01 * 5.99))
+    assert ball_scallop(3, s) == pytest.approx(0.01)
+    assert ball_stepover(3, 0.01, 30) == pytest.approx(np.cos(np.radians(30)) * s)
+
+
+def test_swept_profile_of_a_ball_is_the_swept_cylinder():
+    dy, t = np.array([0.0, 1.0, 2.5]), np.array([0.0, 0.5, 1.2])
+    assert np.allclose(swept_offset(BALL, dy, t), 3 - np.sqrt(9 - dy ** 2) * np.sqrt(1 + t ** 2))
+    # the numeric search used for bull noses agrees with the closed form for a ball-like bull
+    near_ball = parse_cutter("bull6r2.9999")
+    assert np.allclose(swept_offset(near_ball, dy, t), swept_offset(BALL, dy, t), atol=2e-3)
+    assert np.isinf(swept_offset(BALL, 3.1, 0.0))
+
+
+def _fixed(hm, stepover, resolution=0.05):
+    job = finishing_gcode(hm, FinishSettings(BALL, scallop=None, stepover=stepover))
+    rep, _ = verify_gcode(job.text, hm, resolution=resolution, edge_band=3.5)
+    return rep
+
+
+def test_flat_scallop_matches_formula_in_simulation():
+    hm = grid_map(lambda X, Y: 8.0, 0, 24, 0, 20, 1.0)
+    s = 20 / 40                                   # 0.5 mm: passes land on the 0.05 mm lattice
+    rep = _fixed(hm, s)
+    assert rep.gouge < 1e-6
+    assert rep.scallop_max == pytest.approx(ball_scallop(3, s), rel=0.02)
+
+
+def test_slope_across_passes_formula_holds_the_normal_scallop():
+    # on a slope alpha across the passes, s = 2 cos(alpha) sqrt(h (2R - h)) holds the
+    # scallop measured normal to the surface; vertically it shows as h / cos(alpha)
+    alpha = np.radians(20)
+    hm = grid_map(lambda X, Y: 5 + np.tan(alpha) * Y, 0, 24, 0, 20, 1.0)
+    h = 0.01
+    s = 20 / np.ceil(20 / ball_stepover(3, h, 20))
+    rep = _fixed(hm, s, 0.025)
+    expect = ball_scallop(3, s / np.cos(alpha)) / np.cos(alpha)
+    assert rep.gouge < 0.001
+    assert rep.scallop_max == pytest.approx(expect, rel=0.05)
+    assert rep.scallop_max * np.cos(alpha) == pytest.approx(h, rel=0.1)
+
+
+@pytest.mark.parametrize("cutter", ["ball6", "bull6r1"])
+def test_planner_holds_requested_scallop_on_a_curved_surface(cutter):
+    # a saddle-ish curved patch with slopes both along and across the passes
+    hm = grid_map(lambda X, Y: 12 + 0.004 * (X - 12) ** 2 - 0.006 * (Y - 10) ** 2 + 0.15 * X,
+                  0, 24, 0, 20, 0.5)
+    h = 0.01
+    job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=h))
+    rep, _ = verify_gcode(job.text, hm, resolution=0.05, edge_band=1.0)
+    assert rep.gouge <= 0.005
+    assert abs(rep.scallop_max - h) <= 0.1 * h, rep.lines()
