@@ -186,6 +186,20 @@ def plane_pose(x_mm=50.0, y_mm=50.0, rz_deg=0.0) -> Pose:
     return Pose(0.0, 0.0, rz_deg, x_mm, y_mm, 0.0)
 
 
+def _vision_board_pose(board: Board, plane: Pose, plane_xy, rig: Rig) -> dict:
+    """The flat board's place in the vision team's BoardPose terms."""
+    uv = rig.project(np.column_stack([plane_xy, np.zeros(len(plane_xy))]), distorted=True)
+    first = int(np.argmin(np.hypot(uv[:, 0], uv[:, 1])))
+    x0, y0 = plane_xy[first]
+    # the row through that corner, in the direction that runs right in the image
+    i, j = first % board.cols, first // board.cols
+    nb = first + 1 if i + 1 < board.cols else first - 1
+    d = plane_xy[nb] - plane_xy[first]
+    if uv[nb, 0] < uv[first, 0]:
+        d = -d
+    return {"x0": float(x0), "y0": float(y0), "angle_deg": float(np.degrees(np.arctan2(d[1], d[0])))}
+
+
 def render_calibration(folder, rig: Rig = None, board: Board = None, poses=DEFAULT_POSES,
                        plane: Pose = None, effects: Effects = None, seed: int = 0) -> dict:
     """Render pose_NN.png and plane.png into `folder`, board.json beside them, and
@@ -224,7 +238,10 @@ def render_calibration(folder, rig: Rig = None, board: Board = None, poses=DEFAU
         "images": [{"file": im["file"], "kind": im["kind"]} for im in images],
         "plane": {"file": "plane.png",
                   "note": "board floating flat on the liquid; corners in the object frame, OpenCV order",
-                  "corners_xy_mm": plane_xy.tolist()},
+                  "corners_xy_mm": plane_xy.tolist(),
+                  # appliance.vision.calibration.BoardPose: the inner corner seen nearest
+                  # the image's top-left, and the direction its row runs (0 = +x)
+                  "board_pose": _vision_board_pose(board, plane, plane_xy, rig)},
     }
     atomicio.write_json(folder / "board.json", doc)
     cm = rig.camera_model(distorted=effects.lens_distortion)
