@@ -221,21 +221,28 @@ static unsigned unread_bytes(void)
   return (unsigned)(uart0->input.write - uart0->input.read) & (uart_fifo_fifo_size - 1);
 }
 
+static int dup_pending = -1;                   /* a duplicated byte, due one frame later */
+
 static void feed_uart(void)
 {
-  if (avr->cycle < next_feed_cycle) return;
-  if (uart0 && inq_len && unread_bytes() >= 3) rx_overruns++;
-  for (int i = 0; i < 1 && inq_len && !uart_xoff; i++) {
-    next_feed_cycle = avr->cycle + frame_cycles();
-    uint8_t c = inq[inq_head];
+  if (avr->cycle < next_feed_cycle || uart_xoff) return;
+  if (!inq_len && dup_pending < 0) return;
+  if (uart0 && unread_bytes() >= 3) rx_overruns++;
+  next_feed_cycle = avr->cycle + frame_cycles();
+  uint8_t c;
+  if (dup_pending >= 0) {                      /* the copy takes its own frame on the wire */
+    c = (uint8_t)dup_pending;
+    dup_pending = -1;
+  } else {
+    c = inq[inq_head];
     inq_head = (inq_head + 1) % sizeof inq;
     inq_len--;
     int n = wire(0, &c);
-    for (int k = 0; k < n; k++) {
-      if (c == 0x18) estop_feed_cycle = avr->cycle;
-      avr_raise_irq(irq_uart_in, c);
-    }
+    if (n == 0) return;
+    if (n == 2) dup_pending = c;
   }
+  if (c == 0x18) estop_feed_cycle = avr->cycle;
+  avr_raise_irq(irq_uart_in, c);
 }
 
 static void read_pty(void)
@@ -476,7 +483,7 @@ int main(int argc, char **argv)
     if (avr->cycle >= next_poll) {
       pace();
       /* while bytes wait for the wire, come back once per frame */
-      next_poll = avr->cycle + (inq_len && frame_cycles() < POLL_CYCLES ? frame_cycles() : POLL_CYCLES);
+      next_poll = avr->cycle + ((inq_len || dup_pending >= 0) && frame_cycles() < POLL_CYCLES ? frame_cycles() : POLL_CYCLES);
     }
   }
 }

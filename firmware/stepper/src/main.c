@@ -396,7 +396,13 @@ int main(void)
 {
   wdt_enable(WDTO_500MS);
   stepper_init();
+  linebuf_init(&line);
   serial_init();
+  /* Interrupts on before the slow part of the boot (the 64-bit ramp maths,
+   * ~30 ms, and rewriting a damaged EEPROM image, ~200 ms): the receive
+   * interrupt then keeps the 2-byte hardware buffer empty, and a command the
+   * host sends meanwhile waits in the ring instead of being lost. */
+  sei();
   load_settings();
   /* Timer0: a 100 Hz tick whose only job is to wake the loop to feed the
    * watchdog.  (Timer2 would do on the chip, but simavr 1.6 models its
@@ -407,8 +413,6 @@ int main(void)
   TCCR0B = _BV(CS02) | _BV(CS00);               /* clk/1024: 16 MHz / 1024 / 156 = 100.2 Hz */
   TIMSK0 = _BV(OCIE0A);
   set_sleep_mode(SLEEP_MODE_IDLE);
-  linebuf_init(&line);
-  sei();
   banner();
 
   for (;;) {

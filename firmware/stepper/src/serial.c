@@ -14,6 +14,7 @@
  * whatever the main loop is doing.  The main loop only records the state. */
 #include <avr/io.h>
 #include <avr/interrupt.h>
+#include <util/delay.h>
 #include "serial.h"
 #include "board.h"
 #include "uart_math.h"
@@ -40,6 +41,11 @@ void serial_init(void)
 ISR(USART_RX_vect)
 {
   uint8_t c = UDR0;
+#ifdef TEST_SLOW_RX_US
+  /* test builds only (make slow-rx): a receive interrupt too slow for the
+   * line, to prove the simavr bench notices the overruns it would cause */
+  _delay_us(TEST_SLOW_RX_US);
+#endif
   if (c == RT_ESTOP) { stepper_halt_now(); rt_requests |= RT_REQ_ESTOP; return; }
   if (c == RT_STATUS) { rt_requests |= RT_REQ_STATUS; return; }
   uint8_t h = rx_head, next = (uint8_t)((h + 1) & (RX_SIZE - 1));
