@@ -146,35 +146,50 @@ class Hue:
     """
     other: int
     cut: int
+    clip: int = 256       # other-channel level from which a pixel is a clipped highlight
+
 
 
 def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 24.0):
     """The Hue test learned from a decimated colour sample, or None (gray frames, grey ink).
 
-    Among the bright pixels there may be more glare than part (a small part, big
-    highlights), so the part's colour is found as the less-blue of two classes
-    of the bright pixels' (other - main), not as their mean.
+    The ink's own colour is enough to start with: glare is lamp light added to
+    the ink, so it stays about as much bluer than red as the ink is, while a
+    light part is not blue at all. When bright pixels are present the part's
+    colour is found as the less-blue of two classes among them (there may be
+    more glare than part), else it is taken as neutral.
     """
     if sample_bgr.ndim == 2 or sample_bgr.shape[2] < 3:
         return None
     m = np.ascontiguousarray(sample_bgr[:, :, main])
     bright = m >= (split.otsu if split.otsu >= 0 else split.threshold)
-    if bright.sum() < 16 or (~bright).sum() < 16:
+    if (~bright).sum() < 16:
         return None
     best = None
     for c in range(3):
         if c == main:
             continue
-        d = cv2.subtract(np.ascontiguousarray(sample_bgr[:, :, c]), m)      # saturates at 0
+        o = np.ascontiguousarray(sample_bgr[:, :, c])
+        d = cv2.subtract(o, m)      # saturates at 0
         d_ink = float(d[~bright].mean())
-        inner = otsu_split(np.bincount(d[bright], minlength=256))
-        # (a small part among big highlights is a small lower class: still a class)
-        lower = (1 - inner.part_fraction) * bright.sum()
-        d_part = inner.ink if inner.contrast >= min_gap and lower >= 4 else float(d[bright].mean())
+        d_part = 0.0
+        if bright.sum() >= 4:
+            inner = otsu_split(np.bincount(d[bright], minlength=256))
+            lower = (1 - inner.part_fraction) * bright.sum()
+            if inner.contrast >= min_gap and lower >= 4:
+                d_part = inner.ink          # (a small part among big highlights: still a class)
+            elif float(d[bright].mean()) < 0.5 * d_ink:
+                d_part = float(d[bright].mean())
         gap = d_ink - d_part
         if gap >= min_gap and (best is None or gap > best[0]):
-            best = (gap, c, int(round(d_part + 0.5 * gap)))
-    return Hue(best[1], best[2]) if best else None
+            cut = int(round(d_part + 0.5 * gap))
+            # Where glare clips, the ink's blue saturates first and its red
+            # catches up: the clipped core is no longer blue, but it is brighter
+            # in `other` than the lit part ever is. Unless the part clips too.
+            part_o = o[bright & (d <= cut)]
+            top = float(np.percentile(part_o, 99)) if part_o.size >= 16 else 0.0
+            best = (gap, c, cut, SATURATED if top < SATURATED - 10 else 256)
+    return Hue(best[1], best[2], best[3]) if best else None
 
 
 def histogram(img: np.ndarray) -> np.ndarray:

@@ -187,12 +187,16 @@ class WaterlineExtractor:
                                   self._buf(name, (y1 - y0, x1 - x0)))
 
     def _apply_hue(self, main, other, binary, name):
-        """binary &= (other - main <= cut): glare (bluish, bright) is ink, not part."""
+        """binary &= (other - main <= cut) & (other < clip): glare is ink, not part."""
         if self.hue is None:
             return binary
         diff = cv2.subtract(other, main, dst=self._buf(name, main.shape))
         cv2.threshold(diff, self.hue.cut, 255, cv2.THRESH_BINARY_INV, diff)
-        return cv2.bitwise_and(binary, diff, binary)
+        cv2.bitwise_and(binary, diff, binary)
+        if self.hue.clip < 256:
+            cv2.threshold(other, self.hue.clip - 1, 255, cv2.THRESH_BINARY_INV, diff)
+            cv2.bitwise_and(binary, diff, binary)
+        return binary
 
     def _learn(self, frame, where):
         """Channel levels, threshold and (once) the glare colour test, from the 1-in-4 sample.
@@ -234,7 +238,10 @@ class WaterlineExtractor:
 
     def _not_glare(self, other, main):
         """255 where (other - main) <= cut: not the ink's blue, so not ink or glare on it."""
-        return cv2.threshold(cv2.subtract(other, main), self.hue.cut, 255, cv2.THRESH_BINARY_INV)[1]
+        ok = cv2.threshold(cv2.subtract(other, main), self.hue.cut, 255, cv2.THRESH_BINARY_INV)[1]
+        if self.hue.clip < 256:
+            cv2.bitwise_and(ok, cv2.threshold(other, self.hue.clip - 1, 255, cv2.THRESH_BINARY_INV)[1], ok)
+        return ok
 
     def _split(self, hist):
         return towards_ink(otsu_split(hist), self.options["threshold_fraction"])
@@ -355,7 +362,8 @@ class WaterlineExtractor:
         now = cv2.medianBlur(np.ascontiguousarray(main), 3)
         part = (now >= self.split.threshold) & (now < self.glare_cut)
         if self.hue is not None:
-            part &= cv2.subtract(np.ascontiguousarray(lat[:, :, self.hue.other]), main) <= self.hue.cut
+            other = np.ascontiguousarray(lat[:, :, self.hue.other])
+            part &= (cv2.subtract(other, main) <= self.hue.cut) & (other < self.hue.clip)
         changed = part != (self._binary[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0)
         changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
         changed[:, 0] = changed[:, -1] = False
