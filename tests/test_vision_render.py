@@ -77,3 +77,24 @@ def test_a_short_rendered_scan_in_band_mode_matches_full_reads():
         assert rms(ea) < 0.25
     assert len(a.loops) == 2                   # both peaks by the end
     assert banded.last_mode == "band"
+
+
+def test_the_top_of_a_scan_is_ink_and_glare_only_and_says_so():
+    """Above the part only ink, highlights and dust show: no island may be made of them."""
+    from appliance.vision.pipeline import NoPartError
+    surf = surfaces.get("sample1")
+    frame = render_frame(surf, 38.0, RIG, PRESETS["realistic"], np.random.default_rng(0))
+    cam = RIG.camera_model(distorted=True)
+    with pytest.raises(NoPartError):
+        WaterlineExtractor(cam).extract(frame, 38.0)
+    assert WaterlineExtractor(cam, no_part="empty").extract(frame, 38.0).loops == []
+
+
+def test_a_clipped_highlight_touching_the_part_does_not_bulge_it():
+    # (seed chosen so that a highlight with a clipped white core sits on the waterline)
+    from appliance.sim.scanrender import scan_levels
+    surf = surfaces.get("sample1")
+    k = scan_levels(surf, 1.0).index(20.0)
+    wl, err, _, _ = measure("sample1", 20.0, PRESETS["realistic"], seed_=k)
+    assert len(wl.loops) == 1
+    assert rms(err) < 0.25 and err.max() < 2.0
