@@ -406,9 +406,11 @@ class WaterlineExtractor:
         A clipped highlight's near-white rim is not blue and passes the colour
         test; but nowhere along its edge is there plain dark ink, so (almost)
         none of its points come from the grey-level step. A real island with
-        a highlight beside it keeps plain ink along most of its edge.
+        a highlight beside it keeps plain ink along most of its edge, and one
+        that continues an island of the previous frame is kept whatever the glare.
         """
-        bad = {i for i, lp in enumerate(loops) if not lp.hole and lp.grey < 0.25}
+        bad = {i for i, lp in enumerate(loops) if not lp.hole and lp.grey < 0.25
+               and not (self._islands and self._connected(lp.pixels.reshape(-1, 1, 2)))}
         if not bad:
             return loops, refined
         for i in bad:
