@@ -123,17 +123,21 @@ def test_impossible_settings_are_refused(link):
 
 
 # ---- hard limits and the emergency stop ----
-def test_hitting_the_top_switch_stops_the_move_and_raises_an_alarm(bench, link):
-    home(link)
-    assert link.ask(30, "SET", "soft_max", 170000).ok        # let a move reach past the switch (98 mm)
-    assert link.ask(31, "MOVE", 165000).ok
-    st = link.wait_idle(timeout=60)
-    assert st.state == "alarm" and st.alarm == "hard_limit_top"
-    assert st.flags["limit_top"] and not st.homed
-    assert bench.stage_position_steps() == 156800            # stopped on the switch, not past it
-    assert bench.stats()["stalls"] == 0
-    assert link.ask(32, "MOVE", 100000).error == err("not_homed")
-    home(link, 33)                                           # HOME clears the alarm
+def test_hitting_the_top_switch_stops_the_move_and_raises_an_alarm(fw_build):
+    with SimulatedBench(speed=0, stage_mm=5.0, top_switch_mm=12.0) as bench:   # a short machine
+        link = RawLink(bench.port)
+        try:
+            home(link)
+            assert link.ask(31, "MOVE", 24000).ok                # 15 mm: inside the soft limits, past the switch
+            st = link.wait_idle()
+            assert st.state == "alarm" and st.alarm == "hard_limit_top"
+            assert st.flags["limit_top"] and not st.homed
+            assert bench.stage_position_steps() == 19200          # stopped on the switch, not past it
+            assert bench.stats()["stalls"] == 0
+            assert link.ask(32, "MOVE", 8000).error == err("not_homed")
+            home(link, 33)                                        # HOME clears the alarm
+        finally:
+            link.close()
 
 
 def test_hitting_the_home_switch_outside_homing_is_a_bottom_hard_limit(bench, link):

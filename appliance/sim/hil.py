@@ -49,14 +49,16 @@ class SimulatedBench:
     FAULT_KINDS = ("drop", "corrupt", "dup")
 
     def __init__(self, speed: float = 10.0, stage_mm: float = 40.0, seed: int = 1,
-                 elf: str | Path | None = None, steps_per_mm: float = STEPS_PER_MM):
+                 elf: str | Path | None = None, steps_per_mm: float = STEPS_PER_MM,
+                 top_switch_mm: float = 98.0):
         build_dir = build()
         self.elf = Path(elf) if elf else build_dir / "inkslice-stepper.elf"
         self.steps_per_mm = steps_per_mm
         self._lock = threading.Lock()
         self._proc = subprocess.Popen(
             [str(build_dir / "hil"), str(self.elf), "--speed", str(speed),
-             "--stage", str(round(stage_mm * steps_per_mm)), "--seed", str(seed)],
+             "--stage", str(round(stage_mm * steps_per_mm)), "--seed", str(seed),
+             "--top-switch", str(round(top_switch_mm * steps_per_mm))],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, bufsize=1)
         first = self._proc.stdout.readline().split()
         if len(first) != 2 or first[0] != "port":

@@ -1,6 +1,6 @@
 /* hil.c -- the hardware-in-the-loop bench: the real firmware ELF on simavr.
  *
- *   hil FIRMWARE.elf [--speed X] [--stage STEPS] [--seed N]
+ *   hil FIRMWARE.elf [--speed X] [--stage STEPS] [--seed N] [--top-switch STEPS]
  *
  * What it simulates
  *   - the ATmega328P at 16 MHz running the unmodified firmware;
