@@ -141,6 +141,13 @@ def create_app(service, config: dict | None = None) -> Flask:
     def _too_big(e):
         return jsonify(error=f"upload larger than {cfg['max_upload_bytes']} bytes"), 413
 
+    @app.template_filter("num")
+    def _num(v):
+        # report statistics come as full-precision floats; a phone screen wants four figures
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return v
+
     @app.context_processor
     def _ctx():
         if "csrf" not in session:
