@@ -330,7 +330,8 @@ def _shade(grid, rig, x, y, tier, wall):
     return out
 
 
-def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall, hidden_tier):
+def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall, hidden_tier,
+                behind=None):
     """Analytic coverage of pixels next to a silhouette (a rim hiding what is behind).
 
     For each tier, find where the pixel's ray crosses the tier's top (Newton on
@@ -392,6 +393,8 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
         colour += take * shades[ti, cols]
         remaining -= take
     s_wl = _shade(grid, rig, x0, y0, wtier, wwall)
+    if behind is not None:
+        s_wl = np.where(behind >= 0, behind, s_wl)
     a_wl = np.where(hidden_tier >= 0, 0.0, a_wl)        # hidden: the rim layer replaces it
     colour += remaining * a_wl * s_wl
     alpha = 1.0 - remaining * (1.0 - a_wl)
@@ -564,7 +567,8 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
 
     # -- silhouettes: anti-alias where the part hides what lies behind it ---------------
     h, w = r1 - r0, c1 - c0
-    label = np.where(occluded, htier, -1).astype(np.int16).reshape(h, w)
+    # what each pixel sees: ink/waterline (-1), or a tier's top (2t) or wall (2t + 1)
+    label = np.where(occluded, 2 * htier + hwall, -1).astype(np.int16).reshape(h, w)
     change = np.zeros((h, w), bool)
     dh = label[:, 1:] != label[:, :-1]
     change[:, 1:] |= dh
@@ -582,8 +586,13 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
         edge |= hidden
         b = np.nonzero(edge)[0]
         hidden_tier = np.where(hidden[b], wtier[b], -1)
+        # behind the rims: a wall the trace saw, else the waterline layer
+        # (a wall met well above the liquid; nearer, the waterline ramp must stay)
+        wall_seen = occluded[b] & hwall[b]
+        behind = np.where(wall_seen, s[b], -1.0).astype(np.float32)
         ab, sb = _silhouette(surface, grid, rig, level, x0[b], y0[b], kx[b], ky[b], pix[b],
-                             a_wl[b], wtier[b], wwall[b], hidden_tier)
+                             np.where(wall_seen, np.float32(1.0), a_wl[b]),
+                             wtier[b], wwall[b], hidden_tier, behind)
         a[b] = ab
         s[b] = sb
     return roi, a.reshape(r1 - r0, c1 - c0), s.reshape(r1 - r0, c1 - c0)
