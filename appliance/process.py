@@ -1,11 +1,18 @@
 """`inkslice process SCAN -o OUT`: a scan folder in, a job's outputs out.
 
-The dissertation's system end to end (pipeline "seed"): every frame through
-the Canny pipeline (vision/seed.py), the edge points as (x, y, level) slice
-points, the 50 x 50 grid over the part, every surface method of the
-dissertation (surface/seed.py), the statistics against ground truth when the
-scan has one (surface/stats.py), error pictures, heightmap.csv for the chosen
-method and a G-code program in the dissertation's format.
+Two pipelines share this entry point:
+
+- "inkslice" (the default): every frame through our integer-first vision
+  (sub-pixel waterlines in mm, vision/pipeline.py), then surface/reconstruct
+  (first exposure, walls kept out, displacement and meniscus corrected, a
+  regularised grid fit), then a cutter-compensated finishing program (cam/).
+- "seed": the dissertation's system, faithfully (chapter 3-4): Canny edge
+  pixels as (x, y, level) points, the 50 x 50 grid over the part, its surface
+  methods (surface/seed.py), its G-code format (cam/dissertation.py).
+
+With `compare`, the other pipeline's methods are run on the same frames so
+the report can put them side by side. Statistics (eqs 3-27..3-30) are computed
+when the scan has ground truth (a rendered scan's `<scan>.truth.json`).
 
 Everything is computed before the first byte is written, and every file is
 written atomically: a bad scan leaves OUT exactly as it was.
@@ -22,7 +29,7 @@ import numpy as np
 
 from . import atomicio, outputs, plots
 from .cam.dissertation import dissertation_gcode
-from .errors import ScanError, SettingError
+from .errors import InkSliceError, ScanError, SettingError
 from .scanfile import load_scan, read_frame
 from .sim import surfaces
 from .surface import seed as seed_methods
@@ -31,19 +38,38 @@ from .surface.seedtables import TABLES
 from .surface.stats import seed_statistics
 from .vision import seed as seed_vision
 
-PIPELINES = ("seed",)
+PIPELINES = ("inkslice", "seed")
+OUR_METHODS = ("fit",)
+LABELS = {"fit": "InkSlice regularised fit", **seed_methods.LABELS}
 
 
 @dataclass
 class Job:
     """What one processing run produced, before anything is written."""
     scan_folder: Path
+    pipeline: str
     method: str
-    heightmaps: dict                       # method -> HeightMap
-    stats: dict = field(default_factory=dict)   # method -> statistics (when truth is known)
+    heightmaps: dict                            # "pipeline:method" -> HeightMap
+    stats: dict = field(default_factory=dict)   # same keys -> statistics (when truth is known)
     truth: str | None = None
     timings: dict = field(default_factory=dict)
+    diagnostics: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+
+    @property
+    def key(self):
+        return f"{self.pipeline}:{self.method}"
+
+    @property
+    def heightmap(self) -> HeightMap:
+        return self.heightmaps[self.key]
+
+
+def label(key: str) -> str:
+    pipeline, method = key.split(":")
+    if pipeline == "seed":
+        return f"{LABELS[method]} (dissertation)"
+    return LABELS[method] if method == "fit" else f"{LABELS[method]} (our waterlines)"
 
 
 def find_truth(scan_folder: Path, truth=None):
@@ -67,12 +93,11 @@ def find_truth(scan_folder: Path, truth=None):
     return surfaces.get(name)
 
 
-def _seed_slices(scan):
-    slices = []
-    for ref in sorted(scan.frames, key=lambda f: -f.level_mm):
-        frame = read_frame(scan, ref)
-        slices.append(seed_vision.seed_slice(frame, ref.level_mm, scan.camera))
-    return slices
+def _frames_top_down(scan):
+    return sorted(scan.frames, key=lambda f: -f.level_mm)
+
+
+# -- the dissertation's pipeline ---------------------------------------------------
 
 
 def _part_outline_mm(lowest, camera):
@@ -92,8 +117,9 @@ def _part_outline_mm(lowest, camera):
 
 
 def run_seed(scan, grid_n=50):
-    """All dissertation methods on one scan -> {method: HeightMap}."""
-    slices = _seed_slices(scan)
+    """All dissertation methods on one scan -> {"seed:method": HeightMap}."""
+    slices = [seed_vision.seed_slice(read_frame(scan, ref), ref.level_mm, scan.camera)
+              for ref in _frames_top_down(scan)]
     pts = np.vstack([np.column_stack([s.edges_mm, np.full(len(s.edges_mm), s.level_mm)])
                      for s in slices])
     if len(pts) < 3:
@@ -103,7 +129,65 @@ def run_seed(scan, grid_n=50):
     grid_px = seed_vision.mm_to_pixels(np.column_stack([X.ravel(), Y.ravel()]), scan.camera)
     exposed = np.stack([seed_vision.exposed_at(s.binary, grid_px).reshape(X.shape) for s in slices])
     levels = [s.level_mm for s in slices]
-    return {m: seed_methods.run_method(m, x, y, pts, levels, exposed) for m in seed_methods.METHODS}
+    return {f"seed:{m}": seed_methods.run_method(m, x, y, pts, levels, exposed) for m in seed_methods.METHODS}
+
+
+# -- ours ---------------------------------------------------------------------------
+
+
+def extract_waterlines(scan):
+    from .vision.pipeline import WaterlineExtractor
+    extractor = WaterlineExtractor(scan.camera, no_part="empty")   # a scan starts above the part
+    return [extractor.extract(read_frame(scan, ref), ref.level_mm) for ref in _frames_top_down(scan)]
+
+
+def _waterline_bounds(waterlines):
+    pts = [wl.points for wl in waterlines if len(wl.points)]
+    if not pts:
+        raise ScanError("scan", "no waterline found in any frame (is the part in view?)")
+    p = np.vstack(pts)
+    return (float(p[:, 0].min()), float(p[:, 0].max()), float(p[:, 1].min()), float(p[:, 1].max()))
+
+
+def meniscus_model(scan, meniscus):
+    """The meniscus correction: a model file from `calibrate --reference`, scan.json's, or none."""
+    if meniscus is False or (meniscus is None and not scan.extra.get("meniscus")):
+        return None
+    from .surface import meniscus as men
+    if meniscus is None:
+        return men.MeniscusModel.from_json(scan.extra["meniscus"])
+    if isinstance(meniscus, men.MeniscusModel):
+        return meniscus
+    path = Path(meniscus)
+    try:
+        return men.MeniscusModel.from_json(json.loads(path.read_text(encoding="utf-8")))
+    except FileNotFoundError:
+        raise SettingError(path, "meniscus model file does not exist") from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise SettingError(path, f"not a meniscus model ({e})") from None
+
+
+def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
+    """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
+    from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
+    waterlines = extract_waterlines(scan)
+    bounds = _waterline_bounds(waterlines)
+    grid = GridSpec(bounds, spacing_mm=spacing_mm) if spacing_mm else GridSpec(bounds, n=grid_n)
+    tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
+    model = meniscus_model(scan, meniscus)
+    out, diag = {}, {}
+    for m in methods:
+        rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model))
+        out[f"inkslice:{m}"] = rec.heightmap
+        diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
+                                                     if k in ("wall_points", "points", "seconds", "notes",
+                                                              "smoothing_mm", "displacement")}}
+    diag["grid"] = {"bounds": bounds, "n": grid_n, "spacing_mm": spacing_mm}
+    diag["corrections"] = {"displacement_tank_area_mm2": tank, "meniscus": bool(model)}
+    return out, diag, waterlines
+
+
+# -- statistics ---------------------------------------------------------------------
 
 
 def statistics_against(surface, hm: HeightMap) -> dict:
@@ -115,31 +199,45 @@ def statistics_against(surface, hm: HeightMap) -> dict:
     return seed_statistics(z_true, z_rec, norm)
 
 
-def process(scan_folder, method="lsq3", pipeline="seed", grid_n=50, truth=None) -> Job:
+def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm=None, truth=None,
+            compare=False, displacement=True, meniscus=None) -> Job:
     scan_folder = Path(scan_folder)
     if pipeline not in PIPELINES:
         raise SettingError("pipeline", f"unknown pipeline {pipeline!r}; known: {', '.join(PIPELINES)}")
-    if method not in seed_methods.METHODS:
-        raise SettingError("method", f"unknown method {method!r}; known: {', '.join(seed_methods.METHODS)}")
+    method = method or ("fit" if pipeline == "inkslice" else "lsq3")
+    allowed = (OUR_METHODS + seed_methods.METHODS) if pipeline == "inkslice" else seed_methods.METHODS
+    if method not in allowed:
+        raise SettingError("method", f"unknown method {method!r} for the {pipeline} pipeline; "
+                                     f"known: {', '.join(allowed)}")
     if not (isinstance(grid_n, int) and 3 <= grid_n <= 2000):
         raise SettingError("grid", f"grid must be 3..2000 cells a side, got {grid_n!r}")
     scan = load_scan(scan_folder)
     surface = find_truth(scan_folder, truth)
-    t0 = time.perf_counter()
-    heightmaps = run_seed(scan, grid_n)
-    job = Job(scan_folder, method, heightmaps, truth=surface.name if surface else None)
-    job.timings["surface_s"] = time.perf_counter() - t0
+    job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None)
+    if pipeline == "seed" or compare:
+        t0 = time.perf_counter()
+        job.heightmaps.update(run_seed(scan, grid_n))
+        job.timings["seed_s"] = time.perf_counter() - t0
+    if pipeline == "inkslice" or compare:
+        t0 = time.perf_counter()
+        methods = (method,) if not compare else tuple(dict.fromkeys((method, "fit")))
+        hms, job.diagnostics, _ = run_inkslice(scan, methods, grid_n, spacing_mm, displacement, meniscus)
+        job.heightmaps.update(hms)
+        job.timings["inkslice_s"] = time.perf_counter() - t0
     if surface is not None:
-        job.stats = {m: statistics_against(surface, hm) for m, hm in heightmaps.items()}
+        job.stats = {k: statistics_against(surface, hm) for k, hm in job.heightmaps.items()}
     return job
 
 
-# -- writing ----------------------------------------------------------------
+# -- writing ------------------------------------------------------------------------
 
 
 def report_markdown(job: Job) -> str:
+    what = ("InkSlice (sub-pixel waterlines, regularised fit)" if job.pipeline == "inkslice"
+            else "the dissertation's (Canny edge pixels, 50 x 50 grid)")
     lines = [f"# InkSlice report: {job.scan_folder.name}", "",
-             f"Pipeline: dissertation (Canny edge pixels, 50 x 50 grid). Chosen method: {job.method}.", ""]
+             f"Pipeline: {what}. Method written to heightmap.csv and the G-code: {label(job.key)}.", ""]
+    lines += [f"- {n}" for n in job.notes]
     if not job.stats:
         lines.append("No ground truth for this scan: statistics need a rendered scan or a known part.")
         return "\n".join(lines) + "\n"
@@ -147,45 +245,85 @@ def report_markdown(job: Job) -> str:
               "Ep (table) = 100 Ea / max|Zf|, degree of matching = 100 - Ep (table).", "",
               "| method | max error mm | Ea mm | sigma mm | Ep table % | Ep printed % | matching % |",
               "|---|---|---|---|---|---|---|"]
-    for m, s in job.stats.items():
-        lines.append(f"| {seed_methods.LABELS[m]} | {s['max_error']:.4f} | {s['Ea']:.4f} | {s['sigma']:.4f} "
+    for k, s in job.stats.items():
+        lines.append(f"| {label(k)} | {s['max_error']:.4f} | {s['Ea']:.4f} | {s['sigma']:.4f} "
                      f"| {s['Ep_table']:.4f} | {s['Ep_printed']:.4f} | {s['matching']:.4f} |")
     if job.truth in TABLES:
         lines += ["", f"The dissertation's table for {job.truth} (Ea / sigma / Ep):", ""]
         for k, (ea, sd, ep) in TABLES[job.truth].items():
             lines.append(f"- {k}: {ea:.4f} / {sd:.4g} / {ep:.4f}")
-    lines += ["", "Error pictures: " + ", ".join(f"`error_{m}.png`" for m in job.stats)]
+    lines += ["", "Error pictures: " + ", ".join(f"`{png_name(k)}`" for k in job.stats)]
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(job: Job, out_folder) -> list[str]:
+def png_name(key):
+    """error_lsq3.png for the dissertation's methods (its figures 5-1..5-16), error_inkslice_fit.png for ours."""
+    pipeline, method = key.split(":")
+    return f"error_{method}.png" if pipeline == "seed" else f"error_{pipeline}_{method}.png"
+
+
+def toolpath_files(job: Job, cam_options=None) -> dict:
+    """G-code for the chosen height map: ours, and the dissertation's format beside it."""
+    hm = job.heightmap
+    files = {"toolpath-dissertation.gcode": dissertation_gcode(hm).encode()}
+    if job.pipeline == "seed":
+        files["toolpath.gcode"] = files.pop("toolpath-dissertation.gcode")
+        return files
+    from .cam.cutters import parse_cutter
+    from .cam.jobs import finishing_gcode
+    from .cam.zigzag import FinishSettings
+    opts = dict(cutter="ball6", scallop=0.01, dialect="linuxcnc")
+    opts.update(cam_options or {})
+    try:
+        settings = FinishSettings(parse_cutter(opts["cutter"]), scallop=opts["scallop"])
+        cam = finishing_gcode(hm, settings, dialect=opts["dialect"])
+        files["toolpath.gcode"] = cam.text.encode()
+        job.diagnostics["toolpath"] = {"runtime_min": cam.runtime_s / 60, **{
+            k: v for k, v in cam.summary.items() if isinstance(v, (int, float, str))}}
+    except InkSliceError as e:
+        job.notes.append(f"no finishing program: {e} (use `inkslice toolpath` with other settings)")
+    return files
+
+
+def write_outputs(job: Job, out_folder, cam_options=None) -> list[str]:
     """Render every output in memory, then write each file atomically."""
     out = Path(out_folder)
-    hm = job.heightmaps[job.method]
-    files = {
-        "heightmap.csv": outputs.heightmap_csv_text(hm).encode(),
-        "toolpath.gcode": dissertation_gcode(hm).encode(),
-        "report.md": report_markdown(job).encode(),
-        "report.json": (json.dumps({"scan": str(job.scan_folder), "pipeline": "seed", "method": job.method,
-                                    "truth": job.truth, "statistics": job.stats, "timings": job.timings},
-                                   indent=2) + "\n").encode(),
-    }
+    hm = job.heightmap
+    files = {"heightmap.csv": outputs.heightmap_csv_text(hm).encode()}
+    files.update(toolpath_files(job, cam_options))
+    if job.pipeline == "inkslice":
+        from .surface.stl import heightmap_to_stl
+        files["surface.stl"] = heightmap_to_stl(hm)
     if job.truth:
         surface = surfaces.get(job.truth)
-        vmax = max(float(np.nanmax(np.abs(h.z - surface.height(*h.grid())))) for h in job.heightmaps.values())
-        for m, h in job.heightmaps.items():
+        errs = {}
+        for k, h in job.heightmaps.items():
             X, Y = h.grid()
-            err = np.where(surface.inside(X, Y), np.abs(h.z - surface.height(X, Y)), np.nan)
-            files[f"error_{m}.png"] = plots.error_map(
-                err, h.x, h.y, f"{job.truth}: {seed_methods.LABELS[m]}", vmax=vmax)
+            errs[k] = np.where(surface.inside(X, Y), np.abs(h.z - surface.height(X, Y)), np.nan)
+        for k, err in errs.items():
+            files[png_name(k)] = plots.error_map(err, job.heightmaps[k].x, job.heightmaps[k].y,
+                                                 f"{job.truth}: {label(k)}")
+    files["report.md"] = report_markdown(job).encode()
+    files["report.json"] = (json.dumps({
+        "scan": str(job.scan_folder), "pipeline": job.pipeline, "method": job.method, "truth": job.truth,
+        "statistics": job.stats, "timings": job.timings, "diagnostics": job.diagnostics, "notes": job.notes,
+    }, indent=2, default=_jsonable) + "\n").encode()
     out.mkdir(parents=True, exist_ok=True)
     for name, data in files.items():
         atomicio.write_bytes(out / name, data)
     return sorted(files)
 
 
-def process_scan(scan_folder, out_folder, **options) -> dict:
+def _jsonable(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def process_scan(scan_folder, out_folder, cam_options=None, **options) -> dict:
     job = process(scan_folder, **options)
-    written = write_outputs(job, out_folder)
-    return {"outputs": written, "statistics": job.stats, "method": job.method, "truth": job.truth,
-            "out": str(out_folder)}
+    written = write_outputs(job, out_folder, cam_options)
+    return {"outputs": written, "statistics": job.stats, "key": job.key, "method": job.method,
+            "pipeline": job.pipeline, "truth": job.truth, "notes": job.notes, "out": str(out_folder)}

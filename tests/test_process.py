@@ -25,9 +25,9 @@ def run_cli(*args):
     return main([str(a) for a in args])
 
 
-def test_process_writes_every_output(scan, tmp_path, capsys):
+def test_dissertation_pipeline_writes_its_outputs(scan, tmp_path, capsys):
     out = tmp_path / "out"
-    assert run_cli("process", scan, "-o", out, "--method", "nearest") == 0
+    assert run_cli("process", scan, "-o", out, "--pipeline", "seed", "--method", "nearest") == 0
     names = {p.name for p in out.iterdir()}
     assert {"heightmap.csv", "toolpath.gcode", "report.md", "report.json"} <= names
     hm = read_heightmap_csv(out / "heightmap.csv")
@@ -40,15 +40,35 @@ def test_process_writes_every_output(scan, tmp_path, capsys):
     assert "F1500" in gcode[2]
 
 
+def test_our_pipeline_writes_mesh_and_compensated_gcode(scan, tmp_path):
+    out = tmp_path / "out"
+    assert run_cli("process", scan, "-o", out, "--scallop", "0.1") == 0    # a coarse finish: fast
+    names = {p.name for p in out.iterdir()}
+    assert {"heightmap.csv", "surface.stl", "toolpath.gcode", "toolpath-dissertation.gcode",
+            "report.md", "report.json"} <= names
+    hm = read_heightmap_csv(out / "heightmap.csv")
+    X, Y = hm.grid()
+    r = np.hypot(X - 30, Y - 30)
+    inner = np.isfinite(hm.z) & (r < 14) & (r > 2)
+    # the hand-made cone is z = 20 - r: inside the scanned levels the fit follows it closely
+    assert np.max(np.abs(hm.z[inner] - (20 - r[inner]))) < 0.1
+    stl = (out / "surface.stl").read_bytes()
+    assert len(stl) == 84 + 50 * int.from_bytes(stl[80:84], "little")
+    gcode = (out / "toolpath.gcode").read_text()
+    assert "G1" in gcode and "M30" in gcode
+
+
 def test_process_with_truth_reports_statistics(scan, tmp_path):
     (tmp_path / "cone.truth.json").write_text(json.dumps({"surface": "cone"}))
     out = tmp_path / "out"
     # the test cone is not the library's reference cone, so just check the wiring:
-    assert run_cli("process", scan, "-o", out) == 0
+    assert run_cli("process", scan, "-o", out, "--compare", "--scallop", "0.1") == 0
     report = json.loads((out / "report.json").read_text())
     assert report["truth"] == "cone"
-    assert set(report["statistics"]) == {"captured", "spline", "nearest", "lsq1", "lsq2", "lsq3"}
+    assert set(report["statistics"]) == {"inkslice:fit"} | {f"seed:{m}" for m in
+                                                           ("captured", "spline", "nearest", "lsq1", "lsq2", "lsq3")}
     assert (out / "error_lsq3.png").stat().st_size > 1000
+    assert (out / "error_inkslice_fit.png").stat().st_size > 1000
 
 
 def _prefill(out):

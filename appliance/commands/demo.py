@@ -4,6 +4,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -21,28 +22,35 @@ def add_arguments(p):
     p.add_argument("--out", default="demo-out", help="output folder (default ./demo-out)")
 
 
+TABLE_KEY = {"seed:captured": "captured", "seed:spline": "spline", "seed:nearest": "nearest",
+             "seed:lsq3": "lsq"}
+
+
 def print_table(job, out=sys.stdout):
-    from ..surface.seed import LABELS
+    """Our statistics per method, with the dissertation's printed figures beside its methods."""
+    from ..process import label
     from ..surface.seedtables import TABLES
-    key = {"captured": "captured", "spline": "spline", "nearest": "nearest", "lsq3": "lsq"}
     ref_of = TABLES.get(job.truth, {})
-    print(f"\n{'method':<26} {'max mm':>8} {'Ea mm':>8} {'sigma':>8} {'Ep %':>8} {'match %':>9}"
+    print(f"\n{'method':<40} {'max mm':>8} {'Ea mm':>8} {'sigma':>8} {'Ep %':>8} {'match %':>9}"
           f"  | dissertation Ea / sigma / Ep", file=out)
-    for m, s in job.stats.items():
-        ref = ref_of.get(key.get(m, ""))
+    for k, s in job.stats.items():
+        ref = ref_of.get(TABLE_KEY.get(k, ""))
         tail = f"  | {ref[0]:.4f} / {ref[1]:.4g} / {ref[2]:.4f}" if ref else ""
-        print(f"{LABELS[m]:<26} {s['max_error']:8.4f} {s['Ea']:8.4f} {s['sigma']:8.4f} "
+        print(f"{label(k):<40} {s['max_error']:8.4f} {s['Ea']:8.4f} {s['sigma']:8.4f} "
               f"{s['Ep_table']:8.4f} {s['matching']:9.4f}{tail}", file=out)
 
 
 def check_gcode(path):
+    """Run LinuxCNC's standalone interpreter over a program; its canonical output is discarded."""
     rs274 = shutil.which("rs274")
     if not rs274:
         return "not checked (LinuxCNC's rs274 is not installed)"
-    with open(Path(path).parent / "rs274.txt", "w") as log:
-        rc = subprocess.run([rs274, "-g", str(path), str(Path(path).parent / "rs274.txt")],
-                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT).returncode
-    return "accepted by LinuxCNC's rs274 -g" if rc == 0 else f"REJECTED by rs274 (exit {rc})"
+    with tempfile.TemporaryDirectory() as tmp:
+        r = subprocess.run([rs274, "-g", str(path), str(Path(tmp) / "canon.txt")], stdin=subprocess.DEVNULL,
+                           capture_output=True, text=True)
+    if r.returncode == 0:
+        return "accepted by LinuxCNC's rs274 -g"
+    return f"REJECTED by rs274 (exit {r.returncode}): {r.stderr.strip()[:200]}"
 
 
 def run(args):
@@ -64,13 +72,16 @@ def run(args):
     t0 = time.perf_counter()
     render_scan(surface, scan_dir, levels=levels, effects=args.effects, seed=1)
     t1 = time.perf_counter()
-    print(f"  rendered in {t1 - t0:.1f} s. Processing with the dissertation's pipeline ...", flush=True)
-    job = proc.process(scan_dir, method="lsq3")
+    print(f"  rendered in {t1 - t0:.1f} s. Processing with ours and with the dissertation's pipeline ...",
+          flush=True)
+    job = proc.process(scan_dir, compare=True)
     written = proc.write_outputs(job, result_dir)
     t2 = time.perf_counter()
     print(f"  processed in {t2 - t1:.1f} s.")
     print_table(job)
     print(f"\nOutputs in {result_dir}/: {', '.join(written)}")
-    print(f"G-code {result_dir / 'toolpath.gcode'}: {check_gcode(result_dir / 'toolpath.gcode')}")
+    for name in ("toolpath.gcode", "toolpath-dissertation.gcode"):
+        if (result_dir / name).exists():
+            print(f"G-code {result_dir / name}: {check_gcode(result_dir / name)}")
     print(f"Report: {result_dir / 'report.md'}")
     return 0
