@@ -197,16 +197,18 @@ def histogram(img: np.ndarray) -> np.ndarray:
 
 
 def best_channel(sample_bgr: np.ndarray, min_contrast: float = 24.0):
-    """The channel whose Otsu split is cleanest on a (decimated) colour sample.
+    """The channel in which the ink is darkest against the brightest things in view.
 
-    None when no channel shows two classes (all ink, all part): decide later.
+    The ink is dark blue, the part light grey: in the red channel the ink is
+    nearly black while the part is as bright as anywhere. Scoring by the
+    ink's darkness (its low percentile) rather than by a two-class split keeps
+    the choice right when big highlights outnumber a small part (glare is
+    brightest in blue). None when no channel has contrast (blank frame).
     """
     if sample_bgr.ndim == 2:
         return 0
     scores = []
     for c in range(min(3, sample_bgr.shape[2])):
-        s = otsu_split(histogram(sample_bgr[:, :, c]))
-        # separability alone likes a tiny bright class; weigh in the contrast
-        ok = s.separability >= 0.5 and s.contrast >= min_contrast
-        scores.append(s.separability * s.contrast if ok else 0.0)
+        lo, hi = np.percentile(sample_bgr[:, :, c], [20, 99.5])
+        scores.append((hi - lo) / (lo + 8.0) if hi - lo >= min_contrast else 0.0)
     return int(np.argmax(scores)) if max(scores) > 0 else None
