@@ -117,6 +117,7 @@ def test_latest_frame_is_a_small_jpeg_with_the_waterline(tmp_path):
         svc.close()
 
 
+@pytest.mark.slow
 def test_cancel_stops_the_motor_and_resume_matches_an_uninterrupted_scan(tmp_path):
     ref_svc, _ = service(tmp_path / "ref")
     try:
