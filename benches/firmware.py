@@ -178,6 +178,12 @@ def main():
     print(f"avr-size: flash {fb} B = {fp:.1f} % of 32 KB, RAM {rb} B = {rp:.1f} % of 2 KB "
           f"(target <= 50 % each: {'PASS' if fp <= 50 and rp <= 50 else 'FAIL'})")
 
+    t = time.monotonic()
+    with SimulatedBench(speed=1.0) as bench:
+        stage = SerialStage(bench.port)
+        stage.close()
+    print(f"SimulatedBench start + SerialStage identify: {time.monotonic() - t:.2f} s (target < 2 s)")
+
     rates = [10000, 20000, 40000] if args.quick else [10000, 15000, 20000, 25000, 30000, 35000, 40000]
     accel = 1_000_000
     best = 0

@@ -41,7 +41,7 @@ def bench(fw_build):
 class RawLink:
     """The protocol by hand: exact lines in, parsed lines out."""
 
-    def __init__(self, port, timeout=1.0):
+    def __init__(self, port, timeout=5.0):       # generous: CI machines are shared and loaded
         self.ser = serial.Serial(port, 115200, timeout=timeout)
         self.timeout = timeout
 
@@ -83,7 +83,7 @@ class RawLink:
             if isinstance(item, P.Status):
                 return item
 
-    def wait_idle(self, timeout=30.0) -> P.Status:
+    def wait_idle(self, timeout=120.0) -> P.Status:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             st = self.status()

