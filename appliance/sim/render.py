@@ -679,7 +679,12 @@ def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.nda
     if effects.blur_sigma_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), effects.blur_sigma_px)
     if effects.noise_sigma > 0:
-        img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(effects.noise_sigma)
+        # OpenCV's generator is ~2x faster than numpy's on 9.4 M samples; seeding it
+        # from rng keeps the frame a function of the rng's state (its state is per thread)
+        cv2.setRNGSeed(int(rng.integers(1, 2 ** 31)))
+        noise = np.empty_like(img)
+        cv2.randn(noise, 0.0, float(effects.noise_sigma))
+        cv2.add(img, noise, dst=img)
     if effects.salt_pepper > 0:
         n = int(rng.binomial(img.shape[0] * img.shape[1], effects.salt_pepper))
         if n:
