@@ -66,6 +66,9 @@ def test_virtual_camera_renders_the_level_at_capture_time():
     assert cam.last_level_mm == 5.0
     bright = lambda im: int((im[..., 1] > 100).sum())
     assert bright(b) > 3 * bright(a) > 0       # more of the cone stands out of the ink
+    assert np.allclose(cam.camera_model().dist, 0)          # clean frames carry no distortion
+    assert np.allclose(VirtualCamera("cone", level_mm=lambda: 1.0, effects="realistic")
+                       .camera_model().dist, Rig().dist_coeffs())
 
 
 def test_virtual_camera_ripple_settles():
@@ -94,3 +97,9 @@ def test_cli_render(tmp_path, capsys):
     assert len(scan.frames) == 4 and truth_path(out).is_file()
     assert "4 frames" in capsys.readouterr().out
     assert main(["render", "sample4", "-o", str(tmp_path / "x"), "--step", "0", "--quiet"]) == 2
+
+
+def test_tank_is_written_only_when_the_bench_displaces_ink(tmp_path):
+    """Processing corrects levels for displaced ink whenever scan.json names the tank."""
+    render_scan("cone", tmp_path / "dry", levels=[10.0], effects=Effects(), seed=1)
+    assert "tank" not in load_scan(tmp_path / "dry").extra

@@ -57,6 +57,11 @@ class VirtualCamera(Camera):
         self.last_ripple_age_s = age
         return replace(self.effects, ripple_age_s=age)
 
+    def camera_model(self):
+        """The TRUE scan.json camera for the frames this camera takes: with the
+        lens distortion only if its effects put it in the frames."""
+        return self.rig.camera_model(distorted=self.effects.lens_distortion)
+
     def note_move_finished(self):
         """Optional hint: the stage just stopped (restarts the ripple clock)."""
         if self.clock is not None:
