@@ -101,9 +101,13 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
             true_levels.append(_render_one(job))
             if progress:
                 progress(i + 1, len(jobs))
-    scan = Scan(folder, rig.camera_model(distorted=effects.lens_distortion), frames,
-                extra={"tank": {"inner_area_mm2": float(rig.tank_area_mm2)},
-                       "source": {"kind": "simulated", "renderer": "appliance.sim.render"}})
+    extra = {"source": {"kind": "simulated", "renderer": "appliance.sim.render"}}
+    if effects.displacement:
+        # A real bench always displaces ink, so the daemon always writes the tank;
+        # a simulated bench only when it simulates the effect, else processing
+        # would "correct" levels that never dropped.
+        extra["tank"] = {"inner_area_mm2": float(rig.tank_area_mm2)}
+    scan = Scan(folder, rig.camera_model(distorted=effects.lens_distortion), frames, extra=extra)
     write_scan_json(scan)
     truth = {
         "format": "inkslice.truth/1",
