@@ -98,3 +98,19 @@ def test_a_clipped_highlight_touching_the_part_does_not_bulge_it():
     wl, err, _, _ = measure("sample1", 20.0, PRESETS["realistic"], seed_=k)
     assert len(wl.loops) == 1
     assert rms(err) < 0.25 and err.max() < 2.0
+
+
+def test_a_scan_from_above_the_top_finds_the_part_once_it_comes_out():
+    """Empty top frames (ink, glare, dust only) must not spoil what is learned for later ones."""
+    surf = surfaces.get("cone")
+    cam = RIG.camera_model(distorted=True)
+    ex = WaterlineExtractor(cam, no_part="empty")
+    found = []
+    for k, level in enumerate([24.0, 23.5, 20.0, 16.0, 12.0]):
+        frame = render_frame(surf, level, RIG, PRESETS["realistic"], np.random.default_rng(k))
+        wl = ex.extract(frame, level)
+        found.append(len(wl.loops))
+        if wl.loops:
+            err = np.abs(surf.level_sdf(wl.points[:, 0], wl.points[:, 1], level)) / MM_PER_PX
+            assert rms(err) < 0.25
+    assert found[:2] == [0, 0] and found[2:] == [1, 1, 1]

@@ -136,9 +136,13 @@ class WaterlineExtractor:
     # -- the frame ---------------------------------------------------------------
 
     def extract(self, frame: np.ndarray, level_mm: float) -> Waterline:
+        cut = self.glare_cut
         try:
             return self._extract(frame, level_mm)
         except NoPartError:
+            # what looked brightest in a frame without the part says nothing about
+            # the part's top: keep the glare cut learned with the part in view
+            self.glare_cut = cut
             if self.options["no_part"] == "empty":
                 return Waterline(float(level_mm), [])
             raise
@@ -150,7 +154,7 @@ class WaterlineExtractor:
         if self.channel is None:
             self.channel = best_channel(self._sample(frame, 8, all_channels=True), self.options["min_contrast"])
         loops = None
-        if self._band is not None and self.options["band"]:
+        if self._band is not None and self._band.any() and self.options["band"]:
             loops = self._read_band(frame, level_mm, where)
         elif self.options["band"]:
             loops = self._read_coarse(frame, level_mm, where)
