@@ -24,8 +24,8 @@ RS274 = "/usr/bin/rs274"
 
 
 def bowl():
-    # a dish with a rim: concave in the middle, 30 x 24 mm
-    return grid_map(lambda X, Y: 6 + 0.02 * ((X - 15) ** 2 + (Y - 12) ** 2), 0, 30, 0, 24, 1.0)
+    # a dish: concave, 20 x 16 mm (small, so the many programs below stay quick)
+    return grid_map(lambda X, Y: 6 + 0.02 * ((X - 10) ** 2 + (Y - 8) ** 2), 0, 20, 0, 16, 1.0)
 
 
 def finish(hm=None, **kw):
@@ -46,7 +46,7 @@ def test_motion_hygiene(linuxcnc_text):
     p = parse_gcode(linuxcnc_text)
     safe = p.xyz[0, 2]
     assert p.kind[0] == 0 and re.fullmatch(r"G0 Z[\d.]+", lines[lines.index(next(l for l in lines if l.startswith("G0")))])
-    assert safe > 6 + 0.02 * (15 ** 2 + 12 ** 2)                      # above the part's top
+    assert safe > np.nanmax(bowl().z)                                  # above the part's top
     # rapids only at the safe height, or straight up out of a cut
     for k in np.flatnonzero(p.kind == 0)[1:]:
         prev = p.xyz[k - 1]
@@ -123,11 +123,11 @@ def test_parser_round_trip_and_errors():
 
 
 def test_envelope_is_refused_not_clipped():
-    m = Machine(travel=((-10, 25), (-10, 210), (-5, 150)))
-    with pytest.raises(SettingError, match=r"X travel -10..25 mm by 5\.000 mm"):
+    m = Machine(travel=((-10, 15), (-10, 210), (-5, 150)))
+    with pytest.raises(SettingError, match=r"X travel -10..15 mm by 5\.000 mm"):
         finish(machine=m)
     with pytest.raises(SettingError, match="Z travel"):
-        finish(machine=Machine(travel=((-10, 300), (-10, 300), (-5, 20))))
+        finish(machine=Machine(travel=((-10, 300), (-10, 300), (-5, 12))))
     # a work offset moves the program, and can push it out
     with pytest.raises(SettingError, match="Z travel"):
         finish(z_offset=140.0)
@@ -143,7 +143,7 @@ def test_feed_limits_slow_moves_down():
     feed = p.feed[1:]
     vz = np.where(L > 0, feed * d[:, 2] / np.where(L > 0, L, 1), 0)
     g1 = p.kind[1:] == 1
-    assert np.all(vz[g1] <= 200.0 + 1e-6)
+    assert np.all(vz[g1] <= 200.0 * 1.02)      # the printed coordinates are rounded
     assert np.nanmax(feed) == 1500.0
 
 

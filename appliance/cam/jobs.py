@@ -49,9 +49,10 @@ def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, material=DEFAULT
     if dialect == "dissertation":
         text = dissertation_gcode(hm)
         return Job(text, float("nan"), {"dialect": "dissertation", "lines": text.count("\n")})
+    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    settings.check()
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     fin = finishing(sampler, settings)
-    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
     target = (f"scallop {settings.scallop:g} mm" if settings.stepover is None
               else f"stepover {settings.stepover:g} mm")
@@ -74,9 +75,10 @@ def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_M
     check_heightmap(hm)
     if dialect == "dissertation":
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
+    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    settings.check()
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     runs = roughing(sampler, settings)
-    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     notes = [f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
              f"stepover {settings.stepover_mm:g} mm, stock to leave {settings.leave:g} mm"]
     prog, text, rt, slowed = _post(hm, runs, settings.cutter, cond, settings.stock_top,

@@ -88,6 +88,7 @@ def limit_feeds(prog: Program, machine: Machine, start=None) -> int:
         cap = np.min(np.where(d > 1e-12, mf[None, :] * L[:, None] / d, np.inf), axis=1)
     feed = prog.kind == FEED
     slow = feed & (cap < prog.feed - 1e-9)
-    # round down to whole mm/min so the printed F never exceeds the cap
-    prog.feed = np.where(slow, np.floor(cap), prog.feed)
+    # 1 % below the cap and rounded down to whole mm/min, so the printed F still
+    # respects it after the coordinates are rounded to the dialect's decimals
+    prog.feed = np.where(slow, np.floor(0.99 * cap), prog.feed)
     return int(slow.sum())

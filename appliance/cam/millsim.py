@@ -41,6 +41,11 @@ from .segments import min_over_segment
 
 
 
+# a rapid that lowers the stock by more than this is reported as a crash (grazing
+# contacts at the cutter's rim round to a few microns and are not crashes)
+CRASH_DEPTH = 0.002
+
+
 @dataclass
 class Stock:
     xs: np.ndarray
@@ -107,7 +112,7 @@ def simulate(parsed: Parsed, cutter: Cutter, stock: Stock, z_zero: float = 0.0) 
     k, n = 0, len(xyz)
     while k < n:
         if parsed.kind[k] == 0:
-            if sweep(stock, cutter, starts[k], xyz[k]) > 1e-4:
+            if sweep(stock, cutter, starts[k], xyz[k]) > CRASH_DEPTH:
                 crashes += 1
                 first = first or int(parsed.line[k])
             k += 1

@@ -40,11 +40,12 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     Ws = np.where(still, 1.0, W2)
     tm = np.where(still, 0.0, (dx * wx + dy * wy) / Ws)
     dperp2 = np.maximum(dx * dx + dy * dy - tm * tm * W2, 0.0)
-    ok = dperp2 <= R * R
+    ok = dperp2 <= R * R + 1e-9          # rounding must not drop a cell at exactly the rim
     delta = np.where(still, np.inf, np.sqrt(np.maximum(R * R - dperp2, 0.0) / Ws))
     lo = np.maximum(tm - delta, 0.0)
     hi = np.minimum(tm + delta, 1.0)
-    ok &= lo <= hi
+    ok &= lo <= hi + 1e-9
+    hi = np.maximum(hi, lo)
     kind = cutter.kind
     if kind == "ball":
         A2 = np.maximum(R * R - dperp2, 0.0)

@@ -356,6 +356,12 @@ class _PassProbe:
         cols = np.arange(Z.shape[1])
         touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
         lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+        if cut.kind != "ball":
+            # a flat bottom over a convex region touches at one point for many
+            # passes, so contacts say little about where the cusps are: measure
+            # between the axes as well (conservative on slopes)
+            ia, ib = int(np.argmin(np.abs(ys - sa))), int(np.argmin(np.abs(ys - sb)))
+            lo, hi = np.minimum(lo, ia), np.maximum(hi, ib)
         rows = np.arange(ys.size)[:, None]
         inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
         if not inside.any():
