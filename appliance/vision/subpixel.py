@@ -138,12 +138,14 @@ def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 
     of the chord from 2k points before to 2k points after) through the points
     k..2k before and after fits them to `max_resid` px while the point itself
     is more than `min_dev` px off it. At a corner of the part the quadratic
-    cannot fit both legs, so corners are kept. Loops shorter than 16k points
-    (radius under ~2.5k px) curve too much within the window and are left alone.
+    cannot fit both legs, so corners are kept. On loops shorter than 16k points
+    the window shrinks (a small loop curves too much over a wide one), down to
+    k = 4; loops under 64 points are left alone.
     """
     n = len(pts)
     out = np.zeros(n, bool)
-    if n < 16 * k:
+    k = min(k, n // 16)             # a small loop curves too much over a wide window
+    if k < 4:
         return out
     # cheap screen: off the chord between the k-th neighbours (a smooth line of
     # radius > 4k px is within 0.5 px of it); only those get the quadratic test
