@@ -1,0 +1,325 @@
+"""First-exposure heights and the regularised grid fit, on one lattice.
+
+First exposure: a lattice node's height is the level at which it first came
+out of the ink. It is exposed at level k (inside that frame's waterline) and
+still submerged at the level above, k - 1; between the two the top surface
+crosses the node, and the signed distances to the two waterlines place it:
+    z = z_lo + (z_hi - z_lo) * d_lo / (d_lo + d_hi).
+This follows islands that merge and holes without any special case, because
+it only asks "inside or outside" of each frame. Nodes whose nearest lower
+waterline point is a wall get no value (the wall says nothing about the top);
+nodes exposed already at the highest frame (the part's very top) get none
+either: the fit's smoothness term extrapolates them.
+
+The fit (gridfit / ANUDEM style) solves, on the lattice nodes over the part,
+    min  sum_points (bilinear z(p) - z_p)^2 + w_cell sum_nodes (z - z_fe)^2
+         + lambda * integral (z_xx^2 + 2 z_xy^2 + z_yy^2) dA
+as a sparse least-squares problem (normal equations, SuperLU). The thin-plate
+term reproduces any quadric exactly, so a cap with no data above the highest
+waterline is continued as the paraboloid its neighbours imply.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import scipy.sparse as sp
+from scipy import ndimage
+from scipy.sparse.linalg import cg, spsolve
+
+from .slices import Slice, polyline_distance
+
+_SHIFT = 8      # fillPoly sub-pixel bits
+
+
+@dataclass
+class Lattice:
+    x: np.ndarray
+    y: np.ndarray
+
+    @property
+    def hx(self):
+        return float(self.x[1] - self.x[0])
+
+    @property
+    def hy(self):
+        return float(self.y[1] - self.y[0])
+
+    @property
+    def shape(self):
+        return (self.y.size, self.x.size)
+
+    def to_index(self, pts):
+        return (pts[:, 0] - self.x[0]) / self.hx, (pts[:, 1] - self.y[0]) / self.hy
+
+
+def exposed_mask(lat: Lattice, sl: Slice) -> np.ndarray:
+    """Nodes inside the slice's waterline (even-odd over its loops: holes stay out)."""
+    m = np.zeros(lat.shape, np.uint8)
+    if sl.empty:
+        return m.astype(bool)
+    polys = []
+    for lp in sl.loops:
+        fi, fj = lat.to_index(lp)
+        polys.append(np.round(np.column_stack([fi, fj]) * (1 << _SHIFT)).astype(np.int32))
+    cv2.fillPoly(m, polys, 1, lineType=cv2.LINE_8, shift=_SHIFT)
+    return m.astype(bool)
+
+
+def _signed_distance(sl: Slice, q, inside):
+    d, i = polyline_distance(sl, q)
+    return np.where(inside, d, -d), i
+
+
+def _lagrange_at_zero(s, z, ok):
+    """Value at s = 0 of the polynomial through the usable (s_j, z_j), per row."""
+    out = np.zeros(s.shape[0])
+    for j in range(s.shape[1]):
+        w = np.where(ok[:, j], 1.0, 0.0)
+        for m in range(s.shape[1]):
+            if m == j:
+                continue
+            den = s[:, j] - s[:, m]
+            den = np.where(np.abs(den) < 1e-12, 1e-12, den)
+            w = w * np.where(ok[:, m], (0.0 - s[:, m]) / den, 1.0)
+        out += w * np.where(ok[:, j], z[:, j], 0.0)
+    return out
+
+
+def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, order: int = 4):
+    """-> (z_fe with NaN where no value, first index per node (len = never), footprint mask).
+
+    Between the bracketing levels the node's height is interpolated along the
+    signed distance to the waterlines: with `order` = 2 the linear rule above;
+    with 3-4 the polynomial through the waterlines k-2 .. k+1 (skipping wall
+    points), which is exact for a paraboloid and also continues the part's
+    very top above the highest waterline (all distances then on one side).
+    """
+    K = len(slices)
+    first = np.full(lat.shape, K, np.int32)
+    masks = []
+    for k in range(K - 1, -1, -1):
+        m = exposed_mask(lat, slices[k])
+        first[m] = k
+    X, Y = np.meshgrid(lat.x, lat.y)
+    footprint = first < K
+    lowest = next(s for s in reversed(slices) if not s.empty)
+    # nodes on the part's outline (the grid's edge on a block) sit on the wall itself:
+    # count them in within a tolerance, their height comes from the fit
+    near = ~footprint
+    if near.any() and footprint_tol_mm > 0:
+        q = np.column_stack([X[near], Y[near]])
+        d, _ = polyline_distance(lowest, q)
+        idx = np.flatnonzero(near.ravel())[d <= footprint_tol_mm]
+        footprint.ravel()[idx] = True
+    # nodes on the outline itself: every wall passes through them, no side is sure
+    on_outline = np.zeros(lat.shape, bool)
+    fq = np.column_stack([X[footprint], Y[footprint]])
+    d_out, _ = polyline_distance(lowest, fq)
+    on_outline[footprint] = d_out <= max(footprint_tol_mm, 1e-6)
+    z = np.full(lat.shape, np.nan)
+    visible = [k for k in range(K) if not slices[k].empty]
+    top = visible[0]
+    hmax = max(lat.hx, lat.hy)
+    for k in range(top, K):
+        sel = first == k
+        if not sel.any():
+            continue
+        q = np.column_stack([X[sel], Y[sel]])
+        kq = first[sel]
+        lo_span = order // 2
+        # one more level uphill than the rule needs: where the lower waterlines are
+        # walls the node is extrapolated from the uphill ones alone
+        js = [j for j in range(k - (order - lo_span) - 1, k + lo_span) if top <= j < K]
+        if k == top:   # the cap: every neighbouring waterline lies downhill
+            js = [j for j in range(top, min(K, top + max(order - 1, 2)))]
+        S = np.zeros((len(q), len(js)))
+        Z = np.zeros_like(S)
+        ok = np.zeros(S.shape, bool)
+        for c, j in enumerate(js):
+            sl = slices[j]
+            sd, i = polyline_distance(sl, q, signed=True)
+            # far from the waterline the raster mask's side is the robust one; near it
+            # (within a node and a half) the exact side of the nearest segment
+            in_mask = kq <= j
+            far_node = np.abs(sd) > 1.5 * hmax
+            S[:, c] = np.where(far_node, np.where(in_mask, 1.0, -1.0) * np.abs(sd), sd)
+            Z[:, c] = sl.z[i]
+            ok[:, c] = ~sl.wall[i]
+        below = ok & (S >= 0)
+        n_ok = ok.sum(axis=1)
+        if k == top:
+            good = n_ok >= 2
+        else:
+            # bracketed: drop the extra uphill level; else extrapolate from >= 2 uphill ones
+            two_sided = below.any(axis=1)
+            extra = k - (order - lo_span) - 1
+            if extra in js:
+                ok[two_sided, js.index(extra)] = False
+            n_ok = ok.sum(axis=1)
+            # one-sided: trust it only as far out as the uphill waterlines are apart
+            far = np.zeros(len(q), bool)
+            up = ok & (S < 0)
+            if (~two_sided).any():
+                Sn = np.where(up, -S, np.inf)
+                srt = np.sort(Sn, axis=1)
+                if srt.shape[1] > 1:
+                    with np.errstate(invalid="ignore"):
+                        far = ~two_sided & ~(srt[:, 0] <= (srt[:, 1] - srt[:, 0]))
+            good = (n_ok >= 2) & ~far
+        # the node came out between the two bracketing levels (told by the exact signs,
+        # the raster mask can be a node off): the answer must lie between them
+        levels = np.array([slices[j].level for j in js])
+        inside = S >= 0
+        c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
+        zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
+        zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
+        rise = np.where(ok, Z - levels, 0.0)        # meniscus-corrected heights widen it
+        zmin = zmin + np.minimum(rise.min(axis=1), 0)
+        zmax = zmax + np.maximum(rise.max(axis=1), 0)
+        raw = _lagrange_at_zero(S, Z, ok)
+        zz = np.clip(raw, zmin, zmax)
+        # a polynomial that leaves its bracket is not to be trusted: let the fit decide
+        zz[np.abs(raw - zz) > 0.25 * (zmax - zmin)] = np.nan
+        zz[~good] = np.nan
+        z[sel] = zz
+    z[on_outline] = np.nan
+    return z, first, footprint
+
+
+def point_data(slices: list[Slice], spacing_mm: float):
+    """Non-wall waterline points thinned to about `spacing_mm` along each loop."""
+    xs, zs = [], []
+    for s in slices:
+        if s.empty:
+            continue
+        keep = ~s.wall
+        seg = np.hypot(*(s.P[s.nxt] - s.P).T)
+        # thin by arc length: keep a point each time the running length passes a multiple
+        run = np.cumsum(seg)
+        bucket = np.floor(run / max(spacing_mm, 1e-9)).astype(np.int64)
+        first_of_bucket = np.r_[True, bucket[1:] != bucket[:-1]]
+        keep &= first_of_bucket
+        xs.append(s.P[keep])
+        zs.append(s.z[keep])
+    if not xs:
+        return np.zeros((0, 2)), np.zeros(0)
+    return np.vstack(xs), np.concatenate(zs)
+
+
+class FitProblem:
+    """The lattice's unknowns (nodes over the part) and its smoothness operator."""
+
+    def __init__(self, lat: Lattice, footprint: np.ndarray, margin: int = 2):
+        self.lat = lat
+        self.active = ndimage.binary_dilation(footprint, iterations=margin) if margin else footprint.copy()
+        self.index = np.full(lat.shape, -1, np.int64)
+        self.index[self.active] = np.arange(int(self.active.sum()))
+        self.n = int(self.active.sum())
+        self.R = self._smoothness()
+
+    def _smoothness(self):
+        lat, idx = self.lat, self.index
+        hx, hy = lat.hx, lat.hy
+        area = hx * hy
+        rows, cols, vals = [], [], []
+        r = 0
+
+        def add(stencil, scale):
+            nonlocal r
+            # stencil: list of (dj, di, coefficient); keep rows whose nodes are all active
+            ny, nx = idx.shape
+            dj = [s[0] for s in stencil]
+            di = [s[1] for s in stencil]
+            j0, j1 = -min(dj), ny - max(dj)
+            i0, i1 = -min(di), nx - max(di)
+            ids = [idx[j0 + a:j1 + a, i0 + b:i1 + b] for a, b in zip(dj, di)]
+            ok = np.all([m >= 0 for m in ids], axis=0)
+            m = int(ok.sum())
+            for (a, b, c), im in zip(stencil, ids):
+                rows.append(np.arange(r, r + m))
+                cols.append(im[ok])
+                vals.append(np.full(m, c * scale))
+            r += m
+
+        s = np.sqrt(area)
+        add([(0, -1, 1.0), (0, 0, -2.0), (0, 1, 1.0)], s / hx ** 2)
+        add([(-1, 0, 1.0), (0, 0, -2.0), (1, 0, 1.0)], s / hy ** 2)
+        add([(0, 0, 1.0), (0, 1, -1.0), (1, 0, -1.0), (1, 1, 1.0)], s * np.sqrt(2) / (hx * hy))
+        R = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(r, self.n))
+        return (R.T @ R).tocsc()
+
+    def data_rows(self, pts, z, weight=1.0):
+        """Bilinear rows for scattered points; points whose cell is not all active are dropped."""
+        lat = self.lat
+        fi, fj = lat.to_index(pts)
+        i0 = np.floor(fi).astype(np.int64)
+        j0 = np.floor(fj).astype(np.int64)
+        ny, nx = lat.shape
+        inb = (i0 >= 0) & (j0 >= 0) & (i0 < nx - 1) & (j0 < ny - 1)
+        i0, j0, fi, fj, z = i0[inb], j0[inb], fi[inb], fj[inb], z[inb]
+        tx, ty = fi - i0, fj - j0
+        ids = [self.index[j0, i0], self.index[j0, i0 + 1], self.index[j0 + 1, i0], self.index[j0 + 1, i0 + 1]]
+        ok = np.all([m >= 0 for m in ids], axis=0)
+        w = [(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty]
+        m = int(ok.sum())
+        rows = np.tile(np.arange(m), 4)
+        cols = np.concatenate([a[ok] for a in ids])
+        vals = np.concatenate([b[ok] for b in w]) * np.sqrt(weight)
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(m, self.n))
+        return A, z[ok] * np.sqrt(weight)
+
+    def node_rows(self, zgrid, weight):
+        sel = self.active & np.isfinite(zgrid)
+        cols = self.index[sel]
+        m = cols.size
+        A = sp.csr_matrix((np.full(m, np.sqrt(weight)), (np.arange(m), cols)), shape=(m, self.n))
+        return A, zgrid[sel] * np.sqrt(weight)
+
+    def gap_fill(self, z_nodes):
+        """The lambda -> 0 limit: data nodes kept, every gap filled by the thin plate.
+
+        Only the gap nodes are unknowns, so the direct solve stays small; it is
+        also the start for the smoothing solve below.
+        """
+        have = self.active & np.isfinite(z_nodes)
+        zd = np.where(have, z_nodes, 0.0)[self.active]
+        gap = ~have[self.active]
+        out = np.full(self.lat.shape, np.nan)
+        full = zd.copy()
+        if gap.any():
+            R = self.R.tocsr()
+            Ruu = R[gap][:, gap].tocsc()
+            rhs = -(R[gap][:, ~gap] @ zd[~gap])
+            Ruu = Ruu + sp.identity(int(gap.sum()), format="csc") * 1e-9 * max(abs(Ruu).max(), 1.0)
+            full[gap] = spsolve(Ruu, rhs, permc_spec="MMD_AT_PLUS_A")
+        out[self.active] = full
+        return out
+
+    def solve(self, blocks, lam, x0=None, maxiter=400):
+        """Minimise the data misfit + lam * thin-plate energy by conjugate gradients,
+        from `x0` (the gap-filled data): the data pin almost every node, so the
+        start is close and a few hundred Jacobi-preconditioned steps suffice."""
+        A = sp.vstack([b[0] for b in blocks]).tocsr()
+        b = np.concatenate([b[1] for b in blocks])
+        M = ((A.T @ A) + lam * self.R).tocsr()
+        M = (M + sp.identity(self.n, format="csr") * 1e-9).tocsr()
+        rhs = A.T @ b
+        start = None if x0 is None else x0[self.active]
+        if self.n <= 3000:
+            sol = spsolve(M.tocsc(), rhs)
+        else:
+            diag = M.diagonal()
+            pre = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
+            sol, _ = cg(M, rhs, x0=start, rtol=1e-10, maxiter=maxiter, M=pre)
+        z = np.full(self.lat.shape, np.nan)
+        z[self.active] = sol
+        return z
+
+
+def bilinear(lat: Lattice, zgrid, pts):
+    """Bilinear interpolation of a lattice field at points (NaN outside)."""
+    fi, fj = lat.to_index(pts)
+    return ndimage.map_coordinates(zgrid, [fj, fi], order=1, mode="constant", cval=np.nan)

@@ -1,0 +1,146 @@
+"""Meniscus: the contact line sits off the free surface; model, correction, calibration.
+
+Shared definition (sim/physics.py simulates it): on a surface sloping at beta
+(radians from horizontal) the contact line sits h = 2 l_c sin((beta - theta)/2)
+above the free surface (l_c capillary length, theta contact angle). A waterline
+seen at free-surface level L is therefore the level curve at L + h(beta), and,
+seen from a camera at height H above the ink, each of its points is displaced
+in the plane towards the camera's foot: a contact point really at height h
+above the ink at p + (C - p) h / H appears at p on the liquid plane.
+
+Correction per waterline point: estimate beta (from the spacing of the
+neighbouring waterlines first, then from the current surface fit), then the
+point's height is L + h(beta) and its position is moved back by the
+perspective. Where a wall is nearer than the contact line needs to climb
+(distance to the part's outline < h_wall / slope), the ink rests on the wall
+and climbs the full wall height h(pi/2), as on the bench.
+
+Calibration: a reference part of known shape (sphere or cone) is scanned; the
+(l_c, theta) that make every observed point sit on the known surface at
+L + h(beta) are found by robust least squares.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import InkSliceError
+from .slices import check_waterlines, mark_walls, polyline_distance
+
+
+@dataclass(frozen=True)
+class MeniscusModel:
+    capillary_length_mm: float = 2.7
+    contact_angle_rad: float = 0.0
+    camera_xy_mm: tuple | None = None      # camera centre over the base, for the perspective
+    camera_height_mm: float | None = None  # camera centre above the liquid plane
+
+    def rise(self, beta):
+        return 2.0 * self.capillary_length_mm * np.sin((np.asarray(beta, float) - self.contact_angle_rad) / 2.0)
+
+    def unproject(self, P, h):
+        """Plane positions of contact points standing h above the ink."""
+        if self.camera_xy_mm is None or not self.camera_height_mm:
+            return P
+        C = np.asarray(self.camera_xy_mm, float)
+        return P + (C - P) * (h / self.camera_height_mm)[:, None]
+
+
+def _outline_distance(slices, P):
+    lowest = next(s for s in reversed(slices) if not s.empty)
+    return polyline_distance(lowest, P)[0]
+
+
+def _corrected(observed, slopes, model):
+    out = []
+    h_wall = float(model.rise(np.pi / 2))
+    for s, g in zip(observed, slopes):
+        if s.empty:
+            out.append(s)
+            continue
+        g = np.maximum(g, 1e-6)
+        beta = np.where(s.wall, np.pi / 2, np.arctan(g))
+        on_wall = s.wall | (_outline_distance(observed, s.P) < h_wall / g)
+        beta = np.where(on_wall, np.pi / 2, beta)
+        h = model.rise(beta)
+        t = s.moved(model.unproject(s.P, h), s.level + h)
+        out.append(t)
+    return out
+
+
+def correct_slices_from_spacing(slices, model: MeniscusModel):
+    """First estimate: slope = level step / distance to the neighbouring waterlines."""
+    slopes = []
+    for k, s in enumerate(slices):
+        if s.empty:
+            slopes.append(np.zeros(0))
+            continue
+        est = []
+        for j in (k - 1, k + 1):
+            if 0 <= j < len(slices) and not slices[j].empty:
+                d = polyline_distance(slices[j], s.P)[0]
+                est.append(abs(slices[j].level - s.level) / np.maximum(d, 1e-6))
+        slopes.append(np.minimum.reduce(est) if est else np.zeros(len(s.P)))
+    return _corrected(slices, slopes, model)
+
+
+def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusModel):
+    """Iteration: slope from the current fit's gradient at each observed point."""
+    from .gridfit import bilinear
+    zf = np.where(np.isfinite(z), z, np.nanmean(z))
+    gy, gx = np.gradient(zf, lat.hy, lat.hx)
+    g = np.hypot(gx, gy)
+    slopes = []
+    for s in observed:
+        if s.empty:
+            slopes.append(np.zeros(0))
+            continue
+        v = bilinear(lat, g, s.P)
+        slopes.append(np.where(np.isfinite(v), v, 0.0))
+    return _corrected(observed, slopes, model)
+
+
+def _reference_slopes(surface, P, eps=1e-3):
+    x, y = P[:, 0], P[:, 1]
+    gx = (surface.height(x + eps, y) - surface.height(x - eps, y)) / (2 * eps)
+    gy = (surface.height(x, y + eps) - surface.height(x, y - eps)) / (2 * eps)
+    return np.hypot(gx, gy)
+
+
+def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera_xy_mm=None,
+                       camera_height_mm=None, wall_tol_mm=0.03) -> MeniscusModel:
+    """(l_c, theta) from a scan of a reference part whose `height(x, y)` is known.
+
+    Only points on the sculptured top, well away from the part's outline,
+    enter: there the contact line's height is the top's height at the point.
+    """
+    slices, _ = check_waterlines(waterlines)
+    if tank_area_mm2:
+        from .displacement import correct_slices
+        slices, _ = correct_slices(slices, tank_area_mm2)
+    mark_walls(slices, wall_tol_mm)
+    P, L = [], []
+    for s in slices:
+        if s.empty:
+            continue
+        keep = ~s.wall & (_outline_distance(slices, s.P) > 3.0)
+        P.append(s.P[keep])
+        L.append(np.full(int(keep.sum()), s.level))
+    if not P or sum(len(p) for p in P) < 20:
+        raise InkSliceError("calibration", "too few waterline points on the reference's top to calibrate the meniscus")
+    P, L = np.vstack(P), np.concatenate(L)
+    if len(P) > 20000:
+        P, L = P[:: len(P) // 20000], L[:: len(P) // 20000]
+    beta = np.arctan(_reference_slopes(reference_surface, P))
+    cam = dict(camera_xy_mm=camera_xy_mm, camera_height_mm=camera_height_mm)
+
+    def residual(params):
+        m = MeniscusModel(params[0], params[1], **cam)
+        h = m.rise(beta)
+        return reference_surface.height(*m.unproject(P, h).T) - (L + h)
+
+    sol = least_squares(residual, x0=[2.0, 0.1], bounds=([0.0, -np.pi / 2], [10.0, np.pi / 2]),
+                        loss="soft_l1", f_scale=0.05)
+    return MeniscusModel(float(sol.x[0]), float(sol.x[1]), **cam)

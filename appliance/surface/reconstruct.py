@@ -1,0 +1,276 @@
+"""Waterlines at levels -> height map: the surface room's main entry point.
+
+    reconstruct(waterlines, grid, options) -> Reconstruction
+
+Steps, each in its own module:
+1. check the input (slices.check_waterlines): sort, de-duplicate, clear errors;
+2. displacement (displacement.py): nominal -> true levels from the areas the
+   waterlines enclose, when the tank's area is given;
+3. walls (slices.mark_walls): waterline stretches that stay put between levels;
+4. meniscus (meniscus.py): each point's height is level + rise(slope), its
+   position corrected for the perspective of the raised contact line; the
+   slope comes from neighbouring waterlines first, then from the fit (iterated);
+5. first-exposure heights and the regularised grid fit (gridfit.py) on an
+   internal lattice of ~240 nodes a side; the smoothing length is chosen by
+   cross-validation on held-out levels;
+6. the output grid sampled from the lattice, with a 1-sigma estimate per cell.
+
+The dissertation's methods stay selectable (options.method = "nearest",
+"spline", "lsq1".."lsq3", "captured") on the same checked, corrected waterlines.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import SettingError
+from . import seed as seed_methods
+from .gridfit import FitProblem, Lattice, bilinear, exposed_mask, first_exposure, point_data
+from .heightmap import HeightMap
+from .slices import check_waterlines, mark_walls
+
+METHODS = ("fit",) + seed_methods.METHODS
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Output lattice: bounds (xmin, xmax, ymin, ymax) in mm and either n = (nx, ny)
+    nodes spanning the bounds inclusive (the dissertation's 50 x 50) or a spacing in mm."""
+    bounds: tuple
+    n: tuple | None = None
+    spacing_mm: float | None = None
+
+    def axes(self):
+        xmin, xmax, ymin, ymax = map(float, self.bounds)
+        if not (xmax > xmin and ymax > ymin):
+            raise SettingError("grid", f"empty bounds {self.bounds}")
+        if (self.n is None) == (self.spacing_mm is None):
+            raise SettingError("grid", "give either n = (nx, ny) or spacing_mm, not both or neither")
+        if self.n is not None:
+            nx, ny = (self.n, self.n) if np.isscalar(self.n) else self.n
+            if int(nx) < 2 or int(ny) < 2:
+                raise SettingError("grid", f"need at least 2 x 2 nodes, got {self.n}")
+            return np.linspace(xmin, xmax, int(nx)), np.linspace(ymin, ymax, int(ny))
+        s = float(self.spacing_mm)
+        if not (s > 0 and math.isfinite(s)):
+            raise SettingError("grid", f"spacing must be a positive number of mm, got {self.spacing_mm!r}")
+        nx = int(math.floor((xmax - xmin) / s + 1e-9)) + 1
+        ny = int(math.floor((ymax - ymin) / s + 1e-9)) + 1
+        if nx * ny > 25_000_000:
+            raise SettingError("grid", f"{nx} x {ny} nodes is too many (over 25 million)")
+        return xmin + s * np.arange(nx), ymin + s * np.arange(ny)
+
+
+@dataclass
+class ReconstructOptions:
+    method: str = "fit"
+    smoothing_mm: float | None = None        # thin-plate smoothing length; None = cross-validate
+    wall_tol_mm: float = 0.03                # a waterline moving less than this between levels is a wall
+    lattice_max: int = 241                   # internal lattice nodes per side (fit size)
+    point_weight: float = 0.0                # weight of a raw waterline point vs a first-exposure node height
+    footprint_tol_mm: float | None = None    # default: a quarter of the lattice spacing
+    tank_area_mm2: float | None = None       # displacement correction when given
+    meniscus: object = None                  # meniscus.MeniscusModel when the correction is wanted
+    meniscus_iterations: int = 2
+
+
+@dataclass
+class Reconstruction:
+    heightmap: HeightMap
+    smoothing: float | None
+    diagnostics: dict = field(default_factory=dict)
+
+
+# -- lattice ------------------------------------------------------------------------
+
+
+def _lattice_for(xo, yo, lattice_max):
+    """A lattice that contains the output nodes when the output is coarse, else its own."""
+    n = max(xo.size, yo.size)
+    if n <= lattice_max:
+        r = 1
+        lx = np.linspace(xo[0], xo[-1], (xo.size - 1) * r + 1)
+        ly = np.linspace(yo[0], yo[-1], (yo.size - 1) * r + 1)
+        return Lattice(lx, ly), r
+    ext = max(xo[-1] - xo[0], yo[-1] - yo[0])
+    h = ext / (lattice_max - 1)
+    nx = int(math.ceil((xo[-1] - xo[0]) / h)) + 1
+    ny = int(math.ceil((yo[-1] - yo[0]) / h)) + 1
+    return Lattice(np.linspace(xo[0], xo[-1], nx), np.linspace(yo[0], yo[-1], ny)), None
+
+
+def _to_output(lat, zl, r, xo, yo):
+    if r is not None:
+        return zl[::r, ::r]
+    # cubic resampling of a field filled past its edge, so NaN never enters the spline
+    nan = ~np.isfinite(zl)
+    filled = zl
+    if nan.any():
+        _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
+        filled = zl[jj, ii]
+    fi = (xo - lat.x[0]) / lat.hx
+    fj = (yo - lat.y[0]) / lat.hy
+    FJ, FI = np.meshgrid(fj, fi, indexing="ij")
+    return ndimage.map_coordinates(filled, [FJ, FI], order=3, mode="nearest")
+
+
+# -- the fit --------------------------------------------------------------------------
+
+
+def _filled(z, footprint):
+    """z with its gaps (NaN) filled by the nearest value: a start for the solver."""
+    nan = ~np.isfinite(z)
+    if not nan.any() or nan.all():
+        return np.where(nan, 0.0, z)
+    _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
+    return z[jj, ii]
+
+
+def _bracket(z, first, slices):
+    """Clamp each node between the level where it came out and the one above it.
+
+    A node exposed first at frame k and still under at frame k - 1 lies in
+    between, whatever the fit's smoothness would rather do (extrapolating into
+    a gap beside a wall, say). Meniscus-corrected heights widen the bracket.
+    """
+    K = len(slices)
+    top = next(k for k, s in enumerate(slices) if not s.empty)
+    lo_rise = [float(np.min(s.z - s.level)) if not s.empty else 0.0 for s in slices]
+    hi_rise = [float(np.max(s.z - s.level)) if not s.empty else 0.0 for s in slices]
+    lv = np.array([s.level for s in slices] + [-np.inf])
+    lo = np.array([lv[k] + min(lo_rise[k], 0.0) for k in range(K)] + [-np.inf])
+    hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], 0.0) for k in range(1, K)] + [np.inf])
+    hi[top] = np.inf
+    # one level of slack each way: the raster mask that tells `first` can be a node off
+    lo_s = np.r_[lo[1:], -np.inf]
+    hi_s = np.r_[np.inf, hi[:-1]]
+    return np.clip(z, lo_s[first], hi_s[first])
+
+
+def _fit_nodes(problem, z_nodes, pts, zp, length_mm, point_weight):
+    lat = problem.lat
+    lam = length_mm ** 4 / (lat.hx * lat.hy)     # data are one per node: density 1 / cell area
+    blocks = [problem.node_rows(z_nodes, 1.0)]
+    if point_weight > 0 and len(pts):
+        blocks.append(problem.data_rows(pts, zp, point_weight))
+    return problem.solve(blocks, lam, x0=problem.gap_fill(z_nodes))
+
+
+def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
+    """Hold out a tenth of the first-exposure nodes, fit on the rest, score on them."""
+    rng = np.random.default_rng(seed)
+    have = np.flatnonzero(np.isfinite(z_fe.ravel()) & problem.active.ravel())
+    if have.size < 50:
+        return None, []
+    held = rng.choice(have, size=max(5, have.size // 10), replace=False)
+    train = z_fe.copy()
+    train.ravel()[held] = np.nan
+    h = min(problem.lat.hx, problem.lat.hy)
+    curve = []
+    for mult in (0.25, 0.5, 1, 2, 4):
+        z = _fit_nodes(problem, train, pts, zp, mult * h, point_weight)
+        r = z.ravel()[held] - z_fe.ravel()[held]
+        curve.append((mult * h, float(np.sqrt(np.mean(r ** 2)))))
+    best = min(curve, key=lambda c: c[1])[0]
+    return best, curve
+
+
+def _sigma(lat, z, slices, cv_rms, footprint, first):
+    """1-sigma per node: local RMS of the fit's residuals at the waterline points,
+    growing with the distance to the nearest data where the fit extrapolates."""
+    pts, zp = point_data(slices, min(lat.hx, lat.hy))
+    res = bilinear(lat, z, pts) - zp
+    ok = np.isfinite(res)
+    fi, fj = lat.to_index(pts[ok])
+    ii = np.clip(np.round(fi).astype(int), 0, lat.shape[1] - 1)
+    jj = np.clip(np.round(fj).astype(int), 0, lat.shape[0] - 1)
+    s2 = np.zeros(lat.shape)
+    cnt = np.zeros(lat.shape)
+    np.add.at(s2, (jj, ii), res[ok] ** 2)
+    np.add.at(cnt, (jj, ii), 1.0)
+    s2 = ndimage.gaussian_filter(s2, 3)
+    cnt = ndimage.gaussian_filter(cnt, 3)
+    local = np.sqrt(s2 / np.maximum(cnt, 1e-9))
+    has = cnt > 1e-3
+    dist = ndimage.distance_transform_edt(~has, sampling=(lat.hy, lat.hx))
+    base = cv_rms if cv_rms is not None else float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else 0.0
+    sig = np.where(has, np.maximum(local, 0.5 * base), base)
+    sig = np.sqrt(sig ** 2 + (base * dist / max(lat.hx, 1e-9) * 0.1) ** 2)
+    return np.where(footprint, sig, np.nan)
+
+
+def _seed_method(name, slices, xo, yo):
+    pts = np.vstack([np.column_stack([s.P, s.z]) for s in slices if not s.empty])
+    levels = [s.level for s in slices]
+    exposed = None
+    if name == "captured":
+        lat = Lattice(xo, yo)
+        exposed = np.stack([exposed_mask(lat, s) for s in slices])
+    return seed_methods.run_method(name, xo, yo, pts, levels, exposed)
+
+
+def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None = None) -> Reconstruction:
+    opt = options or ReconstructOptions()
+    if opt.method not in METHODS:
+        raise SettingError("method", f"unknown surface method {opt.method!r}; known: {', '.join(METHODS)}")
+    t0 = time.perf_counter()
+    xo, yo = grid.axes()
+    slices, notes = check_waterlines(waterlines)
+    diag = {"notes": notes, "levels_in_mm": [s.level for s in slices]}
+    if opt.tank_area_mm2:
+        from .displacement import correct_slices
+        slices, disp = correct_slices(slices, opt.tank_area_mm2)
+        diag["displacement"] = disp
+    diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)
+    diag["points"] = int(sum(len(s.P) for s in slices))
+    if opt.method != "fit":
+        if opt.meniscus is not None:
+            from .meniscus import correct_slices_from_spacing
+            slices = correct_slices_from_spacing(slices, opt.meniscus)
+        hm = _seed_method(opt.method, slices, xo, yo)
+        diag["seconds"] = time.perf_counter() - t0
+        return Reconstruction(hm, None, diag)
+
+    lat, r = _lattice_for(xo, yo, opt.lattice_max)
+    ftol = opt.footprint_tol_mm if opt.footprint_tol_mm is not None else 0.25 * min(lat.hx, lat.hy)
+    diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
+    observed = slices
+    if opt.meniscus is not None:
+        from .meniscus import correct_slices_from_spacing
+        slices = correct_slices_from_spacing(observed, opt.meniscus)
+    z_fe, first, footprint = first_exposure(lat, slices, ftol)
+    if not footprint.any():
+        raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
+    problem = FitProblem(lat, footprint)
+    pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
+    length, curve = opt.smoothing_mm, []
+    if length is None:
+        length, curve = _cross_validate(problem, z_fe, pts, zp, opt.point_weight)
+        if length is None:
+            length = min(lat.hx, lat.hy)
+    z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
+    if opt.meniscus is not None:
+        from .meniscus import correct_slices_from_surface
+        for _ in range(opt.meniscus_iterations):
+            slices = correct_slices_from_surface(observed, lat, z, footprint, opt.meniscus)
+            z_fe, first, _ = first_exposure(lat, slices, ftol)
+            pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
+            z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
+    z = np.where(footprint, _bracket(z, first, slices), np.nan)
+    cv_rms = min(c[1] for c in curve) if curve else None
+    sig = _sigma(lat, z, slices, cv_rms, footprint, first)
+    zo = _to_output(lat, z, r, xo, yo)
+    so = _to_output(lat, sig, r, xo, yo)
+    fo = _to_output(lat, footprint.astype(float), r, xo, yo) > 0.5
+    zo = np.where(fo, zo, np.nan)
+    so = np.where(fo, so, np.nan)
+    diag.update({"cross_validation": curve, "smoothing_mm": length,
+                 "first_exposure_nodes": int(np.isfinite(z_fe).sum()),
+                 "cap_nodes": int((footprint & (first == next(k for k, s in enumerate(slices)
+                                                              if not s.empty))).sum()),
+                 "seconds": time.perf_counter() - t0})
+    return Reconstruction(HeightMap(xo, yo, zo, so), length, diag)
