@@ -129,7 +129,7 @@ def refine_colour(frame: np.ndarray, contour: np.ndarray, subset: np.ndarray, ma
     return pts, subset[ok]
 
 
-def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 0.5) -> np.ndarray:
+def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 0.2) -> np.ndarray:
     """Mask of points on a short excursion from an otherwise smooth line (a speck stuck to it).
 
     A dust speck or bubble touching the waterline bends the binary contour round
