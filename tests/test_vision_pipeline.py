@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from appliance.errors import InkSliceError, ScanError
-from appliance.scanfile import CameraModel
 from appliance.vision.pipeline import AllPartError, FrameError, NoPartError, WaterlineExtractor
 from appliance.vision.types import signed_area
 from test_vision_synth import disc, draw, grid, pixel_camera, ring, to_pixels
