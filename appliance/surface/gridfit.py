@@ -54,7 +54,7 @@ class Lattice:
         return (pts[:, 0] - self.x[0]) / self.hx, (pts[:, 1] - self.y[0]) / self.hy
 
 
-def exposed_mask(lat: Lattice, sl: Slice) -> np.ndarray:
+def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarray:
     """Nodes inside the slice's waterline (even-odd over its loops: holes stay out)."""
     m = np.zeros(lat.shape, np.uint8)
     if sl.empty:
@@ -64,6 +64,14 @@ def exposed_mask(lat: Lattice, sl: Slice) -> np.ndarray:
         fi, fj = lat.to_index(lp)
         polys.append(np.round(np.column_stack([fi, fj]) * (1 << _SHIFT)).astype(np.int32))
     cv2.fillPoly(m, polys, 1, lineType=cv2.LINE_8, shift=_SHIFT)
+    # fillPoly also paints the pixels the outline passes through: within a node or two of
+    # the waterline the exact side of the nearest segment decides instead
+    near = np.zeros(lat.shape, np.uint8)
+    cv2.polylines(near, polys, True, 1, thickness=3, lineType=cv2.LINE_8, shift=_SHIFT)
+    jj, ii = np.nonzero(near)
+    if jj.size and exact_edges:
+        sd, _ = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
+        m[jj, ii] = sd > 0
     return m.astype(bool)
 
 

@@ -145,9 +145,11 @@ def _bracket(z, first, slices):
     lo = np.array([lv[k] + min(lo_rise[k], 0.0) for k in range(K)] + [-np.inf])
     hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], 0.0) for k in range(1, K)] + [np.inf])
     hi[top] = np.inf
-    # one level of slack each way: the raster mask that tells `first` can be a node off
+    # one level of slack each way: where waterlines crowd (a saddle's corner) the side of a
+    # node is not sure; the bracket is there to stop wild extrapolation, not to fine-tune
     lo_s = np.r_[lo[1:], -np.inf]
     hi_s = np.r_[np.inf, hi[:-1]]
+    hi_s[K] = np.inf            # never exposed (nodes on the outline itself): no bracket
     return np.clip(z, lo_s[first], hi_s[first])
 
 
@@ -260,7 +262,9 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             z_fe, first, _ = first_exposure(lat, slices, ftol)
             pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
             z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
-    z = np.where(footprint, _bracket(z, first, slices), np.nan)
+    # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
+    z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices))
+    z = np.where(footprint, z, np.nan)
     cv_rms = min(c[1] for c in curve) if curve else None
     sig = _sigma(lat, z, slices, cv_rms, footprint, first)
     zo = _to_output(lat, z, r, xo, yo)

@@ -1,0 +1,176 @@
+"""Surface room: first exposure, topology, walls, degenerate input, the grid, the mesh."""
+import struct
+
+import numpy as np
+import pytest
+
+from appliance.errors import InkSliceError, SettingError
+from appliance.sim import surfaces
+from appliance.sim.ideal import ideal_waterlines
+from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
+from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
+from appliance.surface.slices import check_waterlines, mark_walls
+from appliance.surface.stl import heightmap_to_stl
+from appliance.vision.types import Waterline
+
+# a paraboloid dome on a disc: z = 20 - 0.01 r^2 (exact answer everywhere)
+DOME = Surface("dome", "paraboloid", (10.0, 90.0, 10.0, 90.0),
+               (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),))
+# a block with a tilted flat top: walls all round, top from 10 to 14 mm
+WEDGE = Surface("wedge", "tilted block", (0.0, 40.0, 0.0, 30.0),
+                (Tier(rect_sdf(0, 40, 0, 30), lambda x, y: 10 + 0.1 * x),))
+
+
+def _errors(surface, rec, margin=0.0):
+    hm = rec.heightmap
+    X, Y = hm.grid()
+    inside = surface.inside(X, Y)
+    e = np.abs(hm.z - surface.height(X, Y))
+    return e, inside
+
+
+@pytest.fixture(scope="module")
+def dome_lines():
+    return ideal_waterlines(DOME, np.arange(21.0, 1.0, -1.0), resolution_mm=0.2)
+
+
+def test_first_exposure_exact_on_a_paraboloid(dome_lines):
+    rec = reconstruct(dome_lines, GridSpec((10, 90, 10, 90), n=(41, 41)))
+    e, inside = _errors(DOME, rec)
+    X, Y = rec.heightmap.grid()
+    interior = inside & (np.hypot(X - 50, Y - 50) < 36)
+    assert np.all(np.isfinite(rec.heightmap.z[interior]))
+    # the interpolation is exact for a quadric; what is left is the waterlines' polygon chords
+    assert np.nanmax(e[interior]) < 0.01
+    # the very top (20 mm, above the highest frame that shows the part, 19 mm) is extrapolated
+    assert abs(rec.heightmap.z[20, 20] - 20.0) < 0.02
+    assert rec.diagnostics["cap_nodes"] > 0
+    assert rec.smoothing > 0 and len(rec.diagnostics["cross_validation"]) >= 3
+    # off the part stays NaN; sigma is given on the part
+    assert np.isnan(rec.heightmap.z[0, 0])
+    assert np.all(np.isfinite(rec.heightmap.sigma[interior]))
+
+
+def test_islands_that_merge_and_a_hole():
+    tp = surfaces.get("twin-peaks")
+    rec = reconstruct(ideal_waterlines(tp, np.arange(31.0, 0.0, -1.0), 0.2), GridSpec(tp.bounds, n=(46, 41)))
+    e, inside = _errors(tp, rec)
+    X, Y = rec.heightmap.grid()
+    # away from the block's rim: its plateau is at 6 mm, exactly a frame's level (a known weak case)
+    away = inside & (X > 8) & (X < 82) & (Y > 8) & (Y < 72)
+    assert np.nanmean(e[away]) < 0.04
+    # between the peaks (30..62, 40) the saddle where the islands merged is right
+    hm = rec.heightmap
+    i = np.argmin(np.abs(hm.x - 46))
+    j = np.argmin(np.abs(hm.y - 40))
+    assert abs(hm.z[j, i] - tp.height(hm.x[i], hm.y[j])) < 0.05
+
+    ring = surfaces.get("ring")
+    # levels off the crest's height (20 mm): a flat ridge exactly at a frame's level is a known weak case
+    rec = reconstruct(ideal_waterlines(ring, np.arange(20.5, 0.0, -1.0), 0.2), GridSpec(ring.bounds, n=(46, 46)))
+    X, Y = rec.heightmap.grid()
+    r = np.hypot(X - 50, Y - 50)
+    assert np.all(np.isnan(rec.heightmap.z[r < 13]))            # the hole goes down to the base
+    band = (r > 20) & (r < 40)      # 5 mm clear of the walls: the rims are the weak part
+    e = np.abs(rec.heightmap.z - ring.height(X, Y))
+    flank = band & (np.abs(r - 30) > 3)
+    assert np.nanmean(e[flank]) < 0.01
+    # the crest (a ridge, top above the highest frame that shows it) is extrapolated: looser
+    assert np.nanmax(e[band & ~flank]) < 0.5
+
+
+def test_walls_are_found_and_kept_out_of_the_fit():
+    lines = ideal_waterlines(WEDGE, [15.0, 13.5, 12.5, 11.5, 10.5, 9.0, 7.0, 5.0], 0.1)
+    slices, _ = check_waterlines(lines)
+    mark_walls(slices, 0.03)
+    low = slices[-1]                       # 5 mm: the block's whole outline is wall
+    assert low.wall.mean() > 0.99
+    mid = slices[2]                        # 12.5 mm: the line x = 25 on the top, walls elsewhere
+    on_top = np.abs(mid.P[:, 0] - 25.0) < 1e-6
+    assert on_top.any() and not mid.wall[on_top & (mid.P[:, 1] > 1) & (mid.P[:, 1] < 29)].any()
+    assert mid.wall[mid.P[:, 0] > 25.5].all()
+    rec = reconstruct(lines, GridSpec(WEDGE.bounds, n=(41, 31)))
+    assert rec.diagnostics["wall_points"] > 0
+    e, inside = _errors(WEDGE, rec)
+    # a plane is in the smoothness term's null space: walls removed, it comes back exactly,
+    # right to the edges where the dissertation's errors piled up
+    assert np.nanmax(e[inside]) < 0.02
+
+
+def test_grid_by_spacing_and_by_count():
+    xs, ys = GridSpec((0, 100, 0, 100), spacing_mm=0.1).axes()
+    assert xs.size == 1001 and ys.size == 1001 and abs(xs[1] - xs[0] - 0.1) < 1e-12
+    xs, ys = GridSpec((0, 100, 0, 50), n=(50, 20)).axes()
+    assert xs.size == 50 and ys.size == 20 and xs[-1] == 100
+    with pytest.raises(SettingError):
+        GridSpec((0, 100, 0, 100)).axes()
+    with pytest.raises(SettingError):
+        GridSpec((0, 100, 0, 100), spacing_mm=-1).axes()
+
+
+@pytest.mark.slow
+def test_fine_grid_is_resampled_from_the_lattice(dome_lines):
+    rec = reconstruct(dome_lines, GridSpec((10, 90, 10, 90), spacing_mm=0.25))
+    e, inside = _errors(DOME, rec)
+    X, Y = rec.heightmap.grid()
+    assert rec.heightmap.z.shape == (321, 321)
+    assert np.nanmax(e[inside & (np.hypot(X - 50, Y - 50) < 36)]) < 0.02
+
+
+def test_degenerate_input(dome_lines):
+    g = GridSpec((10, 90, 10, 90), n=(21, 21))
+    with pytest.raises(InkSliceError, match="only one level"):
+        reconstruct(dome_lines[5:6], g)
+    with pytest.raises(InkSliceError, match="no waterlines"):
+        reconstruct([], g)
+    with pytest.raises(InkSliceError, match="no part is visible"):
+        reconstruct([Waterline(5.0, []), Waterline(4.0, [])], g)
+    # a level with no part visible above the part is fine (it bounds the top)
+    ref = reconstruct(dome_lines, g, ReconstructOptions(smoothing_mm=1.0))
+    assert len(dome_lines[0].loops) == 0
+    # out of order and duplicated levels give the same map, and say so
+    shuffled = list(reversed(dome_lines)) + [dome_lines[7]]
+    rec = reconstruct(shuffled, g, ReconstructOptions(smoothing_mm=1.0))
+    assert np.allclose(rec.heightmap.z, ref.heightmap.z, equal_nan=True)
+    notes = " ".join(rec.diagnostics["notes"])
+    assert "out of order" in notes and "given twice" in notes
+    # a frame that lost the part below frames that showed it is a broken scan
+    broken = dome_lines[:10] + [Waterline(dome_lines[10].level_mm, [])] + dome_lines[11:]
+    with pytest.raises(InkSliceError, match="no part visible"):
+        reconstruct(broken, g)
+    with pytest.raises(SettingError):
+        reconstruct(dome_lines, g, ReconstructOptions(method="magic"))
+
+
+def test_dissertation_methods_stay_selectable(dome_lines):
+    g = GridSpec((10, 90, 10, 90), n=(41, 41))
+    fit = reconstruct(dome_lines, g)
+    for m in ("nearest", "lsq3", "captured"):
+        rec = reconstruct(dome_lines, g, ReconstructOptions(method=m))
+        e, inside = _errors(DOME, rec)
+        ef, _ = _errors(DOME, fit)
+        X, Y = rec.heightmap.grid()
+        inner = inside & (np.hypot(X - 50, Y - 50) < 35)
+        assert np.nanmean(e[inner]) > 3 * np.nanmean(ef[inner])
+
+
+def test_stl_is_watertight_and_encloses_the_volume(dome_lines):
+    hm = reconstruct(dome_lines, GridSpec((10, 90, 10, 90), n=(33, 33))).heightmap
+    data = heightmap_to_stl(hm)
+    n = struct.unpack("<I", data[80:84])[0]
+    assert len(data) == 84 + 50 * n
+    rec = np.frombuffer(data[84:], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    V = rec["v"].astype(float)
+    # every directed edge appears once and its reverse once: closed and consistently oriented
+    edges = {}
+    for t in np.round(V, 4):
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            key = (tuple(t[a]), tuple(t[b]))
+            edges[key] = edges.get(key, 0) + 1
+    assert all(c == 1 for c in edges.values())
+    assert all((b, a) in edges for (a, b) in edges)
+    vol = np.sum(np.einsum("ij,ij->i", V[:, 0], np.cross(V[:, 1], V[:, 2]))) / 6
+    cells = np.isfinite(hm.z)
+    dx, dy = hm.spacing
+    assert vol > 0
+    assert abs(vol - np.nansum(hm.z) * dx * dy) / vol < 0.1
