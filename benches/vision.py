@@ -1,6 +1,6 @@
 """Vision bench: speed and accuracy of the frame pipeline on rendered 2048 x 1536 frames.
 
-    .venv/bin/python benches/vision.py [--quick]      (or: inkslice bench vision --quick)
+    .venv/bin/python benches/vision.py [--quick] [--calibration]   (or: inkslice bench vision --quick)
 
 Speed (one thread, cv2.setNumThreads(1), medians of repeats, all in this run):
   - ours, first frame of a scan (the whole tank is read),
@@ -245,11 +245,46 @@ def accuracy(rig, quick):
           f"{'yes' if noisy_ok else 'NO'}")
 
 
+def calibration_bench():
+    """Calibrate from chessboards drawn through the bench rig's true lens and pose at full
+    size (tests/test_vision_calibration.py draws them until sim/boards.py exists) and
+    compare where the two calibrations put each pixel on the liquid plane."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_vision_calibration import _rot, draw_board, pose_to_board, rays
+    from appliance.scanfile import CameraModel
+    from appliance.vision.calibration import Board, BoardPose, calibrate
+    rig = Rig()
+    size, K, dist = (rig.width, rig.height), rig.K(), rig.dist_coeffs()
+    r = rays(K, dist, size)
+    board = Board(9, 6, 10.0)
+    rng = np.random.default_rng(11)
+    views = []
+    print("\nrendering 9 board views and one board on the liquid plane at 2048 x 1536...", flush=True)
+    for cx in (-0.35, 0.0, 0.35):
+        for cy in (-0.3, 0.0, 0.3):
+            R = _rot(*rng.uniform(-0.3, 0.3, 3))
+            centre = np.array([cx * 330 * rig.width / 2 / K[0, 0], cy * 330 * rig.height / 2 / K[0, 0], 330.0])
+            views.append(draw_board(R, centre - R @ np.array([40.0, 25.0, 0.0]), lambda x, y: (x, y),
+                                    r, size, K[0, 0], board))
+    pose = BoardPose(10.0, 80.0, 0.0)
+    Rc = rig.rotation()
+    plane = draw_board(Rc, -Rc @ rig.centre, pose_to_board(pose), r, size, K[0, 0], board)
+    cam, rep = calibrate(views, plane, board, pose)
+    est = CameraModel(rig.width, rig.height, np.array(cam["homography"]), np.array(cam["K"]), np.array(cam["dist"]))
+    u, v = np.meshgrid(np.linspace(20, rig.width - 20, 41), np.linspace(20, rig.height - 20, 31))
+    uv = np.column_stack([u.ravel(), v.ravel()])
+    e = np.hypot(*(seed.pixels_to_mm(uv, est) - seed.pixels_to_mm(uv, rig.camera_model(distorted=True))).T)
+    print(f"Calibration: corner reprojection {rep['reprojection_rms_px']:.3f} px; liquid-plane error over the "
+          f"field max {e.max() * 1000:.1f} um, RMS {np.sqrt(np.mean(e ** 2)) * 1000:.1f} um (target 20 um); "
+          f"camera height {cam['height_mm']:.2f} mm (true {rig.height_mm:.2f})")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="fewer repeats and cases")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-speed", action="store_true")
+    p.add_argument("--calibration", action="store_true", help="also calibrate from full-size boards (~1.5 min)")
     args = p.parse_args(argv)
     cv2.setNumThreads(1)
     rig = Rig()
@@ -257,6 +292,8 @@ def main(argv=None):
         speed(rig, args.quick)
     if not args.skip_accuracy:
         accuracy(rig, args.quick)
+    if args.calibration:
+        calibration_bench()
 
 
 if __name__ == "__main__":
