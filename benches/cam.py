@@ -152,9 +152,12 @@ def bench_acceptance(quick):
             drep, _ = verify_gcode(dissertation_gcode(hm), hm, cutter=cutter, z_zero=top, resolution=res,
                                    edge_band=max(0.5, 5 * res))
             ok = rep.gouge <= 0.005 and abs(rep.scallop_max - h) <= 0.1 * h
+            dev = rep.deviation[rep.measured]
+            p999 = float(np.percentile(dev, 99.9)) if dev.size else float("nan")
             print(f"{name:8s} {cname:11s} {h:<12g} {job.summary['passes']:6d}  {rep.gouge:.4f}    "
                   f"{rep.scallop_max:.4f}       {rep.scallop_mean:.4f}   | {drep.gouge:.3f}   "
-                  f"{'OK' if ok else 'MISS'}  (gen {tg:.0f} s, {job.runtime_s / 60:.0f} min to mill)",
+                  f"{'OK' if ok else 'MISS'}  (max at x={rep.scallop_at[0]:.1f} y={rep.scallop_at[1]:.1f}, "
+                  f"99.9th percentile {p999:.4f}; gen {tg:.0f} s, {job.runtime_s / 60:.0f} min to mill)",
                   flush=True)
 
 

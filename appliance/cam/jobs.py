@@ -121,7 +121,9 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
     if z_zero is None:
         m = parsed.meta("inkslice z_offset")
         z_zero = -float(m) if m else 0.0
-    sampler = Sampler(hm)
+    # edges on: the opening (what the cutter can reach at all) must see the part's
+    # edge as the toolpath did, or the band along uphill edges counts as scallop
+    sampler = Sampler(hm, edge_step=resolution / 2)
     top = sampler.z_max + 1.0
     stock = new_stock(sampler, resolution, top)
     sim = simulate(parsed, cut, stock, z_zero)

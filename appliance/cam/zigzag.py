@@ -373,7 +373,10 @@ def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
     h = st.scallop
     lo_ok, hi_ok, aim = 0.90 * h, 0.98 * h, 0.95 * h
     probe = _PassProbe(sampler, st, e1, e2, t0, n)
-    s_cap = 0.95 * st.cutter.diameter
+    # never more than 1.5 x the flat-surface stepover: convex surfaces allow a
+    # little more, but a cross-section where nothing could be measured (the
+    # pass along an uphill edge touching only the edge) must not open a gap
+    s_cap = min(0.95 * st.cutter.diameter, 1.5 * flat_stepover(st.cutter, h))
     s_min = max(0.02 * flat_stepover(st.cutter, h), st.resolution / 10)
     guess = flat_stepover(st.cutter, h)
     done = [probe.pass_at(s0)]
