@@ -91,7 +91,7 @@ def camera_centre(cam):
     return camera_centre_xy(cam.K, cam.homography)
 
 
-def rendered(quick, samples, preset):
+def rendered(quick, samples, preset, keep=None):
     """Render (renderer team), extract (vision team), reconstruct with and without corrections."""
     import json
     import tempfile
@@ -104,13 +104,15 @@ def rendered(quick, samples, preset):
     for name in samples:
         s = surfaces.get(name)
         with tempfile.TemporaryDirectory(prefix="surface-bench-") as tmp:
-            folder = Path(tmp) / name
+            tmp = keep or tmp                     # --keep DIR: render once, re-process later
+            folder = Path(tmp) / f"{name}-{preset}"
             t0 = time.perf_counter()
-            render_scan(s, folder, step_mm=1.0, rig=Rig(), effects=preset, seed=1)
+            if not (folder / "scan.json").is_file():
+                render_scan(s, folder, step_mm=1.0, rig=Rig(), effects=preset, seed=1)
             t1 = time.perf_counter()
             scan = load_scan(folder)
-            truth = json.loads((Path(tmp) / f"{name}.truth.json").read_text())
-            ex = WaterlineExtractor(scan.camera)
+            truth = json.loads((Path(tmp) / f"{name}-{preset}.truth.json").read_text())
+            ex = WaterlineExtractor(scan.camera, no_part="empty")
             lines = []
             for ref in sorted(scan.frames, key=lambda f: -f.level_mm):
                 try:
@@ -139,9 +141,10 @@ def main():
     ap.add_argument("--only", choices=("speed", "ideal", "rendered"))
     ap.add_argument("--samples", default="sample1,sample2,sample3,sample4")
     ap.add_argument("--effects", default="physics")
+    ap.add_argument("--keep", help="folder to keep rendered scans in (and reuse)")
     a = ap.parse_args()
     if a.only == "rendered":
-        rendered(a.quick, a.samples.split(","), a.effects)
+        rendered(a.quick, a.samples.split(","), a.effects, a.keep)
         return
     if a.only in (None, "speed"):
         speed(a.quick)

@@ -306,7 +306,7 @@ class FitProblem:
         out[self.active] = full
         return out
 
-    def solve(self, blocks, lam, x0=None, maxiter=400):
+    def solve(self, blocks, lam, x0=None, maxiter=150):
         """Minimise the data misfit + lam * thin-plate energy by conjugate gradients,
         from `x0` (the gap-filled data): the data pin almost every node, so the
         start is close and a few hundred Jacobi-preconditioned steps suffice."""
@@ -321,7 +321,7 @@ class FitProblem:
         else:
             diag = M.diagonal()
             pre = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
-            sol, _ = cg(M, rhs, x0=start, rtol=1e-10, maxiter=maxiter, M=pre)
+            sol, _ = cg(M, rhs, x0=start, rtol=1e-8, maxiter=maxiter, M=pre)
         z = np.full(self.lat.shape, np.nan)
         z[self.active] = sol
         return z

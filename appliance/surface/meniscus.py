@@ -12,8 +12,9 @@ Correction per waterline point: estimate beta (from the spacing of the
 neighbouring waterlines first, then from the current surface fit), then the
 point's height is L + h(beta) and its position is moved back by the
 perspective. Where a wall is nearer than the contact line needs to climb
-(distance to the part's outline < h_wall / slope), the ink rests on the wall
-and climbs the full wall height h(pi/2), as on the bench.
+(distance to the part's outline < h(beta) / slope), the ink rests on the wall
+and climbs the full wall height h(pi/2), as on the bench (the virtual bench
+decides it at the free surface: wall when the outline is nearer than h(beta)/slope).
 
 Calibration: a reference part of known shape (sphere or cone) is scanned; the
 (l_c, theta) that make every observed point sit on the known surface at
@@ -66,14 +67,15 @@ def _outline_distance(slices, P):
 
 def _corrected(observed, slopes, model):
     out = []
-    h_wall = float(model.rise(np.pi / 2))
     for s, g in zip(observed, slopes):
         if s.empty:
             out.append(s)
             continue
         g = np.maximum(g, 1e-6)
         beta = np.where(s.wall, np.pi / 2, np.arctan(g))
-        on_wall = s.wall | (_outline_distance(observed, s.P) < h_wall / g)
+        # the bench decides at the free surface: the ink meets the wall when the wall is
+        # nearer than the top's own level curve would be, (top - L) / slope ~ h(beta) / slope
+        on_wall = s.wall | (_outline_distance(observed, s.P) < model.rise(beta) / g)
         beta = np.where(on_wall, np.pi / 2, beta)
         h = model.rise(beta)
         t = s.moved(model.unproject(s.P, h), s.level + h)

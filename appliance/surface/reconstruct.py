@@ -173,7 +173,7 @@ def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
     train.ravel()[held] = np.nan
     h = min(problem.lat.hx, problem.lat.hy)
     curve = []
-    for mult in (0.25, 0.5, 1, 2, 4):
+    for mult in (0.5, 1, 2, 4):
         z = _fit_nodes(problem, train, pts, zp, mult * h, point_weight)
         r = z.ravel()[held] - z_fe.ravel()[held]
         curve.append((mult * h, float(np.sqrt(np.mean(r ** 2)))))
