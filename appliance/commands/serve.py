@@ -25,6 +25,9 @@ def add_arguments(p):
     p.add_argument("--fake", action="store_true",
                    help="serve the simulated FakeBenchService instead of the daemon (UI work, demos)")
     p.add_argument("--no-usb", action="store_true", help="hide USB stick export")
+    p.add_argument("--new-password", action="store_true",
+                   help="replace the admin password by a fresh generated one and print it (demo; "
+                        "logs every session out)")
 
 
 def run(args):
@@ -41,7 +44,7 @@ def run(args):
         if not sock.exists():
             raise DeviceError(sock, "no daemon socket here; start `inkslice daemon` first (or use --fake)")
         service = BenchClient(sock)
-    config = {"https": args.https}
+    config = {"https": args.https, "reset_password": args.new_password}
     if args.no_usb:
         config["usb"] = None
     try:
