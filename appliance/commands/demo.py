@@ -70,7 +70,7 @@ def run(args):
     print(f"Rendering {len(levels)} frames (2048 x 1536, level step {args.step:g} mm, "
           f"effects '{args.effects}') into {scan_dir} ...", flush=True)
     t0 = time.perf_counter()
-    render_scan(surface, scan_dir, levels=levels, effects=args.effects, seed=1)
+    render_scan(surface, scan_dir, levels=levels, effects=args.effects, seed=1, workers=2)
     t1 = time.perf_counter()
     print(f"  rendered in {t1 - t0:.1f} s. Processing with ours and with the dissertation's pipeline ...",
           flush=True)
