@@ -10,7 +10,10 @@ renderer, not the daemon. Processing runs in a child process (see
 appliance/daemon/processing.py); its peak is printed separately.
 
     .venv/bin/python benches/daemon.py            # 2048 x 1536, 80 levels (~2-3 min)
-    .venv/bin/python benches/daemon.py --quick    # 640 x 480, 10 levels
+    .venv/bin/python benches/daemon.py --quick    # 640 x 480, 10 levels, dissertation pipeline
+
+Measured 2026-11-22 (shared 2-core box, load ~15): daemon peak 122 MB (idle 96 MB); the
+processing child 481 MB with the default pipeline (440 MB with --pipeline seed).
 """
 import argparse
 import json
@@ -67,12 +70,18 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="640 x 480, 10 levels")
     ap.add_argument("--keep", action="store_true", help="keep the data folder and print where it is")
+    ap.add_argument("--pipeline", default=None,
+                    help="processing pipeline for the job (default: processing's own; --quick: seed, "
+                         "since our finishing toolpath takes minutes on a busy machine)")
     args = ap.parse_args()
     w, h, n = (640, 480, 10) if args.quick else (2048, 1536, 80)
     surface = get("sphere")
     step = 0.4 if not args.quick else 3.0
     params = {"name": "memory bench", "surface": surface.name, "levels_from_mm": 0.0,
               "levels_to_mm": round(step * (n - 1), 3), "level_step_mm": step, "settle_s": 0.0}
+    pipeline = args.pipeline or ("seed" if args.quick else "")
+    if pipeline:
+        params["pipeline"] = pipeline
     levels = levels_of({k: v for k, v in params.items() if k in DEFAULTS})
     assert len(levels) == n, len(levels)
     tmp = Path(tempfile.mkdtemp(prefix="inkslice-bench-daemon-"))

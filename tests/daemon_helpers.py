@@ -10,8 +10,10 @@ from appliance.sim.fakes import FakeBench
 FINAL = ("done", "failed", "cancelled")
 # the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm; the first level
 # shows a tip 5.5 mm across (a smaller one is taken for a speck by the vision pipeline)
+# The dissertation's pipeline: our finishing toolpath takes minutes on a busy 2-core box,
+# and these tests are about the daemon, not the CAM.
 SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
-        "level_step_mm": 2.0, "settle_s": 0.0}
+        "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
 
 
 def service(tmp_path, faults=None, processor=in_process, **kw):

@@ -37,7 +37,7 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
         assert audit(svc.store) == []
         # the same folder through `inkslice process` (its defaults = the daemon's) gives the same files
         ref = tmp_path / "ref"
-        assert cli_main(["process", str(scan_dir), "-o", str(ref)]) == 0
+        assert cli_main(["process", str(scan_dir), "-o", str(ref), "--pipeline", "seed"]) == 0
         for name in ("heightmap.csv", "toolpath.gcode"):
             assert (ref / name).read_bytes() == svc.job_file(job_id, name).read_bytes(), name
         # the light was on only while capturing, and is off now

@@ -17,7 +17,7 @@ pytestmark = [pytest.mark.simavr,
               pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
                                  reason="needs gcc-avr and simavr (scripts/setup.sh)")]
 PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
-          "level_step_mm": 2.0, "settle_s": 0.0}
+          "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_a_whole_scan_on_simavr_matches_inkslice_process(reference, factory, tmp
     # the stage really went there: the last level's position, counted from STEP edges
     at_home = job["settings"]["level_at_home_mm"]
     assert abs(factory.bench.stage_position_mm() - (at_home - 2.0)) < 1e-9
-    assert cli_main(["process", str(job_dir / "scan"), "-o", str(tmp_path / "cli")]) == 0
+    assert cli_main(["process", str(job_dir / "scan"), "-o", str(tmp_path / "cli"), "--pipeline", "seed"]) == 0
     for name in ("heightmap.csv", "toolpath.gcode"):
         assert (tmp_path / "cli" / name).read_bytes() == (job_dir / name).read_bytes(), name
     report = json.loads((job_dir / "report.json").read_text())

@@ -31,8 +31,9 @@ def options_for(settings: dict) -> dict:
     from .. import process as P
     accepted = set(inspect.signature(P.process).parameters) | set(inspect.signature(P.process_scan).parameters)
     options = {"grid_n": int(settings["grid"])}
-    if settings.get("method"):
-        options["method"] = settings["method"]
+    for key in ("pipeline", "method"):
+        if settings.get(key):
+            options[key] = settings[key]
     if "cam_options" in accepted:
         options["cam_options"] = {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
                                   "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])}

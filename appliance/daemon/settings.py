@@ -26,6 +26,7 @@ DEFAULTS = {
     "preview_width": 480,          # latest_frame() JPEG width
     "auto_resume": False,          # resume an interrupted scan when the daemon starts
     # processing (passed to process_scan; "" = its own default)
+    "pipeline": "",                # "" = processing's default; e.g. "seed" = the dissertation's (fast)
     "method": "",
     "grid": 50,
     "scallop_mm": 0.01,            # finishing: scallop height the stepover is chosen for
@@ -56,7 +57,17 @@ MAY_BE_ZERO = {"levels_from_mm", "settle_s", "min_free_mb"}
 MAX_LEVELS = 5000
 
 
+def pipelines() -> tuple:
+    from ..process import PIPELINES
+    return ("",) + tuple(PIPELINES)
+
+
 def _check_value(key, value):
+    if key == "pipeline":
+        if value not in pipelines():
+            raise SettingError(key, f"must be one of {', '.join(p for p in pipelines() if p)} "
+                                    f"(or empty for the default), got {value!r}")
+        return value
     if key == "method":
         if value not in surface_methods():
             raise SettingError(key, f"must be one of {', '.join(m for m in surface_methods() if m)} "
