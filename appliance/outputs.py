@@ -72,3 +72,27 @@ def _regular_axis(v):
     step = float(np.min(np.diff(v)))
     n = int(round((v[-1] - v[0]) / step)) + 1
     return v[0] + step * np.arange(n)
+
+
+# -- meniscus.json: the ink's calibrated meniscus (inkslice calibrate --reference) ------------
+
+
+def meniscus_json(model) -> dict:
+    """Only the ink's own parameters: the camera's place comes from each scan's calibration."""
+    return {"format": "inkslice.meniscus/1", "capillary_length_mm": float(model.capillary_length_mm),
+            "contact_angle_deg": float(np.degrees(model.contact_angle_rad))}
+
+
+def meniscus_model(doc, camera, where="meniscus"):
+    """A MeniscusModel for one scan from a meniscus.json document and the scan's camera."""
+    from .surface.meniscus import MeniscusModel, camera_centre_xy
+    try:
+        lc = float(doc["capillary_length_mm"])
+        theta = float(doc["contact_angle_deg"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise InkSliceError(where, f"not a meniscus model (needs capillary_length_mm and contact_angle_deg: {e})") \
+            from None
+    if not (0 <= lc <= 20 and -90 <= theta <= 90):
+        raise InkSliceError(where, f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg")
+    centre = camera_centre_xy(camera.K, camera.homography) if camera.K is not None else None
+    return MeniscusModel(lc, float(np.radians(theta)), centre, camera.height_mm)

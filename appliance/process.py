@@ -150,21 +150,21 @@ def _waterline_bounds(waterlines):
 
 
 def meniscus_model(scan, meniscus):
-    """The meniscus correction: a model file from `calibrate --reference`, scan.json's, or none."""
+    """The meniscus correction: a meniscus.json from `calibrate --reference`, scan.json's, or none."""
     if meniscus is False or (meniscus is None and not scan.extra.get("meniscus")):
         return None
-    from .surface import meniscus as men
     if meniscus is None:
-        return men.MeniscusModel.from_json(scan.extra["meniscus"])
-    if isinstance(meniscus, men.MeniscusModel):
-        return meniscus
+        return outputs.meniscus_model(scan.extra["meniscus"], scan.camera, scan.folder / "scan.json")
+    if not isinstance(meniscus, (str, Path)):
+        return meniscus                                  # a MeniscusModel already
     path = Path(meniscus)
     try:
-        return men.MeniscusModel.from_json(json.loads(path.read_text(encoding="utf-8")))
+        doc = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SettingError(path, "meniscus model file does not exist") from None
-    except (ValueError, KeyError, TypeError) as e:
-        raise SettingError(path, f"not a meniscus model ({e})") from None
+    except (ValueError, UnicodeDecodeError) as e:
+        raise SettingError(path, f"not valid JSON ({e})") from None
+    return outputs.meniscus_model(doc, scan.camera, path)
 
 
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):

@@ -1,13 +1,21 @@
-"""inkslice calibrate: camera intrinsics, distortion and the liquid-plane homography.
+"""inkslice calibrate: the camera, or the meniscus.
 
-Reads chessboard images (several views for the lens, one board lying on the
-liquid plane for the homography), runs appliance.vision.calibration and writes
-the result atomically as exactly scan.json's "camera" block. The previous
-calibration is kept as calibration.prev.json; on any error nothing is written.
+Camera: reads chessboard images (several views for the lens, one board lying
+on the liquid plane for the homography), runs appliance.vision.calibration and
+writes the result atomically as exactly scan.json's "camera" block.
+
+Meniscus (--reference sphere|cone --scan SCAN): a scan of a reference part of
+known shape; the contact line's offset from the level on its slopes gives the
+ink's capillary length and contact angle (surface/meniscus.py), written as
+meniscus.json for `inkslice process --meniscus` (the daemon copies it into
+every scan.json).
+
+The previous file is kept as *.prev.json; on any error nothing is written.
 """
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -19,7 +27,7 @@ from ..vision.calibration import Board, BoardPose, CalibrationError, calibrate
 
 NAME = "calibrate"
 ORDER = 30
-HELP = "calibrate the camera from chessboard images (lens + liquid-plane homography)"
+HELP = "calibrate the camera from chessboard images, or the meniscus from a reference scan"
 
 
 def data_dir() -> Path:
@@ -27,22 +35,23 @@ def data_dir() -> Path:
     return Path(env) if env else Path.home() / ".local" / "share" / "inkslice"
 
 
-def default_out() -> Path:
-    return data_dir() / "calibration.json"
+def default_out(reference=False) -> Path:
+    return data_dir() / ("meniscus.json" if reference else "calibration.json")
 
 
 def add_arguments(p):
-    p.add_argument("images", nargs="+", help="chessboard images at different angles (3 or more) for the lens")
-    p.add_argument("--plane", required=True, help="image of the board lying on the liquid plane")
+    p.add_argument("images", nargs="*", help="chessboard images at different angles (3 or more) for the lens")
+    p.add_argument("--plane", help="image of the board lying on the liquid plane")
     p.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
-    p.add_argument("--square-mm", type=float, required=True, help="side of a board square, mm")
+    p.add_argument("--square-mm", type=float, help="side of a board square, mm")
     p.add_argument("--board-origin", nargs=2, type=float, default=(0.0, 0.0), metavar=("X", "Y"),
                    help="object-frame mm of the inner corner seen nearest the image's top-left")
     p.add_argument("--board-angle", type=float, default=0.0,
                    help="direction of the board's rows in the object frame, degrees from +x (default 0)")
     p.add_argument("--out", default=None, help=f"where to write the camera block (default {default_out()})")
     p.add_argument("--reference", choices=("sphere", "cone"), default=None,
-                   help="meniscus calibration from a scan of a reference part (not available yet)")
+                   help="meniscus calibration from a scan of this reference part (give --scan)")
+    p.add_argument("--scan", default=None, help="with --reference: the reference part's scan folder")
 
 
 def _board(args):
@@ -69,8 +78,9 @@ def _read(path):
 
 def run(args):
     if args.reference is not None:
-        # the surface team's meniscus calibration plugs in here (wired by the lead)
-        raise SettingError("--reference", "meniscus calibration from a reference part is not available yet")
+        return run_reference(args)
+    if len(args.images) < 3 or not args.plane or not args.square_mm:
+        raise SettingError("calibrate", "the camera needs 3 or more board images, --plane IMAGE and --square-mm")
     board = _board(args)
     pose = BoardPose(args.board_origin[0], args.board_origin[1], args.board_angle)
     boards = [_read(p) for p in args.images]
@@ -84,4 +94,27 @@ def run(args):
     print(f"  lens: {report['images']} images, corner reprojection RMS {report['reprojection_rms_px']:.3f} px")
     print(f"  liquid plane: corner RMS {report['plane_rms_mm'] * 1000:.1f} um"
           + (f", camera {camera['height_mm']:.1f} mm above the liquid" if "height_mm" in camera else ""))
+    return 0
+
+
+def run_reference(args):
+    from ..process import extract_waterlines
+    from ..scanfile import load_scan
+    from ..sim import surfaces
+    from ..outputs import meniscus_json
+    from ..surface.meniscus import calibrate_meniscus, camera_centre_xy
+    if not args.scan:
+        raise SettingError("--scan", "--reference needs the reference part's scan folder")
+    scan = load_scan(args.scan)
+    cam = scan.camera
+    centre = camera_centre_xy(cam.K, cam.homography) if cam.K is not None else None
+    tank = (scan.extra.get("tank") or {}).get("inner_area_mm2")
+    model = calibrate_meniscus(extract_waterlines(scan), surfaces.get(args.reference), tank_area_mm2=tank,
+                               camera_xy_mm=centre, camera_height_mm=cam.height_mm)
+    out = Path(args.out) if args.out else default_out(reference=True)
+    if out.is_file():
+        atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())
+    atomicio.write_text(out, json.dumps(meniscus_json(model), indent=2) + "\n")
+    print(f"meniscus written to {out}: capillary length {model.capillary_length_mm:.3f} mm, "
+          f"contact angle {math.degrees(model.contact_angle_rad):.2f} deg")
     return 0

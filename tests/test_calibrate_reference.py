@@ -1,0 +1,60 @@
+"""Meniscus calibration from a reference part, end to end on the virtual bench:
+render a sphere with a known meniscus, `inkslice calibrate --reference`, then
+`inkslice process --meniscus` on a scan of another part with the same ink."""
+import json
+
+import pytest
+
+from appliance.cli import main
+from appliance.sim.render import Effects
+from appliance.sim.rig import Rig
+from appliance.sim.scanrender import render_scan
+
+RIG = Rig(width=1024, height=768, focal_px=1900.0, principal_u=515.0, principal_v=381.5)
+INK = Effects(meniscus=True, capillary_length_mm=2.0, contact_angle_deg=10.0, blur_sigma_px=0.7)
+
+
+@pytest.fixture(scope="module")
+def meniscus_file(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("men")
+    render_scan("sphere", tmp / "sphere", step_mm=1.5, rig=RIG, effects=INK, seed=3, workers=2)
+    out = tmp / "meniscus.json"
+    assert main(["calibrate", "--reference", "sphere", "--scan", str(tmp / "sphere"), "--out", str(out)]) == 0
+    return out
+
+
+def test_reference_scan_recovers_the_inks_meniscus(meniscus_file):
+    doc = json.loads(meniscus_file.read_text())
+    assert doc["capillary_length_mm"] == pytest.approx(2.0, abs=0.1)
+    assert doc["contact_angle_deg"] == pytest.approx(10.0, abs=1.5)
+
+
+@pytest.mark.slow
+def test_the_correction_makes_another_part_measure_better(meniscus_file, tmp_path):
+    render_scan("plateau", tmp_path / "plateau", step_mm=1.5, rig=RIG, effects=INK, seed=4, workers=2)
+    errs = {}
+    for name, extra in (("off", []), ("on", ["--meniscus", str(meniscus_file)])):
+        out = tmp_path / name
+        assert main(["process", str(tmp_path / "plateau"), "-o", str(out), "--scallop", "0.2", *extra]) == 0
+        errs[name] = json.loads((out / "report.json").read_text())["statistics"]["inkslice:fit"]["Ea"]
+    assert errs["on"] < 0.5 * errs["off"], errs
+
+
+def test_reference_needs_a_scan(capsys):
+    assert main(["calibrate", "--reference", "cone"]) == 2
+    assert "--scan" in capsys.readouterr().err
+
+
+def test_camera_calibration_needs_its_images(capsys):
+    assert main(["calibrate", "--square-mm", "8"]) == 2
+    assert "3 or more board images" in capsys.readouterr().err
+
+
+def test_a_bad_meniscus_file_is_named(meniscus_file, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"capillary_length_mm": -3, "contact_angle_deg": 0}')
+    render_scan("cone", tmp_path / "cone", levels=[20.0, 12.0], rig=RIG, effects=INK, seed=5)
+    assert main(["process", str(tmp_path / "cone"), "-o", str(tmp_path / "out"), "--meniscus", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.json" in err and "impossible meniscus" in err
+    assert not (tmp_path / "out").exists()
