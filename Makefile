@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 .PHONY: demo test setup setup-test bench clean install
 
 demo: setup
-	$(VENV)/bin/inkslice demo
+	$(VENV)/bin/inkslice demo --serve
 
 test: setup-test
 	$(PY) -m pytest -q

@@ -20,6 +20,12 @@ def add_arguments(p):
     p.add_argument("--step", type=float, default=1.0, help="level step in mm (default 1)")
     p.add_argument("--effects", default="realistic", help="virtual bench effects preset (default realistic)")
     p.add_argument("--out", default="demo-out", help="output folder (default ./demo-out)")
+    p.add_argument("--serve", action="store_true",
+                   help="then run the whole appliance on the simulated bench (firmware under simavr, "
+                        "virtual camera, daemon, web UI) until Ctrl-C")
+    p.add_argument("--serve-only", action="store_true", help="skip the table; only run the appliance")
+    p.add_argument("--port", type=int, default=8080, help="web UI port for --serve (default 8080)")
+    p.add_argument("--part", default="sphere", help="the part on the simulated bench for --serve")
 
 
 TABLE_KEY = {"seed:captured": "captured", "seed:spline": "spline", "seed:nearest": "nearest",
@@ -53,7 +59,34 @@ def check_gcode(path):
     return f"REJECTED by rs274 (exit {r.returncode}): {r.stderr.strip()[:200]}"
 
 
+def serve_appliance(out: Path, part: str, port: int):
+    """The whole appliance on this machine: the AVR firmware under simavr driven by the real
+    stage driver, the virtual camera watching where the simulated stage really is, the
+    daemon, and the web UI on loopback. Runs until interrupted."""
+    from ..daemon.service import BenchService
+    from ..sim import surfaces
+    from ..sim.fakes import SimulatedBenchFactory, small_rig
+    from ..web.demo import serve
+    surfaces.get(part)
+    data = out / "appliance"
+    data.mkdir(parents=True, exist_ok=True)
+    print(f"\nStarting the appliance on the simulated bench (firmware under simavr, part '{part}', "
+          f"data in {data}) ...", flush=True)
+    factory = SimulatedBenchFactory(part, small_rig(640, 480))
+    service = BenchService(data, factory)
+    try:
+        serve(service, data, host="127.0.0.1", port=port, config={"reset_password": True})
+    except KeyboardInterrupt:
+        pass
+    finally:
+        service.close()
+        factory.close()
+    return 0
+
+
 def run(args):
+    if args.serve_only:
+        return serve_appliance(Path(args.out), args.part, args.port)
     from .. import process as proc
     from ..sim import surfaces
     from ..sim.levels import sculpture_levels
@@ -84,4 +117,6 @@ def run(args):
         if (result_dir / name).exists():
             print(f"G-code {result_dir / name}: {check_gcode(result_dir / name)}")
     print(f"Report: {result_dir / 'report.md'}")
+    if args.serve:
+        return serve_appliance(out, args.part, args.port)
     return 0
