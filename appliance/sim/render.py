@@ -537,7 +537,10 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, x0, y0, lvl)
     xc, yc, lc = x0, y0, lvl
     if effects.meniscus:
-        beta = np.where(wwall, np.pi / 2, np.arctan(wslope))
+        # A wall decides the slope only near the wall: far inside a part the nearest
+        # boundary may be its footprint (the top's own slope is ~0 at a summit), and a
+        # wall's 3.8 mm rise there would flood the summit with ink.
+        beta = np.where(wwall & (np.abs(approx) < 1.0), np.pi / 2, np.arctan(wslope))
         h = physics.meniscus_rise(beta, effects.capillary_length_mm,
                                   math.radians(effects.contact_angle_deg)).astype(np.float32)
         # the contact line is h above the free surface: seen in perspective from there
