@@ -48,7 +48,7 @@ def calibrated_camera(tmp: Path) -> dict:
     cols, rows = doc["board"]["inner_corners"]
     images = sorted(str(p) for p in (tmp / "boards").glob("pose_*.png"))
     out = tmp / "calibration.json"
-    assert cli([*images, "--plane", str(tmp / "boards" / "plane.png"), "--pattern", f"{cols}x{rows}",
+    assert cli(["calibrate", *images, "--plane", str(tmp / "boards" / "plane.png"), "--pattern", f"{cols}x{rows}",
                 "--square-mm", str(doc["board"]["square_mm"]), "--board-origin", str(pose["x0"]), str(pose["y0"]),
                 "--board-angle", str(pose["angle_deg"]), "--out", str(out)]) == 0
     return json.loads(out.read_text())
