@@ -272,7 +272,9 @@ def toolpath_files(job: Job, cam_options=None) -> dict:
     from .cam.cutters import parse_cutter
     from .cam.jobs import finishing_gcode
     from .cam.zigzag import FinishSettings
-    opts = dict(cutter="ball6", scallop=0.01, dialect="linuxcnc")
+    # 0.05 mm: a 0.01 mm finish on a 100 mm part costs our planner ~100 s of CPU here (minutes
+    # on a Pi); ask for it with --scallop or the bench setting when the part deserves it
+    opts = dict(cutter="ball6", scallop=0.05, dialect="linuxcnc")
     opts.update(cam_options or {})
     try:
         settings = FinishSettings(parse_cutter(opts["cutter"]), scallop=opts["scallop"])

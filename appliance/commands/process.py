@@ -25,7 +25,7 @@ def add_arguments(p):
     p.add_argument("--meniscus", default=None,
                    help="meniscus model JSON from `inkslice calibrate --reference` (default: scan.json's, if any)")
     p.add_argument("--cutter", default="ball6", help="finishing cutter (default ball6)")
-    p.add_argument("--scallop", type=float, default=0.01, help="finishing scallop height, mm (default 0.01)")
+    p.add_argument("--scallop", type=float, default=0.05, help="finishing scallop height, mm (default 0.05)")
     p.add_argument("--dialect", default="linuxcnc", help="G-code dialect (default linuxcnc)")
 
 

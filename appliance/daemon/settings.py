@@ -29,7 +29,7 @@ DEFAULTS = {
     "pipeline": "",                # "" = processing's default; e.g. "seed" = the dissertation's (fast)
     "method": "",
     "grid": 50,
-    "scallop_mm": 0.01,            # finishing: scallop height the stepover is chosen for
+    "scallop_mm": 0.05,            # finishing: scallop height the stepover is chosen for
     # the machine and cutter (kept with the job; used by the toolpath stage)
     "cutter_type": "ball",
     "cutter_diameter_mm": 6.0,
