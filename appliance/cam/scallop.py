@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from .cutters import Cutter
+from .segments import golden_section
 
-_GOLD = (np.sqrt(5.0) - 1.0) / 2.0
 
 
 def ball_scallop(radius, stepover):
@@ -77,20 +77,6 @@ def swept_offset(cutter: Cutter, dy, slope):
 
 def _golden_min(cutter, dy, t, c, iters=40):
     f = lambda dx: cutter.profile(np.minimum(np.hypot(dx, dy), cutter.radius)) - t * dx
-    lo = np.zeros(dy.shape)
-    hi = c.copy()
-    x1 = hi - _GOLD * (hi - lo)
-    x2 = lo + _GOLD * (hi - lo)
-    f1, f2 = f(x1), f(x2)
-    for _ in range(iters):
-        left = f1 <= f2
-        hi = np.where(left, x2, hi)
-        lo = np.where(left, lo, x1)
-        x2n = np.where(left, x1, lo + _GOLD * (hi - lo))
-        x1n = np.where(left, hi - _GOLD * (hi - lo), x2)
-        f1n = np.where(left, f(x1n), f2)
-        f2 = np.where(left, f1, f(x2n))
-        f1 = f1n
-        x1, x2 = x1n, x2n
+    _, f1, _, f2, _, _ = golden_section(f, np.zeros(dy.shape), c.copy(), iters)
     ends = np.minimum(f(np.zeros(dy.shape)), f(c))
     return np.minimum(np.minimum(f1, f2), ends)

@@ -68,11 +68,11 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     return np.where(ok, val, np.inf)
 
 
-def _golden(cutter, az, wz, W2, tm, dperp2, lo, hi, iters=20):
-    R = cutter.radius
-    f = lambda t: az + wz * t + cutter.profile(np.sqrt(np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)))
-    lo = np.array(lo, float, copy=True)
-    hi = np.maximum(np.array(hi, float, copy=True), lo)
+def golden_section(f, lo, hi, iters):
+    """Golden-section search for the minimum of f on [lo, hi], element by element.
+
+    Returns the final bracket: its two inner points with their values, and its ends.
+    """
     x1 = hi - _GOLD * (hi - lo)
     x2 = lo + _GOLD * (hi - lo)
     f1, f2 = f(x1), f(x2)
@@ -86,6 +86,15 @@ def _golden(cutter, az, wz, W2, tm, dperp2, lo, hi, iters=20):
         f2 = np.where(left, f1, f(x2n))
         f1 = f1n
         x1, x2 = x1n, x2n
+    return x1, f1, x2, f2, lo, hi
+
+
+def _golden(cutter, az, wz, W2, tm, dperp2, lo, hi, iters=20):
+    R = cutter.radius
+    f = lambda t: az + wz * t + cutter.profile(np.sqrt(np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)))
+    lo = np.array(lo, float, copy=True)
+    hi = np.maximum(np.array(hi, float, copy=True), lo)
+    x1, f1, x2, f2, lo, hi = golden_section(f, lo, hi, iters)
     best = np.where(f1 <= f2, x1, x2)
     # the ends of the interval too (a flat bottom makes the minimum sit there)
     e0, e1, fb = f(lo), f(hi), f(best)
