@@ -40,8 +40,10 @@ def run(factory, data, socket_path=None, processor="child") -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
+    from ..hw.usb import UsbExporter             # the bench button's long press copies to a stick
     service = BenchService(data, factory, processor=child_process if processor == "child" else in_process,
-                           disk_free_mb=getattr(factory, "disk_free_mb", free_mb))
+                           disk_free_mb=getattr(factory, "disk_free_mb", free_mb),
+                           usb=getattr(factory, "usb", None) or UsbExporter())
     server = rpc.serve(service, socket_path)
     if service.interrupted:
         log.warning("interrupted jobs found at start: %s", ", ".join(service.interrupted))

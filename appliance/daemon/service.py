@@ -9,7 +9,10 @@ methods).
 
 Thread-safe: one lock guards the state; one background thread runs a scan at
 a time (runner.py); one panel thread polls the button and drives the status
-LED and display. Device factories are injected so the same service drives
+LED and display. The button: a short press starts or stops a scan, a long
+press (held ~2 s, see hw/gpio.py) copies the newest job's G-code to the USB
+stick (hw/usb.py) in a thread of its own; the outcome is shown on the display,
+in state()["notice"] (the web UI's dashboard) and in the event log. Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
 or the in-memory fakes.
 
@@ -36,6 +39,7 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError
 from . import settings as S
+from .notices import usb_notice
 from .levels import LevelPlan
 from .processing import child_process
 from .recovery import recover
@@ -45,6 +49,7 @@ from .store import ACTIVE, Store
 
 log = logging.getLogger("inkslice.service")
 STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
+NOTICE_S = 30.0         # how long a front-panel notice (USB copy) holds the display
 
 
 def lan_address() -> str:
@@ -59,15 +64,19 @@ def lan_address() -> str:
 
 class BenchService:
     def __init__(self, data_dir, factory, processor: Callable = child_process,
-                 disk_free_mb: Callable = free_mb, panel_interval_s: float = 0.25):
+                 disk_free_mb: Callable = free_mb, panel_interval_s: float = 0.25, usb=None):
         self.data_dir = Path(data_dir)
         self.store = Store(self.data_dir)
         self.factory = factory
         self.processor = processor
         self.disk_free_mb = disk_free_mb
+        self.usb = usb                  # hw.usb.UsbExporter (sticks(), export()); None: no USB export
+        self._usb_thread: threading.Thread | None = None
+        self._shown_notice: tuple[float, list[str]] | None = None     # (until, lines) on the display
         self._lock = threading.RLock()
         self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
-                       "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {}}
+                       "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {},
+                       "notice": None}
         self._subscribers: list[queue.Queue] = []
         self._frame = None
         self._job_settings = {}
@@ -195,10 +204,36 @@ class BenchService:
     def events(self, job_id=None, limit=200) -> list[dict]:
         return self.store.events(job_id, limit)
 
+    def export_latest_gcode(self) -> dict:
+        """What the long press does: the newest finished job's G-code onto the USB stick.
+
+        Returns the outcome as a notice ({"code", "ok", "text", ...}; codes in notices.USB),
+        which is also put on the display, in state()["notice"] and in the event log.
+        Never raises for a missing stick or job: those are outcomes the operator reads.
+        """
+        from ..hw.usb import NoStick, NothingToCopy, copy_latest_gcode
+        if self.usb is None:
+            return self._notify(usb_notice("off"))
+        self._notify(usb_notice("copying"), log_it=False)
+        try:
+            result = copy_latest_gcode(self, self.usb)
+        except NoStick:
+            return self._notify(usb_notice("no_stick"))
+        except NothingToCopy:
+            return self._notify(usb_notice("no_gcode"))
+        except InkSliceError as e:
+            return self._notify(usb_notice("failed", problem=e.problem))
+        except Exception as e:                      # an unexpected bug must still reach the operator
+            log.exception("USB export")
+            return self._notify(usb_notice("failed", problem=f"{type(e).__name__}: {e}"))
+        return self._notify(usb_notice("copied", name=result.name))
+
     def close(self) -> None:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
         self._closing.set()
         self._panel_thread.join(timeout=5)
+        if self._usb_thread is not None:
+            self._usb_thread.join(timeout=30)       # let a copy finish its fsync and verification
         self._panel.close()
         self.store.close()
 
@@ -318,16 +353,41 @@ class BenchService:
                 self._poll_button()
                 st = self.state()
                 self._drive_led(st, tick)
-                lines = self._display_lines(st)
+                lines = self._notice_lines() or self._display_lines(st)
                 if lines != last_lines and self._panel.display is not None:
                     self._panel.display.show(lines)
                     last_lines = lines
             except Exception as e:                 # a flaky I2C bus must not kill the panel
                 log.warning("front panel: %s", e)
 
-    def _poll_button(self):
-        if self._panel.button is None or not self._panel.button.poll():
+    def _notify(self, notice: dict, log_it: bool = True) -> dict:
+        """A front-panel outcome: on the display for NOTICE_S, in the state, in the event log."""
+        lines = notice.pop("lines")
+        with self._lock:
+            self._shown_notice = (time.monotonic() + NOTICE_S, lines)
+        self._set(notice=notice)
+        if log_it:
+            (log.info if notice.get("ok", True) else log.warning)("button: %s", notice["text"])
+            self.store.event(None, notice["kind"], notice["text"])
+        return notice
+
+    def _start_usb_export(self):
+        if self._usb_thread is not None and self._usb_thread.is_alive():
+            self._notify(usb_notice("busy"), log_it=False)
             return
+        log.info("button: long press, copying the latest G-code to the USB stick")
+        self._usb_thread = threading.Thread(target=self.export_latest_gcode, name="inkslice-usb", daemon=True)
+        self._usb_thread.start()
+
+    def _poll_button(self):
+        press = self._panel.button.poll() if self._panel.button is not None else None
+        if not press:
+            return
+        if press == "long":
+            self._start_usb_export()
+            return
+        with self._lock:
+            self._shown_notice = None               # any short press gives the display back to the scan
         if self._thread is not None and self._thread.is_alive():
             log.info("button: cancelling the scan")
             threading.Thread(target=self.cancel, daemon=True).start()
@@ -342,6 +402,16 @@ class BenchService:
         # steady on while working, slow blink when failed, off otherwise
         on = s in ACTIVE or (s == "failed" and tick % 4 < 2)
         self._panel.led.set(on)
+
+    def _notice_lines(self) -> list[str] | None:
+        with self._lock:
+            shown = self._shown_notice
+            if shown is None:
+                return None
+            if time.monotonic() > shown[0]:
+                self._shown_notice = None
+                return None
+        return [*shown[1], lan_address()]
 
     @staticmethod
     def _display_lines(st) -> list[str]:

@@ -42,6 +42,14 @@ SLACK = 1 << 20
 FAT_BAD = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
 
 
+class NoStick(DeviceError):
+    """No USB stick is plugged in (or not the one asked for)."""
+
+
+class NothingToCopy(DeviceError):
+    """No finished job has G-code (the long press has nothing to copy)."""
+
+
 @dataclass
 class Stick:
     id: str             # stable while plugged: the device name (sda1)
@@ -205,7 +213,7 @@ class UsbExporter:
         sticks = self.sticks()
         stick = next((s for s in sticks if s.id == stick_id), None) if stick_id else (sticks[0] if sticks else None)
         if stick is None:
-            raise DeviceError("usb", "no USB stick is plugged in" if not sticks else f"no stick {stick_id!r}")
+            raise NoStick("usb", "no USB stick is plugged in" if not sticks else f"no stick {stick_id!r}")
         folder = Path(stick.mount) / self.subfolder if self.subfolder else Path(stick.mount)
         with self._lock:
             try:
@@ -229,4 +237,4 @@ def copy_latest_gcode(service, exporter: UsbExporter) -> CopyResult:
         if name:
             job_id = job.get("id") or job.get("job_id")
             return exporter.export(service.job_file(job_id, name), None, f"{job_id}-{name}")
-    raise DeviceError("usb", "no finished job with G-code to copy")
+    raise NothingToCopy("usb", "no finished job with G-code to copy")

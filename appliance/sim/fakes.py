@@ -182,19 +182,22 @@ class FakeLine(OutputLine):
 
 
 class FakeButton:
-    """A push button; tests press it with .press()."""
+    """A push button; tests press it with .press() (short) or .long_press() (held ~2 s).
+
+    poll() answers like GpioButton's: "short", "long" or None, once per press.
+    """
 
     def __init__(self):
-        self._presses = 0
+        self._presses: list[str] = []
 
     def press(self):
-        self._presses += 1
+        self._presses.append("short")
 
-    def poll(self) -> bool:
-        if self._presses:
-            self._presses -= 1
-            return True
-        return False
+    def long_press(self):
+        self._presses.append("long")
+
+    def poll(self) -> str | None:
+        return self._presses.pop(0) if self._presses else None
 
 
 class FakeDisplay(Display):

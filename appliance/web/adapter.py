@@ -73,8 +73,11 @@ class WebService:
     def _fetch_state(self) -> dict:
         st = dict(self.inner.state())
         st.setdefault("hardware", {})
-        for key in ("job_id", "level_mm", "eta_s", "message"):
+        for key in ("job_id", "level_mm", "eta_s", "message", "notice"):
             st.setdefault(key, None)
+        if isinstance(st["notice"], dict) and isinstance(st["notice"].get("time"), (int, float)):
+            # the age from the box's own clock: a phone's clock may be minutes off
+            st["notice"] = {**st["notice"], "age_s": round(max(0.0, time.time() - st["notice"]["time"]), 1)}
         st.setdefault("levels_done", 0)
         st.setdefault("levels_total", 0)
         return st

@@ -39,6 +39,13 @@
       const badge = $("#state");
       badge.textContent = s; badge.className = "badge s-" + s;
       text("#message", st.message || "");
+      // the bench's own news (the button's USB copy): shown for its first ten minutes
+      const n = st.notice, nb = $("#notice");
+      if (nb) {
+        const fresh = n && n.text && (!n.age_s || n.age_s < 600);
+        text("#notice", fresh ? "Bench: " + n.text : "");
+        nb.className = "small " + (fresh ? (n.ok ? "ok" : "error") : "hidden");
+      }
       const active = ACTIVE.includes(s);
       btn.disabled = false;
       btn.textContent = active ? "Stop scan" : "Start scan";

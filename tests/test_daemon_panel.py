@@ -1,0 +1,129 @@
+"""The bench's front panel: short/long presses, the long press's USB copy, what the display says."""
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from appliance.daemon.service import BenchService
+from appliance.hw.gpio import PressTimer
+from appliance.hw.usb import UsbExporter
+from appliance.sim.fakes import FakeBench
+from daemon_helpers import SCAN, wait_final
+
+
+def light_processor(scan_folder, out_folder, options, stop=None):
+    """Outputs shaped like process_scan's, at no cost: the panel, not the science, is tested here."""
+    from appliance.atomicio import write_text
+    n = len(json.loads((Path(scan_folder) / "scan.json").read_text())["frames"])
+    write_text(Path(out_folder) / "toolpath.gcode", f"G21 G90\nF800\n(levels {n})\nG1 X1 Y2 Z3\nM2\n")
+    write_text(Path(out_folder) / "heightmap.csv", "x,y,z\n0.0000,0.0000,1.0000\n")
+    return {"outputs": ["heightmap.csv", "toolpath.gcode"]}
+
+
+def wait_for(pred, timeout=10.0, what="condition"):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = pred()
+        if got:
+            return got
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_press_timer_tells_short_from_long():
+    t = PressTimer(2.0)
+    assert t.edge(True, 10.0) is None and t.check(11.0) is None
+    assert t.edge(False, 11.5) == "short"
+    assert t.edge(True, 20.0) is None
+    assert t.check(21.9) is None and t.check(22.0) == "long"      # reported while still held
+    assert t.check(23.0) is None and t.edge(False, 24.0) is None   # once, and the release says nothing
+    assert t.edge(True, 30.0) is None and t.edge(False, 32.5) == "long"   # polled only after the release
+    assert t.edge(False, 40.0) is None                             # a release without a press (held at start)
+
+
+@pytest.fixture
+def bench(tmp_path):
+    media = tmp_path / "media"
+    stick = media / "STICK"
+    stick.mkdir(parents=True)
+    mounts = tmp_path / "mounts"
+    mounts.write_text("")
+    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp_path / "nosys")
+    factory = FakeBench("cone")
+    svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.02, usb=usb)
+    yield svc, factory.panel, stick, mounts
+    svc.close()
+
+
+def notice_code(svc):
+    n = svc.state()["notice"]
+    return n and n["code"] not in ("copying",) and n["code"]
+
+
+def long_press(svc, panel):
+    before = svc.state()["notice"]
+    panel.button.long_press()
+    wait_for(lambda: svc.state()["notice"] not in (None, before) and notice_code(svc), what="a USB outcome")
+    return svc.state()["notice"]
+
+
+def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
+    svc, panel, stick, mounts = bench
+    # nothing finished yet
+    n = long_press(svc, panel)
+    assert (n["code"], n["ok"]) == ("no_gcode", False)
+    wait_for(lambda: panel.display.lines[:1] == ["USB: NOTHING"], what="the display")
+    assert svc.state()["state"] == "idle"                  # a long press never starts a scan
+
+    job_id = svc.start_scan(SCAN)
+    assert wait_final(svc, job_id)["status"] == "done"
+    gcode = svc.job_file(job_id, "toolpath.gcode").read_bytes()
+
+    # no stick in
+    n = long_press(svc, panel)
+    assert n["code"] == "no_stick" and "no USB stick" in n["text"]
+    wait_for(lambda: panel.display.lines[:1] == ["USB: NO STICK"], what="the display")
+
+    # a stick in: copied, verified, and the operator is told it is safe to pull it
+    mounts.write_text(f"/dev/sdb1 {stick} vfat rw,relatime 0 0\n")
+    n = long_press(svc, panel)
+    assert n["ok"] and n["code"] == "copied", n
+    name = f"{job_id}-toolpath.gcode"
+    assert (stick / "inkslice" / name).read_bytes() == gcode
+    assert n["text"] == f"copied {name} to the USB stick, safe to remove"
+    lines = wait_for(lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display")
+    assert lines[1] == name[:18] and lines[2] == "safe to remove"
+    assert [p.name for p in (stick / "inkslice").iterdir()] == [name]      # no temporary file left
+    # the event log keeps every outcome, newest first
+    usb_events = [e["message"] for e in svc.events() if e["kind"] == "usb"]
+    assert usb_events[0] == n["text"] and "no USB stick" in usb_events[1] and "no finished job" in usb_events[2]
+
+    # a short press gives the display back to the bench and starts a scan as before
+    panel.button.press()
+    wait_for(lambda: svc.state()["state"] in ("homing", "scanning", "processing", "done"), what="a scan")
+    wait_for(lambda: panel.display.lines[0] != "USB COPY OK", what="the display back")
+    svc.cancel()
+
+
+def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
+    svc, panel, stick, mounts = bench
+    first = svc.start_scan(SCAN)
+    assert wait_final(svc, first)["status"] == "done"
+    mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
+    second = svc.start_scan({**SCAN, "settle_s": 0.2})
+    wait_for(lambda: svc.state()["state"] == "scanning", what="scanning")
+    n = long_press(svc, panel)
+    assert n["code"] == "copied" and first in n["text"]
+    assert svc.state()["state"] in ("scanning", "processing", "done")     # still going
+    assert wait_final(svc, second)["status"] == "done"
+
+
+def test_without_an_exporter_the_long_press_says_usb_is_off(tmp_path):
+    factory = FakeBench("cone")
+    svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.02)
+    try:
+        n = long_press(svc, factory.panel)
+        assert n["code"] == "off" and "switched off" in n["text"]
+    finally:
+        svc.close()
