@@ -39,6 +39,7 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError
 from . import settings as S
+from .firstrun import Pending
 from .notices import usb_notice
 from .levels import LevelPlan
 from .processing import child_process
@@ -73,6 +74,7 @@ class BenchService:
         self.usb = usb                  # hw.usb.UsbExporter (sticks(), export()); None: no USB export
         self._usb_thread: threading.Thread | None = None
         self._shown_notice: tuple[float, list[str]] | None = None     # (until, lines) on the display
+        self._first_run = Pending(self.data_dir)    # the web's first-run password, until the first login
         self._lock = threading.RLock()
         self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
                        "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {},
@@ -353,7 +355,7 @@ class BenchService:
                 self._poll_button()
                 st = self.state()
                 self._drive_led(st, tick)
-                lines = self._notice_lines() or self._display_lines(st)
+                lines = self._notice_lines() or self._password_lines(st) or self._display_lines(st)
                 if lines != last_lines and self._panel.display is not None:
                     self._panel.display.show(lines)
                     last_lines = lines
@@ -412,6 +414,16 @@ class BenchService:
                 self._shown_notice = None
                 return None
         return [*shown[1], lan_address()]
+
+    def _password_lines(self, st) -> list[str] | None:
+        """The first-run password (firstrun.py) while nobody has logged in; a scan's
+        progress takes the screen while it runs."""
+        if st["state"] in ACTIVE:
+            return None
+        password = self._first_run.pending()
+        if not password:
+            return None
+        return ["FIRST LOGIN", "admin password:", password, lan_address()]
 
     @staticmethod
     def _display_lines(st) -> list[str]:

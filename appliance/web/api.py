@@ -21,6 +21,7 @@ from pathlib import Path, PurePosixPath
 from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session
 
 from ..errors import DeviceError, InkSliceError, SettingError
+from . import auth
 from .adapter import ACTIVE, NotOffered
 
 bp = Blueprint("api", __name__)
@@ -491,6 +492,7 @@ def change_password():
     except ValueError as e:
         return err(str(e), 400, "new")
     session["gen"] = gen            # this session stays in; every other one is logged out
+    auth.first_login_done(ext()["config"])
     return jsonify(ok=True)
 
 

@@ -20,11 +20,15 @@ calls nothing else (architecture.md). `config` is a plain dict:
   trusted_proxy     True to take the client address from X-Forwarded-For (default False)
   reset_password    True to replace the admin password by a fresh generated one at start
                     (the demo does, so it can always print one); other sessions end
+  bench_data_dir    the daemon's data folder (default: data_dir; the two units share
+                    /var/lib/inkslice): a generated password is left there for the bench's
+                    display (daemon/firstrun.py) and removed at the first login
 
 The first-run password, if one was just made, is in app.config["FIRST_RUN_PASSWORD"].
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from datetime import timedelta
@@ -32,6 +36,7 @@ from pathlib import Path
 
 from flask import Flask, g, jsonify, redirect, request, session, url_for
 
+from ..daemon import firstrun
 from . import api, auth, pages
 from .adapter import WebService
 from .eta import EtaSmoother
@@ -68,6 +73,13 @@ def create_app(service, config: dict | None = None) -> Flask:
     first_password = creds.ensure_admin()
     if first_password is None and cfg.get("reset_password"):
         first_password = creds.reset_generated()
+    cfg.setdefault("bench_data_dir", cfg["data_dir"])
+    if first_password is not None:
+        try:
+            firstrun.hand_over(cfg["bench_data_dir"], first_password)     # the daemon shows it
+        except OSError as e:
+            logging.getLogger("inkslice.web").warning(
+                "cannot leave the first-run password for the bench display in %s: %s", cfg["bench_data_dir"], e)
     if "usb" not in cfg:
         from ..hw.usb import UsbExporter      # the stick is a device: its code lives in hw
         cfg["usb"] = UsbExporter()

@@ -7,8 +7,9 @@ friends were about exactly that (anonymous control, an open webcam stream).
 - First run: no password exists, so one is generated (12 random characters),
   its scrypt hash is stored in DATA/web/admin.json with mode 0600 and the
   plain text is handed back once to whoever started the server (printed by
-  `inkslice serve` / the demo, and meant for the bench's display). The UI asks
-  to change it after the first login.
+  `inkslice serve` / the demo, and left in DATA/first-run-password (0600) for
+  the daemon to show on the bench's display until the first login, see
+  daemon/firstrun.py). The UI asks to change it after the first login.
 - Sessions are Flask's signed cookies (key in DATA/web/secret_key, 0600),
   HttpOnly and SameSite=Strict always, Secure when the box is served over
   HTTPS (config "https"; a LAN box rarely has a certificate, and a Secure
@@ -209,6 +210,15 @@ class LoginLimiter:
     def succeeded(self, who: str):
         with self._lock:
             self._fails.pop(who, None)
+
+
+def first_login_done(cfg: dict) -> None:
+    """Somebody logged in: the bench's display stops showing the first-run password."""
+    from ..daemon import firstrun
+    try:
+        firstrun.done(cfg.get("bench_data_dir") or cfg["data_dir"])
+    except OSError:
+        pass                        # a read-only folder must not break the login
 
 
 def new_csrf() -> str:

@@ -3,9 +3,10 @@
     from appliance.web.demo import serve
     serve(bench_service, data_dir="var/demo")          # blocks; Ctrl-C stops it
 
-prints the URL and, on first run, the admin password (it is also meant for
-the bench's display). start() does the same in a background thread and
-returns a handle with .url, .password and .stop(), for tests and benches.
+prints the URL and, on first run, the admin password (also left for the
+daemon to show on the bench's display, see daemon/firstrun.py). start() does
+the same in a background thread and returns a handle with .url, .password and
+.stop(), for tests and benches.
 """
 from __future__ import annotations
 

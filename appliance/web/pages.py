@@ -48,6 +48,7 @@ def login():
             session.clear()             # a fresh session (and CSRF token) at every login
             session.permanent = True
             session.update(user="admin", gen=creds.generation(), t=time.time(), csrf=auth.new_csrf())
+            auth.first_login_done(_ext()["config"])
             return redirect(_safe_next(request.form.get("next")))
         limiter.failed(who)
         error, code = "Wrong password.", 401
