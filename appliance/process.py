@@ -170,14 +170,21 @@ def meniscus_model(scan, meniscus):
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
+    from .surface.slices import Perspective
+    from .surface.meniscus import camera_centre_xy
     waterlines = extract_waterlines(scan)
     bounds = _waterline_bounds(waterlines)
-    grid = GridSpec(bounds, spacing_mm=spacing_mm) if spacing_mm else GridSpec(bounds, n=grid_n)
+    # the grid spans the part's outline once the walls' raised edges are put back
+    grid = GridSpec(None, spacing_mm=spacing_mm) if spacing_mm else GridSpec(None, n=grid_n)
     tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
     model = meniscus_model(scan, meniscus)
+    view = Perspective(camera_centre_xy(scan.camera.K, scan.camera.homography), scan.camera.height_mm) \
+        if scan.camera.height_mm and scan.camera.K is not None else None
     out, diag = {}, {}
     for m in methods:
-        rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model))
+        rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model,
+                                                                perspective=view))
+        bounds = rec.diagnostics.get("bounds", bounds)
         out[f"inkslice:{m}"] = rec.heightmap
         diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
                                                      if k in ("wall_points", "points", "seconds", "notes",

@@ -9,7 +9,7 @@ from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
-from appliance.surface.slices import check_waterlines, mark_walls
+from appliance.surface.slices import Perspective, check_waterlines, mark_walls
 from appliance.surface.stl import heightmap_to_stl
 from appliance.vision.types import Waterline
 
@@ -95,6 +95,42 @@ def test_walls_are_found_and_kept_out_of_the_fit():
     # a plane is in the smoothness term's null space: walls removed, it comes back exactly,
     # right to the edges where the dissertation's errors piled up
     assert np.nanmax(e[inside]) < 0.02
+
+
+def _seen_from(camera, surface, lines):
+    """What a camera over the tank sees: each wall hidden by its top edge, which stands
+    (edge height - level) above the ink and so appears further from the camera's foot."""
+    C, H = np.asarray(camera.xy), camera.height_mm
+    seen = []
+    for w in lines:
+        loops = []
+        for lp in w.loops:
+            inward = lp + 1e-3 * (np.array([20.0, 15.0]) - lp) / np.linalg.norm(np.array([20.0, 15.0]) - lp, axis=1)[:, None]
+            on_wall = ~surface.inside(lp[:, 0] + 2e-3 * np.sign(lp[:, 0] - 20.0), lp[:, 1]) | \
+                ~surface.inside(lp[:, 0], lp[:, 1] + 2e-3 * np.sign(lp[:, 1] - 15.0))
+            h = np.where(on_wall, np.maximum(surface.height(*inward.T) - w.level_mm, 0.0), 0.0)
+            loops.append(C + (lp - C) * (H / (H - h))[:, None])
+        seen.append(Waterline(w.level_mm, loops))
+    return seen
+
+
+def test_walls_seen_by_their_raised_edges_are_put_back():
+    # the wedge 60 mm off the camera's foot: its far wall's edge, 9 mm above the ink at
+    # the lowest level, appears ~2 mm outside the part; level curves on the top do not move
+    camera = Perspective((-20.0, 45.0), 300.0)
+    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
+    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
+    P = np.vstack([w.points for w in seen])
+    assert P[:, 0].max() > 41.5                               # the far wall looks 1.5+ mm further out
+    naive = reconstruct(seen, GridSpec(None, n=(41, 31)))
+    rec = reconstruct(seen, GridSpec(None, n=(41, 31)), ReconstructOptions(perspective=camera))
+    xmin, xmax, ymin, ymax = rec.diagnostics["bounds"]
+    assert xmax == pytest.approx(40.0, abs=0.05) and ymin == pytest.approx(0.0, abs=0.05)
+    assert rec.diagnostics["wall_points"] > 0.5 * sum(len(w.points) for w in seen)
+    e, inside = _errors(WEDGE, rec)
+    en, inside_n = _errors(WEDGE, naive)
+    assert np.nanmean(e[inside]) < 0.02
+    assert np.nanmean(en[inside_n]) > 5 * np.nanmean(e[inside])
 
 
 def test_grid_by_spacing_and_by_count():

@@ -6,10 +6,11 @@ still submerged at the level above, k - 1; between the two the top surface
 crosses the node, and the signed distances to the two waterlines place it:
     z = z_lo + (z_hi - z_lo) * d_lo / (d_lo + d_hi).
 This follows islands that merge and holes without any special case, because
-it only asks "inside or outside" of each frame. Nodes whose nearest lower
-waterline point is a wall get no value (the wall says nothing about the top);
-nodes exposed already at the highest frame (the part's very top) get none
-either: the fit's smoothness term extrapolates them.
+it only asks "inside or outside" of each frame. The distances are to the
+level-curve stretches of each waterline only (walls say nothing about where
+the top crosses a level), so a node beside a wall is placed by the level
+curves around it, and a node on the outline itself (the rim) is exposed at
+the levels whose waterline runs along the wall through it.
 
 The fit (gridfit / ANUDEM style) solves, on the lattice nodes over the part,
     min  sum_points (bilinear z(p) - z_p)^2 + w_cell sum_nodes (z - z_fe)^2
@@ -31,6 +32,7 @@ from scipy.sparse.linalg import cg, spsolve
 from .slices import Slice, polyline_distance
 
 _SHIFT = 8      # fillPoly sub-pixel bits
+DIRECT_MAX = 12000  # unknowns up to which the fit is solved directly (SuperLU), else by CG
 
 
 @dataclass
@@ -129,6 +131,16 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
     z = np.full(lat.shape, np.nan)
     visible = [k for k in range(K) if not slices[k].empty]
     top = visible[0]
+    if on_outline.any():
+        # a node on the outline is on the rim: it is out of the ink at every level whose
+        # waterline runs through it (along the wall), under at the others
+        oq = np.column_stack([X[on_outline], Y[on_outline]])
+        fr = np.full(len(oq), K, np.int32)
+        tol = max(footprint_tol_mm, 1e-6)
+        for k in range(K - 1, top - 1, -1):
+            d, _ = polyline_distance(slices[k], oq)
+            fr[d <= tol] = k
+        first[on_outline] = fr
     hmax = max(lat.hx, lat.hy)
     for k in range(top, K):
         sel = first == k
@@ -136,6 +148,7 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
             continue
         q = np.column_stack([X[sel], Y[sel]])
         kq = first[sel]
+        rim = on_outline[sel]
         lo_span = order // 2
         # one more level uphill than the rule needs: where the lower waterlines are
         # walls the node is extrapolated from the uphill ones alone
@@ -152,9 +165,16 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
             # (within a node and a half) the exact side of the nearest segment
             in_mask = kq <= j
             far_node = np.abs(sd) > 1.5 * hmax
-            S[:, c] = np.where(far_node, np.where(in_mask, 1.0, -1.0) * np.abs(sd), sd)
-            Z[:, c] = sl.z[i]
-            ok[:, c] = ~sl.wall[i]
+            side = np.where(far_node | rim, in_mask, sd >= 0)
+            # the distance that places the node is the one to the level curve: a wall
+            # beside the node says nothing about where the top crosses the level
+            cv = sl.level_curve()
+            if cv.empty:
+                continue
+            d, ic = polyline_distance(cv, q)
+            S[:, c] = np.where(side, d, -d)
+            Z[:, c] = cv.z[ic]
+            ok[:, c] = True
         below = ok & (S >= 0)
         n_ok = ok.sum(axis=1)
         if k == top:
@@ -191,8 +211,11 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         # a polynomial that leaves its bracket is not to be trusted: let the fit decide
         zz[np.abs(raw - zz) > 0.25 * (zmax - zmin)] = np.nan
         zz[~good] = np.nan
+        # nor one that lands far outside the levels it was made from (near-equal distances
+        # to two waterlines blow the Lagrange weights up)
+        spread = levels.max() - levels.min()
+        zz[~np.isfinite(raw) | (raw < levels.min() - spread) | (raw > levels.max() + spread)] = np.nan
         z[sel] = zz
-    z[on_outline] = np.nan
     return z, first, footprint
 
 
@@ -316,7 +339,7 @@ class FitProblem:
         M = (M + sp.identity(self.n, format="csr") * 1e-9).tocsr()
         rhs = A.T @ b
         start = None if x0 is None else x0[self.active]
-        if self.n <= 3000:
+        if self.n <= DIRECT_MAX:
             sol = spsolve(M.tocsc(), rhs)
         else:
             diag = M.diagonal()

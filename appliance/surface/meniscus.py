@@ -78,7 +78,9 @@ def _corrected(observed, slopes, model):
         on_wall = s.wall | (_outline_distance(observed, s.P) < model.rise(beta) / g)
         beta = np.where(on_wall, np.pi / 2, beta)
         h = model.rise(beta)
-        t = s.moved(model.unproject(s.P, h), s.level + h)
+        # a wall is seen by its top edge, not by the contact line climbing it: only the
+        # level-curve points are moved back by the perspective of their raised contact line
+        t = s.moved(model.unproject(s.P, np.where(s.wall, 0.0, h)), s.level + h)
         out.append(t)
     return out
 

@@ -29,18 +29,20 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from . import seed as seed_methods
-from .gridfit import FitProblem, Lattice, bilinear, exposed_mask, first_exposure, point_data
+from .gridfit import DIRECT_MAX, FitProblem, Lattice, bilinear, exposed_mask, first_exposure, point_data
 from .heightmap import HeightMap
-from .slices import check_waterlines, mark_walls
+from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
 METHODS = ("fit",) + seed_methods.METHODS
+RIM_PASSES = 2       # fits with walls present: the second takes each wall edge's height from the first
 
 
 @dataclass(frozen=True)
 class GridSpec:
     """Output lattice: bounds (xmin, xmax, ymin, ymax) in mm and either n = (nx, ny)
-    nodes spanning the bounds inclusive (the dissertation's 50 x 50) or a spacing in mm."""
-    bounds: tuple
+    nodes spanning the bounds inclusive (the dissertation's 50 x 50) or a spacing in mm.
+    bounds None: the part's outline as the waterlines show it (after the perspective)."""
+    bounds: tuple | None
     n: tuple | None = None
     spacing_mm: float | None = None
 
@@ -71,10 +73,11 @@ class ReconstructOptions:
     smoothing_mm: float | None = None        # thin-plate smoothing length; None = cross-validate
     wall_tol_mm: float = 0.03                # a waterline moving less than this between levels is a wall
     lattice_max: int = 241                   # internal lattice nodes per side (fit size)
-    point_weight: float = 0.0                # weight of a raw waterline point vs a first-exposure node height
+    point_weight: float = 0.3                # weight of a raw waterline point vs a first-exposure node height
     footprint_tol_mm: float | None = None    # default: a quarter of the lattice spacing
     tank_area_mm2: float | None = None       # displacement correction when given
     meniscus: object = None                  # meniscus.MeniscusModel when the correction is wanted
+    perspective: Perspective | None = None   # camera foot and height: walls seen by their raised edges
     meniscus_iterations: int = 2
 
 
@@ -92,7 +95,10 @@ def _lattice_for(xo, yo, lattice_max):
     """A lattice that contains the output nodes when the output is coarse, else its own."""
     n = max(xo.size, yo.size)
     if n <= lattice_max:
-        r = 1
+        # a coarse output (the dissertation's 50 x 50) is fitted on a lattice twice as fine,
+        # small enough to solve directly: the waterline points then pin the surface between
+        # the output nodes instead of being smeared over a whole output cell
+        r = 2 if ((xo.size - 1) * 2 + 1) * ((yo.size - 1) * 2 + 1) <= DIRECT_MAX else 1
         lx = np.linspace(xo[0], xo[-1], (xo.size - 1) * r + 1)
         ly = np.linspace(yo[0], yo[-1], (yo.size - 1) * r + 1)
         return Lattice(lx, ly), r
@@ -215,41 +221,41 @@ def _seed_method(name, slices, xo, yo):
     return seed_methods.run_method(name, xo, yo, pts, levels, exposed)
 
 
-def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None = None) -> Reconstruction:
-    opt = options or ReconstructOptions()
-    if opt.method not in METHODS:
-        raise SettingError("method", f"unknown surface method {opt.method!r}; known: {', '.join(METHODS)}")
-    t0 = time.perf_counter()
-    xo, yo = grid.axes()
-    slices, notes = check_waterlines(waterlines)
-    diag = {"notes": notes, "levels_in_mm": [s.level for s in slices]}
+def _corrected_levels(seen, opt, diag, rim_height=None):
+    """Wall edges put back where the walls are, then the displacement's true levels."""
+    slices = seen
+    if opt.perspective is not None:
+        # walls are seen by their top edges, raised and pushed out by the perspective:
+        # put them back before anything measures the part's outline or areas
+        slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height)
     if opt.tank_area_mm2:
         from .displacement import correct_slices
-        slices, disp = correct_slices(slices, opt.tank_area_mm2)
-        diag["displacement"] = disp
-    diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)
-    diag["points"] = int(sum(len(s.P) for s in slices))
-    if opt.method != "fit":
-        if opt.meniscus is not None:
-            from .meniscus import correct_slices_from_spacing
-            slices = correct_slices_from_spacing(slices, opt.meniscus)
-        hm = _seed_method(opt.method, slices, xo, yo)
-        diag["seconds"] = time.perf_counter() - t0
-        return Reconstruction(hm, None, diag)
+        slices, diag["displacement"] = correct_slices(slices, opt.tank_area_mm2)
+    return slices
 
-    lat, r = _lattice_for(xo, yo, opt.lattice_max)
-    ftol = opt.footprint_tol_mm if opt.footprint_tol_mm is not None else 0.25 * min(lat.hx, lat.hy)
-    diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
+
+def _rim_height(lat, z):
+    filled = _filled(z, None)
+    return lambda P: bilinear(lat, filled, P)
+
+
+def _fit_pass(lat, slices, opt, ftol, length, z_prev):
+    """First exposure, the fit (smoothing cross-validated on the first pass) and the
+    meniscus iterations -> (z, z_fe, first, footprint, corrected slices, length, curve or None)."""
     observed = slices
     if opt.meniscus is not None:
-        from .meniscus import correct_slices_from_spacing
-        slices = correct_slices_from_spacing(observed, opt.meniscus)
+        if z_prev is None:
+            from .meniscus import correct_slices_from_spacing
+            slices = correct_slices_from_spacing(observed, opt.meniscus)
+        else:
+            from .meniscus import correct_slices_from_surface
+            slices = correct_slices_from_surface(observed, lat, z_prev, None, opt.meniscus)
     z_fe, first, footprint = first_exposure(lat, slices, ftol)
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
     problem = FitProblem(lat, footprint)
     pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
-    length, curve = opt.smoothing_mm, []
+    curve = None
     if length is None:
         length, curve = _cross_validate(problem, z_fe, pts, zp, opt.point_weight)
         if length is None:
@@ -262,6 +268,52 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             z_fe, first, _ = first_exposure(lat, slices, ftol)
             pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
             z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
+    return z, z_fe, first, footprint, slices, length, curve
+
+
+def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None = None) -> Reconstruction:
+    opt = options or ReconstructOptions()
+    if opt.method not in METHODS:
+        raise SettingError("method", f"unknown surface method {opt.method!r}; known: {', '.join(METHODS)}")
+    t0 = time.perf_counter()
+    xo, yo = grid.axes() if grid.bounds is not None else (None, None)
+    slices, notes = check_waterlines(waterlines)
+    diag = {"notes": notes, "levels_in_mm": [s.level for s in slices]}
+    camera = opt.perspective
+    diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, camera)
+    seen = slices
+    slices = _corrected_levels(seen, opt, diag)
+    auto_bounds = grid.bounds is None
+    if auto_bounds:
+        grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
+        xo, yo = grid.axes()
+        diag["bounds"] = grid.bounds
+    diag["points"] = int(sum(len(s.P) for s in slices))
+    if opt.method != "fit":
+        if opt.meniscus is not None:
+            from .meniscus import correct_slices_from_spacing
+            slices = correct_slices_from_spacing(slices, opt.meniscus)
+        hm = _seed_method(opt.method, slices, xo, yo)
+        diag["seconds"] = time.perf_counter() - t0
+        return Reconstruction(hm, None, diag)
+
+    lat, r = _lattice_for(xo, yo, opt.lattice_max)
+    ftol = opt.footprint_tol_mm if opt.footprint_tol_mm is not None else 0.25 * min(lat.hx, lat.hy)
+    length, curve = opt.smoothing_mm, []
+    passes = RIM_PASSES if camera is not None and any(s.wall.any() for s in seen if not s.empty) else 1
+    z = None
+    for _ in range(passes):
+        if z is not None:
+            # second pass: each wall edge's height from the fitted surface, not the level bracket
+            slices = _corrected_levels(seen, opt, diag, _rim_height(lat, z))
+            if auto_bounds:          # the outline is surer now: the grid follows it
+                grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
+                xo, yo = grid.axes()
+                diag["bounds"] = grid.bounds
+                lat, r = _lattice_for(xo, yo, opt.lattice_max)
+        z, z_fe, first, footprint, slices, length, cv = _fit_pass(lat, slices, opt, ftol, length, z)
+        curve = cv if cv is not None else curve
+    diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices))
     z = np.where(footprint, z, np.nan)
