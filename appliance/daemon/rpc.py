@@ -10,6 +10,14 @@ services share the data folder's group).
 
 BenchClient has the facade's methods and raises the same error types, so
 the web UI cannot tell it from an in-process BenchService.
+
+Connections: the server reads requests off a connection until the client
+closes it, so BenchClient keeps a few connections open and reuses them
+(MAX_CONNECTIONS at once; more callers wait their turn) instead of a connect
+per call: fifty phones behind the web server then mean a handful of daemon
+threads, not fifty. The listen backlog (BACKLOG) is still large, for clients
+that connect on their own (tests, scripts, several web workers): the default
+of 5 refused connections (EAGAIN) as soon as more than five arrived at once.
 """
 from __future__ import annotations
 
@@ -20,6 +28,7 @@ import os
 import socket
 import socketserver
 import threading
+import time
 from pathlib import Path
 
 from .. import errors
@@ -27,6 +36,8 @@ from .. import errors
 log = logging.getLogger("inkslice.rpc")
 METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
            "settings", "update_settings", "events")
+BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
+MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -84,6 +95,7 @@ class _Handler(socketserver.StreamRequestHandler):
 
 class _Server(socketserver.ThreadingMixIn, socketserver.UnixStreamServer):
     daemon_threads = True
+    request_queue_size = BACKLOG
 
 
 def serve(service, path) -> _Server:
@@ -98,11 +110,35 @@ def serve(service, path) -> _Server:
     return server
 
 
-class BenchClient:
-    """The BenchService facade, spoken over the daemon's socket."""
+class _Conn:
+    def __init__(self, sock):
+        self.sock, self.file = sock, sock.makefile("rwb")
 
-    def __init__(self, path, timeout: float = 30.0):
+    def close(self):
+        for c in (self.file, self.sock):
+            try:
+                c.close()
+            except OSError:
+                pass
+
+
+class BenchClient:
+    """The BenchService facade, spoken over the daemon's socket. Thread-safe.
+
+    At most `max_connections` calls are in flight at once, each on a connection
+    kept open for the next call; a caller that finds them all busy waits up to
+    `timeout`. A kept connection found dead (the daemon restarted) is replaced
+    once, transparently, when the request had not reached the daemon or the
+    method only reads.
+    """
+    READ_ONLY = frozenset({"state", "jobs", "job", "job_file", "latest_frame", "settings", "events",
+                           "live_heightmap", "calibration"})
+
+    def __init__(self, path, timeout: float = 30.0, max_connections: int = MAX_CONNECTIONS):
         self.path, self.timeout = str(path), timeout
+        self._slots = threading.BoundedSemaphore(max_connections)
+        self._idle: list[_Conn] = []
+        self._lock = threading.Lock()
 
     def _connect(self, timeout):
         s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -115,13 +151,50 @@ class BenchClient:
                                                              "is inkslice-daemon running?") from None
         return s
 
+    def _exchange(self, conn, request: bytes):
+        """(reply line or b"" on EOF, whether the request was surely not delivered)."""
+        try:
+            conn.file.write(request)
+            conn.file.flush()
+        except (BrokenPipeError, ConnectionResetError):
+            return b"", True
+        try:
+            return conn.file.readline(), False
+        except ConnectionResetError:
+            return b"", False
+
     def _call(self, method, *args, **kwargs):
-        with self._connect(self.timeout) as s, s.makefile("rwb") as f:
-            f.write((json.dumps({"method": method, "args": args, "kwargs": kwargs}) + "\n").encode())
-            f.flush()
-            line = f.readline()
-        if not line:
-            raise errors.DeviceError(f"daemon {self.path}", "closed the connection without a reply")
+        request = (json.dumps({"method": method, "args": args, "kwargs": kwargs}) + "\n").encode()
+        t0 = time.monotonic()
+        if not self._slots.acquire(timeout=self.timeout):
+            raise errors.DeviceError(f"daemon {self.path}", f"no free connection in {self.timeout:.0f} s "
+                                                             "(the daemon is not answering)")
+        try:
+            with self._lock:
+                conn = self._idle.pop() if self._idle else None
+            reused = conn is not None
+            if conn is None:
+                conn = _Conn(self._connect(self.timeout))
+            try:
+                line, undelivered = self._exchange(conn, request)
+                if not line and reused and (undelivered or method in self.READ_ONLY):
+                    conn.close()                    # a connection from before a daemon restart
+                    conn = _Conn(self._connect(max(1.0, self.timeout - (time.monotonic() - t0))))
+                    line, _ = self._exchange(conn, request)
+            except TimeoutError:
+                conn.close()                        # a late reply would answer the next call: drop it
+                raise errors.DeviceError(f"daemon {self.path}",
+                                         f"no answer to {method} in {self.timeout:.0f} s") from None
+            except BaseException:
+                conn.close()
+                raise
+            if not line:
+                conn.close()
+                raise errors.DeviceError(f"daemon {self.path}", "closed the connection without a reply")
+            with self._lock:
+                self._idle.append(conn)
+        finally:
+            self._slots.release()
         reply = json.loads(line)
         if not reply["ok"]:
             e = reply["error"]
@@ -154,4 +227,7 @@ class BenchClient:
                 yield msg["event"]
 
     def close(self):
-        pass
+        with self._lock:
+            idle, self._idle = self._idle, []
+        for conn in idle:
+            conn.close()
