@@ -32,9 +32,44 @@ def light_processor(scan_folder, out_folder, options, stop=None):
     return {"outputs": ["error_inkslice_fit.png", "heightmap.csv", "report.json", "report.md", "toolpath.gcode"]}
 
 
+class ChessboardBench(FakeBench):
+    """The fake bench with the printed calibration board on its base: the camera sees a
+    9 x 6 chessboard of 10 mm squares at 4 px/mm, its first inner corner at pixel (150, 130)."""
+    PX_PER_MM, ORIGIN = 4.0, (150.0, 130.0)
+
+    def open(self, settings, params):
+        import numpy as np
+        devices = super().open(settings, params)
+        img = np.full((480, 640, 3), 255, np.uint8)
+        s, (u0, v0) = 10 * self.PX_PER_MM, self.ORIGIN
+        for j in range(-1, 6):                  # 10 x 7 squares around 9 x 6 inner corners
+            for i in range(-1, 9):
+                if (i + j) % 2 == 0:
+                    x, y = int(u0 + i * s), int(v0 + j * s)
+                    img[y:y + int(s), x:x + int(s)] = 0
+
+        class Board:
+            def capture(self):
+                return img.copy()
+
+            def close(self):
+                pass
+        devices.camera = Board()
+        return devices
+
+
+def on_bench(cls):
+    """Run the test on this device factory instead of the plain FakeBench."""
+    def mark(test):
+        test.bench = cls
+        return test
+    return mark
+
+
 @pytest.fixture(params=["in-process", "socket"])
 def web(tmp_path, request):
-    svc = BenchService(tmp_path / "daemon", FakeBench("cone"), processor=light_processor, panel_interval_s=0.05)
+    factory = getattr(request.function, "bench", FakeBench)("cone")
+    svc = BenchService(tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.05)
     server = client = None
     target = svc
     if request.param == "socket":
@@ -84,9 +119,9 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     assert {f"{job_id}/{n}" for n in info["outputs"]} <= names
     r = c.get("/api/frame.jpg")
     assert r.status_code == 200 and r.data[:2] == b"\xff\xd8"
-    # live features the daemon does not offer are reported as such, not as crashes
-    assert c.get("/api/heightmap/live").status_code == 501
-    assert c.get("/api/calibration").status_code == 501
+    # the daemon's own extras answer too (their tests are below)
+    assert c.get("/api/heightmap/live").status_code == 200
+    assert c.get("/api/calibration").get_json()["step"] == 0
     r = c.patch("/api/settings", json={"dialect": "heidenhain"})
     assert r.status_code == 400 and r.get_json()["where"] == "dialect"
     assert c.patch("/api/settings", json={"dialect": "grbl"}).get_json()["dialect"] == "grbl"
@@ -94,3 +129,128 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     # traversal through the web never reaches the daemon's other files
     for bad in ("..%2fdaemon.db", "scan%2fscan.json", "..", ".hidden"):
         assert c.get(f"/api/jobs/{job_id}/files/{bad}").status_code in (400, 404)
+
+
+def test_the_live_height_map_grows_during_a_scan(web):
+    c, svc = web
+    assert c.get("/api/heightmap/live").status_code == 204          # no scan yet
+    r = c.post("/api/scan", json={**SCAN, "settle_s": 0.15})
+    assert r.status_code == 201
+    counts = []
+    while True:
+        st = c.get("/api/state").get_json()
+        r = c.get("/api/heightmap/live")
+        if r.status_code == 200:
+            hm = r.get_json()
+            assert len(hm["x"]) == len(hm["y"]) == len(hm["z"]) == len(hm["z"][0])
+            counts.append(sum(v is not None for row in hm["z"] for v in row))
+        if st["state"] in ("done", "failed"):
+            break
+    assert st["state"] == "done", st
+    hm = c.get("/api/heightmap/live").get_json()
+    known = [v for row in hm["z"] for v in row if v is not None]
+    # the cone emerges from the ink: the map fills in as the levels go down, never shrinks
+    assert counts == sorted(counts) and 0 < counts[0] < counts[-1] == len(known)
+    assert max(known) == 20.0 and min(known) == 2.0
+    assert any(v is None for row in hm["z"] for v in row)            # the base around the cone
+
+
+@on_bench(ChessboardBench)
+def test_guided_calibration_on_the_daemon(web):
+    c, svc = web
+    cal = c.get("/api/calibration").get_json()
+    assert [s["id"] for s in cal["steps"]] == ["home", "target", "detect", "accept"] and cal["step"] == 0
+    r = c.post("/api/calibration/detect")
+    assert r.status_code == 400 and "home" in r.get_json()["error"]
+    assert c.post("/api/calibration/home").get_json()["step"] == 1
+    # the bench is held by the calibration: no scan meanwhile
+    r = c.post("/api/scan", json=SCAN)
+    assert r.status_code == 400 and "calibration" in r.get_json()["error"]
+    assert c.post("/api/calibration/target").get_json()["step"] == 2
+    cal = c.post("/api/calibration/detect").get_json()
+    d = cal["detected"]
+    assert d["corners"] == 54 and d["plane_rms_mm"] < 0.05 and abs(d["mm_per_px"] - 0.25) < 0.002, d
+    r = c.get("/api/frame.jpg")                                    # the preview with the corners drawn
+    assert r.status_code == 200 and r.data[:2] == b"\xff\xd8"
+    assert c.post("/api/calibration/accept").get_json() == {**cal, "step": 0, "detected": None}
+    cam = svc.store.calibrations()[0]["camera"]
+    import numpy as np
+    H = np.asarray(cam["homography"])
+    # OpenCV puts pixel centres at integers: the corner drawn at column 150 lies at u = 149.5
+    for (u, v), want in (((149.5, 129.5), (0, 0)), ((149.5 + 40 * 8, 129.5), (80, 0)),
+                         ((149.5, 129.5 + 40 * 5), (0, -50))):
+        p = H @ [u, v, 1]
+        assert np.allclose(p[:2] / p[2], want, atol=0.1), (u, v, p[:2] / p[2])
+    assert (cam["width"], cam["height"]) == (640, 480)
+    # the bench is free again
+    r = c.post("/api/scan", json=SCAN)
+    assert r.status_code == 201, r.get_json()
+    assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+
+
+def scan_folder_zip(folder, prefix="myscan/", edit=None, extra=None):
+    doc = json.loads((folder / "scan.json").read_text())
+    if edit:
+        doc = edit(doc)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        z.writestr(prefix + "scan.json", json.dumps(doc))
+        for fr in json.loads((folder / "scan.json").read_text())["frames"]:
+            z.write(folder / fr["file"], prefix + fr["file"])
+        for name, data in (extra or {}).items():
+            z.writestr(prefix + name, data)
+    return buf.getvalue()
+
+
+def test_scan_folder_import_on_the_daemon(web, tmp_path):
+    c, svc = web
+    r = c.post("/api/scan", json=SCAN)
+    first = r.get_json()["job_id"]
+    assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+    folder = svc.store.job_dir(first) / "scan"
+    uploads = tmp_path / "web" / "web" / "uploads"
+    jobs_dir = svc.store.jobs_dir
+
+    def post(body):
+        return c.post("/api/uploads/scan", data={"file": (io.BytesIO(body), "scan.zip")},
+                      content_type="multipart/form-data")
+
+    def nothing_left(n_jobs):
+        assert len(svc.jobs()) == n_jobs
+        assert sorted(p.name for p in jobs_dir.iterdir()) == sorted(j["id"] for j in svc.jobs())
+        assert not uploads.exists() or list(uploads.iterdir()) == []
+
+    # refused by the daemon's own checks, after the web's zip checks passed
+    import cv2
+    import numpy as np
+    ok, small_png = cv2.imencode(".png", np.zeros((10, 10, 3), np.uint8))
+    bad = {
+        "no camera": scan_folder_zip(folder, edit=lambda d: {k: v for k, v in d.items() if k != "camera"}),
+        "singular homography": scan_folder_zip(
+            folder, edit=lambda d: {**d, "camera": {**d["camera"], "homography": [[0] * 3] * 3}}),
+        "wrong frame size": scan_folder_zip(
+            folder, edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/small.png", "level_mm": 1.0}]},
+            extra={"frames/small.png": small_png.tobytes()}),
+        "not an image": scan_folder_zip(
+            folder, edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/x.png", "level_mm": 1.0}]},
+            extra={"frames/x.png": b"#!/bin/sh\nrm -rf /\n"}),
+        "units": scan_folder_zip(folder, edit=lambda d: {**d, "units": "inch"}),
+    }
+    for case, body in bad.items():
+        r = post(body)
+        assert r.status_code == 400, (case, r.status_code, r.get_json())
+        assert r.get_json()["error"], case
+        nothing_left(1)
+
+    # a good one becomes a job, processed like a scan, its folder the daemon's own copy
+    r = post(scan_folder_zip(folder))
+    assert r.status_code == 201, r.get_json()
+    job_id = r.get_json()["job_id"]
+    assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+    info = c.get(f"/api/jobs/{job_id}").get_json()
+    assert info["status"] == "done" and info["params"]["imported"] and info["levels_done"] == 10
+    assert "toolpath.gcode" in info["outputs"]
+    copied = svc.store.job_dir(job_id) / "scan"
+    assert sorted(p.name for p in (copied / "frames").iterdir()) == sorted(p.name for p in (folder / "frames").iterdir())
+    assert json.loads((copied / "scan.json").read_text()) == json.loads((folder / "scan.json").read_text())
+    nothing_left(2)

@@ -263,8 +263,9 @@ def test_uploads_valid_ones_become_jobs(tmp_path):
     assert r.status_code == 201, r.get_json()
     job_id = r.get_json()["job_id"]
     assert svc.job(job_id)["status"] == "done"
-    assert uploads_left(tmp_path) == [job_id]
-    assert (tmp_path / "data" / "web" / "uploads" / job_id / "frames" / "0001.png").is_file()
+    # the service keeps its own copy of the scan; the web's unpacked upload is gone
+    assert uploads_left(tmp_path) == []
+    assert (svc.jobs_dir / job_id / "scan" / "frames" / "0001.png").is_file()
     svc.close()
 
 

@@ -35,9 +35,11 @@ from .. import errors
 
 log = logging.getLogger("inkslice.rpc")
 METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
-           "settings", "update_settings", "events")
+           "settings", "update_settings", "events",
+           "live_heightmap", "calibration", "calibrate", "import_scan")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
+SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0}   # s; homing, a copy
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -166,6 +168,7 @@ class BenchClient:
     def _call(self, method, *args, **kwargs):
         request = (json.dumps({"method": method, "args": args, "kwargs": kwargs}) + "\n").encode()
         t0 = time.monotonic()
+        timeout = max(self.timeout, SLOW_CALLS.get(method, 0.0))
         if not self._slots.acquire(timeout=self.timeout):
             raise errors.DeviceError(f"daemon {self.path}", f"no free connection in {self.timeout:.0f} s "
                                                              "(the daemon is not answering)")
@@ -175,16 +178,18 @@ class BenchClient:
             reused = conn is not None
             if conn is None:
                 conn = _Conn(self._connect(self.timeout))
+            conn.sock.settimeout(timeout)
             try:
                 line, undelivered = self._exchange(conn, request)
                 if not line and reused and (undelivered or method in self.READ_ONLY):
                     conn.close()                    # a connection from before a daemon restart
                     conn = _Conn(self._connect(max(1.0, self.timeout - (time.monotonic() - t0))))
+                    conn.sock.settimeout(timeout)
                     line, _ = self._exchange(conn, request)
             except TimeoutError:
                 conn.close()                        # a late reply would answer the next call: drop it
                 raise errors.DeviceError(f"daemon {self.path}",
-                                         f"no answer to {method} in {self.timeout:.0f} s") from None
+                                         f"no answer to {method} in {timeout:.0f} s") from None
             except BaseException:
                 conn.close()
                 raise
@@ -211,6 +216,10 @@ class BenchClient:
     def settings(self): return self._call("settings")
     def update_settings(self, changes): return self._call("update_settings", changes)
     def events(self, job_id=None, limit=200): return self._call("events", job_id, limit)
+    def live_heightmap(self): return self._call("live_heightmap")
+    def calibration(self): return self._call("calibration")
+    def calibrate(self, step): return self._call("calibrate", step)
+    def import_scan(self, folder): return self._call("import_scan", str(folder))
 
     def latest_frame(self):
         r = self._call("latest_frame")

@@ -12,7 +12,13 @@ a time (runner.py); one panel thread polls the button and drives the status
 LED and display. The button: a short press starts or stops a scan, a long
 press (held ~2 s, see hw/gpio.py) copies the newest job's G-code to the USB
 stick (hw/usb.py) in a thread of its own; the outcome is shown on the display,
-in state()["notice"] (the web UI's dashboard) and in the event log. Device factories are injected so the same service drives
+in state()["notice"] (the web UI's dashboard) and in the event log.
+
+Beyond the facade, what the web UI offers when a service has it:
+    live_heightmap()        the height map so far (livemap.py), None before a scan
+    calibration(), calibrate(step)   guided plane calibration (calibration.py)
+    import_scan(folder)     a scan folder from elsewhere becomes a job that is
+                            processed (importing.py checks and copies it) Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
 or the in-memory fakes.
 
@@ -39,7 +45,9 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError
 from . import settings as S
+from .calibration import GuidedCalibration
 from .firstrun import Pending
+from .livemap import LiveMap
 from .notices import usb_notice
 from .levels import LevelPlan
 from .processing import child_process
@@ -75,6 +83,8 @@ class BenchService:
         self._usb_thread: threading.Thread | None = None
         self._shown_notice: tuple[float, list[str]] | None = None     # (until, lines) on the display
         self._first_run = Pending(self.data_dir)    # the web's first-run password, until the first login
+        self._live: tuple[str, LiveMap] | None = None   # (job id, its height map so far)
+        self._calibration: GuidedCalibration | None = None
         self._lock = threading.RLock()
         self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
                        "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {},
@@ -123,6 +133,13 @@ class BenchService:
             return job_id
 
     def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
+        cal = self._calibration
+        if cal is not None and cal.active and cal.lock.acquire(blocking=False):
+            try:
+                cal.close()                         # a calibration left half-way gives the bench back
+                self._set(message="calibration cancelled")
+            finally:
+                cal.lock.release()
         with self._lock:
             thread = self._thread
             if thread is None or not thread.is_alive():
@@ -148,7 +165,10 @@ class BenchService:
             self.store.update_job(job_id, status="homing", reason="", interrupted=0, finished=None,
                                   attempts=job["attempts"] + 1)
             self.store.event(job_id, "resumed", f"resumed (attempt {job['attempts'] + 1})")
-            self._launch(job_id, job["levels_total"], job["levels_done"])
+            if job["params"].get("imported"):
+                self._launch_import(job_id)         # nothing to capture: process it again
+            else:
+                self._launch(job_id, job["levels_total"], job["levels_done"])
             return job_id
 
     def jobs(self) -> list[dict]:
@@ -206,6 +226,123 @@ class BenchService:
     def events(self, job_id=None, limit=200) -> list[dict]:
         return self.store.events(job_id, limit)
 
+    # == the extras the web UI offers when present ====================================
+    def live_heightmap(self) -> dict | None:
+        """The current (or last) scan's height map so far; None before the first frame."""
+        with self._lock:
+            live = self._live
+        return live[1].to_json() if live else None
+
+    def _guided(self) -> GuidedCalibration:
+        with self._lock:
+            if self._calibration is None:
+                def open_devices():
+                    return self.factory.open(self.settings(), self._calibration_params())
+                self._calibration = GuidedCalibration(open_devices, self.store, self.settings(),
+                                                      show_frame=self._show_frame,
+                                                      **getattr(self.factory, "calibration_target", {}))
+            return self._calibration
+
+    def _calibration_params(self) -> dict:
+        params = {}
+        if hasattr(self.factory, "check"):
+            params = self.factory.check({}) or {}    # the simulated bench fills in its part
+        return params
+
+    def calibration(self) -> dict:
+        return self._guided().describe()
+
+    def calibrate(self, step: str) -> dict:
+        """Do one guided step (in order: home, target, detect, accept); returns calibration()."""
+        cal = self._guided()
+        with self._lock:
+            if self._thread is not None and self._thread.is_alive():
+                raise SettingError("calibration", f"a scan is running ({self._state['job_id']}); "
+                                                  "calibrate when it has finished")
+        if not cal.lock.acquire(blocking=False):
+            raise SettingError("calibration", "a calibration step is already running")
+        try:
+            cal.settings = self.settings()
+            self._set(message=f"calibration: {step}")
+            try:
+                out = cal.do(step)
+            except InkSliceError as e:
+                self._set(message=f"calibration: {step} failed: {e.problem}")
+                raise
+            done = not cal.active
+            self._set(message="calibration stored" if done and step == "accept" else f"calibration: {step} done")
+            if step == "accept":
+                self.store.event(None, "calibrated", f"guided calibration stored: {cal.describe()}")
+            return out
+        finally:
+            cal.lock.release()
+
+    def _show_frame(self, jpeg: bytes, info: dict):
+        with self._lock:
+            self._frame = (jpeg, info)
+
+    def import_scan(self, folder) -> str:
+        """A scan folder from elsewhere (the web's upload) becomes a job and is processed.
+
+        Checked and copied first (importing.py): a refused folder leaves no job and no files.
+        Returns the job id at once; processing runs like a scan's (state processing -> done).
+        """
+        import shutil
+
+        from . import importing
+        scan = importing.check(folder)
+        with self._lock:
+            self._refuse_if_busy()                  # say so before copying a big folder
+        job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
+        importing.copy_into(scan, self.store.job_dir(job_id))     # outside the lock: it may take seconds
+        n = len(scan.frames)
+        name = str(scan.extra.get("name") or "imported scan")[:80]
+        with self._lock:
+            try:
+                self._refuse_if_busy()
+                self.store.create_job(job_id, name, self.settings(), {"name": name, "imported": True}, n)
+                self.store.update_job(job_id, status="processing", levels_done=n)
+                self.store.event(job_id, "imported", f"scan folder imported ({n} frames)")
+            except BaseException:
+                shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
+                raise
+            self._launch_import(job_id)
+            return job_id
+
+    def _launch_import(self, job_id):
+        job = self.store.get_job(job_id)
+        self._stop.clear()
+        self._set(state="processing", job_id=job_id, level_mm=None, levels_done=job["levels_total"],
+                  levels_total=job["levels_total"], eta_s=None, message="processing the imported scan")
+        self._thread = threading.Thread(target=self._run_import, args=(job_id,), name=f"import-{job_id}",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run_import(self, job_id):
+        from .processing import options_for
+        from .runner import Cancelled
+        job = self.store.get_job(job_id)
+        folder = self.store.job_dir(job_id)
+        self.store.update_job(job_id, status="processing")
+        try:
+            result = self.processor(folder / "scan", folder, options_for(S.full(job["settings"])), self._stop)
+            if self._stop.is_set():
+                raise Cancelled()
+            status, reason, outputs = "done", "", sorted(result.get("outputs", []))
+        except Cancelled:
+            status, reason, outputs = "cancelled", getattr(self._stop, "reason", "cancelled by the operator"), None
+        except InkSliceError as e:
+            status, reason, outputs = "failed", str(e), None
+        except Exception as e:                      # a bug must still end the job cleanly
+            log.exception("processing the imported job %s", job_id)
+            status, reason, outputs = "failed", f"internal error: {type(e).__name__}: {e}", None
+        fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
+        if outputs is not None:
+            fields["outputs"] = outputs
+        self.store.update_job(job_id, **fields)
+        self.store.event(job_id, status, reason or "imported scan processed")
+        self._set(state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None)
+
     def export_latest_gcode(self) -> dict:
         """What the long press does: the newest finished job's G-code onto the USB stick.
 
@@ -232,6 +369,8 @@ class BenchService:
 
     def close(self) -> None:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
+        if self._calibration is not None:
+            self._calibration.close()
         self._closing.set()
         self._panel_thread.join(timeout=5)
         if self._usb_thread is not None:
@@ -249,6 +388,8 @@ class BenchService:
 
     # == internals ================================================================
     def _refuse_if_busy(self):
+        if self._calibration is not None and self._calibration.active:
+            raise SettingError("scan", "a guided calibration holds the bench; finish it (accept) first")
         current = self._state["job_id"]
         if self._thread is not None and self._thread.is_alive() and current \
                 and self.store.get_job(current)["status"] in ("done", "failed", "cancelled"):
@@ -332,6 +473,22 @@ class BenchService:
         if ok:
             with self._lock:
                 self._frame = (buf.tobytes(), {**info, "waterline": bool(contours)})
+        self._grow_live_map(image, info.get("level_mm"))
+
+    def _grow_live_map(self, image, level_mm):
+        """The dashboard's height map so far; a preview must never fail the scan."""
+        job_id = self._state["job_id"]
+        try:
+            live = self._live
+            if live is None or live[0] != job_id:
+                from ..scanfile import load_scan
+                live = (job_id, LiveMap(load_scan(self.store.job_dir(job_id) / "scan").camera))
+            if level_mm is not None:
+                live[1].add(image, float(level_mm))
+            with self._lock:
+                self._live = live
+        except Exception as e:
+            log.warning("live height map: %s", e)
 
     # -- the front panel: button, LED, display ---------------------------------------
     def _open_panel(self) -> Devices:

@@ -20,7 +20,7 @@ from pathlib import Path, PurePosixPath
 
 from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session
 
-from ..errors import DeviceError, InkSliceError, SettingError
+from ..errors import DeviceError, InkSliceError, ScanError, SettingError
 from . import auth
 from .adapter import ACTIVE, NotOffered
 
@@ -77,6 +77,12 @@ def _not_offered(e):
 
 @bp.errorhandler(SettingError)
 def _setting(e):
+    return err(e.problem, 400, e.where)
+
+
+@bp.errorhandler(ScanError)
+def _scan(e):
+    # an uploaded scan folder the service refused (bad scan.json, a frame of the wrong size ...)
     return err(e.problem, 400, e.where)
 
 
@@ -398,6 +404,8 @@ def upload_scan():
     members; more than max_unzipped_bytes unpacked (counted while unpacking,
     not trusted from the header); no scan.json, or one whose frames are not in
     the zip. The size of the upload itself is capped by MAX_CONTENT_LENGTH (413).
+    The service checks the folder again (the daemon: importing.py) and keeps its own
+    copy, so the unpacked folder is removed whether the import succeeds or not.
     """
     if not svc().offers("import_scan"):
         raise NotOffered("bench", "this bench service cannot import scans")
@@ -410,11 +418,8 @@ def upload_scan():
     try:
         folder = _unpack_scan_zip(blob, staging, int(cfg["max_unzipped_bytes"]))
         job_id = svc().import_scan(folder)
-    except BaseException:
+    finally:
         shutil.rmtree(staging, ignore_errors=True)
-        raise
-    final = uploads / job_id
-    staging.rename(final)
     return jsonify(job_id=job_id), 201
 
 

@@ -242,6 +242,8 @@ class FakeBenchService:
                    "settings": dict(self._settings), "outputs": [], "levels_total": len(meta["frames"]),
                    "levels_done": len(meta["frames"])}
             self._jobs[job_id] = job
+        import shutil
+        shutil.copytree(folder, self.jobs_dir / job_id / "scan")     # the service keeps its own copy
         job["outputs"] = self._write_outputs(job)
         job["finished"] = time.time()
         return job_id

@@ -1,0 +1,107 @@
+"""A scan folder from elsewhere (the web's upload) checked and copied into a new job.
+
+The web server has already unpacked the zip with its own checks (size, paths,
+member types). The daemon does not trust that: it reads scan.json with the
+scan-format rules (scanfile.load_scan), and checks every frame it lists
+    - is a regular file inside the folder (no symlink, no "..");
+    - is a PNG or JPEG whose header says the size scan.json's camera says, 8 bits;
+    - adds up, with the others, to at most MAX_BYTES;
+and at most MAX_FRAMES frames. Only scan.json and the listed frames are copied
+(into JOBS/.import-XXXX, renamed to the job's folder when complete), so a
+refusal or a failure half-way leaves nothing behind. Reading the headers, not
+decoding every frame, keeps the check to milliseconds: a whole scan is decoded
+by processing anyway, which fails the job with a clear reason if a frame's
+body is corrupt.
+"""
+from __future__ import annotations
+
+import os
+import secrets
+import shutil
+import stat
+import struct
+from pathlib import Path
+
+from ..errors import ScanError
+from ..scanfile import Scan, load_scan
+
+MAX_FRAMES = 5000
+MAX_BYTES = 4 * 1024 ** 3
+PNG_SIG = b"\x89PNG\r\n\x1a\n"
+SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def image_header(path: Path) -> tuple[int, int, int]:
+    """(width, height, bits per sample) from a PNG's IHDR or a JPEG's SOF marker."""
+    with open(path, "rb") as f:
+        head = f.read(33)
+        if head[:8] == PNG_SIG and head[12:16] == b"IHDR":
+            w, h, bits = struct.unpack(">IIB", head[16:25])
+            return w, h, bits
+        if head[:2] == b"\xff\xd8":
+            f.seek(2)
+            while True:
+                marker = f.read(2)
+                if len(marker) < 2 or marker[0] != 0xFF:
+                    break
+                if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
+                    continue
+                seg = f.read(2)
+                if len(seg) < 2:
+                    break
+                length = struct.unpack(">H", seg)[0]
+                if marker[1] in SOF:
+                    bits, h, w = struct.unpack(">BHH", f.read(5))
+                    return w, h, bits
+                f.seek(length - 2, os.SEEK_CUR)
+    raise ScanError(path, "not a PNG or JPEG image (or its header is cut off)")
+
+
+def check(folder) -> Scan:
+    """The scan, if the folder is fit to import; ScanError naming the problem if not."""
+    folder = Path(folder)
+    scan = load_scan(folder)
+    if len(scan.frames) > MAX_FRAMES:
+        raise ScanError(folder / "scan.json", f"{len(scan.frames)} frames; an import may have at most {MAX_FRAMES}")
+    root = folder.resolve()
+    total = 0
+    seen = set()
+    for i, ref in enumerate(scan.frames):
+        path = folder / ref.file
+        try:
+            st = os.lstat(path)
+        except OSError:
+            raise ScanError(folder / "scan.json", f"frames[{i}] ({ref.file}) is not in the folder") from None
+        if not stat.S_ISREG(st.st_mode) or root not in path.resolve().parents:
+            raise ScanError(path, "not a plain file inside the scan folder")
+        if ref.file in seen:
+            raise ScanError(folder / "scan.json", f"frames[{i}] lists {ref.file} a second time")
+        seen.add(ref.file)
+        total += st.st_size
+        if total > MAX_BYTES:
+            raise ScanError(folder, f"the frames add up to more than {MAX_BYTES} bytes")
+        w, h, bits = image_header(path)
+        if (w, h) != (scan.camera.width, scan.camera.height):
+            raise ScanError(path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}")
+        if bits != 8:
+            raise ScanError(path, f"frame must be 8-bit, it has {bits} bits per sample")
+    return scan
+
+
+def copy_into(scan: Scan, job_dir: Path) -> Path:
+    """scan.json and the listed frames into job_dir/scan, all or nothing; returns that folder."""
+    job_dir = Path(job_dir)
+    staging = job_dir.parent / f".import-{secrets.token_hex(6)}"
+    try:
+        target = staging / "scan"
+        target.mkdir(parents=True)
+        shutil.copyfile(scan.folder / "scan.json", target / "scan.json")
+        for ref in scan.frames:
+            dest = target / ref.file
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(scan.folder / ref.file, dest)
+        os.rename(staging, job_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return job_dir / "scan"
