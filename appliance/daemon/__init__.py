@@ -9,6 +9,11 @@
     settings.py    defaults and validation naming the bad key
     processing.py  process_scan in a child process (memory, cancel), or in-process
     notify.py      sd_notify (READY, WATCHDOG, STATUS) without a dependency
+    notices.py     what the front panel tells the operator (USB copy outcomes), as data
+    firstrun.py    the web's first-run password handed to the display through a 0600 file
+    livemap.py     the height map so far, for the dashboard during a scan
+    calibration.py guided plane calibration, step by step from the web UI
+    importing.py   an uploaded scan folder checked and copied into a new job
     main.py        the process: service + socket + watchdog loop + clean SIGTERM
 
 Devices come from a factory: appliance.hw.devices.HardwareBench (the real
