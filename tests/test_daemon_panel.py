@@ -127,3 +127,40 @@ def test_without_an_exporter_the_long_press_says_usb_is_off(tmp_path):
         assert n["code"] == "off" and "switched off" in n["text"]
     finally:
         svc.close()
+
+
+def test_gpio_button_maps_kernel_edges_to_presses(monkeypatch):
+    """GpioButton.poll() on made-up edge events (no gpiochip here): rising = pressed (active low)."""
+    from types import SimpleNamespace
+
+    from gpiod.edge_event import EdgeEvent
+
+    from appliance.hw import gpio
+
+    class Req:
+        def __init__(self):
+            self.events = []
+
+        def wait_edge_events(self, timeout):
+            return bool(self.events)
+
+        def read_edge_events(self):
+            out, self.events = self.events, []
+            return out
+
+    def ev(kind, t):
+        return SimpleNamespace(event_type=kind, timestamp_ns=int(t * 1e9))
+    now = [100.0]
+    monkeypatch.setattr(gpio.time, "monotonic", lambda: now[0])
+    b = gpio.GpioButton.__new__(gpio.GpioButton)
+    b._req, b._rising, b._timer = Req(), EdgeEvent.Type.RISING_EDGE, gpio.PressTimer(2.0)
+    rise, fall = EdgeEvent.Type.RISING_EDGE, EdgeEvent.Type.FALLING_EDGE
+    b._req.events = [ev(rise, 100.0), ev(fall, 100.3)]
+    assert b.poll() == "short" and b.poll() is None
+    b._req.events = [ev(rise, 101.0)]
+    now[0] = 101.5
+    assert b.poll() is None                     # still held, not yet long
+    now[0] = 103.1
+    assert b.poll() == "long"                   # held 2.1 s: reported before the release
+    b._req.events = [ev(fall, 104.0)]
+    assert b.poll() is None

@@ -254,3 +254,15 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     assert sorted(p.name for p in (copied / "frames").iterdir()) == sorted(p.name for p in (folder / "frames").iterdir())
     assert json.loads((copied / "scan.json").read_text()) == json.loads((folder / "scan.json").read_text())
     nothing_left(2)
+
+
+def test_the_bench_buttons_news_reach_the_dashboard(web):
+    c, svc = web
+    assert c.get("/api/state").get_json()["notice"] is None
+    svc.export_latest_gcode()                   # what the long press runs (no USB exporter here)
+    import time
+    time.sleep(0.2)                             # the web caches the state for 0.1 s
+    n = c.get("/api/state").get_json()["notice"]
+    assert n["code"] == "off" and n["text"] == "USB export is switched off on this bench" and not n["ok"]
+    assert 0 <= n["age_s"] < 5 and "lines" not in n
+    assert 'id="notice"' in c.get("/").get_data(as_text=True)
