@@ -210,10 +210,26 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
                     r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
                     tol = wall_tol_mm + r * abs(dl) * 0.5 * h_max / camera.height_mm ** 2
                 d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
-        s.wall = d < wall_tol_mm
+        s.wall = _close_gaps(s, d < wall_tol_mm, WALL_GAP_POINTS)
         s._curve = None
         total += int(s.wall.sum())
     return total
+
+
+WALL_GAP_POINTS = 4     # a run of up to this many non-wall points between wall points is wall
+
+
+def _close_gaps(s: Slice, wall, n):
+    """A few points along a wall that missed the test (noise) are wall all the same:
+    left as a level curve they would claim the ink's level a wall's height away."""
+    left = np.zeros_like(wall)
+    right = np.zeros_like(wall)
+    a, b = np.arange(len(wall)), np.arange(len(wall))
+    for _ in range(n):
+        a, b = s.prv[a], s.nxt[b]
+        left |= wall[a]
+        right |= wall[b]
+    return wall | (left & right)
 
 
 def _edge_moved(camera: Perspective, P, dl, h):
@@ -236,37 +252,39 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     between this level and the one above. Level-curve points lie on the ink
     and stay where they are.
     """
-    out, z0_prev, prev = [], None, None
-    for k, s in enumerate(slices):
+    out, span_prev, prev = [], None, None
+    for s in slices:
         if s.empty or s.wall is None or not s.wall.any():
             out.append(s)
-            z0_prev, prev = (np.full(len(s.P), np.nan), s) if not s.empty else (None, None)
+            span_prev, prev = (np.full((len(s.P), 2), np.nan), s) if not s.empty else (None, None)
             continue
         step_up = (prev.level - s.level) if prev is not None else 1.0
-        z0 = np.full(len(s.P), np.nan)
+        # each wall point's edge height as a bracket (lo, hi): where it first showed
+        span = np.full((len(s.P), 2), np.nan)
         w = np.flatnonzero(s.wall)
-        z0[w] = s.level + 0.5 * step_up
-        if prev is not None and z0_prev is not None:
+        span[w] = (s.level, s.level + step_up)
+        if prev is not None and span_prev is not None:
             # where the edge was one level up: the same ray, h smaller by step_up
-            h_guess = np.zeros(w.size) + 0.5 * step_up
-            q = _edge_moved(camera, s.P[w], -step_up, h_guess)
+            q = _edge_moved(camera, s.P[w], -step_up, np.full(w.size, 0.5 * step_up))
             d, i = polyline_distance(prev, q)
             r = np.hypot(*(s.P[w] - np.asarray(camera.xy, float)).T)
             tol = wall_tol_mm + r * step_up * 0.5 * max(slices[0].level - s.level, 1.0) / camera.height_mm ** 2
-            cont = (d < tol) & np.isfinite(z0_prev[i])
-            z0[w[cont]] = z0_prev[i[cont]]
+            cont = (d < tol) & np.isfinite(span_prev[i, 0])
+            span[w[cont]] = span_prev[i[cont]]
+        z0 = span.mean(axis=1)
         h = np.where(np.isfinite(z0), np.maximum(z0 - s.level, 0.0), 0.0)
         P = camera.true_xy(s.P, h)
         if rim_height is not None and w.size:
-            # a better edge height (the fitted surface at the edge): its own position again
+            # a surer edge height: the fitted surface at the edge, within the bracket
             zr = rim_height(P[w])
             ok = np.isfinite(zr)
+            zr = np.clip(zr, span[w, 0], span[w, 1])
             h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
             P = camera.true_xy(s.P, h)
         t = s.moved(P, s.z)
         t.loops = _split_like(P, s.loops)
         out.append(t)
-        z0_prev, prev = z0, s       # matched against the frame as seen (its own perspective)
+        span_prev, prev = span, s   # matched against the frame as seen (its own perspective)
     return out
 
 
