@@ -255,6 +255,15 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     assert json.loads((copied / "scan.json").read_text()) == json.loads((folder / "scan.json").read_text())
     nothing_left(2)
 
+    # the box's own archive of a job (outputs, job.json and JOB/scan/...) imports as it is
+    archive = c.get(f"/api/jobs/{first}/archive.zip").data
+    r = post(archive)
+    assert r.status_code == 201, r.get_json()
+    assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+    again = svc.store.job_dir(r.get_json()["job_id"])
+    assert (again / "scan" / "scan.json").is_file() and not (again / "job.json").exists()
+    nothing_left(3)
+
 
 def test_the_bench_buttons_news_reach_the_dashboard(web):
     c, svc = web

@@ -145,10 +145,16 @@ class WebService:
         return self._optional("calibration")
 
     def calibrate(self, step: str):
-        return self._optional("calibrate", step)
+        try:
+            return self._optional("calibrate", step)
+        finally:
+            self._drop_cache()
 
     def import_scan(self, folder: Path) -> str:
-        return self._optional("import_scan", folder)
+        try:
+            return self._optional("import_scan", folder)
+        finally:
+            self._drop_cache()          # the import starts processing: show it at once
 
     @staticmethod
     def _job(j: dict) -> dict:

@@ -445,14 +445,15 @@ def _unpack_scan_zip(blob, staging: Path, max_bytes: int) -> Path:
                 raise _Refused(f"not a plain file in zip: {n!r}", 400)
             if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
                 names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
-        # scan.json at the top, or inside one top-level folder
-        prefix = ""
-        if "scan.json" not in names:
-            tops = {PurePosixPath(n).parts[0] for n in names}
-            if len(tops) == 1 and f"{next(iter(tops))}/scan.json" in names:
-                prefix = next(iter(tops)) + "/"
-            else:
-                raise _Refused("no scan.json in the zip", 400)
+        # scan.json at the top, or in a folder up to two deep (myscan/scan.json, or JOB/scan/scan.json
+        # as in this box's own archive.zip); only that folder is unpacked
+        found = sorted((n for n in names if PurePosixPath(n).name == "scan.json" and len(PurePosixPath(n).parts) <= 3),
+                       key=lambda n: len(PurePosixPath(n).parts))
+        if not found:
+            raise _Refused("no scan.json in the zip", 400)
+        if len(found) > 1 and len(PurePosixPath(found[0]).parts) == len(PurePosixPath(found[1]).parts):
+            raise _Refused(f"several scan.json in the zip ({found[0]}, {found[1]}): which scan?", 400)
+        prefix = found[0][: -len("scan.json")]
         try:
             doc = json.loads(z.read(prefix + "scan.json"))
         except (ValueError, UnicodeDecodeError):
