@@ -462,6 +462,17 @@ def _approx_sdf(grid, x, y, level):
     return best, tier, wall, slope, fgx, fgy
 
 
+def _top_height(grid, x, y, tier):
+    """Height of each point's tier's top (continued past its footprint on the grid)."""
+    gx, gy = grid.coords(x, y)
+    out = np.zeros(x.size, np.float32)
+    for ti, tg in enumerate(grid.tiers):
+        sel = tier == ti
+        if sel.any():
+            out[sel] = _lookup(tg.FT, gx[sel], gy[sel], (-grid.margin, 0.0, 0.0, 0.0))[:, 1]
+    return out
+
+
 # -- the frame -------------------------------------------------------------------------
 
 
@@ -537,14 +548,27 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, x0, y0, lvl)
     xc, yc, lc = x0, y0, lvl
     if effects.meniscus:
-        # A wall decides the slope only near the wall: far inside a part the nearest
-        # boundary may be its footprint (the top's own slope is ~0 at a summit), and a
-        # wall's 3.8 mm rise there would flood the summit with ink.
-        beta = np.where(wwall & (np.abs(approx) < 1.0), np.pi / 2, np.arctan(wslope))
-        h = physics.meniscus_rise(beta, effects.capillary_length_mm,
-                                  math.radians(effects.contact_angle_deg)).astype(np.float32)
-        # the contact line is h above the free surface: seen in perspective from there
-        xc, yc, lc = x0 + kx * h, y0 + ky * h, lvl + h
+        # The contact line on the top sits h(beta) above the free surface, beta the top's
+        # slope where the contact line is (found by iterating from the slope at the free
+        # surface's own level curve). A wall does not drag the ink over the top: at a
+        # sharp edge the contact line pins, so the top near a wall comes out with its own
+        # slope's rise, and on the wall itself the ink climbs h(90 deg) - which only moves
+        # where a wall facing the camera shows its waterline.
+        theta = math.radians(effects.contact_angle_deg)
+        rise = lambda b: physics.meniscus_rise(b, effects.capillary_length_mm, theta).astype(np.float32)
+        h = rise(np.arctan(wslope))
+        for _ in range(2):
+            lc = lvl + h
+            approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, x0 + kx * h, y0 + ky * h, lc)
+            h = rise(np.arctan(wslope))
+        lc = lvl + h
+        # on a wall the ink climbs h(90 deg), but never past the wall's top edge
+        seen_h = h.copy()
+        if wwall.any():
+            rim = _top_height(grid, x0[wwall], y0[wwall], wtier[wwall]) - lvl[wwall]
+            seen_h[wwall] = np.clip(rim, 0.0, rise(np.pi / 2))
+        # the contact line is seen_h above the free surface: seen in perspective from there
+        xc, yc = x0 + kx * seen_h, y0 + ky * seen_h
         approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, xc, yc, lc)
     band = np.abs(approx) < 4 * pix + 0.02
     sdf = approx.copy()
@@ -554,7 +578,10 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
 
     # -- layer 2: the part above the liquid, in perspective ------------------------------
     hit, zh, htier, hwall = trace_image(grid, x0, y0, kx, ky, level, pix, r1 - r0, c1 - c0)
-    travel = (zh - level) * np.hypot(kx, ky)
+    # how far (in the plane) the part the ray meets lies from where the ray crosses the
+    # waterline's height: beyond two pixels the part hides what is behind it. With a
+    # meniscus that height is the contact line's: part below it is under the ink.
+    travel = (zh - lc) * np.hypot(kx, ky)
     occluded = hit & (travel > 2 * pix)
     a = np.where(occluded, np.float32(1.0), a_wl)
 

@@ -68,11 +68,52 @@ def true_levels(nominal, areas, tank_area_mm2, iterations=100, tol=1e-10):
     return L
 
 
-def correct_slices(slices, tank_area_mm2):
-    """Slices (highest first) with their levels and point heights moved to the true levels."""
+def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100, tol=1e-10):
+    """True levels from a height map of the part (z, NaN off the part): the emerged
+    volume integrated over the map itself, V(L) = sum max(z - L, 0) * cell area.
+
+    The waterlines' own areas undercount it wherever the ink climbs the part (a
+    meniscus: the contact line encloses the level curve L + h, not L), so once a
+    fit exists its volume is the better measure."""
+    z = np.asarray(z, float)
+    on = np.isfinite(z)
+    # trapezoid rule: a node weighs the quarter of each neighbouring cell that lies
+    # wholly on the part (an edge node half, a corner a quarter)
+    cell = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
+    w = np.zeros(z.shape)
+    for dj in (0, 1):
+        for di in (0, 1):
+            w[dj:dj + cell.shape[0], di:di + cell.shape[1]] += 0.25 * cell
+    order = np.argsort(-np.where(on, z, -np.inf).ravel())
+    keep = on.ravel()[order] & (w.ravel()[order] > 0)
+    zz = z.ravel()[order][keep]
+    ww = w.ravel()[order][keep]
+    if zz.size == 0:
+        return np.asarray(nominal, float)
+    wz = np.cumsum(ww * zz)                    # over the k highest nodes
+    wsum = np.cumsum(ww)
+
+    def volume(L):
+        k = np.asarray(np.searchsorted(-zz, -L, side="left"))     # nodes higher than L
+        i = np.maximum(k - 1, 0)
+        return cell_area_mm2 * np.where(k > 0, wz[i] - wsum[i] * L, 0.0)
+
+    nominal = np.asarray(nominal, float)
+    L = nominal.copy()
+    for _ in range(iterations):
+        L_new = nominal - volume(L) / tank_area_mm2
+        if np.max(np.abs(L_new - L)) < tol:
+            return L_new
+        L = L_new
+    return L
+
+
+def correct_slices(slices, tank_area_mm2, levels=None):
+    """Slices (highest first) with their levels and point heights moved to the true levels
+    (solved from the waterlines' areas, or given)."""
     nominal = [s.level for s in slices]
     areas = [max(s.area(), 0.0) for s in slices]
-    L = true_levels(nominal, areas, tank_area_mm2)
+    L = true_levels(nominal, areas, tank_area_mm2) if levels is None else np.asarray(levels, float)
     out = []
     for s, lv in zip(slices, L):
         t = s.moved(s.P, s.z + (lv - s.level))

@@ -11,10 +11,10 @@ above the ink at p + (C - p) h / H appears at p on the liquid plane.
 Correction per waterline point: estimate beta (from the spacing of the
 neighbouring waterlines first, then from the current surface fit), then the
 point's height is L + h(beta) and its position is moved back by the
-perspective. Where a wall is nearer than the contact line needs to climb
-(distance to the part's outline < h(beta) / slope), the ink rests on the wall
-and climbs the full wall height h(pi/2), as on the bench (the virtual bench
-decides it at the free surface: wall when the outline is nearer than h(beta)/slope).
+perspective. On the top the rise is that of the top's own slope, right up to a
+wall: at the sharp edge the contact line pins (the virtual bench renders it so);
+the ink climbing the wall itself (h(pi/2)) is hidden behind the wall's edge and
+wall points are no data for the top anyway.
 
 Calibration: a reference part of known shape (sphere or cone) is scanned; the
 (l_c, theta) that make every observed point sit on the known surface at
@@ -73,9 +73,7 @@ def _corrected(observed, slopes, model):
             continue
         g = np.maximum(g, 1e-6)
         beta = np.where(s.wall, np.pi / 2, np.arctan(g))
-        # the bench decides at the free surface: the ink meets the wall when the wall is
-        # nearer than the top's own level curve would be, (top - L) / slope ~ h(beta) / slope
-        on_wall = s.wall | (_outline_distance(observed, s.P) < model.rise(beta) / g)
+        on_wall = s.wall
         beta = np.where(on_wall, np.pi / 2, beta)
         h = model.rise(beta)
         # a wall is seen by its top edge, not by the contact line climbing it: only the
@@ -94,8 +92,10 @@ def correct_slices_from_spacing(slices, model: MeniscusModel):
             continue
         est = []
         for j in (k - 1, k + 1):
-            if 0 <= j < len(slices) and not slices[j].empty:
-                d = polyline_distance(slices[j], s.P)[0]
+            # to the neighbours' level curves: a wall beside the point is no slope of the top
+            cv = slices[j].level_curve() if 0 <= j < len(slices) and not slices[j].empty else None
+            if cv is not None and not cv.empty:
+                d = polyline_distance(cv, s.P)[0]
                 est.append(abs(slices[j].level - s.level) / np.maximum(d, 1e-6))
         slopes.append(np.minimum.reduce(est) if est else np.zeros(len(s.P)))
     return _corrected(slices, slopes, model)
@@ -104,7 +104,14 @@ def correct_slices_from_spacing(slices, model: MeniscusModel):
 def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusModel):
     """Iteration: slope from the current fit's gradient at each observed point."""
     from .gridfit import bilinear
-    zf = np.where(np.isfinite(z), z, np.nanmean(z))
+    # off the part the field is continued by its nearest value: a mean height there
+    # would put a cliff at the outline and a steep slope on every point near it
+    from scipy import ndimage
+    nan = ~np.isfinite(z)
+    zf = z
+    if nan.any() and not nan.all():
+        _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
+        zf = z[jj, ii]
     gy, gx = np.gradient(zf, lat.hy, lat.hx)
     g = np.hypot(gx, gy)
     slopes = []

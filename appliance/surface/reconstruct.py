@@ -34,7 +34,8 @@ from .heightmap import HeightMap
 from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
 METHODS = ("fit",) + seed_methods.METHODS
-RIM_PASSES = 2       # fits with walls present: the second takes each wall edge's height from the first
+PASSES = 3   # with walls seen in perspective or a tank given: each later fit takes the true
+             # levels, each wall edge's height and the emerged volume from the one before
 
 
 @dataclass(frozen=True)
@@ -145,8 +146,10 @@ def _bracket(z, first, slices):
     """
     K = len(slices)
     top = next(k for k, s in enumerate(slices) if not s.empty)
-    lo_rise = [float(np.min(s.z - s.level)) if not s.empty else 0.0 for s in slices]
-    hi_rise = [float(np.max(s.z - s.level)) if not s.empty else 0.0 for s in slices]
+    # the rises of the level-curve points (a wall point's says nothing about the top)
+    curves = [s.level_curve() if not s.empty else s for s in slices]
+    lo_rise = [float(np.min(c.z - c.level)) if not c.empty else 0.0 for c in curves]
+    hi_rise = [float(np.max(c.z - c.level)) if not c.empty else 0.0 for c in curves]
     lv = np.array([s.level for s in slices] + [-np.inf])
     lo = np.array([lv[k] + min(lo_rise[k], 0.0) for k in range(K)] + [-np.inf])
     hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], 0.0) for k in range(1, K)] + [np.inf])
@@ -221,22 +224,54 @@ def _seed_method(name, slices, xo, yo):
     return seed_methods.run_method(name, xo, yo, pts, levels, exposed)
 
 
-def _corrected_levels(seen, opt, diag, rim_height=None):
-    """Wall edges put back where the walls are, then the displacement's true levels."""
+STEP_RANGE = 2.5   # before the displacement is known: true level steps up to this x nominal
+
+
+def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
+    """Walls found and their edges put back where the walls are, then the displacement's
+    true levels. From the second pass on, the previous pass's true levels (`levels`)
+    place the walls, and its fit (lat, z) gives each edge's height and the emerged volume."""
+    nominal = [s.level for s in seen]
     slices = seen
+    if levels is not None:
+        slices = [_at_level(s, L) for s, L in zip(seen, levels)]
     if opt.perspective is not None:
         # walls are seen by their top edges, raised and pushed out by the perspective:
-        # put them back before anything measures the part's outline or areas
-        slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height)
+        # find them and put them back before anything measures the outline or areas
+        rng = STEP_RANGE if (opt.tank_area_mm2 and levels is None) else 1.0
+        diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, opt.perspective, rng)
+        rise = float(opt.meniscus.rise(np.pi / 2)) if opt.meniscus is not None else 0.0
+        rim_height = _rim_height(lat, z) if z is not None else None
+        slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height, max(rise, 0.0))
     if opt.tank_area_mm2:
-        from .displacement import correct_slices
-        slices, diag["displacement"] = correct_slices(slices, opt.tank_area_mm2)
+        from .displacement import correct_slices, levels_from_surface
+        true = None
+        if z is not None:
+            true = levels_from_surface(nominal, z, lat.hx * lat.hy, opt.tank_area_mm2)
+        base = [_at_level(s, L) for s, L in zip(slices, nominal)]
+        slices, disp = correct_slices(base, opt.tank_area_mm2, true)
+        disp["from"] = "fitted surface" if z is not None else "waterline areas"
+        diag["displacement"] = disp
     return slices
 
 
+def _at_level(s, level):
+    """The slice with its level (and point heights) moved to `level`."""
+    if abs(s.level - level) < 1e-12:
+        return s
+    t = s.moved(s.P, s.z + (level - s.level))
+    t.level = float(level)
+    return t
+
+
 def _rim_height(lat, z):
+    """The fit's height at wall edges (points a little off the lattice take its edge)."""
     filled = _filled(z, None)
-    return lambda P: bilinear(lat, filled, P)
+
+    def at(P):
+        Q = np.column_stack([np.clip(P[:, 0], lat.x[0], lat.x[-1]), np.clip(P[:, 1], lat.y[0], lat.y[-1])])
+        return bilinear(lat, filled, Q)
+    return at
 
 
 def _fit_pass(lat, slices, opt, ftol, length, z_prev):
@@ -280,7 +315,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     slices, notes = check_waterlines(waterlines)
     diag = {"notes": notes, "levels_in_mm": [s.level for s in slices]}
     camera = opt.perspective
-    diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, camera)
+    if camera is None:
+        diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)
     seen = slices
     slices = _corrected_levels(seen, opt, diag)
     auto_bounds = grid.bounds is None
@@ -300,12 +336,15 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     lat, r = _lattice_for(xo, yo, opt.lattice_max)
     ftol = opt.footprint_tol_mm if opt.footprint_tol_mm is not None else 0.25 * min(lat.hx, lat.hy)
     length, curve = opt.smoothing_mm, []
-    passes = RIM_PASSES if camera is not None and any(s.wall.any() for s in seen if not s.empty) else 1
+    walls = camera is not None and any(s.wall.any() for s in slices if not s.empty)
+    passes = PASSES if walls or opt.tank_area_mm2 else 1
     z = None
     for _ in range(passes):
         if z is not None:
-            # second pass: each wall edge's height from the fitted surface, not the level bracket
-            slices = _corrected_levels(seen, opt, diag, _rim_height(lat, z))
+            # second pass: each wall edge's height and the emerged volume from the first fit
+            z_first = np.where(footprint, z, np.nan)
+            true = diag["displacement"]["true_mm"] if "displacement" in diag else None
+            slices = _corrected_levels(seen, opt, diag, lat, z_first, true)
             if auto_bounds:          # the outline is surer now: the grid follows it
                 grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
                 xo, yo = grid.axes()

@@ -179,7 +179,8 @@ class Perspective:
         return C + (P - C) * ((self.height_mm - np.asarray(h, float)) / self.height_mm)[..., None]
 
 
-def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None) -> int:
+def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None,
+               step_range: float = 1.0) -> int:
     """Mark points whose waterline stays put to the next level down (or up): walls.
 
     On a sculptured top the level curve moves by step / slope between levels;
@@ -191,6 +192,9 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
     level: its image moves away from the camera's foot by |x - C| dL / H per
     level step dL (0.17 mm at 50 mm from the foot, 300 mm up, 1 mm steps).
     With the camera given, the neighbour is looked for where that move puts it.
+    Before the displacement is known the true step can be up to `step_range`
+    times the nominal one (the ink drops further as the part comes out): the
+    neighbour is then looked for along that stretch of the ray.
     """
     total = 0
     top = next((s.level for s in slices if not s.empty), 0.0)
@@ -206,10 +210,14 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
                     # the edge's height above the ink is unknown (0 .. top - level): take the
                     # middle and widen the tolerance by what the rest of the range moves it
                     h_max = max(top - s.level, 0.0) + abs(dl)
-                    q = _edge_moved(camera, s.P, dl, 0.5 * h_max)
                     r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
-                    tol = wall_tol_mm + r * abs(dl) * 0.5 * h_max / camera.height_mm ** 2
-                d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
+                    tol = wall_tol_mm + r * abs(dl) * step_range * 0.5 * h_max / camera.height_mm ** 2
+                    n = 1 if step_range <= 1.0 else 8
+                    for f in np.linspace(1.0, step_range, n):
+                        q = _edge_moved(camera, s.P, f * dl, 0.5 * h_max)
+                        d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
+                    continue
+                d = np.minimum(d, polyline_distance(slices[j], q)[0])
         s.wall = _close_gaps(s, d < wall_tol_mm, WALL_GAP_POINTS)
         s._curve = None
         total += int(s.wall.sum())
@@ -241,7 +249,7 @@ def _edge_moved(camera: Perspective, P, dl, h):
 
 
 def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
-                   rim_height=None) -> list[Slice]:
+                   rim_height=None, rise_max: float = 0.0) -> list[Slice]:
     """Move each wall point from where the camera sees its top edge to where the wall is.
 
     A wall's top edge at height z0 first shows at the highest level below z0,
@@ -249,8 +257,8 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     seen further out. Going down the levels, a wall point inherits the edge
     height of the wall point it continues (found where the perspective puts it
     in the frame above); a wall point with none above is a new edge: z0 lies
-    between this level and the one above. Level-curve points lie on the ink
-    and stay where they are.
+    between this level and the one above (plus the meniscus' rise, if any).
+    Level-curve points lie on the ink and stay where they are.
     """
     out, span_prev, prev = [], None, None
     for s in slices:
@@ -262,7 +270,8 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
         # each wall point's edge height as a bracket (lo, hi): where it first showed
         span = np.full((len(s.P), 2), np.nan)
         w = np.flatnonzero(s.wall)
-        span[w] = (s.level, s.level + step_up)
+        # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
+        span[w] = (s.level, s.level + step_up + rise_max)
         if prev is not None and span_prev is not None:
             # where the edge was one level up: the same ray, h smaller by step_up
             q = _edge_moved(camera, s.P[w], -step_up, np.full(w.size, 0.5 * step_up))
