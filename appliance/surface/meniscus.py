@@ -140,8 +140,15 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
     """
     slices, _ = check_waterlines(waterlines)
     if tank_area_mm2:
-        from .displacement import correct_slices
-        slices, _ = correct_slices(slices, tank_area_mm2)
+        # the reference's shape is known, so is its emerged volume at every level: the
+        # waterlines' areas would undercount it by the meniscus being calibrated
+        from .displacement import correct_slices, levels_from_surface
+        x0, x1, y0, y1 = reference_surface.bounds
+        step = max(x1 - x0, y1 - y0) / 500.0
+        X, Y = np.meshgrid(np.arange(x0, x1 + step / 2, step), np.arange(y0, y1 + step / 2, step))
+        z = np.where(reference_surface.inside(X, Y), reference_surface.height(X, Y), np.nan)
+        true = levels_from_surface([s.level for s in slices], z, step * step, tank_area_mm2)
+        slices, _ = correct_slices(slices, tank_area_mm2, true)
     mark_walls(slices, wall_tol_mm)
     P, L = [], []
     for s in slices:
