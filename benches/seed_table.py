@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 import time
@@ -33,6 +34,7 @@ from appliance import process as proc                      # noqa: E402
 from appliance.cli import main as cli                       # noqa: E402
 from appliance.sim import surfaces                          # noqa: E402
 from appliance.sim.levels import sculpture_levels           # noqa: E402
+from appliance.sim.physics import meniscus_rise             # noqa: E402
 from appliance.sim.scanrender import render_scan            # noqa: E402
 from appliance.surface.seedtables import TABLES, best_ea    # noqa: E402
 
@@ -82,7 +84,9 @@ def run_sample(sample, step, effects, tmp, camera=None, meniscus=None):
     surface = surfaces.get(sample)
     folder = tmp / f"{sample}-{effects}-{step:g}"
     t0 = time.perf_counter()
-    render_scan(surface, folder, levels=sculpture_levels(surface, step), effects=effects, seed=1, workers=2)
+    # with a meniscus the scan goes on until the ink is the wall rise below the top's lowest point
+    below = float(meniscus_rise(math.pi / 2)) if effects == "physics" else 0.0
+    render_scan(surface, folder, levels=sculpture_levels(surface, step, below), effects=effects, seed=1, workers=2)
     if camera:
         use_camera(folder, camera)
     t1 = time.perf_counter()

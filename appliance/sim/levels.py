@@ -2,13 +2,16 @@
 from __future__ import annotations
 
 
-def sculpture_levels(surface, step):
+def sculpture_levels(surface, step, below_mm=0.0):
     """The dissertation's practice: one picture per step from the first in which the top
     shows, down to the first in which the whole sculptured top stands above the ink.
 
     Above the top a frame shows only ink (and glare, which the baseline's Otsu
     threshold would take for the part); below the top's lowest point it shows
-    only the block's walls again.
+    only the block's walls again. With a meniscus the ink clings to the top until
+    it is the rise below it: `below_mm` more (the rise on a wall, ~3.8 mm for
+    water) keeps the scan going until the whole top is really out.
     """
     from .scanrender import scan_levels
-    return [lv for lv in scan_levels(surface, step) if surface.z_min_top - step <= lv < surface.z_max]
+    lowest = surface.z_min_top - step - below_mm
+    return [lv for lv in scan_levels(surface, step) if lowest <= lv < surface.z_max]
