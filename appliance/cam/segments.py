@@ -94,8 +94,9 @@ def _golden(cutter, az, wz, W2, tm, dperp2, lo, hi, iters=20):
     f = lambda t: az + wz * t + cutter.profile(np.sqrt(np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)))
     lo = np.array(lo, float, copy=True)
     hi = np.maximum(np.array(hi, float, copy=True), lo)
-    x1, f1, x2, f2, lo, hi = golden_section(f, lo, hi, iters)
+    x1, f1, x2, f2, _, _ = golden_section(f, lo, hi, iters)
     best = np.where(f1 <= f2, x1, x2)
-    # the ends of the interval too (a flat bottom makes the minimum sit there)
+    # the ends of the whole interval too (a flat bottom makes the minimum sit there);
+    # not the narrowed bracket's ends, which golden_section also returns
     e0, e1, fb = f(lo), f(hi), f(best)
     return np.where(e0 <= np.minimum(e1, fb), lo, np.where(e1 <= fb, hi, best))

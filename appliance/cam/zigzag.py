@@ -53,7 +53,26 @@ import numpy as np
 
 from ..errors import SettingError
 from .cutters import Cutter
-from .dropcutter import DEFAULT_RESOLUTION, drop_lines, drop_points
+from .contact import polish
+from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
+
+def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
+    """The lattice drop-cutter, polished on steep faces (contact.py) so a tip is never
+    low by the lattice's h'' d^2 / 8 there: a low tip is a gouge."""
+    origins = np.atleast_2d(np.asarray(origins, float))
+    e1 = np.asarray(direction, float)
+    e1 = e1 / np.hypot(*e1)
+    tip = _lattice_lines(sampler, cutter, origins, e1, n, d)
+    t = d * np.arange(n)
+    x = origins[:, :1] + t[None, :] * e1[0]
+    y = origins[:, 1:2] + t[None, :] * e1[1]
+    return polish(sampler, cutter, x, y, tip, d)
+
+
+def drop_points(sampler, cutter, x, y, d=DEFAULT_RESOLUTION):
+    x = np.asarray(x, float).ravel()
+    y = np.asarray(y, float).ravel()
+    return drop_lines(sampler, cutter, np.column_stack([x, y]), (1.0, 0.0), 1, d)[:, 0]
 from .sampling import Sampler
 from .scallop import flat_stepover, swept_offset
 
@@ -317,7 +336,7 @@ class _PassProbe:
 
     def pass_at(self, s):
         o = self.t0 * self.e1 + s * self.e2
-        tip = drop_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
+        tip = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
                          self.st.resolution, self.stride)[0]
         slope = np.gradient(tip, self.step) if tip.size > 1 else np.zeros_like(tip)
         return s, tip, slope
