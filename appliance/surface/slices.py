@@ -29,6 +29,7 @@ class Slice:
     prv: np.ndarray
     z: np.ndarray                # (M,) height each point samples
     wall: np.ndarray = None      # (M,) bool
+    edge: np.ndarray = None      # (M,) bool: a wall seen by its raised top edge (moves in perspective)
     _tree: cKDTree = field(default=None, repr=False)
     _curve: "Slice" = field(default=None, repr=False)
 
@@ -59,7 +60,8 @@ class Slice:
     def moved(self, P, z):
         """The same slice with corrected point positions and heights."""
         return Slice(self.level, self.loops, P, self.nxt, self.prv, z,
-                     None if self.wall is None else self.wall.copy())
+                     None if self.wall is None else self.wall.copy(),
+                     None if self.edge is None else self.edge.copy())
 
     def area(self):
         """Area enclosed by the waterline (holes subtract: they run clockwise)."""
@@ -202,10 +204,12 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
         if s.empty:
             continue
         d = np.full(len(s.P), np.inf)
+        d_static = np.full(len(s.P), np.inf)      # a wall facing the camera shows its foot: no move
         for j in (k - 1, k + 1):
             if 0 <= j < len(slices) and not slices[j].empty:
                 q, tol = s.P, wall_tol_mm
                 if camera is not None:
+                    d_static = np.minimum(d_static, polyline_distance(slices[j], s.P)[0])
                     dl = s.level - slices[j].level          # > 0: the neighbour is lower
                     # the edge's height above the ink is unknown (0 .. top - level): take the
                     # middle and widen the tolerance by what the rest of the range moves it
@@ -218,7 +222,12 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
                         d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
                     continue
                 d = np.minimum(d, polyline_distance(slices[j], q)[0])
-        s.wall = _close_gaps(s, d < wall_tol_mm, WALL_GAP_POINTS)
+        raised = d < wall_tol_mm
+        s.wall = _close_gaps(s, raised | (d_static < wall_tol_mm), WALL_GAP_POINTS)
+        # a raised edge moves as the perspective says (near the camera's foot it also
+        # looks static: the move is then too small to matter)
+        s.edge = s.wall & _close_gaps(s, raised, WALL_GAP_POINTS) if camera is not None else \
+            np.zeros(len(s.P), bool)
         s._curve = None
         total += int(s.wall.sum())
     return total
@@ -262,14 +271,14 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     """
     out, span_prev, prev = [], None, None
     for s in slices:
-        if s.empty or s.wall is None or not s.wall.any():
+        if s.empty or s.wall is None or not s.wall.any() or (s.edge is not None and not s.edge.any()):
             out.append(s)
             span_prev, prev = (np.full((len(s.P), 2), np.nan), s) if not s.empty else (None, None)
             continue
         step_up = (prev.level - s.level) if prev is not None else 1.0
         # each wall point's edge height as a bracket (lo, hi): where it first showed
         span = np.full((len(s.P), 2), np.nan)
-        w = np.flatnonzero(s.wall)
+        w = np.flatnonzero(s.edge if s.edge is not None else s.wall)
         # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
         span[w] = (s.level, s.level + step_up + rise_max)
         if prev is not None and span_prev is not None:
