@@ -366,7 +366,8 @@ class _PassProbe:
         Z = self.sampler.z(X, Y)
         on = self.sampler.on_part(X, Y)
         envs = []
-        for p in [q for q in done[-8:] if q[0] >= sa - 2 * R] + [b]:
+        near = [q for q in done[-8:] if q[0] >= sa - 2 * R] + [b]
+        for p in near:
             envs.append(p[1][None, :] + swept_offset(cut, (ys - p[0])[:, None], p[2][None, :]))
         stock = np.min(envs, axis=0)
         gap_a = np.where(on, envs[-2] - Z, np.inf)
@@ -385,7 +386,23 @@ class _PassProbe:
         inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
         if not inside.any():
             return 0.0
-        return float(np.max((stock - Z)[inside]))
+        val = np.where(inside, stock - Z, -np.inf)
+        coarse = float(np.max(val))
+        # the cusp is a sharp V between two cutter profiles: sampled `step` apart
+        # its top is missed by up to slope x step / 2 (~20 % of the scallop for a
+        # ball), so look again on a fine grid around each column's highest row
+        cols_ok = np.flatnonzero(inside.any(axis=0))
+        r = np.argmax(val[:, cols_ok], axis=0)
+        S = ys[r][None, :] + step * np.linspace(-1.0, 1.0, 17)[:, None]
+        a1 = self.along[cols_ok][None, :]
+        Xf = a1 * self.e1[0] + S * self.e2[0]
+        Yf = a1 * self.e1[1] + S * self.e2[1]
+        Zf = self.sampler.z(Xf, Yf)
+        onf = self.sampler.on_part(Xf, Yf)
+        fine = np.min([p[1][cols_ok][None, :] + swept_offset(cut, S - p[0], p[2][cols_ok][None, :])
+                       for p in near], axis=0)
+        fine = np.where(onf, fine - Zf, -np.inf)
+        return max(coarse, float(np.max(fine)))
 
 
 def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
