@@ -18,10 +18,12 @@ lattice itself. A rapid that lowers the stock is a crash and is reported.
 
 What is reported (all in mm, vertical):
 * gouge: max(design - stock) over the part: how deep the program cut into it;
-* scallop = stock - design, max and mean, over the cells where the cutter
-  can reach: cells where the cutter's opening of the design (the stock an
-  infinitely fine stepover would leave) is within `reach_tol` of the design,
-  and at least `edge_band` inside the footprint's edge. Concave regions
+* scallop = stock - max(design, opening), max and mean, over the cells where
+  the cutter can reach: cells where the cutter's opening of the design (the
+  stock an infinitely fine stepover would leave) is within `reach_tol` of the
+  design, and at least `edge_band` inside the footprint's edge. Measured from
+  the opening, not the design: the opening's own residue (<= reach_tol) is
+  set by the cutter's size, not the stepover. Concave regions
   tighter than the cutter, and the walls of steps, are excluded there and
   counted separately as unreachable area;
 * uncut area: part cells left more than `uncut_tol` above the design.
@@ -221,10 +223,18 @@ def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=0.005, ed
     g = np.where(part, -dev, -np.inf)
     k = np.unravel_index(int(np.argmax(g)), g.shape)
     gouge = max(float(g[k]), 0.0)
-    sc = np.where(measured, dev, -np.inf)
+    # scallop: what the stepover left above what the cutter can reach at all. In a
+    # reachable cell the opening may still stand up to reach_tol above the design
+    # (a concave region just tighter than the cutter, the cells next to an edge the
+    # cutter rides on): that residue is the cutter's size, not the stepover's, and
+    # no stepover removes it, so it is not scallop. The opening is read from a
+    # coarser lattice (never above the true opening), so this never hides stock
+    # the stepover left.
+    above = st.z - np.maximum(design, np.minimum(op_s, design + reach_tol))
+    sc = np.where(measured, above, -np.inf)
     ks = np.unravel_index(int(np.argmax(sc)), sc.shape)
     smax = float(sc[ks]) if measured.any() else float("nan")
-    smean = float(np.mean(np.maximum(dev[measured], 0))) if measured.any() else float("nan")
+    smean = float(np.mean(np.maximum(above[measured], 0))) if measured.any() else float("nan")
     uncut = part & (dev > uncut_tol)
     return Report(gouge, (float(X[k]), float(Y[k])), smax, smean, (float(X[ks]), float(Y[ks])),
                   float(uncut.sum() * cell), float(uncut.sum() / max(part.sum(), 1)),
