@@ -146,7 +146,9 @@ def bench_acceptance(quick):
         for cname, h in (cuts[:1] if quick else cuts):
             cutter = parse_cutter(cname)
             t = time.perf_counter()
-            job = finishing_gcode(hm, FinishSettings(cutter, scallop=h, resolution=d, chord=0.002))
+            # default chord (h / 20, at most 0.002): a move may stand that far above the tips,
+            # which adds to the scallop directly
+            job = finishing_gcode(hm, FinishSettings(cutter, scallop=h, resolution=d))
             tg = time.perf_counter() - t
             rep, _ = verify_gcode(job.text, hm, resolution=res, edge_band=max(0.5, 5 * res))
             drep, _ = verify_gcode(dissertation_gcode(hm), hm, cutter=cutter, z_zero=top, resolution=res,
