@@ -69,3 +69,24 @@ def test_planner_holds_requested_scallop_on_a_curved_surface(cutter):
     rep, _ = verify_gcode(job.text, hm, resolution=0.05, edge_band=1.0)
     assert rep.gouge <= 0.005
     assert abs(rep.scallop_max - h) <= 0.1 * h, rep.lines()
+
+
+def test_steep_faces_with_a_small_ball_do_not_gouge():
+    # a ridge of 79-degree faces (sample 4 is like this): the lattice drop-cutter is
+    # low by ~d^2 / (8 R cos^3 a) there (0.02-0.03 mm for a 1 mm ball at d = 0.02),
+    # which the finishing polishes away (contact.py)
+    hm = grid_map(lambda X, Y: 12 - 5 * np.abs(X - 2.0) + 0.3 * Y, 0, 4, 0, 2.4, 0.2)
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball1"), scallop=0.01, resolution=0.02))
+    rep, _ = verify_gcode(job.text, hm, resolution=0.02, edge_band=0.1)
+    assert rep.gouge <= 0.005, rep.lines()
+
+
+def test_planner_holds_the_scallop_with_a_small_ball():
+    # a curved patch with slopes along and across the passes, at the 1 mm tools' scale
+    hm = grid_map(lambda X, Y: 5 + 0.05 * (X - 2) ** 2 - 0.08 * (Y - 1.5) ** 2 + 0.3 * X,
+                  0, 4, 0, 3, 0.1)
+    h = 0.005
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball1"), scallop=h, resolution=0.02))
+    rep, _ = verify_gcode(job.text, hm, resolution=0.01, edge_band=0.5)
+    assert rep.gouge <= 0.005
+    assert abs(rep.scallop_max - h) <= 0.1 * h, rep.lines()
