@@ -242,7 +242,7 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, opt.perspective, rng)
         rise = float(opt.meniscus.rise(np.pi / 2)) if opt.meniscus is not None else 0.0
         rim_height = _rim_height(lat, z) if z is not None else None
-        slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height, max(rise, 0.0))
+        slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height, max(rise, 0.0), rng)
     if opt.tank_area_mm2:
         from .displacement import correct_slices, levels_from_surface
         true = None

@@ -258,7 +258,7 @@ def _edge_moved(camera: Perspective, P, dl, h):
 
 
 def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
-                   rim_height=None, rise_max: float = 0.0) -> list[Slice]:
+                   rim_height=None, rise_max: float = 0.0, step_range: float = 1.0) -> list[Slice]:
     """Move each wall point from where the camera sees its top edge to where the wall is.
 
     A wall's top edge at height z0 first shows at the highest level below z0,
@@ -283,8 +283,13 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
         span[w] = (s.level, s.level + step_up + rise_max)
         if prev is not None and span_prev is not None:
             # where the edge was one level up: the same ray, h smaller by step_up
-            q = _edge_moved(camera, s.P[w], -step_up, np.full(w.size, 0.5 * step_up))
-            d, i = polyline_distance(prev, q)
+            # (the true step may be up to step_range x the given one: look along that stretch)
+            d, i = np.full(w.size, np.inf), np.zeros(w.size, int)
+            for f in np.linspace(1.0, step_range, 1 if step_range <= 1.0 else 8):
+                q = _edge_moved(camera, s.P[w], -f * step_up, np.full(w.size, 0.5 * step_up))
+                df, i_f = polyline_distance(prev, q)
+                better = df < d
+                d, i = np.where(better, df, d), np.where(better, i_f, i)
             r = np.hypot(*(s.P[w] - np.asarray(camera.xy, float)).T)
             tol = wall_tol_mm + r * step_up * 0.5 * max(slices[0].level - s.level, 1.0) / camera.height_mm ** 2
             cont = (d < tol) & np.isfinite(span_prev[i, 0])
