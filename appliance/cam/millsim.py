@@ -201,7 +201,7 @@ class Report:
 
 
 def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=0.005, edge_band=0.5,
-           uncut_tol=0.1, reach_resolution=0.2) -> Report:
+           uncut_tol=0.1, reach_resolution=0.0) -> Report:
     st = sim.stock
     X, Y = np.meshgrid(st.xs, st.ys)
     design = sampler.z(X, Y)
@@ -227,10 +227,14 @@ def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=0.005, ed
     # reachable cell the opening may still stand up to reach_tol above the design
     # (a concave region just tighter than the cutter, the cells next to an edge the
     # cutter rides on): that residue is the cutter's size, not the stepover's, and
-    # no stepover removes it, so it is not scallop. The opening is read from a
-    # coarser lattice (never above the true opening), so this never hides stock
-    # the stepover left.
-    above = st.z - np.maximum(design, np.minimum(op_s, design + reach_tol))
+    # no stepover removes it, so it is not scallop. The lattice opening (a min over
+    # offsets d apart) can stand above the true one by up to h'' (d/sqrt2)^2 / 2
+    # = d^2 / (4 rc): only the residue beyond that is taken off, so no stock the
+    # stepover left is hidden (a flat end, h'' unbounded at its rim: none).
+    rc = cutter.corner_radius
+    slack = d * d / (4 * rc) if rc > 0 else np.inf
+    residue = np.clip(op_s - design - slack, 0.0, reach_tol)
+    above = st.z - design - residue
     sc = np.where(measured, above, -np.inf)
     ks = np.unravel_index(int(np.argmax(sc)), sc.shape)
     smax = float(sc[ks]) if measured.any() else float("nan")
