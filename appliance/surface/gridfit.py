@@ -140,7 +140,12 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         for k in range(K - 1, top - 1, -1):
             d, _ = polyline_distance(slices[k], oq)
             fr[d <= tol] = k
-        first[on_outline] = fr
+        # a wall edge put back a little off the node can miss it: more than a level later
+        # than the nodes just inside it is such a miss (a summit on the rim would otherwise
+        # be clamped to the lowest level); it then comes out with them
+        inner = np.where(on_outline, K, first)
+        near = ndimage.minimum_filter(inner, size=3, mode="nearest")[on_outline]
+        first[on_outline] = np.where(fr > near + 1, near, fr)
     hmax = max(lat.hx, lat.hy)
     for k in range(top, K):
         sel = first == k
