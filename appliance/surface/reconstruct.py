@@ -224,9 +224,6 @@ def _seed_method(name, slices, xo, yo):
     return seed_methods.run_method(name, xo, yo, pts, levels, exposed)
 
 
-STEP_RANGE = 2.5   # before the displacement is known: true level steps up to this x nominal
-
-
 def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
     """Walls found and their edges put back where the walls are, then the displacement's
     true levels. From the second pass on, the previous pass's true levels (`levels`)
@@ -238,7 +235,10 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
     if opt.perspective is not None:
         # walls are seen by their top edges, raised and pushed out by the perspective:
         # find them and put them back before anything measures the outline or areas
-        rng = STEP_RANGE if (opt.tank_area_mm2 and levels is None) else 1.0
+        # the true level steps: unknown before the first fit (the ink drops up to 2.5x the
+        # nominal step as the part comes out), known to within a third after it
+        rng = (1.0, 2.5) if levels is None else (0.75, 1.33)
+        rng = rng if opt.tank_area_mm2 else (1.0, 1.0)
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, opt.perspective, rng)
         rise = float(opt.meniscus.rise(np.pi / 2)) if opt.meniscus is not None else 0.0
         rim_height = _rim_height(lat, z) if z is not None else None

@@ -182,7 +182,7 @@ class Perspective:
 
 
 def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None,
-               step_range: float = 1.0) -> int:
+               step_range=(1.0, 1.0)) -> int:
     """Mark points whose waterline stays put to the next level down (or up): walls.
 
     On a sculptured top the level curve moves by step / slope between levels;
@@ -194,9 +194,9 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
     level: its image moves away from the camera's foot by |x - C| dL / H per
     level step dL (0.17 mm at 50 mm from the foot, 300 mm up, 1 mm steps).
     With the camera given, the neighbour is looked for where that move puts it.
-    Before the displacement is known the true step can be up to `step_range`
-    times the nominal one (the ink drops further as the part comes out): the
-    neighbour is then looked for along that stretch of the ray.
+    The true step may differ from the given one by the factors in `step_range`
+    (before the displacement is known: 1 to 2.5, the ink dropping further as
+    the part comes out): the neighbour is looked for along that stretch of ray.
     """
     total = 0
     top = next((s.level for s in slices if not s.empty), 0.0)
@@ -215,9 +215,9 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
                     # middle and widen the tolerance by what the rest of the range moves it
                     h_max = max(top - s.level, 0.0) + abs(dl)
                     r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
-                    tol = wall_tol_mm + r * abs(dl) * step_range * 0.5 * h_max / camera.height_mm ** 2
-                    n = 1 if step_range <= 1.0 else 8
-                    for f in np.linspace(1.0, step_range, n):
+                    lo, hi = step_range
+                    tol = wall_tol_mm + r * abs(dl) * hi * 0.5 * h_max / camera.height_mm ** 2
+                    for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
                         q = _edge_moved(camera, s.P, f * dl, 0.5 * h_max)
                         d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
                     continue
@@ -258,7 +258,7 @@ def _edge_moved(camera: Perspective, P, dl, h):
 
 
 def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
-                   rim_height=None, rise_max: float = 0.0, step_range: float = 1.0) -> list[Slice]:
+                   rim_height=None, rise_max: float = 0.0, step_range=(1.0, 1.0)) -> list[Slice]:
     """Move each wall point from where the camera sees its top edge to where the wall is.
 
     A wall's top edge at height z0 first shows at the highest level below z0,
@@ -283,9 +283,10 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
         span[w] = (s.level, s.level + step_up + rise_max)
         if prev is not None and span_prev is not None:
             # where the edge was one level up: the same ray, h smaller by step_up
-            # (the true step may be up to step_range x the given one: look along that stretch)
+            # (the true step may be the given one times step_range: look along that stretch)
             d, i = np.full(w.size, np.inf), np.zeros(w.size, int)
-            for f in np.linspace(1.0, step_range, 1 if step_range <= 1.0 else 8):
+            lo, hi = step_range
+            for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
                 q = _edge_moved(camera, s.P[w], -f * step_up, np.full(w.size, 0.5 * step_up))
                 df, i_f = polyline_distance(prev, q)
                 better = df < d
