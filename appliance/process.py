@@ -232,7 +232,11 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
         job.heightmaps.update(hms)
         job.timings["inkslice_s"] = time.perf_counter() - t0
     if surface is not None:
-        job.stats = {k: statistics_against(surface, hm) for k, hm in job.heightmaps.items()}
+        for k, hm in job.heightmaps.items():
+            try:
+                job.stats[k] = statistics_against(surface, hm)
+            except ValueError as e:     # e.g. the baseline's grid put over a glare blob, not the part
+                job.notes.append(f"{label(k)}: no statistics ({e})")
     return job
 
 
