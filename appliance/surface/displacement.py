@@ -59,9 +59,15 @@ def true_levels(nominal, areas, tank_area_mm2, iterations=100, tol=1e-10):
     if areas.max(initial=0.0) >= tank_area_mm2:
         raise SettingError("tank.inner_area_mm2", f"{tank_area_mm2:g} mm^2 is smaller than the part's "
                            f"waterline area ({areas.max():.0f} mm^2)")
+    return _solve_levels(nominal, lambda L: emerged_volumes(L, areas), tank_area_mm2, iterations, tol)
+
+
+def _solve_levels(nominal, volume, tank_area_mm2, iterations, tol):
+    """Fixed point of L = L_nominal - V_emerged(L) / A_tank (contracts: part area < tank's)."""
+    nominal = np.asarray(nominal, float)
     L = nominal.copy()
     for _ in range(iterations):
-        L_new = nominal - emerged_volumes(L, areas) / tank_area_mm2
+        L_new = nominal - volume(L) / tank_area_mm2
         if np.max(np.abs(L_new - L)) < tol:
             return L_new
         L = L_new
@@ -98,14 +104,7 @@ def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100
         i = np.maximum(k - 1, 0)
         return cell_area_mm2 * np.where(k > 0, wz[i] - wsum[i] * L, 0.0)
 
-    nominal = np.asarray(nominal, float)
-    L = nominal.copy()
-    for _ in range(iterations):
-        L_new = nominal - volume(L) / tank_area_mm2
-        if np.max(np.abs(L_new - L)) < tol:
-            return L_new
-        L = L_new
-    return L
+    return _solve_levels(nominal, volume, tank_area_mm2, iterations, tol)
 
 
 def correct_slices(slices, tank_area_mm2, levels=None):
@@ -114,11 +113,7 @@ def correct_slices(slices, tank_area_mm2, levels=None):
     nominal = [s.level for s in slices]
     areas = [max(s.area(), 0.0) for s in slices]
     L = true_levels(nominal, areas, tank_area_mm2) if levels is None else np.asarray(levels, float)
-    out = []
-    for s, lv in zip(slices, L):
-        t = s.moved(s.P, s.z + (lv - s.level))
-        t.level = float(lv)
-        out.append(t)
+    out = [s.at_level(lv) for s, lv in zip(slices, L)]
     info = {"tank_area_mm2": float(tank_area_mm2), "nominal_mm": list(map(float, nominal)),
             "true_mm": list(map(float, L)), "max_drop_mm": float(np.max(np.asarray(nominal) - L))}
     return out, info

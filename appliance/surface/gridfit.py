@@ -355,6 +355,15 @@ class FitProblem:
         return z
 
 
+def fill_nearest(z):
+    """z with its gaps (NaN) filled by the nearest value (all-NaN: zeros)."""
+    nan = ~np.isfinite(z)
+    if not nan.any() or nan.all():
+        return np.where(nan, 0.0, z)
+    _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
+    return z[jj, ii]
+
+
 def bilinear(lat: Lattice, zgrid, pts):
     """Bilinear interpolation of a lattice field at points (NaN outside)."""
     fi, fj = lat.to_index(pts)

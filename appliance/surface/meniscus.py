@@ -73,8 +73,6 @@ def _corrected(observed, slopes, model):
             continue
         g = np.maximum(g, 1e-6)
         beta = np.where(s.wall, np.pi / 2, np.arctan(g))
-        on_wall = s.wall
-        beta = np.where(on_wall, np.pi / 2, beta)
         h = model.rise(beta)
         # a wall is seen by its top edge, not by the contact line climbing it: only the
         # level-curve points are moved back by the perspective of their raised contact line
@@ -103,15 +101,10 @@ def correct_slices_from_spacing(slices, model: MeniscusModel):
 
 def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusModel):
     """Iteration: slope from the current fit's gradient at each observed point."""
-    from .gridfit import bilinear
+    from .gridfit import bilinear, fill_nearest
     # off the part the field is continued by its nearest value: a mean height there
     # would put a cliff at the outline and a steep slope on every point near it
-    from scipy import ndimage
-    nan = ~np.isfinite(z)
-    zf = z
-    if nan.any() and not nan.all():
-        _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
-        zf = z[jj, ii]
+    zf = fill_nearest(z)
     gy, gx = np.gradient(zf, lat.hy, lat.hx)
     g = np.hypot(gx, gy)
     slopes = []

@@ -29,7 +29,8 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from . import seed as seed_methods
-from .gridfit import DIRECT_MAX, FitProblem, Lattice, bilinear, exposed_mask, first_exposure, point_data
+from .gridfit import (DIRECT_MAX, FitProblem, Lattice, bilinear, exposed_mask, fill_nearest, first_exposure,
+                      point_data)
 from .heightmap import HeightMap
 from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
@@ -114,11 +115,7 @@ def _to_output(lat, zl, r, xo, yo):
     if r is not None:
         return zl[::r, ::r]
     # cubic resampling of a field filled past its edge, so NaN never enters the spline
-    nan = ~np.isfinite(zl)
-    filled = zl
-    if nan.any():
-        _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
-        filled = zl[jj, ii]
+    filled = fill_nearest(zl)
     fi = (xo - lat.x[0]) / lat.hx
     fj = (yo - lat.y[0]) / lat.hy
     FJ, FI = np.meshgrid(fj, fi, indexing="ij")
@@ -126,15 +123,6 @@ def _to_output(lat, zl, r, xo, yo):
 
 
 # -- the fit --------------------------------------------------------------------------
-
-
-def _filled(z, footprint):
-    """z with its gaps (NaN) filled by the nearest value: a start for the solver."""
-    nan = ~np.isfinite(z)
-    if not nan.any() or nan.all():
-        return np.where(nan, 0.0, z)
-    _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
-    return z[jj, ii]
 
 
 def _bracket(z, first, slices):
@@ -231,7 +219,7 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
     nominal = [s.level for s in seen]
     slices = seen
     if levels is not None:
-        slices = [_at_level(s, L) for s, L in zip(seen, levels)]
+        slices = [s.at_level(L) for s, L in zip(seen, levels)]
     if opt.perspective is not None:
         # walls are seen by their top edges, raised and pushed out by the perspective:
         # find them and put them back before anything measures the outline or areas
@@ -248,25 +236,16 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         true = None
         if z is not None:
             true = levels_from_surface(nominal, z, lat.hx * lat.hy, opt.tank_area_mm2)
-        base = [_at_level(s, L) for s, L in zip(slices, nominal)]
+        base = [s.at_level(L) for s, L in zip(slices, nominal)]
         slices, disp = correct_slices(base, opt.tank_area_mm2, true)
         disp["from"] = "fitted surface" if z is not None else "waterline areas"
         diag["displacement"] = disp
     return slices
 
 
-def _at_level(s, level):
-    """The slice with its level (and point heights) moved to `level`."""
-    if abs(s.level - level) < 1e-12:
-        return s
-    t = s.moved(s.P, s.z + (level - s.level))
-    t.level = float(level)
-    return t
-
-
 def _rim_height(lat, z):
     """The fit's height at wall edges (points a little off the lattice take its edge)."""
-    filled = _filled(z, None)
+    filled = fill_nearest(z)
 
     def at(P):
         Q = np.column_stack([np.clip(P[:, 0], lat.x[0], lat.x[-1]), np.clip(P[:, 1], lat.y[0], lat.y[-1])])

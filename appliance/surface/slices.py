@@ -63,6 +63,14 @@ class Slice:
                      None if self.wall is None else self.wall.copy(),
                      None if self.edge is None else self.edge.copy())
 
+    def at_level(self, level) -> "Slice":
+        """The same slice at another level (its point heights move with it)."""
+        if abs(self.level - level) < 1e-12:
+            return self
+        t = self.moved(self.P, self.z + (level - self.level))
+        t.level = float(level)
+        return t
+
     def area(self):
         """Area enclosed by the waterline (holes subtract: they run clockwise)."""
         a = 0.0
@@ -203,27 +211,21 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
     for k, s in enumerate(slices):
         if s.empty:
             continue
-        d = np.full(len(s.P), np.inf)
-        d_static = np.full(len(s.P), np.inf)      # a wall facing the camera shows its foot: no move
+        static = np.zeros(len(s.P), bool)       # a wall facing the camera shows its foot: no move
+        raised = np.zeros(len(s.P), bool)
         for j in (k - 1, k + 1):
-            if 0 <= j < len(slices) and not slices[j].empty:
-                q, tol = s.P, wall_tol_mm
-                if camera is not None:
-                    d_static = np.minimum(d_static, polyline_distance(slices[j], s.P)[0])
-                    dl = s.level - slices[j].level          # > 0: the neighbour is lower
-                    # the edge's height above the ink is unknown (0 .. top - level): take the
-                    # middle and widen the tolerance by what the rest of the range moves it
-                    h_max = max(top - s.level, 0.0) + abs(dl)
-                    r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
-                    lo, hi = step_range
-                    tol = wall_tol_mm + r * abs(dl) * hi * 0.5 * h_max / camera.height_mm ** 2
-                    for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
-                        q = _edge_moved(camera, s.P, f * dl, 0.5 * h_max)
-                        d = np.minimum(d, polyline_distance(slices[j], q)[0] - (tol - wall_tol_mm))
-                    continue
-                d = np.minimum(d, polyline_distance(slices[j], q)[0])
-        raised = d < wall_tol_mm
-        s.wall = _close_gaps(s, raised | (d_static < wall_tol_mm), WALL_GAP_POINTS)
+            if not (0 <= j < len(slices)) or slices[j].empty:
+                continue
+            static |= polyline_distance(slices[j], s.P)[0] < wall_tol_mm
+            if camera is not None:
+                dl = s.level - slices[j].level          # > 0: the neighbour is lower
+                # the edge's height above the ink is unknown (0 .. top - level): take the
+                # middle and widen the tolerance by what the rest of the range moves it
+                h_max = max(top - s.level, 0.0) + abs(dl)
+                d, _ = _along_ray(camera, s.P, slices[j], dl, 0.5 * h_max, step_range)
+                r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
+                raised |= d < wall_tol_mm + r * abs(dl) * step_range[1] * 0.5 * h_max / camera.height_mm ** 2
+        s.wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
         # a raised edge moves as the perspective says (near the camera's foot it also
         # looks static: the move is then too small to matter)
         s.edge = s.wall & _close_gaps(s, raised, WALL_GAP_POINTS) if camera is not None else \
@@ -257,6 +259,18 @@ def _edge_moved(camera: Perspective, P, dl, h):
     return C + (P - C) * (f[:, None] if f.ndim else f)
 
 
+def _along_ray(camera: Perspective, P, other: Slice, dl, h, step_range):
+    """Distance (and nearest vertex) from `other` to where edges seen at P appear when the
+    ink is dl lower, the true step being dl times a factor in step_range."""
+    lo, hi = step_range
+    d, i = np.full(len(P), np.inf), np.zeros(len(P), int)
+    for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
+        df, i_f = polyline_distance(other, _edge_moved(camera, P, f * dl, h))
+        better = df < d
+        d, i = np.where(better, df, d), np.where(better, i_f, i)
+    return d, i
+
+
 def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
                    rim_height=None, rise_max: float = 0.0, step_range=(1.0, 1.0)) -> list[Slice]:
     """Move each wall point from where the camera sees its top edge to where the wall is.
@@ -271,26 +285,20 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     """
     out, span_prev, prev = [], None, None
     for s in slices:
-        if s.empty or s.wall is None or not s.wall.any() or (s.edge is not None and not s.edge.any()):
+        if s.empty or s.edge is None or not s.edge.any():
             out.append(s)
             span_prev, prev = (np.full((len(s.P), 2), np.nan), s) if not s.empty else (None, None)
             continue
         step_up = (prev.level - s.level) if prev is not None else 1.0
         # each wall point's edge height as a bracket (lo, hi): where it first showed
         span = np.full((len(s.P), 2), np.nan)
-        w = np.flatnonzero(s.edge if s.edge is not None else s.wall)
+        w = np.flatnonzero(s.edge)
         # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
         span[w] = (s.level, s.level + step_up + rise_max)
         if prev is not None and span_prev is not None:
             # where the edge was one level up: the same ray, h smaller by step_up
             # (the true step may be the given one times step_range: look along that stretch)
-            d, i = np.full(w.size, np.inf), np.zeros(w.size, int)
-            lo, hi = step_range
-            for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
-                q = _edge_moved(camera, s.P[w], -f * step_up, np.full(w.size, 0.5 * step_up))
-                df, i_f = polyline_distance(prev, q)
-                better = df < d
-                d, i = np.where(better, df, d), np.where(better, i_f, i)
+            d, i = _along_ray(camera, s.P[w], prev, -step_up, 0.5 * step_up, step_range)
             r = np.hypot(*(s.P[w] - np.asarray(camera.xy, float)).T)
             tol = wall_tol_mm + r * step_up * 0.5 * max(slices[0].level - s.level, 1.0) / camera.height_mm ** 2
             cont = (d < tol) & np.isfinite(span_prev[i, 0])
