@@ -243,6 +243,16 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
     return slices
 
 
+def _resample(old: Lattice, z, new: Lattice):
+    """A fit (NaN off the part) read on another lattice: the next pass's starting slopes
+    must sit where the surface is, not where the old lattice's indices fall."""
+    X, Y = np.meshgrid(new.x, new.y)
+    P = np.column_stack([X.ravel(), Y.ravel()])
+    on = bilinear(old, np.isfinite(z).astype(float), P) > 0.5
+    v = bilinear(old, fill_nearest(z), P)
+    return np.where(on & np.isfinite(v), v, np.nan).reshape(X.shape)
+
+
 def _rim_height(lat, z):
     """The fit's height at wall edges (points a little off the lattice take its edge)."""
     filled = fill_nearest(z)
@@ -324,11 +334,13 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             z_first = np.where(footprint, z, np.nan)
             true = diag["displacement"]["true_mm"] if "displacement" in diag else None
             slices = _corrected_levels(seen, opt, diag, lat, z_first, true)
+            z = z_first
             if auto_bounds:          # the outline is surer now: the grid follows it
                 grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
                 xo, yo = grid.axes()
                 diag["bounds"] = grid.bounds
-                lat, r = _lattice_for(xo, yo, opt.lattice_max)
+                old, (lat, r) = lat, _lattice_for(xo, yo, opt.lattice_max)
+                z = _resample(old, z_first, lat)
         z, z_fe, first, footprint, slices, length, cv = _fit_pass(lat, slices, opt, ftol, length, z)
         curve = cv if cv is not None else curve
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
