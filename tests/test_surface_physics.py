@@ -91,3 +91,29 @@ def test_displacement_from_the_fitted_surface_matches_the_bench():
     est = levels_from_surface(nominal, z, 0.5 * 0.5, 22500.0)
     assert np.max(nominal - true) > 5.0            # the bottom frame's ink is 5+ mm lower
     assert np.max(np.abs(est - true)) < 0.02
+
+
+def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
+    """A lattice whose nodes stop short of the part's outline (the grid follows the seen
+    outline, never exactly on it): the nodes alone miss a strip all round. Weighting
+    each node by its cell's share inside the outline gives the true levels back."""
+    from appliance.sim import physics
+    from appliance.surface.displacement import levels_from_surface
+    from appliance.surface.gridfit import Lattice, area_weights
+    from appliance.surface.slices import make_slice
+    part = surfaces.get("sample1")
+    x = np.linspace(-0.4, 100.6, 102)                 # ~1 mm spacing, 0.4 mm off the edges
+    lat = Lattice(x, x)
+    X, Y = np.meshgrid(x, x)
+    inside = part.inside(X, Y)
+    z = np.where(inside, part.height(X, Y), np.nan)
+    square = np.array([[0.0, 0.0], [100.002, 0.0], [100.002, 100.002], [0.0, 100.002]])
+    w = area_weights(lat, make_slice(0.0, [square]))
+    assert abs(w.sum() * lat.hx * lat.hy - 100.002 ** 2) < 20.0      # within 0.2 %
+    nominal = np.array([30.0, 20.0, 10.0, 2.0])
+    true = np.array([physics.true_level(part, lv, 22500.0) for lv in nominal])
+    cell = lat.hx * lat.hy
+    plain = levels_from_surface(nominal, z, cell, 22500.0)
+    weighted = levels_from_surface(nominal, z, cell, 22500.0, weights=w)
+    assert np.max(np.abs(plain - true)) > 0.05       # the strip: ~2 % of the volume
+    assert np.max(np.abs(weighted - true)) < 0.02

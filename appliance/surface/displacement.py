@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SettingError
+from .gridfit import fill_nearest
 
 
 def emerged_volumes(levels, areas, gap_above=None):
@@ -74,22 +75,31 @@ def _solve_levels(nominal, volume, tank_area_mm2, iterations, tol):
     return L
 
 
-def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100, tol=1e-10):
+def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100, tol=1e-10, weights=None):
     """True levels from a height map of the part (z, NaN off the part): the emerged
     volume integrated over the map itself, V(L) = sum max(z - L, 0) * cell area.
 
     The waterlines' own areas undercount it wherever the ink climbs the part (a
     meniscus: the contact line encloses the level curve L + h, not L), so once a
-    fit exists its volume is the better measure."""
+    fit exists its volume is the better measure.
+
+    `weights`: each node's share of its cell on the part (gridfit.area_weights from the
+    outline); nodes just off the fit then take their nearest fitted height. Without them
+    the trapezoid rule over the nodes on the part."""
     z = np.asarray(z, float)
     on = np.isfinite(z)
-    # trapezoid rule: a node weighs the quarter of each neighbouring cell that lies
-    # wholly on the part (an edge node half, a corner a quarter)
-    cell = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
-    w = np.zeros(z.shape)
-    for dj in (0, 1):
-        for di in (0, 1):
-            w[dj:dj + cell.shape[0], di:di + cell.shape[1]] += 0.25 * cell
+    if weights is not None and on.any():
+        w = np.asarray(weights, float)
+        z = fill_nearest(z)
+        on = w > 0
+    else:
+        # trapezoid rule: a node weighs the quarter of each neighbouring cell that lies
+        # wholly on the part (an edge node half, a corner a quarter)
+        cell = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
+        w = np.zeros(z.shape)
+        for dj in (0, 1):
+            for di in (0, 1):
+                w[dj:dj + cell.shape[0], di:di + cell.shape[1]] += 0.25 * cell
     order = np.argsort(-np.where(on, z, -np.inf).ravel())
     keep = on.ravel()[order] & (w.ravel()[order] > 0)
     zz = z.ravel()[order][keep]

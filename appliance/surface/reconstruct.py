@@ -29,8 +29,8 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from . import seed as seed_methods
-from .gridfit import (DIRECT_MAX, FitProblem, Lattice, bilinear, exposed_mask, fill_nearest, first_exposure,
-                      point_data)
+from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
+                      first_exposure, point_data)
 from .heightmap import HeightMap
 from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
@@ -235,7 +235,9 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         from .displacement import correct_slices, levels_from_surface
         true = None
         if z is not None:
-            true = levels_from_surface(nominal, z, lat.hx * lat.hy, opt.tank_area_mm2)
+            outline = next(s for s in reversed(slices) if not s.empty)
+            true = levels_from_surface(nominal, z, lat.hx * lat.hy, opt.tank_area_mm2,
+                                       weights=area_weights(lat, outline))
         base = [s.at_level(L) for s, L in zip(slices, nominal)]
         slices, disp = correct_slices(base, opt.tank_area_mm2, true)
         disp["from"] = "fitted surface" if z is not None else "waterline areas"
