@@ -105,15 +105,18 @@ def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusMode
     from .gridfit import bilinear, fill_nearest
     # the slope comes from the fit one node in from the outline: the outline's own nodes
     # sit on the walls, where the fit is least sure, and a step between them and the
-    # interior read as a slope raises every contact line near the edge, which raises the
+    # interior read as slope raised every contact line near the edge, which raises the
     # next fit there (left in, sample 2's edges climbed 1.2 mm in three iterations).
-    # Off the part the field is continued by its nearest value: a mean height there
-    # would put a cliff at the outline and a steep slope on every point near it.
+    # The slope itself, not the height, is continued outwards to the rim (a height
+    # continued flat reads as no slope: sample 3's ridges came out 1 mm low).
     on = np.isfinite(z) if footprint is None else (footprint & np.isfinite(z))
     inner = ndimage.binary_erosion(on, iterations=1, border_value=0)
-    zf = fill_nearest(np.where(inner if inner.sum() >= 4 else on, z, np.nan))
-    gy, gx = np.gradient(zf, lat.hy, lat.hx)
+    inner = inner if inner.sum() >= 9 else on
+    gy, gx = np.gradient(fill_nearest(np.where(inner, z, np.nan)), lat.hy, lat.hx)
+    # a central difference is sound where both neighbours are inner nodes
+    sound = ndimage.binary_erosion(inner, iterations=1, border_value=0)
     g = np.hypot(gx, gy)
+    g = fill_nearest(np.where(sound if sound.any() else inner, g, np.nan))
     slopes = []
     for s in observed:
         if s.empty:
