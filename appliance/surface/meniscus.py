@@ -99,8 +99,12 @@ def correct_slices_from_spacing(slices, model: MeniscusModel):
     return _corrected(slices, slopes, model)
 
 
-def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusModel):
-    """Iteration: slope from the current fit's gradient at each observed point."""
+def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusModel, previous=None):
+    """Iteration: slope from the current fit's gradient at each observed point
+    -> (corrected slices, slopes). With `previous` (the slopes of the last iteration)
+    the new slopes are averaged with them: the rise a slope gives moves the points, the
+    points move the next fit, and where the fit is loose (beside a basin no waterline
+    crosses) undamped slopes swung 0.07 -> 0.78 -> 0.26 against a true 0.40."""
     from scipy import ndimage
     from .gridfit import bilinear, fill_nearest
     # the slope comes from the fit one node in from the outline: the outline's own nodes
@@ -124,7 +128,9 @@ def correct_slices_from_surface(observed, lat, z, footprint, model: MeniscusMode
             continue
         v = bilinear(lat, g, s.P)
         slopes.append(np.where(np.isfinite(v), v, 0.0))
-    return _corrected(observed, slopes, model)
+    if previous is not None:
+        slopes = [0.5 * (a + b) for a, b in zip(slopes, previous)]
+    return _corrected(observed, slopes, model), slopes
 
 
 def _reference_slopes(surface, P, eps=1e-3):

@@ -270,12 +270,13 @@ def _fit_pass(lat, slices, opt, ftol, length, z_prev):
     meniscus iterations -> (z, z_fe, first, footprint, corrected slices, length, curve or None)."""
     observed = slices
     if opt.meniscus is not None:
+        slopes = None
         if z_prev is None:
             from .meniscus import correct_slices_from_spacing
             slices = correct_slices_from_spacing(observed, opt.meniscus)
         else:
             from .meniscus import correct_slices_from_surface
-            slices = correct_slices_from_surface(observed, lat, z_prev, None, opt.meniscus)
+            slices, slopes = correct_slices_from_surface(observed, lat, z_prev, None, opt.meniscus)
     z_fe, first, footprint = first_exposure(lat, slices, ftol)
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
@@ -290,7 +291,7 @@ def _fit_pass(lat, slices, opt, ftol, length, z_prev):
     if opt.meniscus is not None:
         from .meniscus import correct_slices_from_surface
         for _ in range(opt.meniscus_iterations):
-            slices = correct_slices_from_surface(observed, lat, z, footprint, opt.meniscus)
+            slices, slopes = correct_slices_from_surface(observed, lat, z, footprint, opt.meniscus, slopes)
             z_fe, first, _ = first_exposure(lat, slices, ftol)
             pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
             z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
