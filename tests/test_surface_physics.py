@@ -117,3 +117,29 @@ def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
     weighted = levels_from_surface(nominal, z, cell, 22500.0, weights=w)
     assert np.max(np.abs(plain - true)) > 0.05       # the strip: ~2 % of the volume
     assert np.max(np.abs(weighted - true)) < 0.02
+
+
+def test_meniscus_slope_beside_a_wall_is_the_tops_own():
+    """A plane rising at 0.7 to a wall at x = 0 (a ridge along the edge). The fit's
+    outline nodes sit on the wall and are the least sure (here 1 mm low); the contact
+    line just inside must still get the top's slope, 0.7, not the step to the rim node
+    (read as a slope of ~2) nor a flat continuation (slope 0)."""
+    from appliance.surface.gridfit import Lattice
+    from appliance.surface.meniscus import correct_slices_from_surface
+    from appliance.surface.slices import make_slice
+    x = np.arange(-0.4, 20.0, 1.0)
+    lat = Lattice(x, x)
+    X, Y = np.meshgrid(x, x)
+    z = 30.0 - 0.7 * X
+    footprint = X > -0.5
+    z[:, 0] -= 1.0                                  # the rim nodes: 1 mm off
+    level = 29.0
+    pts = np.column_stack([np.full(9, 0.3), np.linspace(4.0, 16.0, 9)])     # 0.3 mm in from the wall
+    loop = np.vstack([pts, [[0.3, 17.0], [-0.4, 17.0], [-0.4, 3.0]]])
+    model = MeniscusModel(2.7, 0.0)
+    _, slopes = correct_slices_from_surface([make_slice(level, [loop])], lat, z, footprint, model)
+    assert np.allclose(slopes[0][:9], 0.7, atol=0.02)
+    # damped iterations: the slope handed on is the mean of this and the last iteration's
+    _, again = correct_slices_from_surface([make_slice(level, [loop])], lat, z, footprint, model,
+                                           [np.full(len(loop), 0.3)])
+    assert np.allclose(again[0][:9], 0.5, atol=0.02)
