@@ -34,6 +34,7 @@ invariant, so nothing else changes.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .cutters import Cutter
@@ -106,9 +107,12 @@ def _edge_contacts(segs, cutter, px, py, out):
     mid = 0.5 * (a[:, :2] + b[:, :2])
     half = 0.5 * float(np.max(np.hypot(*(b[:, :2] - a[:, :2]).T)))
     t_seg = cKDTree(mid)
+    idx = _near(mid, px, py, R + half)
+    if idx.size == 0:
+        return
     pts = np.column_stack([px, py])
-    dist, _ = t_seg.query(pts, distance_upper_bound=R + half)
-    idx = np.flatnonzero(np.isfinite(dist))
+    dist, _ = t_seg.query(pts[idx], distance_upper_bound=R + half)
+    idx = idx[np.isfinite(dist)]
     if idx.size == 0:
         return
     pairs = t_seg.sparse_distance_matrix(cKDTree(pts[idx]), R + half, output_type="ndarray")
@@ -119,6 +123,25 @@ def _edge_contacts(segs, cutter, px, py, out):
     # drop onto the edge = minus the lowest sweep of the edge with heights negated
     m = min_over_segment(cutter, px[pj] - a[si, 0], py[pj] - a[si, 1], w[:, 0], w[:, 1], -w[:, 2], -a[si, 2])
     np.maximum.at(out, pj, -m)
+
+
+def _near(mid, px, py, reach):
+    """Indices of points that may lie within `reach` of a segment midpoint.
+
+    A bucket test before the exact k-d query: the map is binned into squares
+    of side `reach`, and only points whose square or a neighbour holds a
+    midpoint go on (on a whole-map drop most points are far from every edge,
+    and the k-d query over a million points was a quarter of the time).
+    """
+    lo = np.minimum(mid.min(axis=0), [px.min(), py.min()]) - reach
+    shape = (np.maximum(mid.max(axis=0), [px.max(), py.max()]) - lo) // reach + 3
+    occ = np.zeros(shape.astype(int)[::-1], bool)
+    mi = ((mid - lo) // reach).astype(int) + 1
+    occ[mi[:, 1], mi[:, 0]] = True
+    occ = ndimage.maximum_filter(occ, size=3)
+    qi = ((px - lo[0]) // reach).astype(int) + 1
+    qj = ((py - lo[1]) // reach).astype(int) + 1
+    return np.flatnonzero(occ[qj, qi])
 
 
 def drop_points(sampler: Sampler, cutter: Cutter, x, y, d: float = DEFAULT_RESOLUTION):
@@ -161,12 +184,27 @@ def _axis_slab(sampler, o, axis, b, c):
 
 
 def _dilate_slab(slab, groups, m, n, stride=1):
+    """The max over the disc's offsets, in float32 relative to the slab's top.
+
+    Single precision halves the memory traffic of the ~1450 passes (the whole
+    cost: 1.37 -> 0.79 s for a 1001 x 1001 map). Heights are taken relative to
+    the slab's highest value first, so a part 100 mm tall still resolves
+    8e-6 mm, far below the 0.002 mm we promise.
+    """
     k = len(range(0, n, stride))
-    res = np.full((slab.shape[0], k), -np.inf)
+    ref = float(np.max(slab))
+    z = (slab - ref).astype(np.float32)
+    res = np.full((z.shape[0], k), -np.inf, np.float32)
     tmp = np.empty_like(res)
     for b, avals, hvals in groups:
-        row = slab[:, m + b] if b == 0 else np.maximum(slab[:, m + b], slab[:, m - b])
+        row = z[:, m + b] if b == 0 else np.maximum(z[:, m + b], z[:, m - b])
         for a, h in zip(avals.tolist(), hvals.tolist()):
-            np.subtract(row[:, m + a:m + a + n:stride], h, out=tmp)
+            if a < 0:
+                continue          # folded into +a: h is symmetric in a as well
+            if a == 0:
+                np.subtract(row[:, m:m + n:stride], np.float32(h), out=tmp)
+            else:
+                np.maximum(row[:, m + a:m + a + n:stride], row[:, m - a:m - a + n:stride], out=tmp)
+                np.subtract(tmp, np.float32(h), out=tmp)
             np.maximum(res, tmp, out=res)
-    return res
+    return res.astype(np.float64) + ref
