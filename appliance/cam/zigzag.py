@@ -50,6 +50,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from ..errors import SettingError
 from .cutters import Cutter
@@ -335,11 +336,89 @@ class _PassProbe:
         self.step = st.resolution * self.stride
 
     def pass_at(self, s):
+        """(across position, tips at the sparse points, their along-slopes, all tips or None)."""
         o = self.t0 * self.e1 + s * self.e2
-        tip = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
-                         self.st.resolution, self.stride)[0]
+        full = None
+        if self.st.cutter.kind == "ball":
+            tip = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
+                                 self.st.resolution, self.stride)[0]
+        else:
+            full = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
+                                  self.st.resolution)[0]
+            tip = full[::self.stride]
         slope = np.gradient(tip, self.step) if tip.size > 1 else np.zeros_like(tip)
-        return s, tip, slope
+        return s, tip, slope, full
+
+    def envelope(self, p, dy, cols):
+        """Lowest the cutter of pass p reaches at lateral distance dy (rows x len(cols)) in sparse columns `cols`.
+
+        A ball's lowest point lies within ~R t of the column, where the pass is
+        nearly straight, so the swept cylinder of the local slope (scallop.py)
+        is exact enough. A flat or bull-nose bottom reaches lowest up to R away
+        along the pass, where a curved pass has left the local tangent line by
+        ~curvature x R^2 / 2 (0.036 mm on a gentle 0.008 /mm bend, more than the
+        scallop asked for); for them the envelope is taken over the pass's own
+        tool positions instead: the min over positions k within reach of
+        tip_k + h(distance). For a bull nose the minimum is a smooth interior
+        one, so positions 0.1 mm apart miss it by a second-order amount; a flat
+        end's minimum sits where its rim leaves the column, so the tips there
+        are interpolated at exactly that reach as well.
+        """
+        cut = self.st.cutter
+        if p[3] is None:
+            return p[1][cols][None, :] + swept_offset(cut, dy, p[2][cols][None, :])
+        full, d, R = p[3], self.st.resolution, cut.radius
+        a_flat = R - cut.corner_radius
+        dy = np.abs(np.asarray(dy, float))
+        at = cols * self.stride
+        env = np.full(np.broadcast_shapes(dy.shape, (1, at.size)), np.inf)
+        # the flat bottom: a plain window minimum of the tips (h = 0 there), one
+        # minimum filter per distinct window width
+        w_flat = np.floor(np.sqrt(np.maximum(a_flat ** 2 - dy ** 2, 0.0)) / d + 1e-9).astype(int)
+        w_flat = np.where(dy <= a_flat, w_flat, -1)
+        for w in np.unique(w_flat[w_flat >= 0]):
+            lowest = ndimage.minimum_filter1d(full, 2 * w + 1, mode="constant", cval=np.inf)[at]
+            env = np.where(w_flat == w, np.minimum(env, lowest[None, :]), env)
+        if cut.kind == "flat":
+            # its lowest reach is at the rim: interpolate the tips exactly there too
+            reach = np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d
+            for sign in (-1.0, 1.0):
+                f = at[None, :] + sign * reach
+                ok = (f >= 0) & (f <= full.size - 1) & (dy <= R)
+                env = np.minimum(env, np.where(ok, np.interp(f, np.arange(full.size), full), np.inf))
+        else:
+            # the corner: positions whose corner passes over the column, h from the profile
+            m = int(np.floor(R / d + 1e-9))
+            pad = np.pad(full, m, constant_values=np.inf)
+            w_all = np.floor(np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d + 1e-9)
+            rows_only = dy.shape[1] == 1          # one dy per row: work on the rows in the ring only
+            for k in range(-m, m + 1):
+                ring = (abs(k) > w_flat) & (abs(k) <= w_all) & (dy <= R)
+                if rows_only:
+                    r = np.flatnonzero(ring[:, 0])
+                    if r.size:
+                        h = cut.profile(np.hypot(k * d, dy[r]))
+                        env[r] = np.minimum(env[r], pad[at + m + k][None, :] + h)
+                elif ring.any():
+                    h = cut.profile(np.minimum(np.hypot(k * d, dy), R))
+                    env = np.where(ring, np.minimum(env, pad[at + m + k][None, :] + h), env)
+        return np.where(dy <= R + 1e-12, env, np.inf)
+
+    def _opening(self, stock, a, b, ys, cols):
+        """stock lowered by three passes between a and b (tips interpolated across)."""
+        out = stock
+        for f in (0.25, 0.5, 0.75):
+            v = (a[0] + f * (b[0] - a[0]), (1 - f) * a[1] + f * b[1], (1 - f) * a[2] + f * b[2],
+                 (1 - f) * a[3] + f * b[3])
+            out = np.minimum(out, self.envelope(v, ys - v[0], cols))
+        return out
+
+    def _above_opening(self, stock, opening, Z, inside):
+        """Scallop as the verification counts it: above the opening, where the opening nearly reaches the design."""
+        tol = 0.3 * self.st.scallop
+        reach = opening - Z
+        ok = inside & (reach <= tol)
+        return np.where(ok, stock - Z - np.clip(reach, 0.0, tol), -np.inf)
 
     def points(self, s):
         return (self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
@@ -366,32 +445,45 @@ class _PassProbe:
         Z = self.sampler.z(X, Y)
         on = self.sampler.on_part(X, Y)
         envs = []
-        near = [q for q in done[-8:] if q[0] >= sa - 2 * R] + [b]
+        cols_all = np.arange(self.along.size)
+        # every pass whose cutter reaches the interval: with small steps (a
+        # flat bottom on a cross slope) that is many more than the last few
+        near = [q for q in done[-200:] if q[0] >= sa - 2 * R] + [b]
         for p in near:
-            envs.append(p[1][None, :] + swept_offset(cut, (ys - p[0])[:, None], p[2][None, :]))
+            envs.append(self.envelope(p, (ys - p[0])[:, None], cols_all))
         stock = np.min(envs, axis=0)
         gap_a = np.where(on, envs[-2] - Z, np.inf)
         gap_b = np.where(on, envs[-1] - Z, np.inf)
         ca, cb = np.argmin(gap_a, axis=0), np.argmin(gap_b, axis=0)
         cols = np.arange(Z.shape[1])
-        touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
-        lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
-        if cut.kind != "ball":
-            # a flat bottom over a convex region touches at one point for many
-            # passes, so contacts say little about where the cusps are: measure
-            # between the axes as well (conservative on slopes)
-            ia, ib = int(np.argmin(np.abs(ys - sa))), int(np.argmin(np.abs(ys - sb)))
-            lo, hi = np.minimum(lo, ia), np.maximum(hi, ib)
         rows = np.arange(ys.size)[:, None]
-        inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
-        if not inside.any():
+        if cut.kind == "ball":
+            touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
+            lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+            inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
+            val = np.where(inside, stock - Z, -np.inf)
+        else:
+            # A flat bottom touches a convex region at one spot for many passes
+            # and, near the part's edges, reaches a column only from passes to
+            # the side, so contacts in the column say little. Measure instead
+            # what a and b leave above what a continuum of passes between them
+            # would leave (three passes in between, their tips interpolated):
+            # the verification's "scallop above the opening". Rows that even the
+            # continuum leaves high are the cutter's size or the margin's
+            # business (the strip downhill of the first pass), not the stepover's.
+            ia, ib = int(np.argmin(np.abs(ys - sa))), int(np.argmin(np.abs(ys - sb)))
+            lo = np.minimum(np.minimum(ca, cb), ia)
+            hi = np.maximum(np.maximum(ca, cb), ib)
+            opening = self._opening(stock, a, b, ys[:, None], cols)
+            inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & on
+            val = self._above_opening(stock, opening, Z, inside)
+        if not np.isfinite(val).any():
             return 0.0
-        val = np.where(inside, stock - Z, -np.inf)
         coarse = float(np.max(val))
         # the cusp is a sharp V between two cutter profiles: sampled `step` apart
         # its top is missed by up to slope x step / 2 (~20 % of the scallop for a
         # ball), so look again on a fine grid around each column's highest row
-        cols_ok = np.flatnonzero(inside.any(axis=0))
+        cols_ok = np.flatnonzero(np.isfinite(val).any(axis=0))
         r = np.argmax(val[:, cols_ok], axis=0)
         S = ys[r][None, :] + step * np.linspace(-1.0, 1.0, 17)[:, None]
         a1 = self.along[cols_ok][None, :]
@@ -399,9 +491,11 @@ class _PassProbe:
         Yf = a1 * self.e1[1] + S * self.e2[1]
         Zf = self.sampler.z(Xf, Yf)
         onf = self.sampler.on_part(Xf, Yf)
-        fine = np.min([p[1][cols_ok][None, :] + swept_offset(cut, S - p[0], p[2][cols_ok][None, :])
-                       for p in near], axis=0)
-        fine = np.where(onf, fine - Zf, -np.inf)
+        fine = np.min([self.envelope(p, S - p[0], cols_ok) for p in near], axis=0)
+        if cut.kind == "ball":
+            fine = np.where(onf, fine - Zf, -np.inf)
+        else:
+            fine = self._above_opening(fine, self._opening(fine, a, b, S, cols_ok), Zf, onf)
         return max(coarse, float(np.max(fine)))
 
 
