@@ -106,3 +106,20 @@ def test_lines_at_an_angle_agree_with_a_fine_brute_force():
     ok = r <= 3
     brute = [np.max(s.z(x + U[ok], y + V[ok]) - BALL.profile(r[ok])) for x, y in zip(px, py)]
     assert np.max(np.abs(lines[1, ::7] - brute)) < 0.002
+
+
+def test_flat_end_on_a_slope_touches_with_its_rim_exactly():
+    # a plane of gradient (0.24, 0.08): a flat end touches at its rim in the uphill
+    # direction, tip = Z(p + R g/|g|). The lattice disc's outermost uphill offsets
+    # stop short of the rim (0.007 mm low here); the finishing drop-cutter searches
+    # the rim itself.
+    from appliance.cam.zigzag import drop_points as finishing_drop
+    g = np.array([0.24, 0.08])
+    hm = grid_map(lambda X, Y: 10 + g[0] * X + g[1] * Y, 0, 30, 0, 30, 1.0)
+    s = Sampler(hm, edge_step=0.05)
+    x, y = np.array([12.0, 15.3]), np.array([11.0, 14.7])
+    exact = 10 + g @ np.vstack([x, y]) + 3 * np.hypot(*g)
+    lattice = drop_points(s, FLAT, x, y)
+    assert np.max(exact - lattice) > 0.003           # what the lattice alone misses
+    got = finishing_drop(s, FLAT, x, y)
+    assert np.max(np.abs(got - exact)) < 2e-4
