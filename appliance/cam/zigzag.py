@@ -405,9 +405,9 @@ class _PassProbe:
         return np.where(dy <= R + 1e-12, env, np.inf)
 
     def _opening(self, stock, a, b, ys, cols):
-        """stock lowered by three passes between a and b (tips interpolated across)."""
+        """stock lowered by five passes between a and b (tips interpolated across)."""
         out = stock
-        for f in (0.25, 0.5, 0.75):
+        for f in (1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6):
             v = (a[0] + f * (b[0] - a[0]), (1 - f) * a[1] + f * b[1], (1 - f) * a[2] + f * b[2],
                  (1 - f) * a[3] + f * b[3])
             out = np.minimum(out, self.envelope(v, ys - v[0], cols))
@@ -415,7 +415,8 @@ class _PassProbe:
 
     def _above_opening(self, stock, opening, Z, inside):
         """Scallop as the verification counts it: above the opening, where the opening nearly reaches the design."""
-        tol = 0.3 * self.st.scallop
+        # like the verification's reach tolerance (0.005 mm for a 0.01 mm request)
+        tol = 0.5 * self.st.scallop
         reach = opening - Z
         ok = inside & (reach <= tol)
         return np.where(ok, stock - Z - np.clip(reach, 0.0, tol), -np.inf)
@@ -467,7 +468,7 @@ class _PassProbe:
             # and, near the part's edges, reaches a column only from passes to
             # the side, so contacts in the column say little. Measure instead
             # what a and b leave above what a continuum of passes between them
-            # would leave (three passes in between, their tips interpolated):
+            # would leave (five passes in between, their tips interpolated):
             # the verification's "scallop above the opening". Rows that even the
             # continuum leaves high are the cutter's size or the margin's
             # business (the strip downhill of the first pass), not the stepover's.
