@@ -90,13 +90,35 @@ def golden_section(f, lo, hi, iters):
 
 
 def _golden(cutter, az, wz, W2, tm, dperp2, lo, hi, iters=20):
-    R = cutter.radius
-    f = lambda t: az + wz * t + cutter.profile(np.sqrt(np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)))
+    """t of the bull nose's minimum on [lo, hi].
+
+    The function is convex, so its slope at the two ends (closed form) settles
+    most pairs at once: at lo if it already rises there, at hi if it still
+    falls. Only the rest, where h' balances the segment's slope somewhere
+    inside, are searched (golden section): that was every pair before, the
+    whole cost of verifying a bull-nose program.
+    """
+    R, rc = cutter.radius, cutter.corner_radius
+    a = R - rc
     lo = np.array(lo, float, copy=True)
     hi = np.maximum(np.array(hi, float, copy=True), lo)
-    x1, f1, x2, f2, _, _ = golden_section(f, lo, hi, iters)
-    best = np.where(f1 <= f2, x1, x2)
-    # the ends of the whole interval too (a flat bottom makes the minimum sit there);
-    # not the narrowed bracket's ends, which golden_section also returns
-    e0, e1, fb = f(lo), f(hi), f(best)
-    return np.where(e0 <= np.minimum(e1, fb), lo, np.where(e1 <= fb, hi, best))
+
+    def slope(t):
+        r = np.sqrt(np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R))
+        e = np.clip(r - a, 0.0, rc)
+        dh = np.where(r > a, e / np.sqrt(np.maximum(rc * rc - e * e, 1e-300)), 0.0)
+        return wz + dh * W2 * (t - tm) / np.where(r > 0, r, 1.0)
+
+    s_lo, s_hi = slope(lo), slope(hi)
+    t = np.where(s_lo >= 0, lo, hi)
+    k = np.flatnonzero((s_lo < 0) & (s_hi > 0))
+    if k.size:
+        azk, wzk, W2k, tmk, dpk = az[k], wz[k], W2[k], tm[k], dperp2[k]
+        f = lambda u: azk + wzk * u + cutter.profile(np.sqrt(np.minimum(dpk + W2k * (u - tmk) ** 2, R * R)))
+        x1, f1, x2, f2, _, _ = golden_section(f, lo[k], hi[k], iters)
+        best = np.where(f1 <= f2, x1, x2)
+        # the ends of the whole interval too (a flat bottom makes the minimum sit there);
+        # not the narrowed bracket's ends, which golden_section also returns
+        e0, e1, fb = f(lo[k]), f(hi[k]), f(best)
+        t[k] = np.where(e0 <= np.minimum(e1, fb), lo[k], np.where(e1 <= fb, hi[k], best))
+    return t
