@@ -134,16 +134,20 @@ PLAN = {
 }
 
 
-def bench_acceptance(quick):
+def bench_acceptance(quick, only_sample=None, only_cutter=None):
     print("== acceptance: finishing programs verified by simulated milling (sim lattice 0.1 mm; sample4 0.02 mm) ==")
     print("sample   cutter      req.scallop  passes  gouge     scallop max  mean     | dissertation gouge")
     for name, cuts in PLAN.items():
+        if only_sample and name != only_sample:
+            continue
         step = 0.2 if name == "sample4" else 1.0
         hm = sample_map(name, step)
         res = 0.02 if name == "sample4" else 0.1
         d = 0.02 if name == "sample4" else 0.1
         top = float(np.nanmax(hm.z))
         for cname, h in (cuts[:1] if quick else cuts):
+            if only_cutter and cname != only_cutter:
+                continue
             cutter = parse_cutter(cname)
             t = time.perf_counter()
             # default chord (h / 20, at most 0.002): a move may stand that far above the tips,
@@ -167,13 +171,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", choices=("dropcutter", "fullmap", "acceptance"))
+    ap.add_argument("--sample", help="acceptance: only this sample (sample1..sample4)")
+    ap.add_argument("--cutter", help="acceptance: only this cutter (as named in the table)")
     a = ap.parse_args(argv)
     if a.only in (None, "dropcutter"):
         bench_dropcutter(a.quick)
     if a.only in (None, "fullmap"):
         bench_fullmap(a.quick)
     if a.only in (None, "acceptance"):
-        bench_acceptance(a.quick)
+        bench_acceptance(a.quick, a.sample, a.cutter)
 
 
 if __name__ == "__main__":
