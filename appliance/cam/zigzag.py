@@ -334,6 +334,8 @@ class _PassProbe:
         self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
         self.stride = max(1, int(round(PLAN_SPACING / st.resolution)))
         self._rows = {}
+        # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
+        self.row = min(_ROW, flat_stepover(st.cutter, st.scallop) / 8)
         self.along = t0 + st.resolution * np.arange(0, n, self.stride)
         self.step = st.resolution * self.stride
 
@@ -407,7 +409,7 @@ class _PassProbe:
         return np.where(dy <= R + 1e-12, env, np.inf)
 
     def _cached_rows(self, p, k0, k1, cols):
-        """Envelope of a placed pass on the global rows k0..k1-1 (rows y = k _ROW).
+        """Envelope of a placed pass on the global rows k0..k1-1 (rows y = k row).
 
         A placed pass is measured against by every candidate of the next ~2R / s
         passes (27 of them for a bull nose at 0.22 mm): its envelope is computed
@@ -416,8 +418,8 @@ class _PassProbe:
         blk = self._rows.get(p[0])
         if blk is None:
             R = self.st.cutter.radius
-            j0, j1 = int(np.floor((p[0] - R) / _ROW)), int(np.ceil((p[0] + R) / _ROW)) + 1
-            ys = _ROW * np.arange(j0, j1)
+            j0, j1 = int(np.floor((p[0] - R) / self.row)), int(np.ceil((p[0] + R) / self.row)) + 1
+            ys = self.row * np.arange(j0, j1)
             blk = (j0, self.envelope(p, (ys - p[0])[:, None], np.arange(self.along.size)))
             self._rows[p[0]] = blk
         j0, env = blk
@@ -467,7 +469,7 @@ class _PassProbe:
         R = cut.radius
         a = done[-1]
         sa, sb = a[0], b[0]
-        step = _ROW
+        step = self.row
         k0, k1 = int(np.floor((sa - R) / step)), int(np.ceil((sb + R) / step)) + 1
         ys = step * np.arange(k0, k1)
         X, Y = self.points(ys)
