@@ -17,12 +17,14 @@ s^2, bracketed) for the largest stepover whose scallop is within 90-98 % of
 the request, which also holds the scallop on slopes across the passes and on
 curved surfaces where the formula errs by 10-15 %.
 
-Columns are left out of that measure where the cutter physically cannot
-reach the surface under its axis (a concave region tighter than the cutter,
-or the wall of a step): there the residue is set by the cutter's size, not by
-the stepover, and no stepover would help. Such columns are recognised by the
-swept cutter standing more than 30 % of the scallop above the surface right
-under its own pass.
+Stock that no stepover would remove is left out of that measure: a concave
+region tighter than the cutter, the wall of a step, the strip downhill of the
+first pass. For a ball such columns are recognised by the swept cutter
+standing more than 30 % of the scallop above the surface right under its own
+pass. A flat or bull-nose bottom touches far from its axis, so for them the
+scallop is measured as the verification measures it: above what a continuum
+of passes between the two would leave (the "opening"), where that continuum
+comes within half the request of the surface.
 
 Boundary
 --------
