@@ -56,7 +56,7 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from .cutters import Cutter
-from .contact import polish
+from .contact import polish, polish_rim
 from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
 
 def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
@@ -359,7 +359,16 @@ class _PassProbe:
         else:
             full = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
                                   self.st.resolution)[0]
+            if self.st.cutter.kind == "flat":
+                # the lattice stops short of a flat end's rim: up to slope x d low, which
+                # the planner would take for stock already cut (0.03 mm on a 0.76 slope)
+                t = self.st.resolution * np.arange(self.n)
+                full = polish_rim(self.sampler, self.st.cutter, o[0] + t * self.e1[0], o[1] + t * self.e1[1], full)
+            # positions off the part (beyond the margin) are not in the program
+            t = self.st.resolution * np.arange(self.n)
+            gone = self.sampler.part_distance(o[0] + t * self.e1[0], o[1] + t * self.e1[1]) > self.st.margin + 1e-9
             tip = full[self.idx]
+            full = np.where(gone, np.inf, full)
         slope = np.gradient(tip, self.along) if tip.size > 1 else np.zeros_like(tip)
         return s, tip, slope, full
 
@@ -399,7 +408,8 @@ class _PassProbe:
             for sign in (-1.0, 1.0):
                 f = at[None, :] + sign * reach
                 ok = (f >= 0) & (f <= full.size - 1) & (dy <= R)
-                env = np.minimum(env, np.where(ok, np.interp(f, np.arange(full.size), full), np.inf))
+                at_reach = np.interp(f, np.arange(full.size), full)
+                env = np.minimum(env, np.where(ok & ~np.isnan(at_reach), at_reach, np.inf))
         else:
             # the corner: positions whose corner passes over the column, h from the profile
             m = int(np.floor(R / d + 1e-9))
@@ -458,7 +468,13 @@ class _PassProbe:
         tol = 0.5 * self.st.scallop
         reach = opening - Z
         ok = inside & (reach <= tol)
-        return np.where(ok, stock - Z - np.clip(reach, 0.0, tol), -np.inf)
+        # and like it, take off only the opening's residue beyond what its lattice
+        # adds (d^2 / 4 rc), none for a flat end (it trusts no flat-end opening)
+        rc = self.st.cutter.corner_radius
+        if rc <= 0:
+            return np.where(ok, stock - Z, -np.inf)
+        slack = self.st.resolution ** 2 / (4 * rc)
+        return np.where(ok, stock - Z - np.clip(reach - slack, 0.0, tol), -np.inf)
 
     def points(self, s):
         return (self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
