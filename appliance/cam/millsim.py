@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .contact import polish_rim
 from .cutters import Cutter
 from .dropcutter import drop_grid, _offsets
 from .gcodeparse import Parsed
@@ -160,6 +161,11 @@ def sweep_many(stock: Stock, cutter: Cutter, A, B, budget=3_000_000):
 def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
     """The design opened by the cutter on a lattice: what an infinitely fine stepover leaves."""
     tip = drop_grid(sampler, cutter, x0, y0, nx, ny, d)
+    if cutter.kind == "flat":
+        # the lattice stops short of a flat end's rim and would call a strip
+        # reachable that no tool position reaches (slope x shortfall low)
+        X, Y = np.meshgrid(x0 + d * np.arange(nx), y0 + d * np.arange(ny))
+        tip = polish_rim(sampler, cutter, X, Y, tip)
     groups, m = _offsets(cutter, d)
     pad = np.pad(tip, m, constant_values=np.inf)
     out = np.full(tip.shape, np.inf)
