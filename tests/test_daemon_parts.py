@@ -95,9 +95,13 @@ def test_the_socket_client_is_the_facade(tmp_path):
         with pytest.raises(SettingError) as e:           # the error type and its parts survive the trip
             client.start_scan({**SCAN, "level_step_mm": -1})
         assert e.value.where == "level_step_mm"
+        # subscribe before starting: on a busy machine homing can be over before a
+        # subscription made after start_scan sees its first state
+        stream = client.subscribe(timeout=60)            # streamed over the socket as they change
+        assert next(stream)["state"] == "idle"
         job_id = client.start_scan(SCAN)
         states = []
-        for st in client.subscribe(timeout=60):          # streamed over the socket as they change
+        for st in stream:
             states.append(st["state"])
             if st["state"] == "done":
                 break
