@@ -495,9 +495,17 @@ class _PassProbe:
         R = cut.radius
         a = done[-1]
         sa, sb = a[0], b[0]
-        step = self.row
-        k0, k1 = int(np.floor((sa - R) / step)), int(np.ceil((sb + R) / step)) + 1
-        ys = step * np.arange(k0, k1)
+        # rows on the global grid (placed passes' envelopes are cached on it), or
+        # finer when the step is small: a ball's contact on a steep face must fall
+        # near a row, or the column looks untouched and is left out (sample 4's
+        # 80-degree faces then let the planner jump, 0.49 mm left)
+        step = min(self.row, max(sb - sa, 1e-3) / 8)
+        cached = step == self.row
+        if cached:
+            k0, k1 = int(np.floor((sa - R) / step)), int(np.ceil((sb + R) / step)) + 1
+            ys = step * np.arange(k0, k1)
+        else:
+            ys = np.arange(sa - R, sb + R + step / 2, step)
         X, Y = self.points(ys)
         Z = self.sampler.z(X, Y)
         on = self.sampler.on_part(X, Y)
@@ -510,7 +518,8 @@ class _PassProbe:
         stock = env_b.copy()
         who = np.full(stock.shape, len(near) - 1)      # which pass leaves the stock there
         for i, p in enumerate(near[:-1]):
-            env = self._cached_rows(p, k0, k1, cols_all)
+            env = (self._cached_rows(p, k0, k1, cols_all) if cached
+                   else self.envelope(p, (ys - p[0])[:, None], cols_all))
             lower = env < stock
             stock[lower] = env[lower]
             who[lower] = i
@@ -613,7 +622,13 @@ def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
         if best_ok is None:
             best_ok = s_min
             best_p = probe.pass_at(sa + s_min)
-        passes.append(min(sa + best_ok, s1))
+        nxt = min(sa + best_ok, s1)
+        if s1 - nxt < s_min:
+            # a last sliver narrower than the smallest step: end on the boundary
+            # instead of adding a pass a fraction of a micron from it
+            nxt = s1
+            best_p = probe.pass_at(s1)
+        passes.append(nxt)
         done.append(best_p)
         guess = best_ok
     return np.array(passes)
