@@ -79,6 +79,30 @@ def test_a_short_rendered_scan_in_band_mode_matches_full_reads():
     assert banded.last_mode == "band"
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("effects", ["clean", "realistic"])
+def test_a_bright_face_that_comes_out_late_is_tracked_like_a_full_read(effects):
+    """Sample 4's top shows only faces turned from the lamp at first; its lit corner comes
+    out at 22 mm, brighter than anything seen before. The tracking extractor must take it
+    in (it once kept the first frame's glare cut and lost half the outline from there on),
+    and a 10 mm part must still get its channel and colour test (0.05 % of the frame)."""
+    from appliance.sim.rig import Rig
+    rig = Rig()
+    surf = surfaces.get("sample4")
+    cam = rig.camera_model(distorted=PRESETS[effects].lens_distortion)
+    tracked = WaterlineExtractor(cam, no_part="empty")
+    for k, level in enumerate(np.arange(36.0, 15.0, -1.0)):      # the scan's 1 mm steps
+        frame = render_frame(surf, level, rig, PRESETS[effects], np.random.default_rng(k))
+        a = tracked.extract(frame, level)
+        if level % 3:
+            continue
+        b = WaterlineExtractor(cam, no_part="empty").extract(frame, level)
+        assert len(a.loops) == len(b.loops), level
+        area_a, area_b = sum(signed_area(lp) for lp in a.loops), sum(signed_area(lp) for lp in b.loops)
+        assert area_a == pytest.approx(area_b, rel=0.01, abs=0.05), level
+    assert tracked.hue is not None
+
+
 def test_the_top_of_a_scan_is_ink_and_glare_only_and_says_so():
     """Above the part only ink, highlights and dust show: no island may be made of them."""
     from appliance.vision.pipeline import NoPartError

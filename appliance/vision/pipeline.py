@@ -152,7 +152,9 @@ class WaterlineExtractor:
         check_frame(frame, self.width, self.height, where)
         self._decimated = None
         if self.channel is None:
-            self.channel = best_channel(self._sample(frame, 8, all_channels=True), self.options["min_contrast"])
+            self.channel = best_channel(self._sample(frame, 4, all_channels=True), self.options["min_contrast"])
+            if self.channel is not None and self.split is not None:
+                self._learn(frame, where)         # the colour test needs the channel: learn it now
         loops = None
         if self._band is not None and self._band.any() and self.options["band"]:
             loops = self._read_band(frame, level_mm, where)
@@ -316,7 +318,7 @@ class WaterlineExtractor:
         self.last_mode = mode
         grid = self.grid
         band = self._band if band is None else band
-        read = self._lattice_changes(frame, band) if lattice else band
+        read = self._lattice_changes(frame, band, where) if lattice else band
         ty, tx = np.nonzero(read)
         if len(ty) == 0:
             return None
@@ -334,8 +336,13 @@ class WaterlineExtractor:
         if split.separability < 0.6 or split.contrast < mc:
             return None                       # the band lost the edge: read everything
         self.split = split
-        # (the glare cut stays as the whole-tank sample set it: the band is
-        # where glare next to the part is, the worst place to learn the part's top)
+        # The glare cut stays as the whole-tank sample set it - the band is where glare
+        # next to the part is, the worst place to learn the part's top - unless the colour
+        # test has taken the glare out of the band's histogram: then a face brighter than
+        # the cut is part coming out of the ink (a sliver along a rim the lattice misses),
+        # and the cut only ever rises to take it in.
+        if not_glare is not None:
+            self.glare_cut = max(self.glare_cut, glare_cut(hist, split))
         binary = part_mask(smooth, split, self.glare_cut)
         if not_glare is not None:
             cv2.bitwise_and(binary, not_glare, binary)
@@ -351,12 +358,20 @@ class WaterlineExtractor:
     def _channel_view(frame, c):
         return frame if frame.ndim == 2 else frame[:, :, min(c, frame.shape[2] - 1)]
 
-    def _lattice_changes(self, frame, band):
+    def _lattice_changes(self, frame, band, where):
         """Tiles off the band where a sparse lattice of the new frame disagrees with the kept binary.
 
         One strided read of every 16th pixel of every 16th row (12 k pixels):
         enough to see a new peak come out or the part flood once it is a mm
         or so across, far cheaper than reading the tank.
+
+        The glare cut was learned from the faces out of the ink when it was: a
+        face turned to the lamp that comes out later can be brighter than all of
+        them (sample 4's corner: 200 DN against 85 before it). Lattice points
+        above the cut (that pass the colour test, if there is one) may be such a
+        face: the cut is learned again from the whole tank's sample, as on the
+        first frame, before anything is decided with it (else a new face stays
+        "ink" in every later frame).
         """
         g = self.grid
         D = self.LATTICE
@@ -364,10 +379,13 @@ class WaterlineExtractor:
         lat = np.ascontiguousarray(frame[y0 + D // 2:y1:D, x0 + D // 2:x1:D])
         main = self._channel_view(lat, self._ch)
         now = cv2.medianBlur(np.ascontiguousarray(main), 3)
-        part = (now >= self.split.threshold) & (now < self.glare_cut)
+        part = now >= self.split.threshold
         if self.hue is not None:
             other = np.ascontiguousarray(lat[:, :, self.hue.other])
             part &= (cv2.subtract(other, main) <= self.hue.cut) & (other < self.hue.clip)
+        if self.glare_cut < 256 and np.count_nonzero(part & (now >= self.glare_cut)) >= 2:
+            self._learn(frame, where)
+        part &= now < self.glare_cut
         changed = part != (self._binary[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0)
         changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
         changed[:, 0] = changed[:, -1] = False
