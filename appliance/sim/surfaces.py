@@ -156,10 +156,14 @@ def _lifted(f, offset):
     return lambda x, y: f(x, y) + offset
 
 
-def _dissertation_sample(name, desc, size, f, offset, normaliser):
-    top = _lifted(f, offset)
-    return Surface(name, desc, (0.0, size, 0.0, size),
-                   (Tier(rect_sdf(0, size, 0, size), top),),
+def _dissertation_sample(name, desc, size, f, offset, normaliser, at=0.0):
+    """A sample lifted by `offset` onto the base, its corner at (at, at) on the base: the
+    100 mm samples fill the base, the 10 mm one stands at its centre, under the camera,
+    where anybody would put a small part (at the base's corner it stood 60 mm off the
+    camera's axis, and its 40 mm-tall rims hid most of its own waterlines)."""
+    top = _lifted(lambda x, y: f(x - at, y - at), offset)
+    return Surface(name, desc, (at, at + size, at, at + size),
+                   (Tier(rect_sdf(at, at + size, at, at + size), top),),
                    diss_offset=offset, table_normaliser=normaliser, tags=("dissertation",))
 
 
@@ -171,7 +175,7 @@ SAMPLE2 = _dissertation_sample("sample2", "four-fold saddle, 100 x 100 mm (disse
 SAMPLE3 = _dissertation_sample("sample3", "bicubic Bezier patch, 100 x 100 mm (dissertation sample 3)",
                                100.0, _sample3, 0.0, 49.81)
 SAMPLE4 = _dissertation_sample("sample4", "steep saddle, 10 x 10 mm (dissertation sample 4)",
-                               10.0, _saddle(10.0, 2.25), 20.07, 28.36)
+                               10.0, _saddle(10.0, 2.25), 20.07, 28.36, at=45.0)
 
 
 # -- our own parts -------------------------------------------------------------
