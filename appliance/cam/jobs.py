@@ -19,6 +19,7 @@ from .feeds import DEFAULT_MATERIAL, conditions
 from .gcodeparse import parse_gcode
 from .limits import Machine, check_envelope, limit_feeds
 from .millsim import new_stock, report, simulate
+from .opening import REACH_TOL
 from .posts import DEFAULT_DIALECT, render
 from .program import DEFAULT_CLEARANCE, build_program
 from .roughing import RoughSettings, roughing
@@ -105,7 +106,7 @@ def cutter_from_program(parsed, default=None) -> Cutter:
 
 
 def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resolution=0.1,
-                 reach_tol=0.005, edge_band=0.5, uncut_tol=0.1, where="G-code"):
+                 reach_tol=REACH_TOL, edge_band=0.5, uncut_tol=0.1, where="G-code"):
     """Simulate `text` over a flat block and compare with `hm`. Returns (Report, summary dict).
 
     z_zero: object height of program Z0 (None: from our header, else 0). The

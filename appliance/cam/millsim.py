@@ -35,10 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from .contact import polish_rim
 from .cutters import Cutter
-from .dropcutter import drop_grid, _offsets
 from .gcodeparse import Parsed
+from .opening import REACH_TOL, Opening
 from .sampling import Sampler
 from .segments import min_over_segment
 
@@ -158,25 +157,6 @@ def sweep_many(stock: Stock, cutter: Cutter, A, B, budget=3_000_000):
         s = e
 
 
-def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
-    """The design opened by the cutter on a lattice: what an infinitely fine stepover leaves."""
-    tip = drop_grid(sampler, cutter, x0, y0, nx, ny, d)
-    if cutter.kind == "flat":
-        # the lattice stops short of a flat end's rim and would call a strip
-        # reachable that no tool position reaches (slope x shortfall low)
-        X, Y = np.meshgrid(x0 + d * np.arange(nx), y0 + d * np.arange(ny))
-        tip = polish_rim(sampler, cutter, X, Y, tip)
-    groups, m = _offsets(cutter, d)
-    pad = np.pad(tip, m, constant_values=np.inf)
-    out = np.full(tip.shape, np.inf)
-    for b, avals, hvals in groups:
-        for sb in ((b, -b) if b else (0,)):
-            rows = pad[m + sb:m + sb + ny]
-            for a, h in zip(avals.tolist(), hvals.tolist()):
-                np.minimum(out, rows[:, m + a:m + a + nx] + h, out=out)
-    return out
-
-
 @dataclass
 class Report:
     gouge: float
@@ -206,7 +186,7 @@ class Report:
         return out
 
 
-def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=0.005, edge_band=0.5,
+def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=REACH_TOL, edge_band=0.5,
            uncut_tol=0.1, reach_resolution=0.0) -> Report:
     st = sim.stock
     X, Y = np.meshgrid(st.xs, st.ys)
@@ -217,30 +197,15 @@ def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=0.005, ed
     cell = r * r
     # distance to the footprint's edge, for the edge band
     inner = ndimage.distance_transform_edt(np.pad(part, 1), sampling=r)[1:-1, 1:-1]
-    # reachability from the opening on a coarser lattice, interpolated
+    # reachability from the opening (opening.py), on a lattice at least as coarse as the stock's
     d = max(reach_resolution, r)
-    x0, y0 = st.xs[0], st.ys[0]
-    nx = int(np.ceil((st.xs[-1] - x0) / d)) + 1
-    ny = int(np.ceil((st.ys[-1] - y0) / d)) + 1
-    op = opening(sampler, cutter, x0, y0, nx, ny, d)
-    op_s = ndimage.map_coordinates(op, [(Y - y0) / d, (X - x0) / d], order=1, mode="nearest")
-    reach = op_s - design <= reach_tol
+    op = Opening.over(sampler, cutter, d, st.xs[0], st.ys[0], st.xs[-1], st.ys[-1])
+    above, reach = op.above(st.z, design, X, Y, reach_tol)
     measured = part & reach & (inner >= edge_band)
     g = np.where(part, -dev, -np.inf)
     k = np.unravel_index(int(np.argmax(g)), g.shape)
     gouge = max(float(g[k]), 0.0)
-    # scallop: what the stepover left above what the cutter can reach at all. In a
-    # reachable cell the opening may still stand up to reach_tol above the design
-    # (a concave region just tighter than the cutter, the cells next to an edge the
-    # cutter rides on): that residue is the cutter's size, not the stepover's, and
-    # no stepover removes it, so it is not scallop. The lattice opening (a min over
-    # offsets d apart) can stand above the true one by up to h'' (d/sqrt2)^2 / 2
-    # = d^2 / (4 rc): only the residue beyond that is taken off, so no stock the
-    # stepover left is hidden (a flat end, h'' unbounded at its rim: none).
-    rc = cutter.corner_radius
-    slack = d * d / (4 * rc) if rc > 0 else np.inf
-    residue = np.clip(op_s - design - slack, 0.0, reach_tol)
-    above = st.z - design - residue
+    # scallop: what the stepover left above what the cutter can reach at all
     sc = np.where(measured, above, -np.inf)
     ks = np.unravel_index(int(np.argmax(sc)), sc.shape)
     smax = float(sc[ks]) if measured.any() else float("nan")

@@ -1,0 +1,153 @@
+"""The cutter's opening of the design: what an infinitely fine stepover leaves.
+
+Dropping the cutter at every position of a lattice gives the tip heights;
+lowering the stock by the cutter at all of them (a grey erosion of the tips
+with the cutter's profile) gives the opening. Where it stands above the
+design the cutter cannot reach at all (a concave region tighter than it, the
+wall of a step, the top of a dome under a flat bottom): no stepover removes
+that, so the scallop is measured only where the opening comes within a
+reach tolerance of the design, and above the opening's own residue there.
+
+The verification (millsim.report) and the stepover planner (zigzag.py) read
+the same opening through the same functions, so the planner holds the
+scallop the verification measures, not an approximation of it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from .contact import polish_rim
+from .cutters import Cutter
+from .dropcutter import _offsets, drop_grid
+from .sampling import Sampler
+
+REACH_TOL = 0.005       # mm: a cell is reachable when the opening is within this of the design
+
+
+def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
+    """The design opened by the cutter on the lattice x0 + i d, y0 + j d; shape (ny, nx)."""
+    tip = drop_grid(sampler, cutter, x0, y0, nx, ny, d)
+    if cutter.kind == "flat":
+        # the lattice stops short of a flat end's rim and would call a strip
+        # reachable that no tool position reaches (slope x shortfall low)
+        X, Y = np.meshgrid(x0 + d * np.arange(nx), y0 + d * np.arange(ny))
+        tip = polish_rim(sampler, cutter, X, Y, tip)
+    groups, m = _offsets(cutter, d)
+    pad = np.pad(tip, m, constant_values=np.inf)
+    out = np.full(tip.shape, np.inf)
+    for b, avals, hvals in groups:
+        for sb in ((b, -b) if b else (0,)):
+            rows = pad[m + sb:m + sb + ny]
+            for a, h in zip(avals.tolist(), hvals.tolist()):
+                np.minimum(out, rows[:, m + a:m + a + nx] + h, out=out)
+    if cutter.kind == "flat":
+        np.minimum(out, _rim_minimum(tip, cutter.radius / d), out=out)
+        np.minimum(out, _side_ends(tip, cutter.radius / d), out=out)
+    return out
+
+
+_RIM = 64
+
+
+def _rim_minimum(tip, r, chunk=8):
+    """min of the tips, bilinearly interpolated, on the circle of radius r (lattice units)
+    around every node; inf where the circle leaves the lattice.
+
+    A flat end's bottom is level (h = 0 out to R), so the opening at a cell is
+    the lowest tip within R of it, and on a slope that lies on the circle of
+    radius R, downhill. The lattice disc stops short of that circle by up to a
+    lattice step, which leaves the opening |grad tip| x d high (0.004 mm on a
+    0.09 slope at 0.05 mm): whether a cell counts as reachable then depended on
+    the lattice. Tips vary smoothly between nodes, so interpolating them on the
+    circle itself errs only to second order; 64 angles leave at most R x
+    |grad| x (1 - cos(pi / 64)), 3e-4 mm for a 6 mm end on a 0.09 slope.
+    """
+    ny, nx = tip.shape
+    J, I = np.mgrid[0:ny, 0:nx].astype(float)
+    out = np.full(tip.shape, np.inf)
+    ang = 2 * np.pi * np.arange(_RIM) / _RIM
+    for k in range(0, _RIM, chunk):
+        for th in ang[k:k + chunk]:
+            fi, fj = I + r * np.cos(th), J + r * np.sin(th)
+            inside = (fi >= 0) & (fi <= nx - 1) & (fj >= 0) & (fj <= ny - 1)
+            val = ndimage.map_coordinates(tip, [fj, fi], order=1, mode="nearest")
+            np.minimum(out, np.where(inside, val, np.inf), out=out)
+    return out
+
+
+@dataclass
+class Opening:
+    """An opening on a lattice, read anywhere by bilinear interpolation."""
+    cutter: Cutter
+    x0: float
+    y0: float
+    d: float
+    z: np.ndarray
+
+    @classmethod
+    def over(cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None):
+        """The opening on a lattice of spacing d from (x0, y0) to (x1, y1) (default: the footprint's bounds)."""
+        bx0, bx1, by0, by1 = sampler.bounds
+        x0 = bx0 if x0 is None else x0
+        y0 = by0 if y0 is None else y0
+        x1 = bx1 if x1 is None else x1
+        y1 = by1 if y1 is None else y1
+        # nodes up to the far bound, none past it (like the simulation's stock): a
+        # position past the part's edge is one no program with margin 0 has
+        nx = np.arange(x0, x1 + d / 2, d).size
+        ny = np.arange(y0, y1 + d / 2, d).size
+        return cls(cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d))
+
+    def at(self, X, Y):
+        X, Y = np.asarray(X, float), np.asarray(Y, float)
+        return ndimage.map_coordinates(self.z, [(Y - self.y0) / self.d, (X - self.x0) / self.d],
+                                       order=1, mode="nearest")
+
+    def above(self, stock, design, X, Y, reach_tol=REACH_TOL):
+        """(stock above the opening's residue, reachable) at points (X, Y) with heights `design`.
+
+        In a reachable cell the opening may still stand up to reach_tol above
+        the design (cells beside an edge the cutter rides on, concave regions
+        just tighter than the cutter): that residue is the cutter's size, not
+        the stepover's, so it is taken off. The lattice opening (a min over
+        offsets d apart) can stand above the true one by up to h'' (d/sqrt2)^2
+        / 2 = d^2 / (4 rc): only the residue beyond that is taken off, so no
+        stock the stepover left is hidden (a flat end, h'' unbounded at its
+        rim: none).
+        """
+        return self.above_at(stock, design, self.at(X, Y), reach_tol)
+
+    def above_at(self, stock, design, op, reach_tol=REACH_TOL):
+        """Like above(), with the opening already read at the points (`op`)."""
+        reach = op - design
+        rc = self.cutter.corner_radius
+        slack = self.d ** 2 / (4 * rc) if rc > 0 else np.inf
+        residue = np.clip(reach - slack, 0.0, reach_tol)
+        return stock - design - residue, reach <= reach_tol
+
+
+def _side_ends(tip, r):
+    """min of the tips at the two ends of each lattice side's chord through the circle of
+    radius r around every node (lattice units), interpolated along the side.
+
+    Positions stop at the lattice's sides (the part's bounds), and there the
+    lowest tip within R of a cell is often where the circle meets the side:
+    the rim search above cannot see it (its points past the side do not
+    count) and the lattice misses it by a step along the side.
+    """
+    ny, nx = tip.shape
+    out = np.full(tip.shape, np.inf)
+    J, I = np.mgrid[0:ny, 0:nx].astype(float)
+    for line, dist, along, n in ((tip[:, 0], I, J, ny), (tip[:, -1], nx - 1 - I, J, ny),
+                                 (tip[0, :], J, I, nx), (tip[-1, :], ny - 1 - J, I, nx)):
+        w = np.sqrt(np.maximum(r * r - dist * dist, 0.0))
+        near = dist <= r
+        for sign in (-1.0, 1.0):
+            f = along + sign * w
+            ok = near & (f >= 0) & (f <= n - 1)
+            val = np.interp(np.where(ok, f, 0.0), np.arange(n), line)
+            np.minimum(out, np.where(ok, val, np.inf), out=out)
+    return out
