@@ -22,9 +22,9 @@ region tighter than the cutter, the wall of a step, the strip downhill of the
 first pass. For a ball such columns are recognised by the swept cutter
 standing more than 30 % of the scallop above the surface right under its own
 pass. A flat or bull-nose bottom touches far from its axis, so for them the
-scallop is measured as the verification measures it: above what a continuum
-of passes between the two would leave (the "opening"), where that continuum
-comes within half the request of the surface.
+scallop is measured as the verification measures it, with the same opening
+(opening.py: what an infinitely fine stepover leaves), on the rows between
+the two passes' contacts (later passes touch beyond the second's).
 
 Boundary
 --------
@@ -57,6 +57,7 @@ from scipy import ndimage
 from ..errors import SettingError
 from .cutters import Cutter
 from .contact import polish, polish_rim
+from .opening import Opening
 from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
 
 def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
@@ -335,7 +336,7 @@ class _PassProbe:
     def __init__(self, sampler, st, e1, e2, t0, n):
         self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
         self.stride = max(1, int(round(PLAN_SPACING / st.resolution)))
-        self._rows = {}
+        self._grids = {}
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
         self.row = min(_ROW, flat_stepover(st.cutter, st.scallop) / 8)
         idx = np.arange(0, n, self.stride)
@@ -348,6 +349,8 @@ class _PassProbe:
             idx = np.union1d(idx, np.concatenate([np.arange(m), np.arange(n - m, n)]))
         self.idx = idx
         self.along = t0 + st.resolution * idx
+        # what an infinitely fine stepover would leave, on the verification's lattice
+        self.opening = None if st.cutter.kind == "ball" else Opening.over(sampler, st.cutter, st.resolution)
 
     def pass_at(self, s):
         """(across position, tips at the sparse points, their along-slopes, all tips or None)."""
@@ -387,10 +390,18 @@ class _PassProbe:
         end's minimum sits where its rim leaves the column, so the tips there
         are interpolated at exactly that reach as well.
         """
-        cut = self.st.cutter
-        if p[3] is None:
-            return p[1][cols][None, :] + swept_offset(cut, dy, p[2][cols][None, :])
-        full, d, R = p[3], self.st.resolution, cut.radius
+        return self.envelope_many([p], np.zeros(np.size(cols), int), dy, cols)
+
+    def envelope_many(self, passes, pid, dy, cols):
+        """envelope() with column j's pass passes[pid[j]]: the cusp's fine search asks
+        for many passes, each at a few columns, and one call costs what one pass's does."""
+        cut, d, R = self.st.cutter, self.st.resolution, self.st.cutter.radius
+        cols = np.asarray(cols)
+        if passes[0][3] is None:
+            tip = np.stack([q[1] for q in passes])[pid, cols]
+            slope = np.stack([q[2] for q in passes])[pid, cols]
+            return tip[None, :] + swept_offset(cut, dy, slope[None, :])
+        full = np.stack([q[3] for q in passes])
         a_flat = R - cut.corner_radius
         dy = np.abs(np.asarray(dy, float))
         at = self.idx[cols]
@@ -400,81 +411,83 @@ class _PassProbe:
         w_flat = np.floor(np.sqrt(np.maximum(a_flat ** 2 - dy ** 2, 0.0)) / d + 1e-9).astype(int)
         w_flat = np.where(dy <= a_flat, w_flat, -1)
         for w in np.unique(w_flat[w_flat >= 0]):
-            lowest = ndimage.minimum_filter1d(full, 2 * w + 1, mode="constant", cval=np.inf)[at]
+            lowest = ndimage.minimum_filter1d(full, 2 * w + 1, axis=1, mode="constant", cval=np.inf)[pid, at]
             env = np.where(w_flat == w, np.minimum(env, lowest[None, :]), env)
         if cut.kind == "flat":
             # its lowest reach is at the rim: interpolate the tips exactly there too
             reach = np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d
             for sign in (-1.0, 1.0):
-                f = at[None, :] + sign * reach
-                ok = (f >= 0) & (f <= full.size - 1) & (dy <= R)
-                at_reach = np.interp(f, np.arange(full.size), full)
-                env = np.minimum(env, np.where(ok & ~np.isnan(at_reach), at_reach, np.inf))
+                env = np.minimum(env, self._tips_at(full, pid, at[None, :] + sign * reach, dy <= R))
         else:
-            # the corner: positions whose corner passes over the column, h from the profile
-            m = int(np.floor(R / d + 1e-9))
-            pad = np.pad(full, m, constant_values=np.inf)
-            w_all = np.floor(np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d + 1e-9)
-            rows_only = dy.shape[1] == 1          # one dy per row: work on the rows in the ring only
-            for k in range(-m, m + 1):
-                ring = (abs(k) > w_flat) & (abs(k) <= w_all) & (dy <= R)
-                if rows_only:
-                    r = np.flatnonzero(ring[:, 0])
-                    if r.size:
-                        h = cut.profile(np.hypot(k * d, dy[r]))
-                        env[r] = np.minimum(env[r], pad[at + m + k][None, :] + h)
-                elif ring.any():
-                    h = cut.profile(np.minimum(np.hypot(k * d, dy), R))
-                    env = np.where(ring, np.minimum(env, pad[at + m + k][None, :] + h), env)
+            env = np.minimum(env, self._corner_envelope(full, pid, at, dy, w_flat))
         return np.where(dy <= R + 1e-12, env, np.inf)
 
-    def _cached_rows(self, p, k0, k1, cols):
-        """Envelope of a placed pass on the global rows k0..k1-1 (rows y = k row).
+    @staticmethod
+    def _tips_at(full, pid, f, ok):
+        """Tips of pass pid (per column) interpolated at fractional positions f; inf off the
+        pass or next to a position that is not in the program."""
+        n = full.shape[1]
+        ok = ok & (f >= 0) & (f <= n - 1)
+        i = np.clip(np.floor(f).astype(int), 0, n - 2)
+        u = f - i
+        lo, hi = full[pid, i], full[pid, i + 1]
+        with np.errstate(invalid="ignore"):
+            val = np.where(u == 0, lo, lo + u * (hi - lo))
+        return np.where(ok & np.isfinite(val), val, np.inf)
 
-        A placed pass is measured against by every candidate of the next ~2R / s
-        passes (27 of them for a bull nose at 0.22 mm): its envelope is computed
-        once, on every row it reaches, and sliced after that.
+    def _corner_envelope(self, full, pid, at, dy, w_flat, budget=400_000):
+        """min over positions k whose bull-nose corner passes over the column: tip_k + h.
+
+        h depends on (k, dy) only, so it is tabled once per call. With one dy per
+        row (cached rows, many columns) the loop runs over k on the rows each k
+        reaches; with a dy per element (the cusp's fine search, a few thousand
+        elements) all k are taken at once, in chunks of `budget` elements.
         """
-        blk = self._rows.get(p[0])
-        if blk is None:
-            R = self.st.cutter.radius
-            j0, j1 = int(np.floor((p[0] - R) / self.row)), int(np.ceil((p[0] + R) / self.row)) + 1
-            ys = self.row * np.arange(j0, j1)
-            blk = (j0, self.envelope(p, (ys - p[0])[:, None], np.arange(self.along.size)))
-            self._rows[p[0]] = blk
-        j0, env = blk
-        out = np.full((k1 - k0, cols.size), np.inf)
-        a, b = max(k0, j0), min(k1, j0 + env.shape[0])
-        if a < b:
-            out[a - k0:b - k0] = env[a - j0:b - j0][:, cols]
-        return out
+        cut, d, R = self.st.cutter, self.st.resolution, self.st.cutter.radius
+        m = int(np.floor(R / d + 1e-9))
+        pad = np.pad(full, ((0, 0), (m, m)), constant_values=np.inf)
+        ks = np.arange(-m, m + 1)
+        shape = np.broadcast_shapes(dy.shape, (1, at.size))
+        env = np.full(shape, np.inf)
+        w_all = np.floor(np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d + 1e-9)
+        kk = np.abs(ks).reshape((-1,) + (1,) * dy.ndim)
+        ring = (kk > w_flat[None]) & (kk <= w_all[None]) & (dy <= R)[None]
+        H = cut.profile(np.minimum(np.hypot(kk * d, dy[None]), R))
+        if dy.shape[1] == 1:
+            for i, k in enumerate(ks):
+                r = np.flatnonzero(ring[i, :, 0])
+                if r.size:
+                    env[r] = np.minimum(env[r], pad[pid, at + m + k][None, :] + H[i, r])
+            return env
+        tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]          # (k, 1, cols)
+        step = max(1, budget // max(env.size, 1))
+        for k0 in range(0, ks.size, step):
+            sl = slice(k0, k0 + step)
+            cand = np.where(ring[sl], tips[sl] + H[sl], np.inf)
+            env = np.minimum(env, cand.min(axis=0))
+        return env
 
-    def _forget(self, below):
-        for key in [k for k in self._rows if k < below]:
-            del self._rows[key]
+    def _row_step(self, gap):
+        """Row spacing for a gap between passes: the global spacing, halved until it is at
+        most an eighth of the gap (a ball's contact on a steep face must fall near a row,
+        or the column looks untouched and is left out: sample 4's 80-degree faces then let
+        the planner jump, 0.49 mm left). Powers of two keep the rows on a few global
+        grids, so the placed passes merged on them serve many candidates."""
+        level = max(0, int(np.ceil(np.log2(self.row * 8 / max(gap, 1e-3)) - 1e-9)))
+        return self.row / 2 ** level
 
-    def _opening(self, stock, a, b, ys, cols):
-        """stock lowered by five passes between a and b (tips interpolated across)."""
-        out = stock
-        for f in (1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6):
-            v = (a[0] + f * (b[0] - a[0]), (1 - f) * a[1] + f * b[1], (1 - f) * a[2] + f * b[2],
-                 (1 - f) * a[3] + f * b[3])
-            out = np.minimum(out, self.envelope(v, ys - v[0], cols))
-        return out
-
-    def _above_opening(self, stock, opening, Z, inside):
-        """Scallop as the verification counts it: above the opening, where the opening nearly reaches the design."""
-        # like the verification's reach tolerance (0.005 mm for a 0.01 mm request)
-        tol = 0.5 * self.st.scallop
-        reach = opening - Z
-        ok = inside & (reach <= tol)
-        # and like it, take off only the opening's residue beyond what its lattice
-        # adds (d^2 / 4 rc), none for a flat end (it trusts no flat-end opening)
-        rc = self.st.cutter.corner_radius
-        if rc <= 0:
-            return np.where(ok, stock - Z, -np.inf)
-        slack = self.st.resolution ** 2 / (4 * rc)
-        return np.where(ok, stock - Z - np.clip(reach - slack, 0.0, tol), -np.inf)
+    def _placed(self, step, done):
+        """The placed passes merged on the row grid of spacing `step`, up to date with `done`."""
+        sa = done[-1][0]
+        reach = 2 * self.st.cutter.radius
+        # grids no pass can still reach are dropped
+        for key in [k for k, g in self._grids.items() if g.top_y() < sa - reach]:
+            del self._grids[key]
+        grid = self._grids.get(step)
+        if grid is None:
+            grid = self._grids[step] = _PlacedRows(self, step)
+        grid.catch_up(done)
+        return grid
 
     def points(self, s):
         return (self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
@@ -495,35 +508,18 @@ class _PassProbe:
         R = cut.radius
         a = done[-1]
         sa, sb = a[0], b[0]
-        # rows on the global grid (placed passes' envelopes are cached on it), or
-        # finer when the step is small: a ball's contact on a steep face must fall
-        # near a row, or the column looks untouched and is left out (sample 4's
-        # 80-degree faces then let the planner jump, 0.49 mm left)
-        step = min(self.row, max(sb - sa, 1e-3) / 8)
-        cached = step == self.row
-        if cached:
-            k0, k1 = int(np.floor((sa - R) / step)), int(np.ceil((sb + R) / step)) + 1
-            ys = step * np.arange(k0, k1)
-        else:
-            ys = np.arange(sa - R, sb + R + step / 2, step)
-        X, Y = self.points(ys)
-        Z = self.sampler.z(X, Y)
-        on = self.sampler.on_part(X, Y)
+        step = self._row_step(sb - sa)
+        k0, k1 = int(np.floor((sa - R) / step)), int(np.ceil((sb + R) / step)) + 1
+        ys = step * np.arange(k0, k1)
         cols_all = np.arange(self.along.size)
-        # every pass whose cutter reaches the interval: with small steps (a
-        # flat bottom on a cross slope) that is many more than the last few
-        near = [q for q in done[-200:] if q[0] >= sa - 2 * R] + [b]
-        self._forget(sa - 2 * R)
+        # every placed pass whose cutter reaches the interval (with small steps, a
+        # flat bottom on a cross slope, 90 of them), merged once on a global grid
+        grid = self._placed(step, done)
+        Z, on, op, placed, owner, env_a = grid.rows(k0, k1)
         env_b = self.envelope(b, (ys - b[0])[:, None], cols_all)
-        stock = env_b.copy()
-        who = np.full(stock.shape, len(near) - 1)      # which pass leaves the stock there
-        for i, p in enumerate(near[:-1]):
-            env = (self._cached_rows(p, k0, k1, cols_all) if cached
-                   else self.envelope(p, (ys - p[0])[:, None], cols_all))
-            lower = env < stock
-            stock[lower] = env[lower]
-            who[lower] = i
-        gap_a = np.where(on, env - Z, np.inf)           # env is a's, the last placed pass
+        stock = np.minimum(placed, env_b)
+        who = np.where(env_b < placed, len(done), owner)      # which pass leaves the stock there
+        gap_a = np.where(on, env_a - Z, np.inf)
         gap_b = np.where(on, env_b - Z, np.inf)
         ca, cb = np.argmin(gap_a, axis=0), np.argmin(gap_b, axis=0)
         cols = np.arange(Z.shape[1])
@@ -534,20 +530,25 @@ class _PassProbe:
             inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
             val = np.where(inside, stock - Z, -np.inf)
         else:
-            # A flat bottom touches a convex region at one spot for many passes
-            # and, near the part's edges, reaches a column only from passes to
-            # the side, so contacts in the column say little. Measure instead
-            # what a and b leave above what a continuum of passes between them
-            # would leave (five passes in between, their tips interpolated):
-            # the verification's "scallop above the opening". Rows that even the
-            # continuum leaves high are the cutter's size or the margin's
-            # business (the strip downhill of the first pass), not the stepover's.
-            ia, ib = int(np.argmin(np.abs(ys - sa))), int(np.argmin(np.abs(ys - sb)))
-            lo = np.minimum(np.minimum(ca, cb), ia)
-            hi = np.maximum(np.maximum(ca, cb), ib)
-            opening = self._opening(stock, a, b, ys[:, None], cols)
+            # The rows between the contacts: positions between a and b touch
+            # there, later passes touch beyond b's contact. A flat bottom
+            # touches a whole band at once (on a flat, under all its bottom), so
+            # of equal contacts take a's nearest b and b's nearest a. The rows
+            # beyond b's contact are not b's to hold: a later pass cuts them
+            # (on a cross slope a flat bottom leaves m x 2R under its own
+            # bottom there, which the opening, reached from the later
+            # positions, rightly calls reachable). Measured above the opening,
+            # as the verification measures: rows the opening leaves high are
+            # the cutter's size, not the stepover's.
+            tie = 0.1 * self.st.scallop
+            near_a = gap_a <= gap_a.min(axis=0) + tie
+            near_b = gap_b <= gap_b.min(axis=0) + tie
+            ca = ys.size - 1 - np.argmax(near_a[::-1], axis=0)
+            cb = np.argmax(near_b, axis=0)
+            lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
             inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & on
-            val = self._above_opening(stock, opening, Z, inside)
+            above, reach = self.opening.above_at(stock, Z, op)
+            val = np.where(inside & reach, above, -np.inf)
         if not np.isfinite(val).any():
             return 0.0
         coarse = float(np.max(val))
@@ -566,16 +567,106 @@ class _PassProbe:
         # neighbouring rows (two, at a cusp): only those are evaluated again
         rr = np.clip(r[None, :] + np.array([-1, 0, 1])[:, None], 0, ys.size - 1)
         owners = who[rr, cols_ok[None, :]]
+        ids = np.unique(owners)
+        passes = [b if i == len(done) else done[i] for i in ids]
+        # every (owner, column) pair once, all in one call
+        pick = np.zeros((ids.size, cols_ok.size), bool)
+        pick[np.searchsorted(ids, owners), np.arange(cols_ok.size)[None, :]] = True
+        pid, c = np.nonzero(pick)
+        across = np.array([q[0] for q in passes])[pid]
+        env = self.envelope_many(passes, pid, S[:, c] - across[None, :], cols_ok[c])
         fine = np.full(S.shape, np.inf)
-        for i in np.unique(owners):
-            c = np.flatnonzero((owners == i).any(axis=0))
-            env = self.envelope(near[i], S[:, c] - near[i][0], cols_ok[c])
-            fine[:, c] = np.minimum(fine[:, c], env)
+        np.minimum.at(fine.T, c, env.T)
         if cut.kind == "ball":
             fine = np.where(onf, fine - Zf, -np.inf)
         else:
-            fine = self._above_opening(fine, self._opening(fine, a, b, S, cols_ok), Zf, onf)
+            above, reach = self.opening.above(fine, Zf, Xf, Yf)
+            fine = np.where(onf & reach, above, -np.inf)
         return max(coarse, float(np.max(fine)))
+
+
+class _PlacedRows:
+    """The passes placed so far, merged on one global grid of cross-section rows y = k step.
+
+    Every candidate pass is measured against all the placed passes its cutter
+    could meet (2R / s of them: 90 for a flat end at 0.065 mm on a steep cross
+    slope). Each placed pass is merged into the grid's stock once (with the
+    index of the pass that leaves each row's stock, for the cusp's fine
+    search), and the design, the footprint and the opening on the rows are read
+    once, so a candidate costs its own envelope and a slice.
+    """
+
+    def __init__(self, probe, step):
+        self.probe, self.step = probe, step
+        self.k0, self.n = 0, 0                # rows k0 .. k0 + n - 1 are held
+        ncol = probe.along.size
+        self.Z, self.op, self.stock = (np.empty((0, ncol)) for _ in range(3))
+        self.on = np.empty((0, ncol), bool)
+        self.owner = np.empty((0, ncol), int)
+        self.merged = 0                       # passes of `done` merged so far
+        self.last = (0, np.empty((0, ncol)))  # (first row, envelope) of the last merged pass
+
+    def top_y(self):
+        return (self.k0 + self.n) * self.step
+
+    def _arrays(self):
+        return self.Z, self.on, self.op, self.stock, self.owner
+
+    def _hold(self, k0, k1):
+        """Hold at least rows k0..k1-1. Rows below k0 are dropped: the passes only move
+        on (k0 follows the last placed pass), so no row is asked for again."""
+        assert self.n == 0 or k0 >= self.k0, "the planner's rows went back"
+        if self.n == 0 or k0 >= self.k0 + self.n:
+            self.k0, self.n = k0, 0
+            self.Z, self.on, self.op, self.stock, self.owner = (a[:0] for a in self._arrays())
+        if k1 > self.k0 + self.n:
+            new = self._new_rows(self.k0 + self.n, k1)
+            self.Z, self.on, self.op, self.stock, self.owner = (
+                np.concatenate([o, n]) for o, n in zip(self._arrays(), new))
+            self.n = k1 - self.k0
+        if k0 > self.k0:
+            cut = k0 - self.k0
+            self.Z, self.on, self.op, self.stock, self.owner = (a[cut:] for a in self._arrays())
+            self.k0, self.n = k0, self.n - cut
+
+    def _new_rows(self, k0, k1):
+        pr = self.probe
+        X, Y = pr.points(self.step * np.arange(k0, k1))
+        Z, on = pr.sampler.z(X, Y), pr.sampler.on_part(X, Y)
+        op = pr.opening.at(X, Y) if pr.opening is not None else np.zeros_like(Z)
+        return Z, on, op, np.full(Z.shape, np.inf), np.full(Z.shape, -1)
+
+    def catch_up(self, done):
+        """Merge the passes of `done` not merged yet, on the rows a candidate after the
+        last of them is measured on (from R below it: nothing lower is measured again)."""
+        R = self.probe.st.cutter.radius
+        first = int(np.floor((done[-1][0] - R) / self.step))
+        while self.merged < len(done) and done[self.merged][0] + R < first * self.step:
+            self.merged += 1
+        while self.merged < len(done):
+            p = done[self.merged]
+            j0 = max(int(np.ceil((p[0] - R) / self.step)), first)
+            j1 = int(np.floor((p[0] + R) / self.step)) + 1
+            self._hold(first, j1)
+            ys = self.step * np.arange(j0, j1)
+            env = self.probe.envelope(p, (ys - p[0])[:, None], np.arange(self.probe.along.size))
+            sl = slice(j0 - self.k0, j1 - self.k0)
+            lower = env < self.stock[sl]
+            self.stock[sl] = np.where(lower, env, self.stock[sl])
+            self.owner[sl] = np.where(lower, self.merged, self.owner[sl])
+            self.last = (j0, env)
+            self.merged += 1
+
+    def rows(self, k0, k1):
+        """(design, on part, opening, placed stock, owner, last pass's envelope) on rows k0..k1-1."""
+        self._hold(k0, k1)
+        sl = slice(k0 - self.k0, k1 - self.k0)
+        j0, env = self.last
+        last = np.full((k1 - k0, env.shape[1]), np.inf)
+        a, b = max(k0, j0), min(k1, j0 + env.shape[0])
+        if a < b:
+            last[a - k0:b - k0] = env[a - j0:b - j0]
+        return self.Z[sl], self.on[sl], self.op[sl], self.stock[sl], self.owner[sl], last
 
 
 def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
