@@ -240,3 +240,41 @@ def test_commands_end_to_end(tmp_path, capsys):
     assert main(["toolpath", str(csv), "-o", str(out), "--feed", "0"]) == 2
     assert "feed" in capsys.readouterr().err
     assert main(["verify", str(out), "--against", str(csv), "--z-zero", "high"]) == 2
+
+
+@pytest.fixture(scope="module")
+def bowl_files(tmp_path_factory):
+    from appliance.outputs import write_heightmap_csv
+    d = tmp_path_factory.mktemp("bad")
+    write_heightmap_csv(d / "bowl.csv", bowl())
+    holes = bowl()
+    holes.z[5:7, 5:8] = np.nan
+    write_heightmap_csv(d / "holes.csv", holes)
+    (d / "ok.gcode").write_text(finish().text)
+    return d
+
+
+@pytest.mark.parametrize("argv, where, what", [
+    (["toolpath", "{d}/bowl.csv", "--cutter", "ball40"], "cutter", "larger than the part"),
+    (["toolpath", "{d}/bowl.csv", "--feed", "0"], "feed", "must be > 0"),
+    (["toolpath", "{d}/bowl.csv", "--feed", "-100"], "feed", "must be > 0"),
+    (["toolpath", "{d}/bowl.csv", "--stepover", "0"], "stepover", "must be > 0"),
+    (["toolpath", "{d}/bowl.csv", "--stepover", "-0.5"], "stepover", "must be > 0"),
+    (["toolpath", "{d}/bowl.csv", "--scallop", "-0.01"], "scallop", "must be > 0"),
+    (["toolpath", "{d}/bowl.csv", "--angle", "nan"], "angle", "degrees"),
+    (["toolpath", "{d}/holes.csv"], "{d}/holes.csv", "6 cells with no height inside the part"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/holes.csv"], "{d}/holes.csv", "no height inside the part"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--resolution", "0"], "resolution", "must be > 0"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--edge-band", "-1"], "edge band", "must be >= 0"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--scallop", "0"], "--scallop", "must be > 0"),
+])
+def test_bad_input_is_one_line_naming_where_and_what(bowl_files, tmp_path, capsys, argv, where, what):
+    from appliance.cli import main
+    argv = [a.format(d=bowl_files) for a in argv]
+    if argv[0] == "toolpath":
+        argv += ["-o", str(tmp_path / "out.gcode")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith(f"inkslice: error: {where.format(d=bowl_files)}: ") and what in err, err
+    assert not (tmp_path / "out.gcode").exists()

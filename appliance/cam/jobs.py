@@ -113,8 +113,10 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
     block's top is the part's top + 1 mm, or the program's safe height if lower.
     """
     check_heightmap(hm)
-    if not np.isfinite(resolution) or resolution <= 0:
-        raise SettingError("resolution", f"must be > 0 mm, got {resolution}")
+    for name, v, least in (("resolution", resolution, None), ("reach tolerance", reach_tol, None),
+                           ("edge band", edge_band, 0.0), ("uncut tolerance", uncut_tol, 0.0)):
+        if not np.isfinite(v) or (v <= 0 if least is None else v < least):
+            raise SettingError(name, f"must be {'> 0' if least is None else '>= 0'} mm, got {v}")
     parsed = parse_gcode(text, where)
     if cutter is not None and not isinstance(cutter, Cutter):
         cutter = parse_cutter(cutter)

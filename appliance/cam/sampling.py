@@ -52,7 +52,7 @@ def check_heightmap(hm: HeightMap, where="height map"):
         j, i = np.argwhere(holes)[0]
         raise InkSliceError(where, f"has {int(holes.sum())} cells with no height inside the part "
                                    f"(first at x={hm.x[i]:.2f}, y={hm.y[j]:.2f} mm): fill the holes "
-                                   "(re-scan or interpolate) before making a toolpath")
+                                   "(re-scan or interpolate) first")
 
 
 def interior_holes(on_part):

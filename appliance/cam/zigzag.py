@@ -120,6 +120,8 @@ class FinishSettings:
                 raise SettingError("scallop", f"{self.scallop:g} mm is not less than the cutter radius {R:g} mm")
         if not np.isfinite(self.resolution) or self.resolution <= 0:
             raise SettingError("resolution", f"must be > 0 mm, got {self.resolution}")
+        if not np.isfinite(self.angle):
+            raise SettingError("angle", f"must be a number of degrees, got {self.angle}")
         if self.resolution > R / 3:
             raise SettingError("resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius "
                                              f"{R:g} mm (at most {R / 3:.3g} mm)")

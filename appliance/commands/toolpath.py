@@ -68,9 +68,11 @@ def _machine(args):
 def run(args):
     from ..cam.cutters import parse_cutter
     from ..cam.jobs import finishing_gcode, roughing_gcode
+    from ..cam.sampling import check_heightmap
     from ..cam.roughing import RoughSettings
     from ..cam.zigzag import FinishSettings
     hm = read_heightmap_csv(args.heightmap)
+    check_heightmap(hm, where=args.heightmap)          # its problems named by the file
     machine = _machine(args)
     common = dict(material=args.material, feed=args.feed, plunge=args.plunge_feed, rpm=args.spindle,
                   dialect=args.dialect, clearance=args.clearance, z_offset=args.z_offset, machine=machine)

@@ -33,12 +33,16 @@ def add_arguments(p):
 def run(args):
     import numpy as np
     from ..cam.jobs import verify_gcode
+    from ..cam.sampling import check_heightmap
     from ..cam.millsim import deviation_png
     path = Path(args.gcode)
     if not path.is_file():
         raise InkSliceError(path, "G-code file does not exist")
+    if not np.isfinite(args.scallop) or args.scallop <= 0:
+        raise SettingError("--scallop", f"must be > 0 mm, got {args.scallop}")
     text = path.read_text(encoding="utf-8", errors="replace")
     hm = read_heightmap_csv(args.against)
+    check_heightmap(hm, where=args.against)          # its problems named by the file
     z_zero = args.z_zero
     if z_zero is not None:
         if str(z_zero).lower() == "top":
