@@ -42,13 +42,13 @@ def _F(sampler, cutter, x, y, ux, uy):
     return np.where(ok, val, -np.inf)
 
 
-def _grad(sampler, x, y, e):
+def surface_gradient(sampler, x, y, e):
     gx = (sampler.z(x + e, y) - sampler.z(x - e, y)) / (2 * e)
     gy = (sampler.z(x, y + e) - sampler.z(x, y - e)) / (2 * e)
     return gx, gy
 
 
-def _guess(cutter, gx, gy):
+def plane_contact(cutter, gx, gy):
     """Contact offset of the cutter on a plane of gradient (gx, gy)."""
     G = np.hypot(gx, gy)
     rc = cutter.corner_radius
@@ -98,9 +98,9 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
     shape = out.shape
     x, y, out = x.ravel(), y.ravel(), out.reshape(-1)
     e = d / 2
-    gx, gy = _grad(sampler, x, y, e)
-    ux, uy = _guess(cutter, gx, gy)
-    gx2, gy2 = _grad(sampler, x + ux, y + uy, e)
+    gx, gy = surface_gradient(sampler, x, y, e)
+    ux, uy = plane_contact(cutter, gx, gy)
+    gx2, gy2 = surface_gradient(sampler, x + ux, y + uy, e)
     steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP)
     idx = np.flatnonzero(steep & np.isfinite(out))
     for s in range(0, idx.size, chunk // 2):
@@ -109,7 +109,7 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
         # and the best of a scan of rings near the rim (beside a cliff or a
         # crease the plane's guess can be far from the contact: 0.02 mm low
         # on sample 4's top edge)
-        gcx, gcy = _guess(cutter, gx2[k0], gy2[k0])
+        gcx, gcy = plane_contact(cutter, gx2[k0], gy2[k0])
         rcx, rcy = _ring_scan(sampler, cutter, x[k0], y[k0])
         k = np.concatenate([k0, k0])
         px, py = x[k], y[k]
