@@ -35,6 +35,9 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     """m(q) for q - A = (dx, dy) and w = B - A; +inf where q is never under the cutter."""
     R = cutter.radius
     dx, dy, wx, wy, wz, az = np.broadcast_arrays(*(np.asarray(v, float) for v in (dx, dy, wx, wy, wz, az)))
+    shape = dx.shape
+    # flat from here on: the bull nose's search picks elements by flat index
+    dx, dy, wx, wy, wz, az = (v.ravel() for v in (dx, dy, wx, wy, wz, az))
     W2 = wx * wx + wy * wy
     still = W2 < 1e-18
     Ws = np.where(still, 1.0, W2)
@@ -65,7 +68,7 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     else:
         prof = cutter.profile(np.sqrt(rho2))
     val = az + wz * t + prof
-    return np.where(ok, val, np.inf)
+    return np.where(ok, val, np.inf).reshape(shape)
 
 
 def golden_section(f, lo, hi, iters):

@@ -11,20 +11,20 @@ Either fixed (`stepover`), or chosen pass by pass so the scallop is the
 requested height (`scallop`, default 0.01 mm). The planner does not trust the
 flat-surface formula: for a candidate next pass it drops the cutter along it,
 then measures the actual scallop between it and the previous pass with the
-swept cutter (scallop.py) at 15 cross-sections between them, on every third
-point along the pass, against the design surface. It searches (secant on
-s^2, bracketed) for the largest stepover whose scallop is within 90-98 % of
-the request, which also holds the scallop on slopes across the passes and on
-curved surfaces where the formula errs by 10-15 %.
+cutter swept over both passes' tool positions, on cross-section rows at most
+an eighth of the step apart, every 0.3 mm along the pass (every point near its
+ends), on the rows between the two passes' contacts (later passes touch beyond
+the second's). It searches (secant on s^2, bracketed) for the largest
+stepover whose scallop is within 90-98 % of the request, which also holds the
+scallop on slopes across the passes and on curved surfaces where the formula
+errs by 10-15 %.
 
-Stock that no stepover would remove is left out of that measure: a concave
-region tighter than the cutter, the wall of a step, the strip downhill of the
-first pass. For a ball such columns are recognised by the swept cutter
-standing more than 30 % of the scallop above the surface right under its own
-pass. A flat or bull-nose bottom touches far from its axis, so for them the
-scallop is measured as the verification measures it, with the same opening
-(opening.py: what an infinitely fine stepover leaves), on the rows between
-the two passes' contacts (later passes touch beyond the second's).
+The scallop is measured as the verification measures it, above the same
+opening (opening.py: what an infinitely fine stepover leaves) where that
+opening comes within the reach tolerance of the design: stock no stepover
+would remove is left out (a concave region tighter than the cutter, the wall
+of a step, the strip downhill of the first pass). A ball's columns where
+either pass touches nothing are left out too.
 
 Boundary
 --------
@@ -56,7 +56,7 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from .cutters import Cutter
-from .contact import polish, polish_rim
+from .contact import polish
 from .opening import Opening
 from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
 
@@ -78,7 +78,8 @@ def drop_points(sampler, cutter, x, y, d=DEFAULT_RESOLUTION):
     y = np.asarray(y, float).ravel()
     return drop_lines(sampler, cutter, np.column_stack([x, y]), (1.0, 0.0), 1, d)[:, 0]
 from .sampling import Sampler
-from .scallop import ball_stepover, flat_stepover, swept_offset
+from .scallop import ball_stepover, flat_stepover
+from .segments import min_over_segment
 
 DEFAULT_SCALLOP = 0.01      # mm
 DEFAULT_CHORD = 0.002       # mm
@@ -342,55 +343,47 @@ class _PassProbe:
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
         self.row = min(_ROW, flat_stepover(st.cutter, st.scallop) / 8)
         idx = np.arange(0, n, self.stride)
-        if st.cutter.kind != "ball":
-            # every point within 1.5 R of the passes' ends: there a flat bottom reaches
-            # the strip beside the part's edge only from passes to the side, and the
-            # cusps it leaves change within a tenth of a millimetre along the pass
-            # (0.3 mm apart they were missed: 0.013-0.019 mm against 0.01 asked)
-            m = min(int(np.ceil(1.5 * st.cutter.radius / st.resolution)), n)
-            idx = np.union1d(idx, np.concatenate([np.arange(m), np.arange(n - m, n)]))
+        # every point within 1.5 R of the passes' ends: there the cutter reaches the
+        # strip beside the part's edge only from positions to the side, and the cusps
+        # it leaves change within a tenth of a millimetre along the pass (0.3 mm apart
+        # they were missed: a bull nose left 0.013-0.019 mm against 0.01 asked, a 1 mm
+        # ball on sample 4's 81-degree faces down to its edge 0.023)
+        m = min(int(np.ceil(1.5 * st.cutter.radius / st.resolution)), n)
+        idx = np.union1d(idx, np.concatenate([np.arange(m), np.arange(n - m, n)]))
         self.idx = idx
         self.along = t0 + st.resolution * idx
         # what an infinitely fine stepover would leave, on the verification's lattice
-        self.opening = None if st.cutter.kind == "ball" else Opening.over(sampler, st.cutter, st.resolution)
+        self.opening = Opening.over(sampler, st.cutter, st.resolution)
 
     def pass_at(self, s):
-        """(across position, tips at the sparse points, their along-slopes, all tips or None)."""
+        """(across position, tips at every point of the pass; inf where not in the program).
+
+        The tips are the program's own (polished on steep faces, a flat end's at
+        its rim): lattice tips stand up to 0.03 mm low on sample 4's 80-degree
+        faces, which the planner would take for stock already cut.
+        """
         o = self.t0 * self.e1 + s * self.e2
-        full = None
-        if self.st.cutter.kind == "ball":
-            tip = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
-                                 self.st.resolution, self.stride)[0]
-        else:
-            full = _lattice_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n,
-                                  self.st.resolution)[0]
-            if self.st.cutter.kind == "flat":
-                # the lattice stops short of a flat end's rim: up to slope x d low, which
-                # the planner would take for stock already cut (0.03 mm on a 0.76 slope)
-                t = self.st.resolution * np.arange(self.n)
-                full = polish_rim(self.sampler, self.st.cutter, o[0] + t * self.e1[0], o[1] + t * self.e1[1], full)
-            # positions off the part (beyond the margin) are not in the program
-            t = self.st.resolution * np.arange(self.n)
-            gone = self.sampler.part_distance(o[0] + t * self.e1[0], o[1] + t * self.e1[1]) > self.st.margin + 1e-9
-            tip = full[self.idx]
-            full = np.where(gone, np.inf, full)
-        slope = np.gradient(tip, self.along) if tip.size > 1 else np.zeros_like(tip)
-        return s, tip, slope, full
+        full = drop_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n, self.st.resolution)[0]
+        # positions off the part (beyond the margin) are not in the program
+        t = self.st.resolution * np.arange(self.n)
+        gone = self.sampler.part_distance(o[0] + t * self.e1[0], o[1] + t * self.e1[1]) > self.st.margin + 1e-9
+        return s, np.where(gone, np.inf, full)
 
     def envelope(self, p, dy, cols):
         """Lowest the cutter of pass p reaches at lateral distance dy (rows x len(cols)) in sparse columns `cols`.
 
-        A ball's lowest point lies within ~R t of the column, where the pass is
-        nearly straight, so the swept cylinder of the local slope (scallop.py)
-        is exact enough. A flat or bull-nose bottom reaches lowest up to R away
-        along the pass, where a curved pass has left the local tangent line by
-        ~curvature x R^2 / 2 (0.036 mm on a gentle 0.008 /mm bend, more than the
-        scallop asked for); for them the envelope is taken over the pass's own
-        tool positions instead: the min over positions k within reach of
-        tip_k + h(distance). For a bull nose the minimum is a smooth interior
-        one, so positions 0.1 mm apart miss it by a second-order amount; a flat
-        end's minimum sits where its rim leaves the column, so the tips there
-        are interpolated at exactly that reach as well.
+        The envelope is taken over the pass's own tool positions: the min over
+        positions k within reach of tip_k + h(distance). The swept cylinder of
+        the local slope (scallop.py) is not enough: the lowest point of a swept
+        cutter lies up to R away along the pass (a flat or bull-nose bottom
+        always, a ball on a slope t at R t / sqrt(1 + t^2)), where a curved pass
+        has left its tangent line by ~curvature x R^2 / 2 (0.036 mm on a gentle
+        0.008 /mm bend; on sample 4's steep saddle the cylinder stood 0.2 mm
+        above a 1 mm ball's sweep, the columns looked untouched and the planner
+        left a 0.13 mm scallop). For a ball or bull nose the minimum is a
+        smooth interior one, so positions 0.1 mm apart miss it by a second-order
+        amount; a flat end's minimum sits where its rim leaves the column, so
+        the tips there are interpolated at exactly that reach as well.
         """
         return self.envelope_many([p], np.zeros(np.size(cols), int), dy, cols)
 
@@ -399,11 +392,7 @@ class _PassProbe:
         for many passes, each at a few columns, and one call costs what one pass's does."""
         cut, d, R = self.st.cutter, self.st.resolution, self.st.cutter.radius
         cols = np.asarray(cols)
-        if passes[0][3] is None:
-            tip = np.stack([q[1] for q in passes])[pid, cols]
-            slope = np.stack([q[2] for q in passes])[pid, cols]
-            return tip[None, :] + swept_offset(cut, dy, slope[None, :])
-        full = np.stack([q[3] for q in passes])
+        full = np.stack([q[1] for q in passes])
         a_flat = R - cut.corner_radius
         dy = np.abs(np.asarray(dy, float))
         at = self.idx[cols]
@@ -438,7 +427,8 @@ class _PassProbe:
         return np.where(ok & np.isfinite(val), val, np.inf)
 
     def _corner_envelope(self, full, pid, at, dy, w_flat, budget=400_000):
-        """min over positions k whose bull-nose corner passes over the column: tip_k + h.
+        """min over positions k whose ball or bull-nose corner passes over the column: tip_k + h,
+        then the moves beside the lowest position swept exactly.
 
         h depends on (k, dy) only, so it is tabled once per call. With one dy per
         row (cached rows, many columns) the loop runs over k on the rows each k
@@ -451,6 +441,7 @@ class _PassProbe:
         ks = np.arange(-m, m + 1)
         shape = np.broadcast_shapes(dy.shape, (1, at.size))
         env = np.full(shape, np.inf)
+        best = np.zeros(shape, int)            # k of the lowest position
         w_all = np.floor(np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d + 1e-9)
         kk = np.abs(ks).reshape((-1,) + (1,) * dy.ndim)
         ring = (kk > w_flat[None]) & (kk <= w_all[None]) & (dy <= R)[None]
@@ -459,15 +450,47 @@ class _PassProbe:
             for i, k in enumerate(ks):
                 r = np.flatnonzero(ring[i, :, 0])
                 if r.size:
-                    env[r] = np.minimum(env[r], pad[pid, at + m + k][None, :] + H[i, r])
-            return env
-        tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]          # (k, 1, cols)
-        step = max(1, budget // max(env.size, 1))
-        for k0 in range(0, ks.size, step):
-            sl = slice(k0, k0 + step)
-            cand = np.where(ring[sl], tips[sl] + H[sl], np.inf)
-            env = np.minimum(env, cand.min(axis=0))
-        return env
+                    cand = pad[pid, at + m + k][None, :] + H[i, r]
+                    low = cand < env[r]
+                    env[r] = np.where(low, cand, env[r])
+                    best[r] = np.where(low, k, best[r])
+        else:
+            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]          # (k, 1, cols)
+            step = max(1, budget // max(env.size, 1))
+            for k0 in range(0, ks.size, step):
+                sl = slice(k0, k0 + step)
+                cand = np.where(ring[sl], tips[sl] + H[sl], np.inf)
+                j = np.argmin(cand, axis=0)
+                low = np.take_along_axis(cand, j[None], axis=0)[0]
+                better = low < env
+                env = np.where(better, low, env)
+                best = np.where(better, ks[k0 + j], best)
+        return self._between_positions(full, pid, at, dy, env, best)
+
+    def _between_positions(self, full, pid, at, dy, env, best):
+        """env lowered to what the straight moves on either side of each element's
+        lowest position cut (segments.py, exact).
+
+        The program moves in straight lines between positions d apart; on a face
+        steep along the pass the cutter's h'' is large (526 /mm for a 1 mm ball
+        at 81 degrees) and the lowest of the positions alone stood up to h'' (d /
+        2)^2 / 2 above the sweep (0.026 mm at d = 0.02): the planner took that for
+        stock left and stepped over far finer than the verification needed.
+        """
+        cut, d = self.st.cutter, self.st.resolution
+        n = full.shape[1]
+        pos = at[None, :] + best
+        rows = np.broadcast_to(pid[None, :], pos.shape)
+        out = env
+        for j0 in (pos - 1, pos):
+            ok = np.isfinite(env) & (j0 >= 0) & (j0 <= n - 2)
+            j0 = np.clip(j0, 0, n - 2)
+            a, b = full[rows, j0], full[rows, j0 + 1]
+            ok &= np.isfinite(a) & np.isfinite(b)
+            a, b = np.where(ok, a, 0.0), np.where(ok, b, 0.0)
+            swept = min_over_segment(cut, (at[None, :] - j0) * d, dy, d, 0.0, b - a, a)
+            out = np.where(ok, np.minimum(out, swept), out)
+        return out
 
     def _row_step(self, gap):
         """Row spacing for a gap between passes: the global spacing, halved until it is at
@@ -521,36 +544,42 @@ class _PassProbe:
         env_b = self.envelope(b, (ys - b[0])[:, None], cols_all)
         stock = np.minimum(placed, env_b)
         who = np.where(env_b < placed, len(done), owner)      # which pass leaves the stock there
-        gap_a = np.where(on, env_a - Z, np.inf)
-        gap_b = np.where(on, env_b - Z, np.inf)
+        # a pass touches where it comes nearest the opened design, the surface the
+        # cutter can reach at all: beside sample 4's 81-degree faces down to its
+        # edge no position comes within 0.004 mm of the design itself, and a ball's
+        # column there looked untouched and was left out (0.011 left)
+        surface = np.maximum(Z, op)
+        gap_a = np.where(on, env_a - surface, np.inf)
+        gap_b = np.where(on, env_b - surface, np.inf)
         ca, cb = np.argmin(gap_a, axis=0), np.argmin(gap_b, axis=0)
         cols = np.arange(Z.shape[1])
         rows = np.arange(ys.size)[:, None]
         if cut.kind == "ball":
+            # a ball touches at one row of a column; a column where either pass
+            # touches nothing (a concave region tighter than the cutter) is left out
             touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
-            lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
-            inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & touch[None, :] & on
-            val = np.where(inside, stock - Z, -np.inf)
+            inside = touch[None, :] & on
         else:
-            # The rows between the contacts: positions between a and b touch
-            # there, later passes touch beyond b's contact. A flat bottom
-            # touches a whole band at once (on a flat, under all its bottom), so
-            # of equal contacts take a's nearest b and b's nearest a. The rows
-            # beyond b's contact are not b's to hold: a later pass cuts them
-            # (on a cross slope a flat bottom leaves m x 2R under its own
-            # bottom there, which the opening, reached from the later
-            # positions, rightly calls reachable). Measured above the opening,
-            # as the verification measures: rows the opening leaves high are
-            # the cutter's size, not the stepover's.
+            # A flat bottom touches a whole band at once (on a flat, under all
+            # its bottom): of equal contacts take a's nearest b and b's nearest a
             tie = 0.1 * self.st.scallop
             near_a = gap_a <= gap_a.min(axis=0) + tie
             near_b = gap_b <= gap_b.min(axis=0) + tie
             ca = ys.size - 1 - np.argmax(near_a[::-1], axis=0)
             cb = np.argmax(near_b, axis=0)
-            lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
-            inside = (rows >= lo[None, :]) & (rows <= hi[None, :]) & on
-            above, reach = self.opening.above_at(stock, Z, op)
-            val = np.where(inside & reach, above, -np.inf)
+            inside = on
+        # The rows between the contacts: positions between a and b touch there,
+        # later passes touch beyond b's contact, so the rows beyond are not b's to
+        # hold (on a cross slope a flat bottom leaves m x 2R under its own bottom
+        # there, which the opening, reached from the later positions, rightly
+        # calls reachable). Measured above the opening, as the verification
+        # measures: rows the opening leaves high are the cutter's size, not the
+        # stepover's, and its residue within the reach tolerance is no scallop
+        # (counted, it made the planner 17 % too fine on sample 4's steep faces)
+        lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+        inside = inside & (rows >= lo[None, :]) & (rows <= hi[None, :])
+        above, reach = self.opening.above_at(stock, Z, op)
+        val = np.where(inside & reach, above, -np.inf)
         if not np.isfinite(val).any():
             return 0.0
         coarse = float(np.max(val))
@@ -579,11 +608,8 @@ class _PassProbe:
         env = self.envelope_many(passes, pid, S[:, c] - across[None, :], cols_ok[c])
         fine = np.full(S.shape, np.inf)
         np.minimum.at(fine.T, c, env.T)
-        if cut.kind == "ball":
-            fine = np.where(onf, fine - Zf, -np.inf)
-        else:
-            above, reach = self.opening.above(fine, Zf, Xf, Yf)
-            fine = np.where(onf & reach, above, -np.inf)
+        above, reach = self.opening.above(fine, Zf, Xf, Yf)
+        fine = np.where(onf & reach, above, -np.inf)
         return max(coarse, float(np.max(fine)))
 
 
@@ -635,7 +661,7 @@ class _PlacedRows:
         pr = self.probe
         X, Y = pr.points(self.step * np.arange(k0, k1))
         Z, on = pr.sampler.z(X, Y), pr.sampler.on_part(X, Y)
-        op = pr.opening.at(X, Y) if pr.opening is not None else np.zeros_like(Z)
+        op = pr.opening.at(X, Y)
         return Z, on, op, np.full(Z.shape, np.inf), np.full(Z.shape, -1)
 
     def catch_up(self, done):
