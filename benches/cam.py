@@ -4,7 +4,7 @@ dissertation's format).
 
     .venv/bin/python benches/cam.py            # everything (~10-20 min on 2 busy cores)
     .venv/bin/python benches/cam.py --quick    # a slice of each (~2 min)
-    .venv/bin/python benches/cam.py --only dropcutter|acceptance|fullmap
+    .venv/bin/python benches/cam.py --only dropcutter|acceptance|fullmap|dialects
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -30,11 +32,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from appliance.cam.cutters import parse_cutter  # noqa: E402
 from appliance.cam.dissertation import dissertation_gcode  # noqa: E402
 from appliance.cam.dropcutter import drop_grid, drop_lines  # noqa: E402
-from appliance.cam.jobs import finishing_gcode, verify_gcode  # noqa: E402
+from appliance.cam.dialects import check_fanuc, check_grbl  # noqa: E402
+from appliance.cam.jobs import finishing_gcode, finishing_gcodes, verify_gcode  # noqa: E402
+from appliance.cam.posts import DIALECT_NAMES  # noqa: E402
 from appliance.cam.sampling import Sampler  # noqa: E402
 from appliance.cam.zigzag import FinishSettings  # noqa: E402
 from appliance.sim import surfaces  # noqa: E402
 from appliance.surface.heightmap import HeightMap  # noqa: E402
+
+RS274 = "/usr/bin/rs274"
+# every dialect goes through LinuxCNC's interpreter (it reads them all, Fanuc's % and
+# O0001 included); GRBL's and Fanuc's own rules are checked by ours as well
+RULE_CHECKERS = {"grbl": check_grbl, "fanuc": check_fanuc}
 
 
 def sample_map(name, step):
@@ -124,6 +133,42 @@ def bench_fullmap(quick):
     print(f"1001 x 1001 tool heights in {t:.2f} s (median)")
 
 
+def run_rs274(text, folder):
+    """LinuxCNC's interpreter on a program: (exit code, its complaint or '')."""
+    src = Path(folder) / "p.ngc"
+    src.write_text(text)
+    r = subprocess.run([RS274, "-g", str(src), str(Path(folder) / "out.txt")], stdin=subprocess.DEVNULL,
+                       capture_output=True, text=True, timeout=600)
+    return r.returncode, (r.stderr or r.stdout).strip().splitlines()[-1:] if r.returncode else []
+
+
+def bench_dialects(quick):
+    """Every dialect of one finishing plan for a dissertation sample, each through its checker."""
+    name = "sample3"
+    st = (FinishSettings(parse_cutter("ball6"), scallop=None, stepover=1.0) if quick
+          else FinishSettings(parse_cutter("ball6"), scallop=0.01))
+    print(f"== dialects: {name}, ball6, {'stepover 1 mm' if quick else 'scallop 0.01 mm'}; "
+          "each through LinuxCNC's `rs274 -g`, GRBL and Fanuc through our rule checkers too ==")
+    hm = sample_map(name, 1.0)
+    jobs = finishing_gcodes(hm, st, DIALECT_NAMES)
+    have_rs274 = Path(RS274).exists()
+    if not have_rs274:
+        print("rs274 not installed (apt-get install linuxcnc-uspace): only the rule checkers run")
+    with tempfile.TemporaryDirectory() as tmp:
+        for d, job in jobs.items():
+            lines = job.text.splitlines()
+            how = []
+            if have_rs274:
+                t = time.perf_counter()
+                rc, why = run_rs274(job.text, tmp)
+                how.append(f"rs274 -g exit {rc} in {time.perf_counter() - t:.1f} s{' ' + ' '.join(why) if why else ''}")
+            if d in RULE_CHECKERS:
+                problems = RULE_CHECKERS[d](job.text)
+                how.append(f"check_{d}: {len(problems)} problems" + (f" (first: {problems[0]})" if problems else ""))
+            print(f"{d:12s} {len(lines):7d} lines, longest {max(len(l) for l in lines):3d} chars: {'; '.join(how)}",
+                  flush=True)
+
+
 # sample -> cutters (name, requested scallop). Sample 4 is 10 x 10 mm and very
 # steep: a 6 mm cutter does not fit its features, so it gets 1 mm tools.
 PLAN = {
@@ -170,7 +215,7 @@ def bench_acceptance(quick, only_sample=None, only_cutter=None):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=("dropcutter", "fullmap", "acceptance"))
+    ap.add_argument("--only", choices=("dropcutter", "fullmap", "acceptance", "dialects"))
     ap.add_argument("--sample", help="acceptance: only this sample (sample1..sample4)")
     ap.add_argument("--cutter", help="acceptance: only this cutter (as named in the table)")
     a = ap.parse_args(argv)
@@ -178,6 +223,8 @@ def main(argv=None):
         bench_dropcutter(a.quick)
     if a.only in (None, "fullmap"):
         bench_fullmap(a.quick)
+    if a.only in (None, "dialects"):
+        bench_dialects(a.quick)
     if a.only in (None, "acceptance"):
         bench_acceptance(a.quick, a.sample, a.cutter)
 

@@ -278,3 +278,24 @@ def test_bad_input_is_one_line_naming_where_and_what(bowl_files, tmp_path, capsy
     assert err.count("\n") == 1, err
     assert err.startswith(f"inkslice: error: {where.format(d=bowl_files)}: ") and what in err, err
     assert not (tmp_path / "out.gcode").exists()
+
+
+def test_every_dialect_of_a_dissertation_sample_passes_its_checkers(tmp_path):
+    # sample 4 (the steep 10 mm saddle), one plan written in every dialect
+    from appliance.cam.jobs import finishing_gcodes
+    from appliance.cam.posts import DIALECT_NAMES
+    s = surfaces.get("sample4")
+    x0, x1, y0, y1 = s.bounds
+    hm = grid_map(s.height, x0, x1, y0, y1, 0.2)
+    st = FinishSettings(parse_cutter("ball1"), scallop=None, stepover=0.25, resolution=0.05)
+    jobs = finishing_gcodes(hm, st, DIALECT_NAMES)
+    assert set(jobs) == set(DIALECT_NAMES)
+    for d, job in jobs.items():
+        r = _rs274(tmp_path, job.text)
+        assert r.returncode == 0, (d, r.stdout + r.stderr)
+    assert check_grbl(jobs["grbl"].text) == []
+    assert check_fanuc(jobs["fanuc"].text) == []
+    # one plan: every dialect but the dissertation's describes the same moves
+    ref = parse_gcode(jobs["linuxcnc"].text).xyz
+    for d in ("grbl", "mach3", "fanuc"):
+        assert np.nanmax(np.abs(parse_gcode(jobs[d].text).xyz - ref)) < 0.0011

@@ -43,13 +43,22 @@ def _post(hm, runs, cutter, cond, stock_top, title, dialect, clearance, z_offset
     return prog, text, rt, slowed
 
 
-def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, material=DEFAULT_MATERIAL, feed=None,
-                    plunge=None, rpm=None, dialect=DEFAULT_DIALECT, clearance=DEFAULT_CLEARANCE,
-                    z_offset=0.0, machine: Machine = Machine(), stock_top=None) -> Job:
+def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, dialect=DEFAULT_DIALECT, **kw) -> Job:
+    return finishing_gcodes(hm, settings, (dialect,), **kw)[dialect]
+
+
+def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, material=DEFAULT_MATERIAL,
+                     feed=None, plunge=None, rpm=None, clearance=DEFAULT_CLEARANCE, z_offset=0.0,
+                     machine: Machine = Machine(), stock_top=None) -> dict:
+    """One finishing plan written in several dialects: {dialect: Job}."""
     check_heightmap(hm)
-    if dialect == "dissertation":
+    jobs = {}
+    if "dissertation" in dialects:
         text = dissertation_gcode(hm)
-        return Job(text, float("nan"), {"dialect": "dissertation", "lines": text.count("\n")})
+        jobs["dissertation"] = Job(text, float("nan"), {"dialect": "dissertation", "lines": text.count("\n")})
+    ours = [d for d in dialects if d != "dissertation"]
+    if not ours:
+        return jobs
     cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     settings.check()
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
@@ -59,15 +68,17 @@ def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, material=DEFAULT
               else f"stepover {settings.stepover:g} mm")
     notes = [f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
              f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"]
-    prog, text, rt, slowed = _post(hm, fin.runs, settings.cutter, cond, top, "InkSlice finishing program",
-                                   dialect, clearance, z_offset, machine, settings.chord, notes)
     so = fin.stepovers
-    return Job(text, rt, {"passes": int(len(fin.passes)), "runs": len(fin.runs),
-                          "points": int(sum(len(r) for r in fin.runs)),
-                          "stepover_min": float(so.min()) if so.size else 0.0,
-                          "stepover_max": float(so.max()) if so.size else 0.0,
-                          "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
-                          "slowed_moves": slowed, "lines": text.count("\n")})
+    for d in ours:
+        prog, text, rt, slowed = _post(hm, fin.runs, settings.cutter, cond, top, "InkSlice finishing program",
+                                       d, clearance, z_offset, machine, settings.chord, notes)
+        jobs[d] = Job(text, rt, {"passes": int(len(fin.passes)), "runs": len(fin.runs),
+                                 "points": int(sum(len(r) for r in fin.runs)),
+                                 "stepover_min": float(so.min()) if so.size else 0.0,
+                                 "stepover_max": float(so.max()) if so.size else 0.0,
+                                 "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
+                                 "slowed_moves": slowed, "lines": text.count("\n")})
+    return jobs
 
 
 def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_MATERIAL, feed=None,
