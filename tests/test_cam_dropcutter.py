@@ -123,3 +123,53 @@ def test_flat_end_on_a_slope_touches_with_its_rim_exactly():
     assert np.max(exact - lattice) > 0.003           # what the lattice alone misses
     got = finishing_drop(s, FLAT, x, y)
     assert np.max(np.abs(got - exact)) < 2e-4
+
+
+@pytest.mark.parametrize("cutter", [BALL, FLAT, BULL], ids=["ball", "flat", "bull"])
+def test_edge_pairs_left_out_could_not_raise_a_tip(cutter, monkeypatch):
+    # a footprint with a bay, walls inside it and a rough top: the pairs the bound
+    # leaves out change no tip, and it does leave most of them out
+    from appliance.cam import dropcutter
+    rng = np.random.default_rng(3)
+    hm = grid_map(lambda X, Y: 6 + 0.2 * X + np.where(X > 12, 4.0, 0.0), 0, 24, 0, 20, 0.5)
+    hm.z += rng.normal(0, 0.05, hm.z.shape)
+    hm.z[15:, 18:30] = np.nan
+    s = Sampler(hm, edge_step=0.05)
+    origins = np.column_stack([np.full(41, -2.0), np.linspace(-2, 22, 41)])
+    kept = []
+    pruned = dropcutter._may_raise
+
+    def counting(*a):
+        out = pruned(*a)
+        kept.append((out[0].size, a[6].size))
+        return out
+
+    monkeypatch.setattr(dropcutter, "_may_raise", counting)
+    got = drop_lines(s, cutter, origins, (1.0, 0.0), 281, 0.1)
+    monkeypatch.setattr(dropcutter, "_may_raise", lambda a, b, c, px, py, out, si, pj: (si, pj))
+    every = drop_lines(s, cutter, origins, (1.0, 0.0), 281, 0.1)
+    assert np.array_equal(got, every)
+    (k, total), = kept
+    assert k < 0.5 * total
+
+
+@pytest.mark.parametrize("angle, stride", [(0, 1), (90, 2), (30, 3), (180, 1)])
+def test_lines_meet_the_edges_as_the_same_points_one_by_one(angle, stride):
+    # the points of lines find their edge segments by arithmetic, scattered points
+    # through a k-d tree: both must see the same contacts (a step wall and a bay)
+    hm = grid_map(lambda X, Y: 6 + 0.2 * X + np.where(X > 12, 4.0, 0.0), 0, 24, 0, 20, 0.5)
+    hm.z[15:, 18:30] = np.nan
+    s = Sampler(hm, edge_step=0.05)
+    th = np.radians(angle)
+    e1 = np.array([np.cos(th), np.sin(th)])
+    origins = np.array([[12, 10], [11.05, 14.3], [8, 7.9]]) - 14 * e1
+    n = 281
+    lines = drop_lines(s, BALL, origins, e1, n, 0.1, stride=stride)
+    t = 0.1 * np.arange(0, n, stride)
+    px = origins[:, :1] + t[None, :] * e1[0]
+    py = origins[:, 1:] + t[None, :] * e1[1]
+    points = drop_points(s, BALL, px.ravel(), py.ravel()).reshape(px.shape)
+    # (single-precision dilation relative to each slab's top: a few 1e-6 mm apart)
+    assert np.max(np.abs(lines - points)) < 2e-5
+    bare = drop_lines(Sampler(hm), BALL, origins, e1, n, 0.1, stride=stride)
+    assert np.max(lines - bare) > 1.0          # the edges raised some tips

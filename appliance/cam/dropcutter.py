@@ -85,44 +85,109 @@ def drop_lines(sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: 
         o = origins[s:s + chunk]
         if axis is None:
             slab = sampler.z(o[:, 0, None, None] + ox[None], o[:, 1, None, None] + oy[None])
+            table, index = slab.reshape(-1, slab.shape[-1]), np.arange(slab.shape[0] * slab.shape[1])
+            index = index.reshape(slab.shape[:2])
         else:
-            slab = _axis_slab(sampler, o, axis, b, c)
-        out[s:s + chunk] = _dilate_slab(slab, groups, m, n, stride)
+            table, index = _axis_rows(sampler, o, axis, b, c)
+        out[s:s + chunk] = _dilate_slab(table, index, groups, m, n, stride)
     if sampler.edges is not None:
         along = d * np.arange(0, n, stride)
         px = origins[:, 0, None] + along[None, :] * e1[0]
         py = origins[:, 1, None] + along[None, :] * e1[1]
-        _edge_contacts(sampler.edges, cutter, px.ravel(), py.ravel(), out.reshape(-1))
+        lines = (origins, e1, d, n, stride) if n > 1 else None
+        _edge_contacts(sampler.edges, cutter, px.ravel(), py.ravel(), out.reshape(-1), lines)
     return out
 
 
-def _edge_contacts(segs, cutter, px, py, out):
+def _edge_contacts(segs, cutter, px, py, out, lines=None):
     """Raise `out` (in place) where the cutter meets the footprint's edge first.
 
     The edge is a cliff the lattice can straddle; each boundary segment is
     tested exactly (segments.py) against every tool point within reach.
+    `lines` (origins, e1, d, n, stride): the points are those lines' points,
+    which finds the pairs without a k-d tree.
     """
     R = cutter.radius
     a, b = segs[:, :3], segs[:, 3:]
     mid = 0.5 * (a[:, :2] + b[:, :2])
     half = 0.5 * float(np.max(np.hypot(*(b[:, :2] - a[:, :2]).T)))
-    t_seg = cKDTree(mid)
-    idx = _near(mid, px, py, R + half)
-    if idx.size == 0:
+    if lines is None:
+        si, pj = _point_pairs(mid, px, py, R + half)
+    else:
+        si, pj = _line_pairs(mid, R + half, *lines)
+    si, pj = _may_raise(a, b, cutter, px, py, out, si, pj)
+    if si.size == 0:
         return
-    pts = np.column_stack([px, py])
-    dist, _ = t_seg.query(pts[idx], distance_upper_bound=R + half)
-    idx = idx[np.isfinite(dist)]
-    if idx.size == 0:
-        return
-    pairs = t_seg.sparse_distance_matrix(cKDTree(pts[idx]), R + half, output_type="ndarray")
-    if pairs.size == 0:
-        return
-    si, pj = pairs["i"], idx[pairs["j"]]
     w = b[si] - a[si]
     # drop onto the edge = minus the lowest sweep of the edge with heights negated
     m = min_over_segment(cutter, px[pj] - a[si, 0], py[pj] - a[si, 1], w[:, 0], w[:, 1], -w[:, 2], -a[si, 2])
     np.maximum.at(out, pj, -m)
+
+
+def _point_pairs(mid, px, py, reach):
+    """(segment, point) index pairs within `reach` of the segment's midpoint, for scattered points."""
+    none = (np.zeros(0, int), np.zeros(0, int))
+    t_seg = cKDTree(mid)
+    idx = _near(mid, px, py, reach)
+    if idx.size == 0:
+        return none
+    pts = np.column_stack([px, py])
+    dist, _ = t_seg.query(pts[idx], distance_upper_bound=reach)
+    idx = idx[np.isfinite(dist)]
+    if idx.size == 0:
+        return none
+    pairs = t_seg.sparse_distance_matrix(cKDTree(pts[idx]), reach, output_type="ndarray")
+    return pairs["i"].astype(int), idx[pairs["j"]]
+
+
+def _line_pairs(mid, reach, origins, e1, d, n, stride):
+    """The same pairs for points on parallel lines o_l + i d e1 (every stride-th i).
+
+    A midpoint's disc meets a line in an interval of i, so the pairs come from
+    arithmetic: lines sorted by their offset across, the ones within reach of
+    each midpoint found by bisection, and each interval expanded. On a whole
+    map this is a tenth of the k-d tree's time.
+    """
+    e2 = np.array([-e1[1], e1[0]])
+    K = len(range(0, n, stride))
+    across_l = origins @ e2
+    order = np.argsort(across_l, kind="stable")
+    sorted_l = across_l[order]
+    across_s = mid @ e2
+    lo = np.searchsorted(sorted_l, across_s - reach, "left")
+    hi = np.searchsorted(sorted_l, across_s + reach, "right")
+    cnt = hi - lo
+    seg = np.repeat(np.arange(mid.shape[0]), cnt)
+    line = order[np.repeat(lo, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+    gap = across_s[seg] - across_l[line]
+    w = np.sqrt(np.maximum(reach * reach - gap * gap, 0.0))
+    along = mid[seg] @ e1 - origins[line] @ e1
+    k0 = np.ceil(np.maximum(np.ceil((along - w) / d - 1e-9), 0) / stride)
+    k1 = np.floor(np.minimum(np.floor((along + w) / d + 1e-9), n - 1) / stride)
+    k1 = np.minimum(k1, K - 1)
+    c = np.maximum(k1 - k0 + 1, 0).astype(int)
+    si = np.repeat(seg, c)
+    k = np.repeat(k0.astype(int), c) + np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)
+    return si, np.repeat(line, c) * K + k
+
+
+def _may_raise(a, b, cutter, px, py, out, si, pj):
+    """The (segment, point) pairs whose contact could stand above the lattice's tip.
+
+    The cutter touches the segment no higher than its higher end less the
+    profile at the point's distance from it (h increases with r, and every
+    point of the segment is at least that far). Beside most of the edge the
+    lattice already sees the part's top that close, so nine pairs in ten end
+    here, before the exact test (on sample 3's whole map: 773 k -> 83 k pairs).
+    """
+    w = b[si, :2] - a[si, :2]
+    qx, qy = px[pj] - a[si, 0], py[pj] - a[si, 1]
+    W2 = np.einsum("ij,ij->i", w, w)
+    t = np.clip((qx * w[:, 0] + qy * w[:, 1]) / np.where(W2 > 0, W2, 1.0), 0.0, 1.0)
+    dist = np.hypot(qx - t * w[:, 0], qy - t * w[:, 1])
+    bound = np.maximum(a[si, 2], b[si, 2]) - cutter.profile(dist)
+    keep = bound > out[pj]
+    return si[keep], pj[keep]
 
 
 def _near(mid, px, py, reach):
@@ -166,11 +231,13 @@ def _axis_aligned(e1, origins):
     return None
 
 
-def _axis_slab(sampler, o, axis, b, c):
-    """The slab for axis-aligned lines: rows shared between lines are read once.
+def _axis_rows(sampler, o, axis, b, c):
+    """The slab of axis-aligned lines as (rows, index): line l's row b is rows[index[l, m + b]].
 
-    Along +x, e2 = +y: rows are y = o_y + b, columns x = o_x + c. Along +y,
-    e2 = -x: rows are x = o_x - b, columns y = o_y + c.
+    Neighbouring lines share most rows, so each is read (and later converted)
+    once, not once per line that reaches it: 61 rows per line become ~1 on a
+    whole map. Along +x, e2 = +y: rows are y = o_y + b, columns x = o_x + c.
+    Along +y, e2 = -x: rows are x = o_x - b, columns y = o_y + c.
     """
     if axis == 0:
         rows = o[:, 1, None] + b[None, :]
@@ -180,24 +247,26 @@ def _axis_slab(sampler, o, axis, b, c):
         cols = o[0, 1] + c
     uniq, inv = np.unique(np.round(rows, 9), return_inverse=True)
     grid = sampler.z_grid(cols, uniq) if axis == 0 else sampler.z_grid(uniq, cols).T
-    return grid[inv.reshape(rows.shape)]
+    return grid, inv.reshape(rows.shape)
 
 
-def _dilate_slab(slab, groups, m, n, stride=1):
+def _dilate_slab(table, index, groups, m, n, stride=1):
     """The max over the disc's offsets, in float32 relative to the slab's top.
 
+    The slab is given as rows and an index (line l's row b is
+    table[index[l, m + b]]), and rows b and -b are gathered already folded.
     Single precision halves the memory traffic of the ~1450 passes (the whole
     cost: 1.37 -> 0.79 s for a 1001 x 1001 map). Heights are taken relative to
     the slab's highest value first, so a part 100 mm tall still resolves
     8e-6 mm, far below the 0.002 mm we promise.
     """
     k = len(range(0, n, stride))
-    ref = float(np.max(slab))
-    z = (slab - ref).astype(np.float32)
-    res = np.full((z.shape[0], k), -np.inf, np.float32)
+    ref = float(np.max(table))
+    z = (table - ref).astype(np.float32)
+    res = np.full((index.shape[0], k), -np.inf, np.float32)
     tmp = np.empty_like(res)
     for b, avals, hvals in groups:
-        row = z[:, m + b] if b == 0 else np.maximum(z[:, m + b], z[:, m - b])
+        row = z[index[:, m]] if b == 0 else np.maximum(z[index[:, m + b]], z[index[:, m - b]])
         for a, h in zip(avals.tolist(), hvals.tolist()):
             if a < 0:
                 continue          # folded into +a: h is symmetric in a as well
