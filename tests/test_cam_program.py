@@ -204,6 +204,22 @@ def test_bad_settings_are_refused_with_a_clear_error(kw, what):
     assert what in str(e.value)
 
 
+@pytest.mark.parametrize("kw, what", [(dict(clearance=-5.0), "clearance"), (dict(z_offset=float("nan")), "z offset")])
+def test_program_frame_is_refused_before_planning(kw, what, monkeypatch):
+    # a finishing plan takes seconds to minutes; a bad clearance was refused only after it
+    import appliance.cam.jobs as jobs
+
+    def no_planning(*a, **k):
+        raise AssertionError("planned before refusing the settings")
+
+    monkeypatch.setattr(jobs, "finishing", no_planning)
+    monkeypatch.setattr(jobs, "roughing", no_planning)
+    with pytest.raises(SettingError, match=what):
+        finish(**kw)
+    with pytest.raises(SettingError, match=what):
+        roughing_gcode(bowl(), RoughSettings(parse_cutter("flat6"), 12.0), **kw)
+
+
 def test_heightmap_with_a_hole_is_refused():
     hm = bowl()
     hm.z[10:12, 10:13] = np.nan
@@ -251,6 +267,7 @@ def bowl_files(tmp_path_factory):
     holes.z[5:7, 5:8] = np.nan
     write_heightmap_csv(d / "holes.csv", holes)
     (d / "ok.gcode").write_text(finish().text)
+    (d / "flat2d.gcode").write_text("G21 G90\nG1 X1 Y1 F100\nG1 X5 Y5\nM2\n")
     return d
 
 
@@ -267,6 +284,13 @@ def bowl_files(tmp_path_factory):
     (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--resolution", "0"], "resolution", "must be > 0"),
     (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--edge-band", "-1"], "edge band", "must be >= 0"),
     (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--scallop", "0"], "--scallop", "must be > 0"),
+    # were: a program with `G0 Znan` and exit 0; a "program never sets Z" traceback (twice);
+    # a --max-gouge check that always passed
+    (["toolpath", "{d}/bowl.csv", "--z-offset", "nan"], "z offset", "must be a number"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--z-zero", "nan"], "--z-zero", "must be a number"),
+    (["verify", "{d}/flat2d.gcode", "--against", "{d}/bowl.csv", "--cutter", "ball6"], "{d}/flat2d.gcode",
+     "never sets Z"),
+    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--max-gouge", "nan"], "--max-gouge", "must be >= 0"),
 ])
 def test_bad_input_is_one_line_naming_where_and_what(bowl_files, tmp_path, capsys, argv, where, what):
     from appliance.cli import main

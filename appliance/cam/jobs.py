@@ -21,7 +21,7 @@ from .limits import Machine, check_envelope, limit_feeds
 from .millsim import new_stock, report, simulate
 from .opening import REACH_TOL
 from .posts import DEFAULT_DIALECT, render
-from .program import DEFAULT_CLEARANCE, build_program
+from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
 from .zigzag import FinishSettings, finishing
@@ -61,6 +61,7 @@ def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, mater
         return jobs
     cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     settings.check()
+    check_frame(clearance, z_offset)
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     fin = finishing(sampler, settings)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
@@ -89,6 +90,7 @@ def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_M
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
     cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     settings.check()
+    check_frame(clearance, z_offset)
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     runs = roughing(sampler, settings)
     notes = [f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
@@ -129,12 +131,19 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
         if not np.isfinite(v) or (v <= 0 if least is None else v < least):
             raise SettingError(name, f"must be {'> 0' if least is None else '>= 0'} mm, got {v}")
     parsed = parse_gcode(text, where)
+    for ax, name in enumerate("XYZ"):
+        if np.all(np.isnan(parsed.xyz[:, ax])):
+            # a 2-D program (or one in another axis's words) was a ValueError traceback
+            raise InkSliceError(where, f"never sets {name}: there is no cutter position to simulate")
     if cutter is not None and not isinstance(cutter, Cutter):
         cutter = parse_cutter(cutter)
     cut = cutter if cutter is not None else cutter_from_program(parsed)
     if z_zero is None:
         m = parsed.meta("inkslice z_offset")
         z_zero = -float(m) if m else 0.0
+    if not np.isfinite(z_zero):
+        # a NaN Z0 made every Z unknown: a "program never sets Z" traceback
+        raise SettingError("--z-zero", f"must be a number of mm or 'top', got {z_zero}")
     # edges on: the opening (what the cutter can reach at all) must see the part's
     # edge as the toolpath did, or the band along uphill edges counts as scallop
     sampler = Sampler(hm, edge_step=resolution / 2)

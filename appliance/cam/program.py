@@ -51,10 +51,22 @@ class Program:
         return float(np.sum(L / rate) * 60.0)
 
 
-def build_program(runs, cutter: Cutter, cond: Conditions, stock_top: float, title: str,
-                  clearance: float = DEFAULT_CLEARANCE, z_offset: float = 0.0) -> Program:
+def check_frame(clearance, z_offset):
+    """Refuse a safe height or work offset no program can be written with.
+
+    The jobs call it before planning (a finishing plan takes seconds to
+    minutes, and then failed on its last step); a NaN work offset was written
+    out as `G0 Znan` and the command reported success.
+    """
     if not np.isfinite(clearance) or clearance <= 0:
         raise SettingError("clearance", f"must be > 0 mm, got {clearance}")
+    if not np.isfinite(z_offset):
+        raise SettingError("z offset", f"must be a number of mm, got {z_offset}")
+
+
+def build_program(runs, cutter: Cutter, cond: Conditions, stock_top: float, title: str,
+                  clearance: float = DEFAULT_CLEARANCE, z_offset: float = 0.0) -> Program:
+    check_frame(clearance, z_offset)
     runs = [np.asarray(r, float) for r in runs if len(r)]
     if not runs:
         raise SettingError("toolpath", "has no cutting moves (is the part outside the margin?)")

@@ -40,6 +40,9 @@ def run(args):
         raise InkSliceError(path, "G-code file does not exist")
     if not np.isfinite(args.scallop) or args.scallop <= 0:
         raise SettingError("--scallop", f"must be > 0 mm, got {args.scallop}")
+    if args.max_gouge is not None and not (np.isfinite(args.max_gouge) and args.max_gouge >= 0):
+        # NaN compared false with every gouge: the check always passed
+        raise SettingError("--max-gouge", f"must be >= 0 mm, got {args.max_gouge}")
     text = path.read_text(encoding="utf-8", errors="replace")
     hm = read_heightmap_csv(args.against)
     check_heightmap(hm, where=args.against)          # its problems named by the file
