@@ -73,8 +73,9 @@ def test_meniscus_correction_removes_the_rise():
     e_raw = np.nanmean(np.abs(raw.heightmap.z - dome.height(X, Y))[inner])
     e_fix = np.nanmean(np.abs(fixed.heightmap.z - dome.height(X, Y))[inner])
     assert e_raw > 0.3                        # uncorrected, the rise biases the heights
-    # measured: raw ~1 mm, corrected ~0.11 mm (slope from a 1 mm-step fit; see the report)
-    assert e_fix < 0.15 and e_fix < e_raw / 5
+    # measured: raw 0.84 mm, corrected 0.0068 mm (0.0012 when the top's solve settles, see
+    # meniscus.FINE_ITERATIONS; 0.11 with the rise iterated from the fit's slope)
+    assert e_fix < 0.01
 
 
 def test_displacement_from_the_fitted_surface_matches_the_bench():
@@ -119,27 +120,57 @@ def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
     assert np.max(np.abs(weighted - true)) < 0.02
 
 
-def test_meniscus_slope_beside_a_wall_is_the_tops_own():
-    """A plane rising at 0.7 to a wall at x = 0 (a ridge along the edge). The fit's
-    outline nodes sit on the wall and are the least sure (here 1 mm low); the contact
-    line just inside must still get the top's slope, 0.7, not the step to the rim node
-    (read as a slope of ~2) nor a flat continuation (slope 0)."""
+def _apparent(top, model, x, y):
+    """The apparent surface top - h(atan |grad top|) of an analytic top, and the top."""
+    X, Y = np.meshgrid(x, y)
+    e = 1e-5
+    gx = (top(X + e, Y) - top(X - e, Y)) / (2 * e)
+    gy = (top(X, Y + e) - top(X, Y - e)) / (2 * e)
+    T = top(X, Y)
+    return T - model.rise_on_slope(np.hypot(gx, gy)), T
+
+
+def _saddle4(x, y):                     # sample 4's top: a steep saddle with a flat corner
+    u, v = (x - 45) / 10, (y - 45) / 10
+    return 22.32 + 45 * (u * v ** 3 - u ** 3 * v)
+
+
+@pytest.mark.parametrize("top,extent", [
+    (lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2), (20.0, 80.0)),    # a dome, slopes to 0.6
+    (_saddle4, (45.0, 55.0)),                                                       # slopes 0 .. 12
+])
+def test_top_from_the_apparent_surface_is_the_top(top, extent):
+    """Exact apparent surfaces give back the top. On sample 4's saddle plain Gauss-Newton
+    (the meniscus switched on at once) grows a 2.6 mm bump in the flat corner, and the
+    old iteration (the rise from the fit's slope, refitted) ran away there."""
     from appliance.surface.gridfit import Lattice
-    from appliance.surface.meniscus import correct_slices_from_surface
-    from appliance.surface.slices import make_slice
-    x = np.arange(-0.4, 20.0, 1.0)
-    lat = Lattice(x, x)
-    X, Y = np.meshgrid(x, x)
-    z = 30.0 - 0.7 * X
-    footprint = X > -0.5
-    z[:, 0] -= 1.0                                  # the rim nodes: 1 mm off
-    level = 29.0
-    pts = np.column_stack([np.full(9, 0.3), np.linspace(4.0, 16.0, 9)])     # 0.3 mm in from the wall
-    loop = np.vstack([pts, [[0.3, 17.0], [-0.4, 17.0], [-0.4, 3.0]]])
+    from appliance.surface.meniscus import top_from_apparent
     model = MeniscusModel(2.7, 0.0)
-    _, slopes = correct_slices_from_surface([make_slice(level, [loop])], lat, z, footprint, model)
-    assert np.allclose(slopes[0][:9], 0.7, atol=0.02)
-    # damped iterations: the slope handed on is the mean of this and the last iteration's
-    _, again = correct_slices_from_surface([make_slice(level, [loop])], lat, z, footprint, model,
-                                           [np.full(len(loop), 0.3)])
-    assert np.allclose(again[0][:9], 0.5, atol=0.02)
+    x = np.linspace(*extent, 61)
+    A, T = _apparent(top, model, x, x)
+    footprint = np.ones(A.shape, bool)
+    got = top_from_apparent(Lattice(x, x), A, footprint, model)
+    err = np.abs(got - T)
+    inner = np.zeros(A.shape, bool)
+    inner[3:-3, 3:-3] = True                 # the outline's nodes are left to the smoothness
+    assert np.abs(T - A).max() > 1.0         # the rise is there to take out
+    # (measured: mean 0.0049 / 0.0036 mm, all nodes 0.0059 / 0.0081; the largest, 0.26 /
+    # 0.12 mm, at the critical points, where the rise is a cone - |grad| grows linearly
+    # from them - and smoothed. The solve stops after three fine steps, which rendered
+    # frames want; settled, it gives 0.0012 / 0.0022: see meniscus.FINE_ITERATIONS)
+    assert err[inner].mean() < 0.006 and err[inner].max() < 0.3
+    assert err.mean() < 0.01
+
+
+def test_the_apparent_surface_at_the_rim_is_not_trusted():
+    """A plane rising at 0.7 to a wall at x = 0. The fit's outline nodes come from the
+    wall's waterline, a level step wide: here 1 mm off. The top inside must not follow them
+    (the equation carries an error at a rim the top rises to inwards, over ~l_c)."""
+    from appliance.surface.gridfit import Lattice
+    from appliance.surface.meniscus import top_from_apparent
+    model = MeniscusModel(2.7, 0.0)
+    x = np.linspace(0.0, 20.0, 41)
+    A, T = _apparent(lambda X, Y: 30.0 - 0.7 * X, model, x, x)
+    A[:, 0] -= 1.0
+    got = top_from_apparent(Lattice(x, x), A, np.ones(A.shape, bool), model)
+    assert np.abs(got - T)[:, 3:].max() < 0.01

@@ -258,8 +258,35 @@ def point_data(slices: list[Slice], spacing_mm: float):
     return np.vstack(xs), np.concatenate(zs)
 
 
+def stencil_rows(index: np.ndarray, stencils) -> sp.csr_matrix:
+    """One row per lattice position where a stencil's nodes are all unknowns.
+
+    index: (ny, nx) unknown number of each node, -1 where the node is not one;
+    stencils: [(scale, [(dj, di, coefficient), ...]), ...]. The rows of all the
+    stencils are stacked: R.T @ R is then the quadratic form of their sum of squares.
+    """
+    ny, nx = index.shape
+    n = int(index.max()) + 1
+    rows, cols, vals = [], [], []
+    r = 0
+    for scale, stencil in stencils:
+        dj = [s[0] for s in stencil]
+        di = [s[1] for s in stencil]
+        j0, j1 = -min(dj), ny - max(dj)
+        i0, i1 = -min(di), nx - max(di)
+        ids = [index[j0 + a:j1 + a, i0 + b:i1 + b] for a, b in zip(dj, di)]
+        ok = np.all([m >= 0 for m in ids], axis=0)
+        m = int(ok.sum())
+        for (_, _, c), im in zip(stencil, ids):
+            rows.append(np.arange(r, r + m))
+            cols.append(im[ok])
+            vals.append(np.full(m, c * scale))
+        r += m
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r, n))
+
+
 class FitProblem:
-    """The lattice's unknowns (nodes over the part) and its smoothness operator."""
+    """The lattice's unknowns (nodes over the part) and its smoothness operators."""
 
     def __init__(self, lat: Lattice, footprint: np.ndarray, margin: int = 2):
         self.lat = lat
@@ -270,36 +297,54 @@ class FitProblem:
         self.R = self._smoothness()
 
     def _smoothness(self):
-        lat, idx = self.lat, self.index
-        hx, hy = lat.hx, lat.hy
-        area = hx * hy
-        rows, cols, vals = [], [], []
-        r = 0
-
-        def add(stencil, scale):
-            nonlocal r
-            # stencil: list of (dj, di, coefficient); keep rows whose nodes are all active
-            ny, nx = idx.shape
-            dj = [s[0] for s in stencil]
-            di = [s[1] for s in stencil]
-            j0, j1 = -min(dj), ny - max(dj)
-            i0, i1 = -min(di), nx - max(di)
-            ids = [idx[j0 + a:j1 + a, i0 + b:i1 + b] for a, b in zip(dj, di)]
-            ok = np.all([m >= 0 for m in ids], axis=0)
-            m = int(ok.sum())
-            for (a, b, c), im in zip(stencil, ids):
-                rows.append(np.arange(r, r + m))
-                cols.append(im[ok])
-                vals.append(np.full(m, c * scale))
-            r += m
-
-        s = np.sqrt(area)
-        add([(0, -1, 1.0), (0, 0, -2.0), (0, 1, 1.0)], s / hx ** 2)
-        add([(-1, 0, 1.0), (0, 0, -2.0), (1, 0, 1.0)], s / hy ** 2)
-        add([(0, 0, 1.0), (0, 1, -1.0), (1, 0, -1.0), (1, 1, 1.0)], s * np.sqrt(2) / (hx * hy))
-        R = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(r, self.n))
+        """Thin-plate energy: integral of z_xx^2 + 2 z_xy^2 + z_yy^2 over the part."""
+        hx, hy = self.lat.hx, self.lat.hy
+        s = np.sqrt(hx * hy)
+        R = stencil_rows(self.index, [
+            (s / hx ** 2, [(0, -1, 1.0), (0, 0, -2.0), (0, 1, 1.0)]),
+            (s / hy ** 2, [(-1, 0, 1.0), (0, 0, -2.0), (1, 0, 1.0)]),
+            (s * np.sqrt(2) / (hx * hy), [(0, 0, 1.0), (0, 1, -1.0), (1, 0, -1.0), (1, 1, 1.0)])])
         return (R.T @ R).tocsc()
+
+    def third_order(self):
+        """Integral of the squared third derivatives (z_xxx^2 + 3 z_xxy^2 + 3 z_xyy^2 + z_yyy^2):
+        zero on any quadric, so it bends a field only where its curvature changes."""
+        hx, hy = self.lat.hx, self.lat.hy
+        s = np.sqrt(hx * hy)
+        d3 = (-1.0, 3.0, -3.0, 1.0)
+        d2, d1 = (1.0, -2.0, 1.0), (-1.0, 1.0)
+        R = stencil_rows(self.index, [
+            (s / hx ** 3, [(0, k, c) for k, c in enumerate(d3)]),
+            (s / hy ** 3, [(k, 0, c) for k, c in enumerate(d3)]),
+            (s * np.sqrt(3) / (hx ** 2 * hy), [(a, b, ca * cb) for a, ca in enumerate(d1) for b, cb in enumerate(d2)]),
+            (s * np.sqrt(3) / (hx * hy ** 2), [(a, b, ca * cb) for a, ca in enumerate(d2) for b, cb in enumerate(d1)])])
+        return (R.T @ R).tocsc()
+
+    def gradient(self):
+        """(Dx, Dy): the slope of the field at each unknown, central where both
+        neighbours are unknowns, one-sided where only one is."""
+        ops = []
+        J, I = np.nonzero(self.active)
+        me = self.index[J, I]
+        for axis, h in ((1, self.lat.hx), (0, self.lat.hy)):
+            def neighbour(d):
+                jj, ii = (J + d, I) if axis == 0 else (J, I + d)
+                ok = (jj >= 0) & (ii >= 0) & (jj < self.lat.shape[0]) & (ii < self.lat.shape[1])
+                out = np.full(J.size, -1)
+                out[ok] = self.index[jj[ok], ii[ok]]
+                return out
+            lo, hi = neighbour(-1), neighbour(1)
+            rows, cols, vals = [], [], []
+            for sel, terms in (((lo >= 0) & (hi >= 0), ((lo, -0.5), (hi, 0.5))),
+                               ((lo < 0) & (hi >= 0), ((me, -1.0), (hi, 1.0))),
+                               ((lo >= 0) & (hi < 0), ((lo, -1.0), (me, 1.0)))):
+                for col, c in terms:
+                    rows.append(me[sel])
+                    cols.append(col[sel])
+                    vals.append(np.full(int(sel.sum()), c / h))
+            ops.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(self.n, self.n)))
+        return tuple(ops)
 
     def data_rows(self, pts, z, weight=1.0):
         """Bilinear rows for scattered points; points whose cell is not all active are dropped."""

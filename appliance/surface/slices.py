@@ -58,8 +58,10 @@ class Slice:
         return self._curve
 
     def moved(self, P, z):
-        """The same slice with corrected point positions and heights."""
-        return Slice(self.level, self.loops, P, self.nxt, self.prv, z,
+        """The same slice with corrected point positions and heights (its loops follow
+        the points: the exposed area is where the points say)."""
+        loops = self.loops if P is self.P else _split_like(P, self.loops)
+        return Slice(self.level, loops, P, self.nxt, self.prv, z,
                      None if self.wall is None else self.wall.copy(),
                      None if self.edge is None else self.edge.copy())
 
@@ -313,9 +315,7 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
             zr = np.clip(zr, span[w, 0], span[w, 1])
             h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
             P = camera.true_xy(s.P, h)
-        t = s.moved(P, s.z)
-        t.loops = _split_like(P, s.loops)
-        out.append(t)
+        out.append(s.moved(P, s.z))
         span_prev, prev = span, s   # matched against the frame as seen (its own perspective)
     return out
 
