@@ -237,6 +237,7 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
     return total
 
 
+EDGE_HISTORY = 2        # a wall point may continue an edge seen this many frames up
 WALL_GAP_POINTS = 4     # a run of up to this many non-wall points between wall points is wall
 
 
@@ -285,26 +286,13 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     between this level and the one above (plus the meniscus' rise, if any).
     Level-curve points lie on the ink and stay where they are.
     """
-    out, span_prev, prev = [], None, None
-    for s in slices:
-        if s.empty or s.edge is None or not s.edge.any():
+    spans = _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range)
+    out = []
+    for s, span in zip(slices, spans):
+        if span is None:
             out.append(s)
-            span_prev, prev = (np.full((len(s.P), 2), np.nan), s) if not s.empty else (None, None)
             continue
-        step_up = (prev.level - s.level) if prev is not None else 1.0
-        # each wall point's edge height as a bracket (lo, hi): where it first showed
-        span = np.full((len(s.P), 2), np.nan)
         w = np.flatnonzero(s.edge)
-        # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
-        span[w] = (s.level, s.level + step_up + rise_max)
-        if prev is not None and span_prev is not None:
-            # where the edge was one level up: the same ray, h smaller by step_up
-            # (the true step may be the given one times step_range: look along that stretch)
-            d, i = _along_ray(camera, s.P[w], prev, -step_up, 0.5 * step_up, step_range)
-            r = np.hypot(*(s.P[w] - np.asarray(camera.xy, float)).T)
-            tol = wall_tol_mm + r * step_up * 0.5 * max(slices[0].level - s.level, 1.0) / camera.height_mm ** 2
-            cont = (d < tol) & np.isfinite(span_prev[i, 0])
-            span[w[cont]] = span_prev[i[cont]]
         z0 = span.mean(axis=1)
         h = np.where(np.isfinite(z0), np.maximum(z0 - s.level, 0.0), 0.0)
         P = camera.true_xy(s.P, h)
@@ -316,8 +304,50 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
             h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
             P = camera.true_xy(s.P, h)
         out.append(s.moved(P, s.z))
-        span_prev, prev = span, s   # matched against the frame as seen (its own perspective)
     return out
+
+
+def _continuation(camera, P, frame: Slice, dl, top, wall_tol_mm, step_range):
+    """(distance, nearest vertex, within tolerance) of the edges seen at P in `frame`, the
+    ink dl lower there (< 0: a frame above): the same ray, the edge dl more above the ink."""
+    d, i = _along_ray(camera, P, frame, dl, 0.5 * abs(dl), step_range)
+    r = np.hypot(*(P - np.asarray(camera.xy, float)).T)
+    tol = wall_tol_mm + r * abs(dl) * 0.5 * max(top, 1.0) / camera.height_mm ** 2
+    return i, d < tol
+
+
+def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
+    """Per frame: each wall point's edge height as a bracket (lo, hi) - where it first
+    showed - (None for a frame without wall points)."""
+    spans, prev, above = [], None, []   # above: the last EDGE_HISTORY frames and brackets
+    for s in slices:
+        if s.empty or s.edge is None or not s.edge.any():
+            spans.append(None)
+            prev = s if not s.empty else None
+            above = (above + [(s, np.full((len(s.P), 2), np.nan))])[-EDGE_HISTORY:] if not s.empty else []
+            continue
+        step_up = (prev.level - s.level) if prev is not None else 1.0
+        span = np.full((len(s.P), 2), np.nan)
+        w = np.flatnonzero(s.edge)
+        # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
+        span[w] = (s.level, s.level + step_up + rise_max)
+        todo = np.ones(w.size, bool)
+        for frame, span_above in reversed(above):
+            # where the edge was a level up, else two (one frame's edge can be a pixel off,
+            # and the chain would start afresh below it; the true step may be the given
+            # one times step_range: the match looks along that stretch of ray)
+            if not todo.any():
+                break
+            q = w[todo]
+            i, near = _continuation(camera, s.P[q], frame, s.level - frame.level, slices[0].level - s.level,
+                                    wall_tol_mm, step_range)
+            cont = near & np.isfinite(span_above[i, 0])
+            span[q[cont]] = span_above[i[cont]]
+            todo[np.flatnonzero(todo)[cont]] = False
+        spans.append(span)
+        prev = s
+        above = (above + [(s, span)])[-EDGE_HISTORY:]   # matched against the frames as seen
+    return spans
 
 
 def outline_bounds(slices: list[Slice]):
