@@ -306,6 +306,8 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
     def residual(params):
         m = MeniscusModel(params[0], params[1], **cam)
         h = m.rise(beta)
+        for _ in range(2):      # the slope where the contact point really is
+            h = m.rise(np.arctan(_reference_slopes(reference_surface, m.unproject(P, h))))
         return reference_surface.height(*m.unproject(P, h).T) - (L + h)
 
     sol = least_squares(residual, x0=[2.0, 0.1], bounds=([0.0, -np.pi / 2], [10.0, np.pi / 2]),
