@@ -125,12 +125,15 @@ def _to_output(lat, zl, r, xo, yo):
 # -- the fit --------------------------------------------------------------------------
 
 
-def _bracket(z, first, slices):
+def _bracket(z, first, slices, rise_max=0.0):
     """Clamp each node between the level where it came out and the one above it.
 
     A node exposed first at frame k and still under at frame k - 1 lies in
     between, whatever the fit's smoothness would rather do (extrapolating into
-    a gap beside a wall, say). Meniscus-corrected heights widen the bracket.
+    a gap beside a wall, say). Meniscus-corrected heights widen the bracket, and
+    with a meniscus a node may stand up to its largest rise above the level that
+    still covered it (`rise_max`): the ink climbs a rim and keeps it under (sample
+    4's 39 mm summit rim, exposed at 36 mm, was clamped there, 3 mm low).
     """
     K = len(slices)
     top = next(k for k, s in enumerate(slices) if not s.empty)
@@ -140,7 +143,7 @@ def _bracket(z, first, slices):
     hi_rise = [float(np.max(c.z - c.level)) if not c.empty else 0.0 for c in curves]
     lv = np.array([s.level for s in slices] + [-np.inf])
     lo = np.array([lv[k] + min(lo_rise[k], 0.0) for k in range(K)] + [-np.inf])
-    hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], 0.0) for k in range(1, K)] + [np.inf])
+    hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], rise_max, 0.0) for k in range(1, K)] + [np.inf])
     hi[top] = np.inf
     # one level of slack each way: where waterlines crowd (a saddle's corner) the side of a
     # node is not sure; the bracket is there to stop wild extrapolation, not to fine-tune
@@ -356,7 +359,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         curve = cv if cv is not None else curve
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
-    z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices))
+    rise_max = 0.0 if opt.meniscus is None else float(np.max(opt.meniscus.rise(np.linspace(0.0, np.pi / 2, 91))))
+    z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     z = np.where(footprint, z, np.nan)
     cv_rms = min(c[1] for c in curve) if curve else None
     sig = _sigma(lat, z, slices, cv_rms, footprint, first)
