@@ -178,7 +178,7 @@ def test_the_apparent_surface_at_the_rim_is_not_trusted():
 
 def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it():
     """A node first out at 36 mm under a meniscus may stand up to the largest rise above
-    the 37 mm level that still covered it (sample 4's 39 mm summit rim was clamped to 36)."""
+    the levels that still covered it (sample 4's 39 mm summit rim was clamped to 36)."""
     from appliance.surface.reconstruct import _bracket
     from appliance.surface.slices import check_waterlines
     from appliance.vision.types import Waterline
@@ -186,9 +186,11 @@ def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it
     def ring(a):
         t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
         return np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
-    slices, _ = check_waterlines([Waterline(L, [ring(a)]) for L, a in ((38.0, 1.0), (37.0, 2.0), (36.0, 3.0))])
-    z = np.array([39.0, 36.5])
-    first = np.array([2, 2])                  # both came out in the 36 mm frame
+    levels = (40.0, 39.0, 38.0, 37.0, 36.0)
+    slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
+    z = np.array([39.5, 36.5])
+    first = np.array([4, 4])                  # both came out in the 36 mm frame
     rise = MeniscusModel(2.7, 0.0).rise(np.linspace(0.0, np.pi / 2, 91)).max()
-    assert list(_bracket(z, first, slices)) == [38.0, 36.5]            # no meniscus: under 37 a level ago
-    assert list(_bracket(z, first, slices, rise)) == [39.0, 36.5]
+    # no meniscus: under at 37, two levels of slack (BRACKET_SLACK_LEVELS) -> at most 39
+    assert list(_bracket(z, first, slices)) == [39.0, 36.5]
+    assert list(_bracket(z, first, slices, rise)) == [39.5, 36.5]
