@@ -573,7 +573,12 @@ class _PassProbe:
             near_b = gap_b <= gap_b.min(axis=0) + tie
             ca = ys.size - 1 - np.argmax(near_a[::-1], axis=0)
             cb = np.argmax(near_b, axis=0)
-            inside = on
+            # and a column either pass touches nothing in is left out as for a ball: on
+            # sample 3's corner (x 99, y 0; slopes 0.83 across, 0.15 along, downhill to
+            # both) only positions 2.6 mm in reach the edge row, the first pass stood
+            # 0.40 above it whatever the step, and the planner crawled at its 0.01 minimum
+            touch = (gap_a.min(axis=0) <= 0.3 * self.st.scallop) & (gap_b.min(axis=0) <= 0.3 * self.st.scallop)
+            inside = touch[None, :] & on
         # The rows between the contacts: positions between a and b touch there,
         # later passes touch beyond b's contact, so the rows beyond are not b's to
         # hold (on a cross slope a flat bottom leaves m x 2R under its own bottom
