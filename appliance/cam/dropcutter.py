@@ -109,12 +109,18 @@ def _edge_contacts(segs, cutter, px, py, out, lines=None):
     """
     R = cutter.radius
     a, b = segs[:, :3], segs[:, 3:]
-    mid = 0.5 * (a[:, :2] + b[:, :2])
-    half = 0.5 * float(np.max(np.hypot(*(b[:, :2] - a[:, :2]).T)))
+    order, first, count, box = _patches(a, b, R / 3)
+    mid = 0.5 * (box[:, 0:2] + box[:, 2:4])
+    half = 0.5 * float(np.max(np.hypot(*(box[:, 2:4] - box[:, 0:2]).T)))
     if lines is None:
-        si, pj = _point_pairs(mid, px, py, R + half)
+        gi, pj = _point_pairs(mid, px, py, R + half)
     else:
-        si, pj = _line_pairs(mid, R + half, *lines)
+        gi, pj = _line_pairs(mid, R + half, *lines)
+    gi, pj = _patch_may_raise(box, cutter, px, py, out, gi, pj)
+    # every segment of a patch that may raise the point
+    c = count[gi]
+    si = order[np.repeat(first[gi], c) + np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)]
+    pj = np.repeat(pj, c)
     si, pj = _may_raise(a, b, cutter, px, py, out, si, pj)
     if si.size == 0:
         return
@@ -122,6 +128,38 @@ def _edge_contacts(segs, cutter, px, py, out, lines=None):
     # drop onto the edge = minus the lowest sweep of the edge with heights negated
     m = min_over_segment(cutter, px[pj] - a[si, 0], py[pj] - a[si, 1], w[:, 0], w[:, 1], -w[:, 2], -a[si, 2])
     np.maximum.at(out, pj, -m)
+
+
+def _patches(a, b, size):
+    """Segments grouped by the square of side `size` their midpoint falls in.
+
+    Returns (order, first, count, box): patch g holds segments
+    order[first[g] : first[g] + count[g]], and box[g] = (xmin, ymin, xmax, ymax,
+    zmax) over their ends. A map sampled at 0.1 mm has 4000 boundary segments
+    a tenth of a millimetre long, each within reach of ~2900 points of a whole
+    map: 11.7 M pairs, most of a 1.65 s drop. Patches are paired first.
+    """
+    mid = 0.5 * (a[:, :2] + b[:, :2])
+    cell = np.floor((mid - mid.min(axis=0)) / size).astype(np.int64)
+    key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
+    order = np.argsort(key, kind="stable")
+    _, first, count = np.unique(key[order], return_index=True, return_counts=True)
+    lo = np.minimum(a[order, :2], b[order, :2])
+    hi = np.maximum(a[order, :2], b[order, :2])
+    z = np.maximum(a[order, 2], b[order, 2])
+    box = np.column_stack([np.minimum.reduceat(lo, first), np.maximum.reduceat(hi, first),
+                           np.maximum.reduceat(z, first)])
+    return order, first, count, box
+
+
+def _patch_may_raise(box, cutter, px, py, out, gi, pj):
+    """(patch, point) pairs whose contact could stand above the lattice's tip: the patch's
+    highest end less the profile at the point's distance from its box (no segment of it
+    is nearer or higher)."""
+    dx = np.maximum(np.maximum(box[gi, 0] - px[pj], px[pj] - box[gi, 2]), 0.0)
+    dy = np.maximum(np.maximum(box[gi, 1] - py[pj], py[pj] - box[gi, 3]), 0.0)
+    keep = box[gi, 4] - cutter.profile(np.maximum(np.hypot(dx, dy) - 1e-6, 0.0)) > out[pj]
+    return gi[keep], pj[keep]
 
 
 def _point_pairs(mid, px, py, reach):
@@ -185,7 +223,9 @@ def _may_raise(a, b, cutter, px, py, out, si, pj):
     W2 = np.einsum("ij,ij->i", w, w)
     t = np.clip((qx * w[:, 0] + qy * w[:, 1]) / np.where(W2 > 0, W2, 1.0), 0.0, 1.0)
     dist = np.hypot(qx - t * w[:, 0], qy - t * w[:, 1])
-    bound = np.maximum(a[si, 2], b[si, 2]) - cutter.profile(dist)
+    # a micron of slack: the exact test takes points at the rim within rounding, and a
+    # flat end's contact is its rim (lattice points exactly R from a segment's end)
+    bound = np.maximum(a[si, 2], b[si, 2]) - cutter.profile(np.maximum(dist - 1e-6, 0.0))
     keep = bound > out[pj]
     return si[keep], pj[keep]
 
