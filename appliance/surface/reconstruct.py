@@ -268,8 +268,8 @@ def _relaxed_levels(previous, update, slices, tank_area_mm2):
 
 
 def _resample(old: Lattice, z, new: Lattice):
-    """A fit (NaN off the part) read on another lattice: the next pass's starting slopes
-    must sit where the surface is, not where the old lattice's indices fall."""
+    """A field (NaN off the part) read on another lattice: the next pass's rise must sit
+    where the surface is, not where the old lattice's indices fall."""
     X, Y = np.meshgrid(new.x, new.y)
     P = np.column_stack([X.ravel(), Y.ravel()])
     on = bilinear(old, np.isfinite(z).astype(float), P) > 0.5
@@ -350,10 +350,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     for _ in range(passes):
         if z is not None:
             # second pass: each wall edge's height and the emerged volume from the first fit
-            z_first = np.where(footprint, z, np.nan)
             true = diag["displacement"]["true_mm"] if "displacement" in diag else None
-            slices = _corrected_levels(seen, opt, diag, lat, z_first, true)
-            z = z_first
+            slices = _corrected_levels(seen, opt, diag, lat, np.where(footprint, z, np.nan), true)
             if auto_bounds:          # the outline is surer now: the grid follows it
                 grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
                 xo, yo = grid.axes()
@@ -364,7 +362,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         curve = cv if cv is not None else curve
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
-    rise_max = 0.0 if opt.meniscus is None else float(np.max(opt.meniscus.rise(np.linspace(0.0, np.pi / 2, 91))))
+    rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     z = np.where(footprint, z, np.nan)
     cv_rms = min(c[1] for c in curve) if curve else None

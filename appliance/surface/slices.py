@@ -282,7 +282,7 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     hardly raised; at every lower level it stands z0 - L above the ink and is
     seen further out. Going down the levels, a wall point inherits the edge
     height of the wall point it continues (found where the perspective puts it
-    in the frame above); a wall point with none above is a new edge: z0 lies
+    in the frame above, else two above); a wall point with none above is a new edge: z0 lies
     between this level and the one above (plus the meniscus' rise, if any).
     Level-curve points lie on the ink and stay where they are.
     """
@@ -308,8 +308,8 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
 
 
 def _continuation(camera, P, frame: Slice, dl, top, wall_tol_mm, step_range):
-    """(distance, nearest vertex, within tolerance) of the edges seen at P in `frame`, the
-    ink dl lower there (< 0: a frame above): the same ray, the edge dl more above the ink."""
+    """(nearest vertex, within tolerance) in `frame` of the edges seen at P, the ink dl
+    lower there (< 0: a frame above): the same ray, the edge dl more above the ink."""
     d, i = _along_ray(camera, P, frame, dl, 0.5 * abs(dl), step_range)
     r = np.hypot(*(P - np.asarray(camera.xy, float)).T)
     tol = wall_tol_mm + r * abs(dl) * 0.5 * max(top, 1.0) / camera.height_mm ** 2
@@ -319,14 +319,13 @@ def _continuation(camera, P, frame: Slice, dl, top, wall_tol_mm, step_range):
 def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
     """Per frame: each wall point's edge height as a bracket (lo, hi) - where it first
     showed - (None for a frame without wall points)."""
-    spans, prev, above = [], None, []   # above: the last EDGE_HISTORY frames and brackets
+    spans, above = [], []   # above: the last EDGE_HISTORY frames and their brackets
     for s in slices:
         if s.empty or s.edge is None or not s.edge.any():
             spans.append(None)
-            prev = s if not s.empty else None
             above = (above + [(s, np.full((len(s.P), 2), np.nan))])[-EDGE_HISTORY:] if not s.empty else []
             continue
-        step_up = (prev.level - s.level) if prev is not None else 1.0
+        step_up = (above[-1][0].level - s.level) if above else 1.0
         span = np.full((len(s.P), 2), np.nan)
         w = np.flatnonzero(s.edge)
         # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
@@ -345,7 +344,6 @@ def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
             span[q[cont]] = span_above[i[cont]]
             todo[np.flatnonzero(todo)[cont]] = False
         spans.append(span)
-        prev = s
         above = (above + [(s, span)])[-EDGE_HISTORY:]   # matched against the frames as seen
     return spans
 
