@@ -60,6 +60,25 @@ def test_meniscus_calibration_recovers_known_parameters():
     assert abs(m.contact_angle_rad - 0.2) < 0.01
 
 
+def test_meniscus_calibration_through_the_cameras_perspective():
+    """Each contact line stands h above the ink and is seen r h / (H - h) further out; its
+    rise must be that of the slope where it really is (taken where it was seen: 2.180 mm
+    for 2.2, the error sample 4's steep faces multiply)."""
+    from appliance.vision.types import Waterline
+    sphere = surfaces.get("sphere")
+    C, H = np.array([20.0, 30.0]), 300.0
+    seen = []
+    for w in meniscus_waterlines(sphere, np.arange(29.0, 2.0, -3.0), 2.2, 0.2, resolution_mm=0.3):
+        loops = []
+        for lp in w.loops:
+            h = np.maximum(sphere.height(lp[:, 0], lp[:, 1]) - w.level_mm, 0.0)
+            loops.append(C + (lp - C) * (H / (H - h))[:, None])
+        seen.append(Waterline(w.level_mm, loops))
+    m = calibrate_meniscus(seen, sphere, camera_xy_mm=tuple(C), camera_height_mm=H)
+    assert abs(m.capillary_length_mm - 2.2) < 0.005           # measured 2.19999
+    assert abs(m.contact_angle_rad - 0.2) < 0.002
+
+
 def test_meniscus_correction_removes_the_rise():
     dome = Surface("dome", "paraboloid", (10.0, 90.0, 10.0, 90.0),
                    (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),))

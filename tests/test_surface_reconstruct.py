@@ -133,6 +133,26 @@ def test_walls_seen_by_their_raised_edges_are_put_back():
     assert np.nanmean(en[inside_n]) > 5 * np.nanmean(e[inside])
 
 
+def test_a_rim_seen_a_pixel_off_in_one_frame_does_not_move_the_frames_below():
+    """One frame's far-wall edge 0.055 mm further out than the perspective puts it
+    (sample 4's rim had three such frames) breaks the chain of edges there. The frames
+    below continue the edge seen two levels up, so they keep its height and go back to
+    the wall; had they started afresh they would stand ~0.7 mm off it."""
+    from appliance.surface.slices import unproject_rims
+    camera = Perspective((-20.0, 45.0), 300.0)
+    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
+    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
+    for lp in seen[4].loops:                                # the 11 mm frame
+        lp[lp[:, 0] > 40.0, 0] += 0.055
+    slices, _ = check_waterlines(seen)
+    mark_walls(slices, 0.03, camera)
+    put_back = unproject_rims(slices, camera, 0.03)
+    below = [s.P[:, 0].max() for s in put_back[5:]]
+    # measured: 40.10 mm (the bracket's middle, before any fit narrows it); 40.71 when
+    # the frames below start afresh
+    assert max(below) == pytest.approx(40.0, abs=0.2), below
+
+
 def test_grid_by_spacing_and_by_count():
     xs, ys = GridSpec((0, 100, 0, 100), spacing_mm=0.1).axes()
     assert xs.size == 1001 and ys.size == 1001 and abs(xs[1] - xs[0] - 0.1) < 1e-12
