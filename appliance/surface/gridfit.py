@@ -77,17 +77,23 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarr
     return m.astype(bool)
 
 
-def area_weights(lat: Lattice, sl: Slice, sub: int = 4) -> np.ndarray:
-    """Each node's share of the area inside the slice's waterline: the fraction of its
-    cell (the node +- half a spacing) that lies inside, from sub x sub samples per cell.
+def area_weights(lat: Lattice, slices, sub: int = 4) -> np.ndarray:
+    """Each node's share of the part's footprint: the fraction of its cell (the node +-
+    half a spacing) inside any of the slices' waterlines, from sub x sub samples per cell.
 
     The nodes inside a waterline undercount its area by a strip of about half a spacing
     all round (2.5 % of a 100 mm block on a 1 mm lattice); an emerged volume summed over
-    them alone put the ink 0.13 mm off its true level."""
+    them alone put the ink 0.13 mm off its true level. The footprint is the union of
+    every frame's exposed region, not the lowest frame's alone: where the part has left
+    the view in the lowest frames their loop cuts a chord across it (sample 2: 73 mm^2
+    short, the lowest levels 0.15 mm high)."""
     off = (np.arange(sub) + 0.5) / sub - 0.5
     fine = Lattice(np.ravel(lat.x[:, None] + lat.hx * off[None, :]),
                    np.ravel(lat.y[:, None] + lat.hy * off[None, :]))
-    inside = exposed_mask(fine, sl, exact_edges=True)
+    inside = np.zeros(fine.shape, bool)
+    for sl in ([slices] if isinstance(slices, Slice) else slices):
+        if not sl.empty:
+            inside |= exposed_mask(fine, sl, exact_edges=True)
     return inside.reshape(lat.y.size, sub, lat.x.size, sub).mean(axis=(1, 3))
 
 
