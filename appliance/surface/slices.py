@@ -282,8 +282,11 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
     hardly raised; at every lower level it stands z0 - L above the ink and is
     seen further out. Going down the levels, a wall point inherits the edge
     height of the wall point it continues (found where the perspective puts it
-    in the frame above, else two above); a wall point with none above is a new edge: z0 lies
-    between this level and the one above (plus the meniscus' rise, if any).
+    in the frame above or two above; of two, the edge that showed first); a wall
+    point with none above is a new edge: z0 lies between this level and the one
+    above (plus the meniscus' rise, if any) - unless its neighbours along the wall
+    continue an edge, when it is a glitch of this frame and takes theirs. Every
+    point with a bracket comes back marked as an edge.
     Level-curve points lie on the ink and stay where they are.
     """
     spans = _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range)
