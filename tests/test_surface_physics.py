@@ -128,7 +128,7 @@ def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
     inside = part.inside(X, Y)
     z = np.where(inside, part.height(X, Y), np.nan)
     square = np.array([[0.0, 0.0], [100.002, 0.0], [100.002, 100.002], [0.0, 100.002]])
-    w = area_weights(lat, make_slice(0.0, [square]))
+    w = area_weights(lat, [make_slice(0.0, [square])])
     assert abs(w.sum() * lat.hx * lat.hy - 100.002 ** 2) < 20.0      # within 0.2 %
     nominal = np.array([30.0, 20.0, 10.0, 2.0])
     true = np.array([physics.true_level(part, lv, 22500.0) for lv in nominal])

@@ -193,7 +193,7 @@ def test_the_outline_where_the_lowest_frame_lost_part_of_the_part():
     lat = Lattice(np.linspace(-1, 41, 85), np.linspace(-1, 31, 65))
     area = area_weights(lat, slices).sum() * lat.hx * lat.hy
     assert area == pytest.approx(1200.0, rel=2e-3)                 # the lowest loop alone: 1040
-    assert area_weights(lat, cut).sum() * lat.hx * lat.hy < 1060.0
+    assert area_weights(lat, [cut]).sum() * lat.hx * lat.hy < 1060.0
     # a higher frame's level-curve point beyond the wall does not move it
     on_top = np.flatnonzero(~slices[2].wall)
     assert on_top.size

@@ -77,7 +77,7 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarr
     return m.astype(bool)
 
 
-def area_weights(lat: Lattice, slices, sub: int = 4) -> np.ndarray:
+def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
     """Each node's share of the part's footprint: the fraction of its cell (the node +-
     half a spacing) inside any of the slices' waterlines, from sub x sub samples per cell.
 
@@ -91,15 +91,10 @@ def area_weights(lat: Lattice, slices, sub: int = 4) -> np.ndarray:
     fine = Lattice(np.ravel(lat.x[:, None] + lat.hx * off[None, :]),
                    np.ravel(lat.y[:, None] + lat.hy * off[None, :]))
     inside = np.zeros(fine.shape, bool)
-    for sl in ([slices] if isinstance(slices, Slice) else slices):
+    for sl in slices:
         if not sl.empty:
             inside |= exposed_mask(fine, sl, exact_edges=True)
     return inside.reshape(lat.y.size, sub, lat.x.size, sub).mean(axis=(1, 3))
-
-
-def _signed_distance(sl: Slice, q, inside):
-    d, i = polyline_distance(sl, q)
-    return np.where(inside, d, -d), i
 
 
 def _lagrange_at_zero(s, z, ok):

@@ -224,9 +224,8 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
                 # the edge's height above the ink is unknown (0 .. top - level): take the
                 # middle and widen the tolerance by what the rest of the range moves it
                 h_max = max(top - s.level, 0.0) + abs(dl)
-                d, _ = _along_ray(camera, s.P, slices[j], dl, 0.5 * h_max, step_range)
-                r = np.hypot(*(s.P - np.asarray(camera.xy, float)).T)
-                raised |= d < wall_tol_mm + r * abs(dl) * step_range[1] * 0.5 * h_max / camera.height_mm ** 2
+                raised |= _ray_match(camera, s.P, slices[j], dl, 0.5 * h_max, step_range[1] * 0.5 * h_max,
+                                     wall_tol_mm, step_range)[1]
         s.wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
         # a raised edge moves as the perspective says (near the camera's foot it also
         # looks static: the move is then too small to matter)
@@ -295,7 +294,8 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
         if span is None:
             out.append(s)
             continue
-        w = np.flatnonzero(np.isfinite(span[:, 0]))
+        edge = np.isfinite(span[:, 0])
+        w = np.flatnonzero(edge)
         z0 = span.mean(axis=1)
         h = np.where(np.isfinite(z0), np.maximum(z0 - s.level, 0.0), 0.0)
         P = camera.true_xy(s.P, h)
@@ -307,18 +307,18 @@ def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
             h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
             P = camera.true_xy(s.P, h)
         t = s.moved(P, s.z)
-        t.edge = np.isfinite(span[:, 0])
+        t.edge = edge
         out.append(t)
     return out
 
 
-def _continuation(camera, P, frame: Slice, dl, top, wall_tol_mm, step_range):
-    """(nearest vertex, within tolerance) in `frame` of the edges seen at P, the ink dl
-    lower there (< 0: a frame above): the same ray, the edge dl more above the ink."""
-    d, i = _along_ray(camera, P, frame, dl, 0.5 * abs(dl), step_range)
+def _ray_match(camera, P, frame: Slice, dl, h, h_spread, wall_tol_mm, step_range):
+    """(nearest vertex, within tolerance) in `frame` of the edges seen at P, standing h
+    above the ink, where the ink is dl lower there (< 0: a frame above). The tolerance
+    grows by what an edge h_spread higher or lower would move differently."""
+    d, i = _along_ray(camera, P, frame, dl, h, step_range)
     r = np.hypot(*(P - np.asarray(camera.xy, float)).T)
-    tol = wall_tol_mm + r * abs(dl) * 0.5 * max(top, 1.0) / camera.height_mm ** 2
-    return i, d < tol
+    return i, d < wall_tol_mm + r * abs(dl) * h_spread / camera.height_mm ** 2
 
 
 def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
@@ -341,10 +341,11 @@ def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
             # step_range: the match looks along that stretch of ray). Of two matches the
             # edge that showed first wins: a point continuing a frame's glitch (itself a
             # "new" edge) would otherwise carry the glitch's bracket all the way down
-            i, near = _continuation(camera, s.P[w], frame, s.level - frame.level, slices[0].level - s.level,
-                                    wall_tol_mm, step_range)
+            dl = s.level - frame.level
+            i, near = _ray_match(camera, s.P[w], frame, dl, 0.5 * abs(dl), 0.5 * max(slices[0].level - s.level, 1.0),
+                                 wall_tol_mm, step_range)
             cand = span_above[i]
-            older = near & np.isfinite(cand[:, 0]) & (np.nan_to_num(cand[:, 0], nan=-np.inf) > span[w, 0])
+            older = near & (cand[:, 0] > span[w, 0])          # NaN (no edge there) compares False
             span[w[older]] = cand[older]
         span = _mend_along_wall(s, span)
         spans.append(span)
