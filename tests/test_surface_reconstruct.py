@@ -176,6 +176,26 @@ def test_a_few_rim_points_a_pixel_off_take_their_neighbours_edge():
     assert put_back[4].edge[run].all()
 
 
+def test_an_edge_continues_the_one_that_showed_first():
+    """The 11 mm frame's far wall is 0.05 mm off, so it starts afresh as a new edge; the
+    10 mm frame's is 0.02 mm off and matches both it and the 12 mm frame's true edge. It
+    continues the edge that showed first, else it (and every frame below) would carry
+    the glitch's bracket, a level step high, and stand outside the wall."""
+    from appliance.surface.slices import unproject_rims
+    camera = Perspective((-20.0, 45.0), 300.0)
+    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
+    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
+    for k, off in ((4, 0.05), (5, 0.02)):                  # the 11 and 10 mm frames
+        for lp in seen[k].loops:
+            lp[lp[:, 0] > 40.0, 0] += off
+    slices, _ = check_waterlines(seen)
+    mark_walls(slices, 0.03, camera)
+    put_back = unproject_rims(slices, camera, 0.03)
+    below = [s.P[:, 0].max() for s in put_back[5:]]
+    # measured: 40.12 mm (the bracket's middle); 40.53 when the nearer frame's match wins
+    assert max(below) == pytest.approx(40.0, abs=0.2), below
+
+
 def test_the_outline_where_the_lowest_frame_lost_part_of_the_part():
     """The lowest frames can see less of the part than the ones above: sample 2's far
     wall leaves the camera's view and that stretch of their loop is a chord. The outline
