@@ -133,20 +133,28 @@ def test_walls_seen_by_their_raised_edges_are_put_back():
     assert np.nanmean(en[inside_n]) > 5 * np.nanmean(e[inside])
 
 
+def _wedge_put_back(glitch):
+    """The wedge 60 mm off the camera's foot seen at 15, 14 .. 5 mm, `glitch(seen)` done to
+    its waterlines, then walls found and put back."""
+    from appliance.surface.slices import unproject_rims
+    camera = Perspective((-20.0, 45.0), 300.0)
+    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
+    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
+    glitch(seen)
+    slices, _ = check_waterlines(seen)
+    mark_walls(slices, 0.03, camera)
+    return unproject_rims(slices, camera, 0.03)
+
+
 def test_a_rim_seen_a_pixel_off_in_one_frame_does_not_move_the_frames_below():
     """One frame's far-wall edge 0.055 mm further out than the perspective puts it
     (sample 4's rim had three such frames) breaks the chain of edges there. The frames
     below continue the edge seen two levels up, so they keep its height and go back to
     the wall; had they started afresh they would stand ~0.7 mm off it."""
-    from appliance.surface.slices import unproject_rims
-    camera = Perspective((-20.0, 45.0), 300.0)
-    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
-    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
-    for lp in seen[4].loops:                                # the 11 mm frame
-        lp[lp[:, 0] > 40.0, 0] += 0.055
-    slices, _ = check_waterlines(seen)
-    mark_walls(slices, 0.03, camera)
-    put_back = unproject_rims(slices, camera, 0.03)
+    def glitch(seen):
+        for lp in seen[4].loops:                            # the 11 mm frame
+            lp[lp[:, 0] > 40.0, 0] += 0.055
+    put_back = _wedge_put_back(glitch)
     below = [s.P[:, 0].max() for s in put_back[5:]]
     # measured: 40.10 mm (the bracket's middle, before any fit narrows it); 40.71 when
     # the frames below start afresh
@@ -158,17 +166,14 @@ def test_a_few_rim_points_a_pixel_off_take_their_neighbours_edge():
     such runs, in clean renders too) start afresh as new edges, a level step high, and
     would stay ~0.7 mm outside the wall. Their neighbours along the wall continue the edge
     from above: the three take that bracket and go back with them."""
-    from appliance.surface.slices import unproject_rims
-    camera = Perspective((-20.0, 45.0), 300.0)
-    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
-    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
-    lp = seen[4].loops[0]                                   # the 11 mm frame
-    far = np.flatnonzero(lp[:, 0] > 40.0)
-    run = far[len(far) // 2: len(far) // 2 + 3]
-    lp[run, 0] += 0.055
-    slices, _ = check_waterlines(seen)
-    mark_walls(slices, 0.03, camera)
-    put_back = unproject_rims(slices, camera, 0.03)
+    run = []
+
+    def glitch(seen):
+        lp = seen[4].loops[0]                               # the 11 mm frame
+        far = np.flatnonzero(lp[:, 0] > 40.0)
+        run.extend(far[len(far) // 2: len(far) // 2 + 3])
+        lp[run, 0] += 0.055
+    put_back = _wedge_put_back(glitch)
     P = put_back[4].P[run]
     # measured: 40.16 mm (the bracket's middle: no fit narrows it here); 40.56 when the
     # three start afresh
@@ -181,16 +186,11 @@ def test_an_edge_continues_the_one_that_showed_first():
     10 mm frame's is 0.02 mm off and matches both it and the 12 mm frame's true edge. It
     continues the edge that showed first, else it (and every frame below) would carry
     the glitch's bracket, a level step high, and stand outside the wall."""
-    from appliance.surface.slices import unproject_rims
-    camera = Perspective((-20.0, 45.0), 300.0)
-    levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
-    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
-    for k, off in ((4, 0.05), (5, 0.02)):                  # the 11 and 10 mm frames
-        for lp in seen[k].loops:
-            lp[lp[:, 0] > 40.0, 0] += off
-    slices, _ = check_waterlines(seen)
-    mark_walls(slices, 0.03, camera)
-    put_back = unproject_rims(slices, camera, 0.03)
+    def glitch(seen):
+        for k, off in ((4, 0.05), (5, 0.02)):              # the 11 and 10 mm frames
+            for lp in seen[k].loops:
+                lp[lp[:, 0] > 40.0, 0] += off
+    put_back = _wedge_put_back(glitch)
     below = [s.P[:, 0].max() for s in put_back[5:]]
     # measured: 40.12 mm (the bracket's middle); 40.53 when the nearer frame's match wins
     assert max(below) == pytest.approx(40.0, abs=0.2), below
