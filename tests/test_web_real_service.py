@@ -172,7 +172,8 @@ def test_guided_calibration_on_the_daemon(web):
     assert d["corners"] == 54 and d["plane_rms_mm"] < 0.05 and abs(d["mm_per_px"] - 0.25) < 0.002, d
     r = c.get("/api/frame.jpg")                                    # the preview with the corners drawn
     assert r.status_code == 200 and r.data[:2] == b"\xff\xd8"
-    assert c.post("/api/calibration/accept").get_json() == {**cal, "step": 0, "detected": None}
+    assert c.post("/api/calibration/accept").get_json() == {**cal, "step": 0, "detected": None,
+                                                          "holds_bench": False}
     cam = svc.store.calibrations()[0]["camera"]
     import numpy as np
     H = np.asarray(cam["homography"])
@@ -186,6 +187,69 @@ def test_guided_calibration_on_the_daemon(web):
     r = c.post("/api/scan", json=SCAN)
     assert r.status_code == 201, r.get_json()
     assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+
+
+class SlowChessboardBench(ChessboardBench):
+    """The board bench whose stage travels at 10 s per 100 mm: homing from mid-travel takes 4 s."""
+    def __init__(self, surface):
+        super().__init__(surface, faults={"stage": {"seconds_per_mm": 0.1}})
+
+
+def scan_then_cancel(c):
+    """The bench takes a scan (201), which is then cancelled so the next case starts idle."""
+    r = c.post("/api/scan", json={**SCAN, "settle_s": 0.2})
+    assert r.status_code == 201, r.get_json()
+    assert c.post("/api/scan/cancel").status_code == 200
+    assert wait_state(c, {"cancelled", "done", "failed"}, timeout=30)["state"] in ("cancelled", "done")
+
+
+@on_bench(ChessboardBench)
+def test_the_calibration_can_be_cancelled_at_every_step(web):
+    c, svc = web
+    steps = ["home", "target", "detect", "accept"]
+    for n_done in range(len(steps)):
+        for step in steps[:n_done]:
+            assert c.post(f"/api/calibration/{step}").status_code == 200, step
+        held = c.get("/api/calibration").get_json()
+        assert held["step"] == n_done and held["holds_bench"] == (n_done > 0)
+        if n_done:
+            r = c.post("/api/scan", json=SCAN)
+            assert r.status_code == 400 and "cancel" in r.get_json()["error"], r.get_json()
+        cal = c.post("/api/calibration/cancel").get_json()
+        assert cal["step"] == 0 and cal["holds_bench"] is False and cal["detected"] is None, (n_done, cal)
+        assert svc.store.calibrations() == []           # nothing half-done was stored
+        assert svc.factory.last is None or svc.factory.last.light.on is False
+        scan_then_cancel(c)
+    # after all that, the full sequence still works from "home"
+    for step in steps:
+        assert c.post(f"/api/calibration/{step}").status_code == 200, step
+    assert len(svc.store.calibrations()) == 1
+
+
+@on_bench(SlowChessboardBench)
+def test_cancel_stops_a_step_that_is_still_running(web):
+    import threading
+    import time
+    c, svc = web
+    outcome = {}
+
+    def home():
+        try:
+            outcome["home"] = svc.calibrate("home")
+        except Exception as e:                          # the interrupted homing ends with the stage's error
+            outcome["home"] = e
+    t = threading.Thread(target=home)
+    t.start()
+    while not (svc.factory.last and "home" in svc.factory.last.stage.calls):
+        time.sleep(0.01)
+    t0 = time.monotonic()
+    cal = c.post("/api/calibration/cancel").get_json()
+    took = time.monotonic() - t0
+    t.join(5)
+    assert cal["step"] == 0 and cal["holds_bench"] is False
+    assert took < 2.0, f"cancel waited {took:.1f} s for a 4 s homing"
+    assert "stop" in svc.factory.last.stage.calls and isinstance(outcome["home"], Exception)
+    scan_then_cancel(c)
 
 
 def scan_folder_zip(folder, prefix="myscan/", edit=None, extra=None):

@@ -12,9 +12,12 @@ The lens (K, distortion) is not found here: it needs several tilted views
 the board's corners are undistorted with them; the plane homography is what
 the guided steps renew (the camera was bumped, the bench moved).
 
-The bench's devices stay open from `home` to `accept` (or cancel()); the
-service refuses scans meanwhile. Steps must come in order; a failed step can
-be retried. Errors are SettingError (wrong step) or the device's own error.
+The bench's devices stay open from `home` to `accept`, and the service
+refuses scans meanwhile; so every step can be cancelled ("cancel", also while
+a step runs: interrupt() stops the stage, close() gives the devices back and
+starts over at "home"). Steps must come in order; a failed step can be
+retried or cancelled. Errors are SettingError (wrong step) or the device's
+own error.
 """
 from __future__ import annotations
 
@@ -53,7 +56,7 @@ class GuidedCalibration:
 
     def describe(self) -> dict:
         return {"steps": [{"id": s, "text": t} for s, t in STEPS], "step": self.step,
-                "detected": dict(self.detected) if self.detected else None}
+                "detected": dict(self.detected) if self.detected else None, "holds_bench": self.active}
 
     def do(self, step: str) -> dict:
         ids = [s for s, _ in STEPS]
@@ -66,6 +69,15 @@ class GuidedCalibration:
         if step != "accept":                # accept closes the bench and starts over at "home"
             self.step += 1
         return self.describe()
+
+    def interrupt(self):
+        """Stop the stage at once (from another thread): a running home or move ends with an error."""
+        devices = self.devices
+        if devices is not None and devices.stage is not None:
+            try:
+                devices.stage.stop()
+            except Exception:
+                pass                            # close() follows; the next step homes again
 
     def close(self):
         devices, self.devices = self.devices, None

@@ -133,13 +133,8 @@ class BenchService:
             return job_id
 
     def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
-        cal = self._calibration
-        if cal is not None and cal.active and cal.lock.acquire(blocking=False):
-            try:
-                cal.close()                         # a calibration left half-way gives the bench back
-                self._set(message="calibration cancelled")
-            finally:
-                cal.lock.release()
+        if self._calibration is not None and self._calibration.active:
+            self.cancel_calibration(wait_s)         # a calibration left half-way gives the bench back
         with self._lock:
             thread = self._thread
             if thread is None or not thread.is_alive():
@@ -253,7 +248,11 @@ class BenchService:
         return self._guided().describe()
 
     def calibrate(self, step: str) -> dict:
-        """Do one guided step (in order: home, target, detect, accept); returns calibration()."""
+        """Do one guided step (in order: home, target, detect, accept); returns calibration().
+
+        "cancel" at any step, also while one runs, gives the bench back (cancel_calibration)."""
+        if step == "cancel":
+            return self.cancel_calibration()
         cal = self._guided()
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
@@ -276,6 +275,25 @@ class BenchService:
             return out
         finally:
             cal.lock.release()
+
+    def cancel_calibration(self, wait_s: float = 30.0) -> dict:
+        """Stop a guided calibration wherever it is: the stage stops, the devices close, the bench
+        takes scans again and the steps start over at "home". Nothing is stored."""
+        cal = self._calibration
+        if cal is None:
+            return self.calibration()
+        cal.interrupt()                             # a running step (homing, say) ends at once
+        if not cal.lock.acquire(timeout=wait_s):
+            raise SettingError("calibration", f"the running step did not stop within {wait_s:.0f} s")
+        try:
+            was_active = cal.active
+            cal.close()
+        finally:
+            cal.lock.release()
+        if was_active:
+            self._set(message="calibration cancelled")
+            self.store.event(None, "calibration", "guided calibration cancelled; the bench is free")
+        return cal.describe()
 
     def _show_frame(self, jpeg: bytes, info: dict):
         with self._lock:
@@ -389,7 +407,8 @@ class BenchService:
     # == internals ================================================================
     def _refuse_if_busy(self):
         if self._calibration is not None and self._calibration.active:
-            raise SettingError("scan", "a guided calibration holds the bench; finish it (accept) first")
+            raise SettingError("scan", "a guided calibration holds the bench; finish it or cancel it "
+                                       "(the Calibrate page, or POST /api/calibration/cancel)")
         current = self._state["job_id"]
         if self._thread is not None and self._thread.is_alive() and current \
                 and self.store.get_job(current)["status"] in ("done", "failed", "cancelled"):

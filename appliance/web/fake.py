@@ -210,10 +210,15 @@ class FakeBenchService:
     def calibration(self) -> dict:
         with self._lock:
             return {"steps": [{"id": s, "text": t} for s, t in self.CALIBRATION_STEPS],
-                    "step": self._calibration["step"], "detected": self._calibration["detected"]}
+                    "step": self._calibration["step"], "detected": self._calibration["detected"],
+                    "holds_bench": self._calibration["step"] > 0}
 
     def calibrate(self, step: str) -> dict:
         ids = [s for s, _ in self.CALIBRATION_STEPS]
+        if step == "cancel":                    # as the daemon: any step, back to "home", nothing stored
+            with self._lock:
+                self._calibration = {"step": 0, "detected": None}
+            return self.calibration()
         if step not in ids:
             raise SettingError("step", f"unknown calibration step {step!r}")
         with self._lock:

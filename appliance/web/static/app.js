@@ -207,16 +207,19 @@
   function calibration() {
     const list = $("#cal-steps");
     if (!list) return;
-    let steps = [];
+    const doBtn = $("#cal-do"), cancelBtn = $("#cal-cancel");
     function render(c) {
-      steps = c.steps; list.innerHTML = "";
+      list.innerHTML = "";
       c.steps.forEach((s, i) => {
         const li = document.createElement("li");
         li.textContent = s.text; li.className = i === c.step ? "now" : (i < c.step ? "done" : "");
         list.appendChild(li);
       });
-      $("#cal-do").textContent = "Do step " + (c.step + 1) + ": " + c.steps[c.step].id;
-      $("#cal-do").dataset.step = c.steps[c.step].id;
+      doBtn.textContent = "Do step " + (c.step + 1) + ": " + c.steps[c.step].id;
+      doBtn.dataset.step = c.steps[c.step].id;
+      // Cancel is there at every step: it stops the stage and gives the bench back for scans.
+      cancelBtn.disabled = !c.holds_bench && c.step === 0;
+      text("#cal-hold", c.holds_bench ? "The calibration holds the bench: scans wait until you finish or cancel it." : "The bench is free for scans.");
       text("#cal-detected", c.detected ? "Detected: " + Object.entries(c.detected).map(([k, v]) => k + " " + v).join(", ") : "");
     }
     function frame() {
@@ -224,9 +227,17 @@
         if (!b) return; const img = $("#cal-frame"); img.src = URL.createObjectURL(b); show(img, true); show($("#cal-noframe"), false);
       });
     }
-    $("#cal-do").addEventListener("click", async () => {
-      try { render(await api("POST", "/api/calibration/" + $("#cal-do").dataset.step)); text("#cal-result", "Done."); frame(); }
-      catch (e) { text("#cal-result", e.message); }
+    doBtn.addEventListener("click", async () => {
+      doBtn.disabled = true; text("#cal-result", "Working on " + doBtn.dataset.step + "…");
+      try { render(await api("POST", "/api/calibration/" + doBtn.dataset.step)); text("#cal-result", "Done."); frame(); }
+      catch (e) { text("#cal-result", e.message + " (retry the step, or cancel)"); api("GET", "/api/calibration").then(render); }
+      doBtn.disabled = false;
+    });
+    cancelBtn.addEventListener("click", async () => {
+      // not disabled while a step runs: cancelling is how a long homing is stopped
+      text("#cal-result", "Cancelling…");
+      try { render(await api("POST", "/api/calibration/cancel")); text("#cal-result", "Calibration cancelled; nothing was stored. The bench takes scans again."); }
+      catch (e) { text("#cal-result", "Not cancelled: " + e.message); }
     });
     api("GET", "/api/calibration").then(render); frame();
   }
