@@ -33,7 +33,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from appliance.hw import protocol as P               # noqa: E402
 from appliance.hw.stage import SerialStage            # noqa: E402
-from appliance.sim.hil import FIRMWARE_DIR, SimulatedBench, build  # noqa: E402
+from appliance.sim.hil import SimulatedBench, build  # noqa: E402
 
 F_CPU = 16_000_000
 CYC_PER_TICK = 8              # Timer1 at clk/8
@@ -161,8 +161,7 @@ def accel_profile(rate, accel, distance, speed):
 
 
 def avr_size():
-    build()
-    out = subprocess.run(["avr-size", "-C", "--mcu=atmega328p", str(FIRMWARE_DIR / "build" / "inkslice-stepper.elf")],
+    out = subprocess.run(["avr-size", "-C", "--mcu=atmega328p", str(build() / "inkslice-stepper.elf")],
                          capture_output=True, text=True, check=True).stdout
     flash = re.search(r"Program:\s+(\d+) bytes \(([\d.]+)% Full\)", out)
     ram = re.search(r"Data:\s+(\d+) bytes \(([\d.]+)% Full\)", out)

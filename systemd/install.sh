@@ -20,7 +20,7 @@ install -m 0644 "$SRC/systemd/99-inkslice.rules" "$ROOT/etc/udev/rules.d/"
 
 # the code: a copy (not the checkout itself: a `git pull` must not change a running box)
 tar -C "$SRC" --exclude=.git --exclude=.venv --exclude='__pycache__' --exclude='*.egg-info' \
-    --exclude=firmware/stepper/build --exclude=demo-out --exclude=benches/out --exclude=tests/artifacts \
+    --exclude=appliance/firmware/stepper/build --exclude=demo-out --exclude=benches/out --exclude=tests/artifacts \
     -cf - . | tar -C "$ROOT$PREFIX" -xf -
 
 if [ -n "$ROOT" ]; then

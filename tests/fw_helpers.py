@@ -13,13 +13,15 @@ import pytest
 import serial
 
 from appliance.hw import protocol as P
+from appliance.firmware import build_dir
 from appliance.sim.hil import FIRMWARE_DIR, SimulatedBench, build
 
-BUILD = FIRMWARE_DIR / "build"
+BUILD = build_dir()
 
 
 def make(*targets, check=True):
-    r = subprocess.run(["make", "-C", str(FIRMWARE_DIR), *targets], capture_output=True, text=True)
+    BUILD.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run(["make", "-C", str(FIRMWARE_DIR), f"BUILD={BUILD}", *targets], capture_output=True, text=True)
     if check and r.returncode != 0:
         raise AssertionError(f"make {' '.join(targets)} failed:\n{r.stdout}\n{r.stderr}")
     return r

@@ -8,7 +8,7 @@ from fw_helpers import BUILD, FIRMWARE_DIR, make
 
 
 def test_host_unit_tests_of_planner_protocol_crc_and_settings_pass():
-    make("build/test_host")
+    make(str(BUILD / "test_host"))
     r = subprocess.run([str(BUILD / "test_host")], capture_output=True, text=True)
     out = r.stdout + r.stderr
     print(out)

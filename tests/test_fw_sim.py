@@ -1,6 +1,6 @@
 """The protocol, homing, limits and e-stop, against the real firmware under simavr.
 
-Each test reads as one clause of firmware/stepper/PROTOCOL.md and checks it
+Each test reads as one clause of appliance/firmware/stepper/PROTOCOL.md and checks it
 on the unmodified ELF through the HIL harness (a fresh MCU per test)."""
 import threading
 import time

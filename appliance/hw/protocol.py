@@ -1,34 +1,25 @@
-"""The host side of the stepper controller's line protocol (firmware/stepper/PROTOCOL.md).
+"""The host side of the stepper controller's line protocol (appliance/firmware/stepper/PROTOCOL.md).
 
 Pure functions and data, no serial port: framing a command, checking and
 splitting a reply or a status report.  The codes (errors, states, flags,
 alarms, reset reasons, settings) are not repeated here: they are read at
-import from firmware/stepper/codes.def, the same X-macro table the firmware
-is compiled from, so the two sides cannot drift apart.
+import from appliance/firmware/stepper/codes.def, the same X-macro table the
+firmware is compiled from, so the two sides cannot drift apart.
 """
 from __future__ import annotations
 
 import binascii
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from appliance.errors import DeviceError
+from appliance.firmware import codes_path
 
 PROTO_VERSION = 1
 LINE_MAX = 48            # characters the firmware buffers before '\n'
 RT_STATUS = b"?"         # real-time: status report
 RT_ESTOP = b"\x18"       # real-time: emergency stop (Ctrl-X)
-
-
-def _codes_path() -> Path:
-    """codes.def lives with the firmware; an editable install runs from the
-    checkout, so it is found relative to this file.  INKSLICE_FIRMWARE_DIR
-    points elsewhere (e.g. an installed copy)."""
-    env = os.environ.get("INKSLICE_FIRMWARE_DIR")
-    base = Path(env) if env else Path(__file__).resolve().parents[2] / "firmware" / "stepper"
-    return base / "codes.def"
 
 
 @dataclass(frozen=True)
@@ -54,7 +45,7 @@ _SETTING_RE = re.compile(r'^SETTING\((\d+),\s*(\w+),\s*(-?\d+),\s*(-?\d+),\s*(-?
 
 
 def load_codes(path: Path | None = None) -> tuple[dict[str, dict[int, Code]], dict[str, Setting]]:
-    path = path or _codes_path()
+    path = path or codes_path()
     try:
         text = path.read_text()
     except OSError as e:

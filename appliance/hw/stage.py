@@ -1,6 +1,6 @@
 """SerialStage: the lifting stage, driven over the controller's line protocol.
 
-The rules it follows (firmware/stepper/PROTOCOL.md has the whole contract):
+The rules it follows (appliance/firmware/stepper/PROTOCOL.md has the whole contract):
 
 * One command at a time.  Each goes out with a new sequence number and a
   CRC; the driver waits for the reply carrying that number.  No reply in
@@ -165,15 +165,15 @@ class SerialStage(Stage):
             r = self.transact("ID")
         except DeviceError:
             raise DeviceError(self._where(), f"no reply to ID at {BAUD} baud: is this the InkSlice "
-                                             "stepper controller (firmware/stepper)?") from None
+                                             "stepper controller (appliance/firmware)?") from None
         info = P.parse_identity(r.payload) if r.ok else {}
         if not r.ok or info.get("name") != "inkslice-stepper":
             raise DeviceError(self._where(), f"the device does not identify as inkslice-stepper "
                                              f"(reply {r.payload or r.error_name!r})")
         if info.get("proto") != P.PROTO_VERSION:
             raise DeviceError(self._where(), f"firmware speaks protocol {info.get('proto')!r} but this driver "
-                                             f"speaks protocol {P.PROTO_VERSION}: flash the firmware from "
-                                             "firmware/stepper of this checkout")
+                                             f"speaks protocol {P.PROTO_VERSION}: flash this version's firmware "
+                                             "(`inkslice firmware flash`, the daemon stopped)")
         return info
 
     def get_setting(self, name: str) -> int:

@@ -5,12 +5,12 @@
         stage.home(); stage.move_to(12.5)
         bench.stage_position_mm()     # where the stage really is, from counted STEP edges
 
-The harness (firmware/stepper/sim/hil.c) runs the unmodified ELF, bridges its
+The harness (appliance/firmware/stepper/sim/hil.c) runs the unmodified ELF, bridges its
 UART to a pseudo-terminal, moves a simulated stage one step per STEP edge
 and closes the limit switches at the ends of travel.  This class starts it,
 talks to its control channel (stdin/stdout lines) and exposes the fault
 switches.  The firmware and the harness are built with make on first use
-(a no-op when they are up to date).
+(a no-op when they are up to date), into appliance.firmware.build_dir().
 
 speed: simulated seconds per wall-clock second.  The default 10 homes the
 stage in about a second and still sleeps most of the time (a few % of a
@@ -21,28 +21,16 @@ host can simulate it (~3x real time), whatever the speed.
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import threading
 from pathlib import Path
 
 from appliance.errors import DeviceError
+from appliance.firmware import build, source_dir
 
-FIRMWARE_DIR = Path(os.environ.get("INKSLICE_FIRMWARE_DIR",
-                                   Path(__file__).resolve().parents[2] / "firmware" / "stepper"))
+FIRMWARE_DIR = source_dir()
 F_CPU = 16_000_000
 STEPS_PER_MM = 1600.0          # the simulated mechanics: 200 steps x 16 microsteps, 2 mm lead
-_build_lock = threading.Lock()
-
-
-def build(targets=("all",)) -> Path:
-    """make the firmware and the harness; return the build directory."""
-    with _build_lock:
-        r = subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), *targets],
-                           capture_output=True, text=True)
-        if r.returncode != 0:
-            raise DeviceError(FIRMWARE_DIR, f"building {' '.join(targets)} failed:\n{r.stdout}{r.stderr}")
-    return FIRMWARE_DIR / "build"
 
 
 class SimulatedBench:
