@@ -100,7 +100,10 @@ def settings():
 @bp.get("/calibration")
 def calibration():
     svc = _ext()["service"]
-    return render_template("calibration.html", page="calibration", offered=svc.offers("calibration"))
+    from ..daemon.calibration import BOARD
+    from ..vision.printboard import describe
+    return render_template("calibration.html", page="calibration", offered=svc.offers("calibration"),
+                           board_text=describe(BOARD))
 
 
 @bp.get("/api/docs")
