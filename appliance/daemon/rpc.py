@@ -36,10 +36,12 @@ from .. import errors
 log = logging.getLogger("inkslice.rpc")
 METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
            "settings", "update_settings", "events",
-           "live_heightmap", "calibration", "calibrate", "import_scan")
+           "live_heightmap", "calibration", "calibrate", "import_scan",
+           "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
-SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0}   # s; homing, a copy
+SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
+              "commission": 600.0}                                          # the search for level zero
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -134,7 +136,7 @@ class BenchClient:
     method only reads.
     """
     READ_ONLY = frozenset({"state", "jobs", "job", "job_file", "latest_frame", "settings", "events",
-                           "live_heightmap", "calibration"})
+                           "live_heightmap", "calibration", "commissioning", "export_commissioning"})
 
     def __init__(self, path, timeout: float = 30.0, max_connections: int = MAX_CONNECTIONS):
         self.path, self.timeout = str(path), timeout
@@ -220,6 +222,11 @@ class BenchClient:
     def calibration(self): return self._call("calibration")
     def calibrate(self, step): return self._call("calibrate", step)
     def import_scan(self, folder): return self._call("import_scan", str(folder))
+    def commissioning(self): return self._call("commissioning")
+    def commission(self, step, action, values=None): return self._call("commission", step, action, values)
+    def export_commissioning(self): return self._call("export_commissioning")
+    def import_commissioning(self, doc): return self._call("import_commissioning", doc)
+    def ink_changed(self): return self._call("ink_changed")
 
     def latest_frame(self):
         r = self._call("latest_frame")

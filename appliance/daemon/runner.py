@@ -30,6 +30,7 @@ from ..errors import DeviceError, InkSliceError
 from ..hw.devices import Devices
 from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
 from . import settings as S
+from .commissioning import scan_extra, stored_camera
 from .levels import LevelPlan, part_mask, waterline_change
 
 log = logging.getLogger("inkslice.runner")
@@ -141,10 +142,11 @@ class ScanRunner:
             if scan.frames:
                 self._mask = part_mask(read_frame(scan, scan.frames[-1]))
             return scan
-        camera = self.dev.camera_model or self._calibrated_camera()
+        camera = self._calibrated_camera()
         self.scan_dir.mkdir(parents=True, exist_ok=True)
         extra = {"job": self.job_id, "name": self.params.get("name", ""),
                  "level_at_home_mm": self.settings["level_at_home_mm"]}
+        extra.update(scan_extra(self.store, self.settings))     # tank, meniscus, what was used and when
         if self.params.get("surface"):
             extra["surface"] = self.params["surface"]
             atomicio.write_json(self.job_dir / "scan.truth.json", {"surface": self.params["surface"]})
@@ -152,11 +154,14 @@ class ScanRunner:
         return Scan(self.scan_dir, camera, [], extra)
 
     def _calibrated_camera(self) -> CameraModel:
+        """The commissioned camera; without one, the model the devices bring (if any)."""
         from ..scanfile import _camera
-        cals = [c for c in self.store.calibrations() if "camera" in c]
-        if not cals:
-            raise DeviceError("camera", "no camera calibration stored: calibrate the bench before scanning")
-        return _camera("calibration", cals[0]["camera"])
+        stored = stored_camera(self.store)
+        if stored is not None:
+            return _camera("calibration", stored)
+        if self.dev.camera_model is not None:
+            return self.dev.camera_model
+        raise DeviceError("camera", "no camera calibration stored: commission the camera before scanning")
 
     # -- motion and capture -----------------------------------------------------
     def _home(self):

@@ -17,6 +17,8 @@ in state()["notice"] (the web UI's dashboard) and in the event log.
 Beyond the facade, what the web UI offers when a service has it:
     live_heightmap()        the height map so far (livemap.py), None before a scan
     calibration(), calibrate(step)   guided plane calibration (calibration.py)
+    commissioning(), commission(step, action, values), export_commissioning(),
+    import_commissioning(doc), ink_changed()   the box's commissioning (commissioning.py)
     import_scan(folder)     a scan folder from elsewhere becomes a job that is
                             processed (importing.py checks and copies it) Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
@@ -46,6 +48,7 @@ import numpy as np
 from ..errors import InkSliceError, SettingError
 from . import settings as S
 from .calibration import GuidedCalibration
+from .commissioning import Commissioning, reference_processor
 from .firstrun import Pending
 from .livemap import LiveMap
 from .notices import usb_notice
@@ -102,6 +105,7 @@ class BenchService:
             self._state.update(state="failed", job_id=last["id"], message=last["reason"],
                                levels_done=last["levels_done"], levels_total=last["levels_total"])
         self._panel = self._open_panel()
+        self._commissioning = Commissioning(self.store, self._commissioning_hooks())
         self._panel_thread = threading.Thread(target=self._panel_loop, args=(panel_interval_s,),
                                               name="inkslice-panel", daemon=True)
         self._panel_thread.start()
@@ -135,6 +139,8 @@ class BenchService:
     def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
         if self._calibration is not None and self._calibration.active:
             self.cancel_calibration(wait_s)         # a calibration left half-way gives the bench back
+        if self._commissioning.holds_bench:
+            self._commissioning.cancel(wait_s=wait_s)
         with self._lock:
             thread = self._thread
             if thread is None or not thread.is_alive():
@@ -295,6 +301,69 @@ class BenchService:
             self.store.event(None, "calibration", "guided calibration cancelled; the bench is free")
         return cal.describe()
 
+    # -- commissioning (commissioning.py) ------------------------------------------------
+    def commissioning(self) -> dict:
+        """Every step's result in force with its date, the step in progress, the last ink change."""
+        return self._commissioning.describe()
+
+    def commission(self, step: str, action: str, values: dict | None = None) -> dict:
+        """One action of one commissioning step (docs/api/README.md); returns commissioning()."""
+        if action == "start" and step in ("level_zero", "camera"):
+            with self._lock:
+                if self._thread is not None and self._thread.is_alive():
+                    raise SettingError("commissioning", f"a scan is running ({self._state['job_id']}); "
+                                                        "start this step when it has finished, or cancel it")
+                if self._calibration is not None and self._calibration.active:
+                    raise SettingError("commissioning", "a guided calibration holds the bench; cancel it first")
+        return self._commissioning.act(step, action, values)
+
+    def export_commissioning(self) -> dict:
+        return self._commissioning.export()
+
+    def import_commissioning(self, doc: dict) -> dict:
+        return self._commissioning.import_(doc)
+
+    def ink_changed(self) -> dict:
+        return self._commissioning.ink_changed()
+
+    def _commissioning_hooks(self):
+        from ..hw.base import HumanOperator
+        service = self
+
+        class Hooks:
+            operator = self._panel.operator or HumanOperator()
+
+            @staticmethod
+            def open_devices():
+                return service.factory.open(service.settings(), {})
+
+            settings = staticmethod(self.settings)
+            update_settings = staticmethod(self.update_settings)
+            show_frame = staticmethod(self._show_frame)
+            job = staticmethod(self.job)
+            start_reference_scan = staticmethod(self._start_reference_scan)
+
+            @staticmethod
+            def say(message):
+                service._set(message=message)
+
+            @staticmethod
+            def cancel_scan():
+                service.cancel(reason="cancelled: the commissioning step was cancelled")
+        return Hooks()
+
+    def _start_reference_scan(self, changes: dict, params: dict) -> str:
+        """A scan of a reference part, processed by reference_processor; params are not the
+        factory's (the part on the base is whatever the operator was asked to put there)."""
+        with self._lock:
+            self._refuse_if_busy()
+            settings = S.validate(self.settings(), changes)
+            job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
+            total = LevelPlan(settings).estimate_total([])
+            self.store.create_job(job_id, params["name"], settings, params, total)
+            self._launch(job_id, total, 0)
+            return job_id
+
     def _show_frame(self, jpeg: bytes, info: dict):
         with self._lock:
             self._frame = (jpeg, info)
@@ -389,6 +458,7 @@ class BenchService:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
         if self._calibration is not None:
             self._calibration.close()
+        self._commissioning.close()
         self._closing.set()
         self._panel_thread.join(timeout=5)
         if self._usb_thread is not None:
@@ -409,6 +479,10 @@ class BenchService:
         if self._calibration is not None and self._calibration.active:
             raise SettingError("scan", "a guided calibration holds the bench; finish it or cancel it "
                                        "(the Calibrate page, or POST /api/calibration/cancel)")
+        if self._commissioning.holds_bench:
+            step = self._commissioning.session.step
+            raise SettingError("scan", f"the commissioning step {step!r} holds the bench; finish it or cancel "
+                                       f"it (POST /api/commissioning/{step}/cancel)")
         current = self._state["job_id"]
         if self._thread is not None and self._thread.is_alive() and current \
                 and self.store.get_job(current)["status"] in ("done", "failed", "cancelled"):
@@ -460,8 +534,12 @@ class BenchService:
                 final.update(changes)
             else:
                 self._set(**changes)
+        processor = self.processor
+        if job["params"].get("reference"):             # the meniscus step's scan of the reference ball
+            from .processing import options_for
+            processor = reference_processor(job["params"]["reference"], options_for(S.full(job["settings"])))
         try:
-            runner = ScanRunner(self.store, job_id, devices, self.processor, report, self._stop,
+            runner = ScanRunner(self.store, job_id, devices, processor, report, self._stop,
                                 on_frame=self._keep_frame, disk_free_mb=self.disk_free_mb)
             status = runner.run()
             if status == "failed":

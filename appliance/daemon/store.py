@@ -144,8 +144,11 @@ class Store:
                 raise
 
     # -- calibration history ------------------------------------------------------
-    def add_calibration(self, data: dict):
-        self._tx("INSERT INTO calibration (time, data) VALUES (?, ?)", (time.time(), json.dumps(data)))
+    def add_calibration(self, data: dict, when: float | None = None):
+        """A calibration result, dated now (or `when`: an imported one keeps its date). The newest
+        row, in the order they were added, is the one in force."""
+        self._tx("INSERT INTO calibration (time, data) VALUES (?, ?)",
+                 (time.time() if when is None else float(when), json.dumps(data)))
 
     def calibrations(self) -> list[dict]:
         with self._lock:

@@ -70,3 +70,43 @@ class Display(abc.ABC):
 
     @abc.abstractmethod
     def show(self, lines: list[str]) -> None: ...
+
+
+@dataclass
+class Placement:
+    """What the bench needs on its base (or in front of the camera) for a commissioning step.
+
+    kind: "empty"        nothing on the base
+          "board_views"  the printed chessboard held tilted under the camera; `view` counts them
+          "board_flat"   the chessboard lying flat on the base at `board`'s jig position
+          "reference"    the reference part on the base (`details`: kind, diameter_mm)
+          "clear"        the step is over: take off what it asked for, the bench is yours again
+    text: the request in words, for the operator (display, web page).
+    details: the numbers behind the request (board size and jig position, the ball's diameter, ...).
+    """
+    kind: str
+    text: str
+    details: dict = field(default_factory=dict)
+    view: int = 0
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind, "text": self.text, "details": dict(self.details), "view": self.view}
+
+
+class Operator(abc.ABC):
+    """Whoever puts things on the base. On a real box that is a person, who reads the request
+    on the display and the phone (HumanOperator); the simulated bench places the object itself."""
+
+    @abc.abstractmethod
+    def place(self, request: Placement) -> None:
+        """Ask for `request`; returns at once (a person then does it and presses on in the wizard)."""
+
+
+class HumanOperator(Operator):
+    """The real box: the request is only a message. The daemon shows `current.text` to the person."""
+
+    def __init__(self):
+        self.current: Placement | None = None
+
+    def place(self, request: Placement) -> None:
+        self.current = request

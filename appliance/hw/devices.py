@@ -44,6 +44,7 @@ class Devices:
     display: object = None
     button: object = None
     level_sensor: object = None
+    operator: object = None                          # hw.base.Operator (the panel's): who places things on the base
     hardware: dict = field(default_factory=dict)     # name -> "ok" | "missing" | "fault: ..."
     closers: list = field(default_factory=list)      # called by close(), in order
 
@@ -141,4 +142,6 @@ class HardwareBench:
         button = _optional(hw, "button", lambda: GpioButton(self.w["gpiochip"], self.w["button_line"]))
         display = _optional(hw, "display", lambda: Ssd1306(self.w["i2c_bus"], self.w["display_address"]))
         closers = [d.close for d in (led, button, display) if d is not None]
-        return Devices(None, None, led=led, button=button, display=display, hardware=hw, closers=closers)
+        from .base import HumanOperator
+        return Devices(None, None, led=led, button=button, display=display, operator=HumanOperator(),
+                       hardware=hw, closers=closers)

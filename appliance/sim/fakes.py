@@ -235,8 +235,12 @@ class FakeBench:
     extra_params = ("surface",)
 
     def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None, replay=None,
-                 level_sensor: bool = False):
+                 level_sensor: bool = False, level_at_home_mm: float | None = None):
         self.surface, self.replay, self.level_sensor = surface, replay, level_sensor
+        # the bench's true liquid level above the base top with the stage at home; None: the
+        # daemon's setting is right (commissioning's level zero measures it)
+        self.level_at_home_mm = level_at_home_mm
+        self.placement = None           # what the operator was asked to put on the base (staging.py)
         self.rig = rig or small_rig(320, 240)
         self.faults = dict(faults or {})
         self.last = None
@@ -259,14 +263,18 @@ class FakeBench:
     def open(self, settings, params):
         from ..hw.devices import Devices
         from .surfaces import get
+        from .render import Effects
+        from .staging import StagedCamera
         stage = FakeStage(faults=self.faults.get("stage"))
-        at_home = float(settings["level_at_home_mm"])
+        at_home = float(self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"])
         level = lambda: at_home - stage.position_mm          # noqa: E731
         if self.replay:
             camera = ReplayCamera(self.replay, level)
         else:
             camera = FakeCamera(get(params.get("surface") or self.surface), self.rig, level,
                                 faults=self.faults.get("camera"))
+            camera = StagedCamera(self, camera, lambda part: FakeCamera(part, self.rig, level), level, self.rig,
+                                  Effects())
         light = FakeLine("light")
         sensor = None
         if self.level_sensor:
@@ -280,6 +288,7 @@ class FakeBench:
 
     def open_panel(self):
         from ..hw.devices import Devices
+        from .staging import SimOperator
         missing = self.faults.get("panel", {})
         hw, parts = {}, {}
         for name, make in (("led", lambda: FakeLine("led")), ("button", FakeButton), ("display", FakeDisplay)):
@@ -287,7 +296,7 @@ class FakeBench:
                 hw[name], parts[name] = "missing", None
             else:
                 hw[name], parts[name] = "ok", make()
-        self.panel = Devices(None, None, hardware=hw, **parts)
+        self.panel = Devices(None, None, hardware=hw, operator=SimOperator(self), **parts)
         return self.panel
 
 
@@ -321,9 +330,11 @@ class SimulatedBenchFactory:
     extra_params = ("surface",)
 
     def __init__(self, surface: str = "sphere", rig=None, speed: float | None = None, effects=None,
-                 clock=None):
+                 clock=None, level_at_home_mm: float | None = None):
         from .hil import SimulatedBench
         self.surface, self.rig, self.effects, self.clock = surface, rig or small_rig(320, 240), effects, clock
+        self.level_at_home_mm = level_at_home_mm      # the bench's truth (see FakeBench); None: the setting's
+        self.placement = None
         self.bench = SimulatedBench() if speed is None else SimulatedBench(speed=speed)
         self.last = None
 
@@ -337,12 +348,14 @@ class SimulatedBenchFactory:
         from ..hw.devices import Devices
         from ..hw.stage import SerialStage
         from .surfaces import get
+        from .staging import StagedCamera
         stage = SerialStage(self.bench.port, auto_rehome=False)
-        at_home = float(settings["level_at_home_mm"])
-        camera = self._camera(get(params.get("surface") or self.surface),
-                              lambda: at_home - self.bench.stage_position_mm())
+        at_home = float(self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"])
+        level = lambda: at_home - self.bench.stage_position_mm()      # noqa: E731
+        part = self._camera(get(params.get("surface") or self.surface), level)
+        model = self.rig.camera_model(distorted=part.effects.lens_distortion)
+        camera = StagedCamera(self, part, lambda other: self._camera(other, level), level, self.rig, part.effects)
         light = FakeLine("light")
-        model = self.rig.camera_model(distorted=camera.effects.lens_distortion)
         self.last = Devices(stage, camera, model, light=light,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"},
                             closers=[camera.close, stage.close])

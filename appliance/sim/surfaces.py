@@ -262,3 +262,25 @@ def get(name) -> Surface:
     except KeyError:
         from ..errors import SettingError
         raise SettingError("surface", f"unknown surface {name!r}; known: {', '.join(SURFACES)}") from None
+
+
+# -- what commissioning puts on the base (sim/staging.py) --------------------------
+
+BASE_PLATE = Surface(
+    "base plate", "the empty base: its flat top at level zero, 120 x 120 mm",
+    (-10.0, 110.0, -10.0, 110.0), (Tier(rect_sdf(-10, 110, -10, 110), _flat(0.0)),))
+
+_BALLS: dict = {}
+
+
+def ball(diameter_mm=25.4, cx=50.0, cy=50.0) -> Surface:
+    """A precision ball lying on the base, seen from above: its upper hemisphere on its
+    equator's outline (appliance.surface.reference.Ball has the same shape)."""
+    key = (round(float(diameter_mm), 4), round(float(cx), 4), round(float(cy), 4))
+    if key not in _BALLS:
+        d, x, y = key
+        r = d / 2
+        _BALLS[key] = Surface(f"ball {d:g} mm", f"reference: a {d:g} mm precision ball lying on the base",
+                              (x - r, x + r, y - r, y + r), (Tier(disc_sdf(x, y, r), _sphere_top(x, y, r, r)),),
+                              tags=("reference",))
+    return _BALLS[key]

@@ -7,6 +7,8 @@ when a service lacks them, so the UI can hide a feature instead of failing:
 
   live_heightmap()       the height map so far (dashboard)
   calibration(), calibrate(step)   guided calibration
+  commissioning(), commission(step, action, values), export_commissioning(),
+  import_commissioning(doc), ink_changed()   commissioning (daemon/commissioning.py)
   import_scan(folder)    an uploaded scan folder becomes a job
 
 If the daemon's real API drifts from the facade, the translation goes here
@@ -149,6 +151,27 @@ class WebService:
             return self._optional("calibrate", step)
         finally:
             self._drop_cache()
+
+    def commissioning(self):
+        return self._optional("commissioning")
+
+    def commission(self, step: str, action: str, values: dict | None = None):
+        try:
+            return self._optional("commission", step, action, values)
+        finally:
+            self._drop_cache()          # a step changes the state message (and may start a scan)
+
+    def export_commissioning(self):
+        return self._optional("export_commissioning")
+
+    def import_commissioning(self, doc: dict):
+        try:
+            return self._optional("import_commissioning", doc)
+        finally:
+            self._drop_cache()
+
+    def ink_changed(self):
+        return self._optional("ink_changed")
 
     def import_scan(self, folder: Path) -> str:
         try:

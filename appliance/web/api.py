@@ -363,6 +363,39 @@ def calibrate(step):
     return jsonify(svc().calibrate(step))
 
 
+# -- commissioning (daemon/commissioning.py; shapes in docs/api/README.md) ---------------------------
+
+@bp.get("/commissioning")
+def commissioning():
+    return jsonify(svc().commissioning())
+
+
+@bp.get("/commissioning/export")
+def commissioning_export():
+    doc = svc().export_commissioning()
+    body = json.dumps(doc, indent=2) + "\n"
+    stamp = time.strftime("%Y%m%d", time.gmtime())
+    return Response(body, mimetype="application/json",
+                    headers={"Content-Disposition": f'attachment; filename="inkslice-commissioning-{stamp}.json"'})
+
+
+@bp.post("/commissioning/import")
+def commissioning_import():
+    return jsonify(svc().import_commissioning(_json_body()))
+
+
+@bp.post("/commissioning/ink-changed")
+def commissioning_ink_changed():
+    return jsonify(svc().ink_changed())
+
+
+@bp.post("/commissioning/<step>/<action>")
+def commission(step, action):
+    if not re.match(r"^[a-z_]{1,30}$", step) or not re.match(r"^[a-z_]{1,30}$", action):
+        raise _Refused("bad step or action name", 400)
+    return jsonify(svc().commission(step, action, _json_body()))
+
+
 # -- USB stick -----------------------------------------------------------------------------------
 
 def _usb():
