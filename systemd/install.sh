@@ -4,18 +4,26 @@
 #   systemd/install.sh --root DIR      only lay the files out under DIR (packaging, tests)
 #
 # What it does: a system user `inkslice` in the dialout, video, gpio and i2c
-# groups; the checkout copied to /opt/inkslice with a venv; the two units, the
-# udev rules and an example /etc/inkslice/bench.json (never overwritten);
-# I2C switched on; udev reloaded; the services enabled and started.
+# groups; the checkout copied to /opt/inkslice and installed (not editable) into
+# its venv; the two units, the udev rules and an example /etc/inkslice/bench.json
+# (never overwritten); USB stick mounting (a udev rule starting
+# inkslice-stick@DEV.service, which mounts FAT/exFAT sticks under
+# /media/inkslice for the inkslice user, and a polkit rule that lets that user
+# unmount them after a copy); I2C switched on; udev reloaded; the services
+# enabled and started.
 set -euo pipefail
 SRC=$(cd "$(dirname "$0")/.." && pwd)
 ROOT=""
 if [ "${1:-}" = "--root" ]; then ROOT=${2:?--root needs a folder}; fi
 PREFIX=/opt/inkslice
 
-install -d "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d" "$ROOT/etc/inkslice" "$ROOT$PREFIX"
-install -m 0644 "$SRC/systemd/inkslice-daemon.service" "$SRC/systemd/inkslice-web.service" "$ROOT/etc/systemd/system/"
-install -m 0644 "$SRC/systemd/99-inkslice.rules" "$ROOT/etc/udev/rules.d/"
+install -d "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d" "$ROOT/etc/inkslice" "$ROOT$PREFIX" \
+           "$ROOT/usr/local/lib/inkslice" "$ROOT/etc/polkit-1/rules.d"
+install -m 0644 "$SRC/systemd/inkslice-daemon.service" "$SRC/systemd/inkslice-web.service" \
+                "$SRC/systemd/inkslice-stick@.service" "$ROOT/etc/systemd/system/"
+install -m 0644 "$SRC/systemd/99-inkslice.rules" "$SRC/systemd/99-inkslice-usb.rules" "$ROOT/etc/udev/rules.d/"
+install -m 0755 "$SRC/systemd/inkslice-stick" "$ROOT/usr/local/lib/inkslice/"
+install -m 0644 "$SRC/systemd/50-inkslice-stick.rules" "$ROOT/etc/polkit-1/rules.d/"
 [ -e "$ROOT/etc/inkslice/bench.json" ] || install -m 0644 "$SRC/systemd/bench.json" "$ROOT/etc/inkslice/bench.json"
 
 # the code: a copy (not the checkout itself: a `git pull` must not change a running box)
@@ -34,12 +42,14 @@ if ! id inkslice >/dev/null 2>&1; then
   useradd --system --no-create-home --home-dir /var/lib/inkslice --shell /usr/sbin/nologin \
           --groups dialout,video,gpio,i2c inkslice
 fi
-apt-get install -y -qq --no-install-recommends python3-venv python3-dev >/dev/null
+# polkitd: the rule that lets the daemon unmount a stick; avrdude and gcc-avr: `inkslice firmware flash`
+apt-get install -y -qq --no-install-recommends python3-venv python3-dev polkitd avrdude gcc-avr avr-libc make >/dev/null
 [ -x "$PREFIX/.venv/bin/python" ] || python3 -m venv "$PREFIX/.venv"
 "$PREFIX/.venv/bin/python" -m pip install -q "$PREFIX"
 command -v raspi-config >/dev/null && raspi-config nonint do_i2c 0 || true
 udevadm control --reload-rules
 udevadm trigger --subsystem-match=tty --subsystem-match=video4linux --subsystem-match=gpio --subsystem-match=i2c-dev
 systemctl daemon-reload
+udevadm trigger --action=add --subsystem-match=block       # a stick already plugged in gets mounted
 systemctl enable --now inkslice-daemon.service inkslice-web.service
 echo "install: done. Logs: journalctl -u inkslice-daemon -u inkslice-web -f"

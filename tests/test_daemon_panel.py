@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from appliance.daemon.service import BenchService
+from appliance.errors import DeviceError
 from appliance.hw.gpio import PressTimer
 from appliance.hw.usb import UsbExporter
 from appliance.sim.fakes import FakeBench
@@ -49,7 +50,11 @@ def bench(tmp_path):
     stick.mkdir(parents=True)
     mounts = tmp_path / "mounts"
     mounts.write_text("")
-    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp_path / "nosys")
+
+    def unmount(s):
+        """What inkslice-stick@.service's stop does, as far as the mount table shows it."""
+        mounts.write_text("".join(l for l in mounts.read_text().splitlines(True) if f" {s.mount} " not in l))
+    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp_path / "nosys", unmount=unmount)
     factory = FakeBench("cone")
     svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.02, usb=usb)
     yield svc, factory.panel, stick, mounts
@@ -85,13 +90,14 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     assert n["code"] == "no_stick" and "no USB stick" in n["text"]
     wait_for(lambda: panel.display.lines[:1] == ["USB: NO STICK"], what="the display")
 
-    # a stick in: copied, verified, and the operator is told it is safe to pull it
+    # a stick in: copied, verified, unmounted, and the operator is told it is safe to pull it
     mounts.write_text(f"/dev/sdb1 {stick} vfat rw,relatime 0 0\n")
     n = long_press(svc, panel)
     assert n["ok"] and n["code"] == "copied", n
     name = f"{job_id}-toolpath.gcode"
     assert (stick / "inkslice" / name).read_bytes() == gcode
-    assert n["text"] == f"copied {name} to the USB stick, safe to remove"
+    assert n["text"] == f"copied {name} to the USB stick and unmounted it, safe to remove"
+    assert mounts.read_text() == ""
     lines = wait_for(lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display")
     assert lines[1] == name[:18] and lines[2] == "safe to remove"
     assert [p.name for p in (stick / "inkslice").iterdir()] == [name]      # no temporary file left
@@ -117,6 +123,23 @@ def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
     assert n["code"] == "copied" and first in n["text"]
     assert svc.state()["state"] in ("scanning", "processing", "done")     # still going
     assert wait_final(svc, second)["status"] == "done"
+
+
+def test_a_stick_that_will_not_unmount_is_not_called_safe_to_remove(bench):
+    svc, panel, stick, mounts = bench
+
+    def busy(s):
+        raise DeviceError(s.mount, "systemctl: Job for inkslice-stick@sdb1.service failed")
+    svc.usb.unmount = busy
+    job_id = svc.start_scan(SCAN)
+    assert wait_final(svc, job_id)["status"] == "done"
+    mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
+    n = long_press(svc, panel)
+    assert (n["code"], n["ok"]) == ("still_mounted", False)
+    assert (stick / "inkslice" / f"{job_id}-toolpath.gcode").is_file()          # the copy itself is there
+    assert "could not unmount it (systemctl: Job for" in n["text"] and "safe to remove" not in n["text"]
+    lines = wait_for(lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display")
+    assert lines[2] == "NOT unmounted"
 
 
 def test_without_an_exporter_the_long_press_says_usb_is_off(tmp_path):

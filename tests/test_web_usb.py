@@ -1,5 +1,6 @@
 """USB stick detection from a fake /proc/mounts + sysfs, and the verified copy."""
 import os
+import subprocess
 from collections import namedtuple
 
 import pytest
@@ -116,11 +117,73 @@ def test_long_press_copies_the_newest_finished_jobs_gcode(tmp_path):
     stick.mkdir(parents=True)
     mounts = tmp_path / "mounts"
     mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
-    ex = usb.UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys")
+    released = []
+    ex = usb.UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys",
+                         unmount=lambda s: (released.append(s.id), mounts.write_text("")))
     r = usb.copy_latest_gcode(svc, ex)
     assert r.name == "new-toolpath.gcode" and (stick / "inkslice" / r.name).read_text() == "NEW"
+    assert released == ["sdb1"] and r.unmounted and r.safe_to_remove       # the long press releases the stick
     mounts.write_text("")
     with pytest.raises(DeviceError, match="no USB stick"):
         usb.copy_latest_gcode(svc, ex)
     with pytest.raises(DeviceError, match="no finished job"):
         usb.copy_latest_gcode(FakeJobs(tmp_path, []), ex)
+
+
+@pytest.fixture
+def one_stick(tmp_path):
+    stick = tmp_path / "media" / "STICK"
+    stick.mkdir(parents=True)
+    mounts = tmp_path / "mounts"
+    src = tmp_path / "toolpath.gcode"
+    src.write_text("G21 G90\nG1 X1\n")
+
+    def exporter(unmount):
+        mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")          # plugged in (again)
+        return usb.UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys",
+                               unmount=unmount)
+    return exporter, mounts, src
+
+
+def test_a_released_stick_is_safe_to_remove_only_once_it_left_the_mount_table(one_stick):
+    exporter, mounts, src = one_stick
+    r = exporter(lambda s: mounts.write_text("")).export(src, release=True)
+    assert (r.verified, r.unmounted, r.safe_to_remove, r.unmount_problem) == (True, True, True, "")
+    r = exporter(lambda s: None).export(src, release=True)              # "unmounted", yet still there
+    assert (r.verified, r.unmounted, r.safe_to_remove, r.unmount_problem) == (True, False, False,
+                                                                             "it is still mounted")
+
+    def refuses(s):
+        raise DeviceError(s.mount, "udisksctl: target is busy")
+    r = exporter(refuses).export(src, release=True)
+    assert (r.unmounted, r.safe_to_remove, r.unmount_problem) == (False, False, "udisksctl: target is busy")
+
+
+def test_an_export_without_release_leaves_the_stick_mounted(one_stick):
+    """The web's export: the operator may copy several files in a row."""
+    exporter, mounts, src = one_stick
+    calls = []
+    r = exporter(calls.append).export(src)
+    assert calls == [] and r.unmounted is None and r.safe_to_remove and r.verified
+
+
+def test_the_box_unmounts_its_own_sticks_through_their_unit_and_a_desktops_through_udisks(monkeypatch):
+    box = usb.Stick("sdb1", "/media/inkslice/KINGSTON", "/dev/sdb1", "vfat", "KINGSTON", 1)
+    desktop = usb.Stick("sdc1", "/media/pi/STICK", "/dev/sdc1", "vfat", "STICK", 1)
+    monkeypatch.setattr(usb.shutil, "which", lambda name: None)
+    assert usb._unmount_command(box) == ["systemctl", "stop", "inkslice-stick@sdb1.service"]
+    assert usb._unmount_command(desktop) is None
+    with pytest.raises(DeviceError, match="no way to unmount it here"):
+        usb.unmount_stick(desktop)
+    monkeypatch.setattr(usb.shutil, "which", lambda name: f"/usr/bin/{name}")
+    assert usb._unmount_command(desktop) == ["udisksctl", "unmount", "--no-user-interaction", "-b", "/dev/sdc1"]
+    # a refused stop comes back as the tool's own last line
+    ran = []
+
+    def run(cmd, **kw):
+        ran.append(cmd)
+        return subprocess.CompletedProcess(cmd, 1, "", "Failed to stop inkslice-stick@sdb1.service: Access denied\n")
+    monkeypatch.setattr(usb.subprocess, "run", run)
+    with pytest.raises(DeviceError, match="systemctl: Failed to stop inkslice-stick@sdb1.service: Access denied"):
+        usb.unmount_stick(box)
+    assert ran == [["systemctl", "stop", "inkslice-stick@sdb1.service"]]

@@ -14,7 +14,10 @@ USB = {
     "copying":  (["USB COPY", "copying ...", "do not remove"],
                  "copying the latest job's G-code to the USB stick"),
     "copied":   (["USB COPY OK", "{name}", "safe to remove"],
-                 "copied {name} to the USB stick, safe to remove"),
+                 "copied {name} to the USB stick and unmounted it, safe to remove"),
+    "still_mounted": (["USB COPY OK", "{name}", "NOT unmounted"],
+                      "copied {name} to the USB stick and synced it, but could not unmount it ({problem}); "
+                      "wait until the stick is idle before removing it"),
     "no_stick": (["USB: NO STICK", "plug one in and", "hold again"],
                  "USB export: no USB stick is plugged in"),
     "no_gcode": (["USB: NOTHING", "no finished job", "with G-code yet"],

@@ -452,6 +452,8 @@ class BenchService:
         except Exception as e:                      # an unexpected bug must still reach the operator
             log.exception("USB export")
             return self._notify(usb_notice("failed", problem=f"{type(e).__name__}: {e}"))
+        if not result.safe_to_remove:               # copied and synced, but the unmount failed
+            return self._notify(usb_notice("still_mounted", name=result.name, problem=result.unmount_problem))
         return self._notify(usb_notice("copied", name=result.name))
 
     def close(self) -> None:

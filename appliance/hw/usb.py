@@ -1,8 +1,9 @@
 """USB sticks: find a mounted mass-storage stick and copy a file onto it, verified.
 
 Detection reads the mount table (/proc/mounts) rather than talking to udisks
-over D-Bus: the box's udev rule (systemd/) or udisks mounts sticks under the
-usual places (/media/USER/LABEL, /run/media/USER/LABEL, /media/LABEL, /mnt/...),
+over D-Bus: the box's udev rule (systemd/99-inkslice-usb.rules, which starts
+inkslice-stick@DEV.service) mounts sticks under /media/inkslice/LABEL, and a
+desktop's udisks under the usual places (/media/USER/LABEL, /run/media/USER/LABEL),
 and the mount table is the one thing that is there on every image, readable
 without privileges and trivially faked in tests. A mount counts as a stick when
   - its mount point is under one of the roots above,
@@ -17,9 +18,14 @@ The copy (copy_verified):
      fsync the folder, so a half-written file never carries the real name;
   4. drop the file's pages from the page cache (posix_fadvise DONTNEED) and
      read it back, compare SHA-256 with the source;
-  5. only then report safe_to_remove. After fsync the data is on the device;
-     the operator may pull the stick (unmounting is still kinder to FAT, which
-     the udev rule's `sync`,`flush` options make safe).
+  5. only then report the copy verified. After fsync the data is on the device.
+
+Releasing the stick (release_stick, the long press does it after its copy):
+sync, then unmount: `systemctl stop inkslice-stick@DEV.service` for a stick the
+box mounted (the polkit rule lets the inkslice user do exactly that), `udisksctl
+unmount` for one a desktop mounted. Only when the mount is gone from the mount
+table is the stick reported safe to remove: FAT's dirty flag and the stick's
+own write cache are then settled too.
 
 copy_latest_gcode() is what the bench's physical button (long press) calls:
 it takes any object with the BenchService's jobs() / job_file() methods.
@@ -30,6 +36,7 @@ import hashlib
 import os
 import re
 import shutil
+import subprocess
 import threading
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -38,6 +45,7 @@ from ..errors import DeviceError
 
 STICK_FS = {"vfat", "msdos", "exfat", "ntfs", "ntfs3", "fuseblk", "ext2", "ext3", "ext4", "f2fs", "btrfs", "xfs", "hfsplus"}
 MOUNT_ROOTS = ("/media", "/run/media", "/mnt")
+BOX_MOUNTS = "/media/inkslice"          # where inkslice-stick@.service mounts (systemd/inkslice-stick)
 SLACK = 1 << 20
 FAT_BAD = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
 
@@ -71,6 +79,8 @@ class CopyResult:
     sha256: str
     verified: bool
     safe_to_remove: bool
+    unmounted: bool | None = None       # None: not asked to; False: see unmount_problem
+    unmount_problem: str = ""
 
     def to_json(self):
         return asdict(self)
@@ -199,17 +209,46 @@ def copy_verified(src, folder, name=None) -> CopyResult:
     return CopyResult(name=final.name, path=str(final), bytes=size, sha256=got, verified=True, safe_to_remove=True)
 
 
-class UsbExporter:
-    """The small interface the web and the button use: sticks() and export()."""
+def _unmount_command(stick: Stick) -> list[str] | None:
+    dev = os.path.basename(stick.device)
+    if stick.mount.startswith(BOX_MOUNTS + "/") and re.fullmatch(r"[A-Za-z0-9]+", dev):
+        return ["systemctl", "stop", f"inkslice-stick@{dev}.service"]
+    if shutil.which("udisksctl") and stick.device.startswith("/dev/"):
+        return ["udisksctl", "unmount", "--no-user-interaction", "-b", stick.device]
+    return None
 
-    def __init__(self, mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys", subfolder="inkslice"):
+
+def unmount_stick(stick: Stick) -> None:
+    """Ask whoever mounted the stick to unmount it; raise DeviceError when that fails."""
+    cmd = _unmount_command(stick)
+    if cmd is None:
+        raise DeviceError(stick.mount, "no way to unmount it here (not mounted by the box, no udisksctl)")
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        raise DeviceError(stick.mount, f"{cmd[0]} failed ({e})") from None
+    if r.returncode != 0:
+        last = (r.stderr or r.stdout).strip().splitlines()[-1:] or [f"exit code {r.returncode}"]
+        raise DeviceError(stick.mount, f"{cmd[0]}: {last[0]}")
+
+
+class UsbExporter:
+    """The small interface the web and the button use: sticks() and export().
+
+    unmount(stick) is how a stick is released after a copy (unmount_stick on the box;
+    tests pass their own)."""
+
+    def __init__(self, mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys", subfolder="inkslice",
+                 unmount=unmount_stick):
         self.mounts_file, self.roots, self.sys_root, self.subfolder = mounts_file, roots, sys_root, subfolder
+        self.unmount = unmount
         self._lock = threading.Lock()       # one copy at a time: sticks are slow and FAT is fragile
 
     def sticks(self) -> list[Stick]:
         return find_sticks(self.mounts_file, self.roots, self.sys_root)
 
-    def export(self, src, stick_id=None, name=None) -> CopyResult:
+    def export(self, src, stick_id=None, name=None, release=False) -> CopyResult:
+        """Copy src onto the stick, verified; with release, sync and unmount it afterwards."""
         sticks = self.sticks()
         stick = next((s for s in sticks if s.id == stick_id), None) if stick_id else (sticks[0] if sticks else None)
         if stick is None:
@@ -220,14 +259,28 @@ class UsbExporter:
                 folder.mkdir(exist_ok=True)
             except OSError as e:
                 raise DeviceError(stick.mount, f"cannot write to the stick ({e.strerror})") from None
-            return copy_verified(src, folder, name)
+            result = copy_verified(src, folder, name)
+            if release:
+                self._release(stick, result)
+            return result
+
+    def _release(self, stick: Stick, result: CopyResult) -> None:
+        os.sync()
+        try:
+            self.unmount(stick)
+            gone = all(s.mount != stick.mount for s in self.sticks())
+            problem = "" if gone else "it is still mounted"
+        except DeviceError as e:
+            gone, problem = False, e.problem
+        result.unmounted, result.unmount_problem, result.safe_to_remove = gone, problem, gone
 
 
 GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap")
 
 
 def copy_latest_gcode(service, exporter: UsbExporter) -> CopyResult:
-    """The long-press action: the newest finished job's toolpath.gcode onto the stick."""
+    """The long-press action: the newest finished job's toolpath.gcode onto the stick, which is
+    then synced and unmounted (result.safe_to_remove says whether that worked)."""
     for job in service.jobs():          # newest first (the facade's order)
         if job.get("status") != "done":
             continue
@@ -236,5 +289,5 @@ def copy_latest_gcode(service, exporter: UsbExporter) -> CopyResult:
             (n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
         if name:
             job_id = job.get("id") or job.get("job_id")
-            return exporter.export(service.job_file(job_id, name), None, f"{job_id}-{name}")
+            return exporter.export(service.job_file(job_id, name), None, f"{job_id}-{name}", release=True)
     raise NothingToCopy("usb", "no finished job with G-code to copy")
