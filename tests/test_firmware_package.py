@@ -43,7 +43,7 @@ def test_flash_without_avrdude_is_one_clear_line(monkeypatch, capsys):
 def test_a_failing_avrdude_names_the_port_and_says_why(monkeypatch, tmp_path, capsys):
     fake_avrdude(tmp_path / "bin", "print('avrdude: stk500_recv(): programmer is not responding', "
                                    "file=sys.stderr); sys.exit(1)")
-    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}:{os.environ["PATH"]}")
+    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}:{os.environ['PATH']}")
     assert cli_main(["firmware", "flash", "--port", "/dev/ttyACM0"]) == 2
     assert capsys.readouterr().err == ("inkslice: error: /dev/ttyACM0: avrdude failed: "
                                        "avrdude: stk500_recv(): programmer is not responding\n")
