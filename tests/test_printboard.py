@@ -71,3 +71,15 @@ def test_the_calibration_page_states_the_printed_size_and_links_both_files(tmp_p
         href = re.search(rf'href="([^"]*{name})"', page).group(1)
         r = c.get(href)
         assert r.status_code == 200 and r.data == (STATIC / name).read_bytes(), name
+
+
+def test_the_commissioning_wizard_names_the_files_and_their_printed_size(tmp_path):
+    from appliance.daemon.service import BenchService
+    from appliance.sim.fakes import FakeBench
+    svc = BenchService(tmp_path / "data", FakeBench("cone"))
+    try:
+        board = svc.commissioning()["board"]
+    finally:
+        svc.close()
+    assert board["printed_mm"] == [100.0, 70.0] and board["print"] == describe(BOARD)
+    assert all((STATIC / name).is_file() for name in board["files"]) and len(board["files"]) == 2

@@ -41,6 +41,7 @@ import numpy as np
 from ..errors import InkSliceError, SettingError
 from ..hw.base import Placement
 from ..vision.calibration import Board, BoardPose, camera_json, find_corners, intrinsics, plane_homography
+from ..vision.printboard import describe as print_instructions, printed_size_mm
 from .calibration import BOARD
 
 FORMAT = "inkslice.commissioning/1"
@@ -203,7 +204,10 @@ class Commissioning:
         return {"steps": steps, "active": s.to_json(ACTIONS.get((s.step, s.stage), ())) if s else None,
                 "ink_changed": force["ink_changed"], "ink_changed_text": _date(force["ink_changed"]),
                 "board": {"inner_corners": [BOARD.cols, BOARD.rows], "square_mm": BOARD.square_mm,
-                          "jig_first_corner_mm": [JIG.x0, JIG.y0], "min_views": MIN_VIEWS},
+                          "jig_first_corner_mm": [JIG.x0, JIG.y0], "min_views": MIN_VIEWS,
+                          # what to print: the web serves these files from its static folder
+                          "printed_mm": list(printed_size_mm(BOARD)), "print": print_instructions(BOARD),
+                          "files": ["chessboard.pdf", "chessboard.png"]},
                 "reference": {"kind": "ball", "default_diameter_mm": BALL_MM}}
 
     # -- acting ---------------------------------------------------------------------
