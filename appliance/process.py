@@ -55,6 +55,7 @@ class Job:
     timings: dict = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    calibration: dict = field(default_factory=dict)   # calibration_used.describe: what was used, warnings
 
     @property
     def key(self):
@@ -221,6 +222,9 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
     scan = load_scan(scan_folder)
     surface = find_truth(scan_folder, truth)
     job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None)
+    from .calibration_used import describe
+    ours = pipeline == "inkslice" or compare                # the dissertation's pipeline corrects neither
+    job.calibration = describe(scan, displacement and ours, meniscus if ours else False)
     if pipeline == "seed" or compare:
         t0 = time.perf_counter()
         job.heightmaps.update(run_seed(scan, grid_n))
@@ -249,6 +253,9 @@ def report_markdown(job: Job) -> str:
     lines = [f"# InkSlice report: {job.scan_folder.name}", "",
              f"Pipeline: {what}. Method written to heightmap.csv and the G-code: {label(job.key)}.", ""]
     lines += [f"- {n}" for n in job.notes]
+    if job.calibration:
+        from .calibration_used import markdown
+        lines += markdown(job.calibration) + [""]
     if not job.stats:
         lines.append("No ground truth for this scan: statistics need a rendered scan or a known part.")
         return "\n".join(lines) + "\n"
@@ -320,6 +327,7 @@ def write_outputs(job: Job, out_folder, cam_options=None) -> list[str]:
     files["report.json"] = (json.dumps({
         "scan": str(job.scan_folder), "pipeline": job.pipeline, "method": job.method, "truth": job.truth,
         "statistics": job.stats, "timings": job.timings, "diagnostics": job.diagnostics, "notes": job.notes,
+        "calibration": job.calibration,
     }, indent=2, default=_jsonable) + "\n").encode()
     out.mkdir(parents=True, exist_ok=True)
     for name, data in files.items():

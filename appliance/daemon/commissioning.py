@@ -308,8 +308,8 @@ class Commissioning:
         return self.describe()
 
     # -- helpers ----------------------------------------------------------------------
-    def _place(self, kind, text, view=0, **details):
-        request = Placement(kind, text, details, view)
+    def _place(self, what, text, view=0, **details):
+        request = Placement(what, text, details, view)
         self.h.operator.place(request)
         if self.session is not None:
             self.session.prompt = text
@@ -536,7 +536,7 @@ class Commissioning:
         s = self.session = Session("meniscus", "ready")
         s.detected = {"diameter_mm": d}
         self._place("reference", f"Put the {d:g} mm ball on the middle of the base, then start its scan",
-                    kind="ball", diameter_mm=d)
+                    part="ball", diameter_mm=d)
 
     def _meniscus_scan(self, values):
         s = self.session

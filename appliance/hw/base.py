@@ -79,7 +79,7 @@ class Placement:
     kind: "empty"        nothing on the base
           "board_views"  the printed chessboard held tilted under the camera; `view` counts them
           "board_flat"   the chessboard lying flat on the base at `board`'s jig position
-          "reference"    the reference part on the base (`details`: kind, diameter_mm)
+          "reference"    the reference part on the base (`details`: part, diameter_mm)
           "clear"        the step is over: take off what it asked for, the bench is yours again
     text: the request in words, for the operator (display, web page).
     details: the numbers behind the request (board size and jig position, the ball's diameter, ...).
