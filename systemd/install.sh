@@ -27,7 +27,9 @@ install -m 0644 "$SRC/systemd/50-inkslice-stick.rules" "$ROOT/etc/polkit-1/rules
 [ -e "$ROOT/etc/inkslice/bench.json" ] || install -m 0644 "$SRC/systemd/bench.json" "$ROOT/etc/inkslice/bench.json"
 
 # the code: a copy (not the checkout itself: a `git pull` must not change a running box)
+# (./build: setuptools' staging folder; a stale one would put deleted modules into the box's wheel)
 tar -C "$SRC" --exclude=.git --exclude=.venv --exclude='__pycache__' --exclude='*.egg-info' \
+    --exclude=./build --exclude=./dist --exclude=.pytest_cache \
     --exclude=appliance/firmware/stepper/build --exclude=demo-out --exclude=benches/out --exclude=tests/artifacts \
     -cf - . | tar -C "$ROOT$PREFIX" -xf -
 

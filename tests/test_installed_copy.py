@@ -1,7 +1,8 @@
 """An installed copy works with no checkout beside it.
 
-This is what `systemd/install.sh` gives a box: a wheel built from the sources,
-installed (not editable) into a venv of its own. The test builds the wheel,
+This is what `systemd/install.sh` gives a box: the sources copied to
+/opt/inkslice, installed (not editable) into a venv of its own. The test lays
+the files out with `install.sh --root`, builds the wheel from that copy,
 installs it into a fresh venv in a temporary folder and runs everything from
 there, with the working folder outside the checkout and the checkout nowhere
 on the import path:
@@ -32,6 +33,7 @@ import sysconfig
 import time
 import urllib.error
 import urllib.request
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,6 +51,7 @@ SCAN = {"name": "installed copy: cone", "levels_to_mm": 20.0, "levels_from_mm": 
 
 @dataclass
 class Installed:
+    wheel: Path
     venv: Path
     site: Path               # the venv's site-packages, where the wheel went
     run_dir: Path            # the working folder of every process (not the checkout)
@@ -66,23 +69,17 @@ class Installed:
                                 stderr=subprocess.STDOUT, text=True)
 
 
-def sources(dest: Path) -> Path:
-    """The checkout's files as git sees them (tracked and new, not ignored): a copy, so the
-    build never reuses a stale build/ folder of the checkout nor leaves one behind."""
-    names = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=REPO, check=True,
-                           capture_output=True).stdout.decode().split("\0")
-    for name in filter(None, names):
-        src = REPO / name
-        if src.is_file():
-            (dest / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(src, dest / name)
-    return dest
+def laid_out(root: Path) -> Path:
+    """The sources as `systemd/install.sh` copies them to the box (/opt/inkslice under root)."""
+    r = subprocess.run([str(REPO / "systemd/install.sh"), "--root", str(root)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return root / "opt" / "inkslice"
 
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory) -> Installed:
     tmp = tmp_path_factory.mktemp("installed")
-    src = sources(tmp / "src")
+    src = laid_out(tmp / "root")
     wheel_dir = tmp / "dist"
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(wheel_dir), str(src)],
                        capture_output=True, text=True, timeout=600)
@@ -97,13 +94,13 @@ def installed(tmp_path_factory) -> Installed:
     r = subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", str(wheel)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
-    shutil.rmtree(src)                   # nothing of the sources is left to fall back on
+    shutil.rmtree(tmp / "root")          # nothing of the sources is left to fall back on
     run_dir = tmp / "run"
     run_dir.mkdir()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "INKSLICE_", "VIRTUAL_ENV"))}
     env.update(PATH=f"{venv / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}", XDG_CACHE_HOME=str(tmp / "cache"),
                PYTHONUNBUFFERED="1")
-    return Installed(venv, site, run_dir, env)
+    return Installed(wheel, venv, site, run_dir, env)
 
 
 def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_table(installed):
@@ -122,12 +119,18 @@ def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_tab
     assert not [p for p in got["path"] if p and Path(p).resolve().is_relative_to(REPO)]
 
 
-def test_the_installed_copy_ships_the_web_files_and_the_printable_chessboard(installed):
-    web = installed.site / "appliance" / "web"
-    for name in ("templates/base.html", "templates/calibration.html", "static/app.js", "static/app.css",
-                 "static/chessboard.pdf", "static/chessboard.png"):
-        assert (web / name).is_file(), name
-    assert (web / "static/chessboard.pdf").read_bytes().startswith(b"%PDF-")
+def test_the_wheel_holds_the_modules_of_the_checkout_and_what_they_need_at_run_time(installed):
+    names = set(zipfile.ZipFile(installed.wheel).namelist())
+    tracked = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "appliance"], cwd=REPO, check=True,
+                             capture_output=True, text=True).stdout.split()
+    # every module, and nothing else (a stale build/ folder would add deleted ones)
+    assert {n for n in names if n.endswith(".py")} == {n for n in tracked if n.endswith(".py")}
+    fw = "appliance/firmware/stepper/"
+    needed = {fw + "codes.def", fw + "Makefile", fw + "sim/hil.c", "appliance/web/static/chessboard.pdf",
+              "appliance/web/static/chessboard.png"}
+    needed |= {n for n in tracked if n.startswith((fw + "src/", "appliance/web/templates/", "appliance/web/static/"))}
+    assert needed <= names, sorted(needed - names)
+    assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf", ".hex"))], "build outputs shipped"
 
 
 def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path):
