@@ -55,6 +55,20 @@ def test_the_correction_makes_another_part_measure_better(meniscus_file, tmp_pat
     assert errs["on"] < errs["off"], errs
 
 
+def test_a_ball_lying_anywhere_on_the_base_recovers_the_inks_meniscus(tmp_path):
+    """The reference a user can buy: a 25.4 mm precision ball, put down by hand off the centre.
+    It is found in the scan, then fitted like the sphere."""
+    ball = surfaces.ball(25.4, 44.0, 56.0)
+    levels = [round(26.0 - 0.75 * i, 3) for i in range(22)]          # 26 .. 10.25 mm: past its equator
+    render_scan(ball, tmp_path / "ball", levels=levels, rig=RIG, effects=INK, seed=6, workers=2)
+    out = tmp_path / "meniscus.json"
+    assert main(["calibrate", "--reference", "ball", "--diameter", "25.4", "--scan", str(tmp_path / "ball"),
+                 "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["capillary_length_mm"] == pytest.approx(2.0, abs=0.15)
+    assert doc["contact_angle_deg"] == pytest.approx(10.0, abs=2.0)
+
+
 def test_reference_needs_a_scan(capsys):
     assert main(["calibrate", "--reference", "cone"]) == 2
     assert "--scan" in capsys.readouterr().err

@@ -4,11 +4,14 @@ Camera: reads chessboard images (several views for the lens, one board lying
 on the liquid plane for the homography), runs appliance.vision.calibration and
 writes the result atomically as exactly scan.json's "camera" block.
 
-Meniscus (--reference sphere|cone --scan SCAN): a scan of a reference part of
-known shape; the contact line's offset from the level on its slopes gives the
-ink's capillary length and contact angle (surface/meniscus.py), written as
-meniscus.json for `inkslice process --meniscus` (the daemon copies it into
-every scan.json).
+Meniscus (--reference ball|sphere|cone --scan SCAN): a scan of a reference part
+of known shape; the contact line's offset from the level on its slopes gives the
+ink's capillary length and contact angle (surface/reference.py fit_meniscus),
+written as meniscus.json for `inkslice process --meniscus`. A ball (--diameter,
+default 25.4 mm) is found wherever it lies on the base; sphere and cone are the
+virtual bench's reference parts at their known places. The daemon's
+commissioning does the same from its own reference scan and writes the model
+into every scan.json.
 
 The previous file is kept as *.prev.json; on any error nothing is written.
 """
@@ -49,8 +52,9 @@ def add_arguments(p):
     p.add_argument("--board-angle", type=float, default=0.0,
                    help="direction of the board's rows in the object frame, degrees from +x (default 0)")
     p.add_argument("--out", default=None, help=f"where to write the camera block (default {default_out()})")
-    p.add_argument("--reference", choices=("sphere", "cone"), default=None,
+    p.add_argument("--reference", choices=("ball", "sphere", "cone"), default=None,
                    help="meniscus calibration from a scan of this reference part (give --scan)")
+    p.add_argument("--diameter", type=float, default=25.4, help="with --reference ball: its diameter, mm")
     p.add_argument("--scan", default=None, help="with --reference: the reference part's scan folder")
 
 
@@ -98,19 +102,19 @@ def run(args):
 
 
 def run_reference(args):
-    from ..process import extract_waterlines
-    from ..scanfile import load_scan
-    from ..sim import surfaces
     from ..outputs import meniscus_json
-    from ..surface.meniscus import calibrate_meniscus, camera_centre_xy
+    from ..scanfile import load_scan
+    from ..surface.reference import Ball, fit_meniscus
     if not args.scan:
         raise SettingError("--scan", "--reference needs the reference part's scan folder")
-    scan = load_scan(args.scan)
-    cam = scan.camera
-    centre = camera_centre_xy(cam.K, cam.homography) if cam.K is not None else None
-    tank = (scan.extra.get("tank") or {}).get("inner_area_mm2")
-    model = calibrate_meniscus(extract_waterlines(scan), surfaces.get(args.reference), tank_area_mm2=tank,
-                               camera_xy_mm=centre, camera_height_mm=cam.height_mm)
+    if args.reference == "ball":
+        if not 1.0 <= args.diameter <= 100.0:
+            raise SettingError("--diameter", f"a reference ball of {args.diameter} mm: use 1 to 100 mm")
+        part = Ball(args.diameter)
+    else:
+        from ..sim import surfaces                  # the virtual bench's own reference parts
+        part = surfaces.get(args.reference)
+    model, part = fit_meniscus(load_scan(args.scan), part)
     out = Path(args.out) if args.out else default_out(reference=True)
     if out.is_file():
         atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())

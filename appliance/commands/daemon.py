@@ -18,6 +18,12 @@ def add_arguments(p):
                         "simavr with the virtual camera")
     p.add_argument("--surface", default="sphere", help="the part on the simulated bench (default sphere)")
     p.add_argument("--frame", default="320x240", help="simulated frame size WxH (default 320x240)")
+    p.add_argument("--effects", default=None,
+                   help="--sim simavr: the virtual camera's effects preset (clean, optics, realistic, physics, "
+                        "harsh; default clean); physics adds the ink's displacement and meniscus")
+    p.add_argument("--level-zero", type=float, default=None, metavar="MM",
+                   help="simulated benches: the true stage position where the base top meets the ink (default: "
+                        "whatever the daemon's setting level_at_home_mm says; commissioning measures it)")
     p.add_argument("--replay", default=None,
                    help="--sim fake: serve frames rendered beforehand from this folder (one PNG per level, "
                         "see sim/fakes.py ReplayCamera) instead of rendering in the daemon")
@@ -48,8 +54,11 @@ def make_factory(args):
             faults = json.loads(args.faults) if args.faults else {}
         except json.JSONDecodeError as e:
             raise SettingError("--faults", f"not valid JSON ({e})") from None
-        return FakeBench(args.surface, rig, faults, replay=args.replay)
-    return SimulatedBenchFactory(args.surface, rig)
+        return FakeBench(args.surface, rig, faults, replay=args.replay, level_at_home_mm=args.level_zero)
+    if args.effects is not None:
+        from ..sim.render import effects_preset
+        effects_preset(args.effects)                # SettingError naming the presets
+    return SimulatedBenchFactory(args.surface, rig, effects=args.effects, level_at_home_mm=args.level_zero)
 
 
 def run(args):
