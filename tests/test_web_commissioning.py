@@ -113,3 +113,174 @@ def test_the_calibration_can_be_cancelled_at_each_step_and_the_bench_then_scans(
         assert "free" in d.find_element(By.ID, "cal-hold").text
         assert box["svc"].calibration()["holds_bench"] is False
         bench_takes_a_scan(d, box["url"])
+
+
+# -- the commissioning page ------------------------------------------------------------------
+
+FIND_BUTTON = """
+    const [label, click] = arguments;
+    const b = [...document.querySelectorAll('main button')].find((e) => e.offsetParent !== null
+        && !e.disabled && (e.textContent.trim().startsWith(label) || (e.getAttribute('aria-label') || '') === label));
+    if (b && click) { b.scrollIntoView({block: 'center'}); b.click(); }
+    return !!b;"""
+
+
+def can_press(d, label):
+    """A visible, enabled button whose text starts with `label` (or whose aria-label is it)."""
+    return d.execute_script(FIND_BUTTON, label, False)
+
+
+def press(d, label, timeout=30):
+    # found and clicked in one script: the page redraws its buttons as the daemon's answers come
+    wait(d, lambda: d.execute_script(FIND_BUTTON, label, True), timeout=timeout, what=f"button {label!r}")
+
+
+def active(box):
+    return box["svc"].commissioning()["active"]
+
+
+def statuses(box):
+    return {s["id"]: s["status"] for s in box["svc"].commissioning()["steps"]}
+
+
+def open_commissioning(d, box):
+    d.get(box["url"] + "/commission")
+    wait(d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning page")
+
+
+def note(d):
+    return d.find_element(By.ID, "cm-note").text
+
+
+def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
+    d = phone
+    open_commissioning(d, box)
+    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"          # the sequence starts here
+    assert "100 x 70 mm" in d.find_element(By.ID, "cm-board-size").text
+    for link in ("cm-board-pdf", "cm-board-png"):
+        href = d.find_element(By.ID, link).get_attribute("href")
+        assert d.execute_script("return fetch(arguments[0]).then(r => r.status)", href) == 200, href
+    readable_on_a_phone(d, "commissioning, first visit")
+    shot(d, "phone", "commission-1-start")
+
+    # level zero: measured on the bench (the base rises until its top breaks the ink), then accepted
+    press(d, "Start")
+    press(d, "Measure level zero")
+    press(d, "Accept and store", timeout=120)
+    wait(d, lambda: note(d) == "Level zero stored.", what="level zero stored")
+    assert d.find_element(By.ID, "cm-step-title").text == "Camera lens and liquid plane"
+
+    # camera: three tilted views for the lens, the flat board for the plane
+    press(d, "Start")
+    for n in (1, 2, 3):
+        press(d, "Take a tilted view", timeout=60)
+        wait(d, lambda: can_press(d, f"Take a tilted view ({n} taken)"), timeout=60, what=f"view {n}")
+    wait(d, lambda: d.execute_script(
+        "const i=document.getElementById('cm-frame');return i.complete && i.naturalWidth > 0"), what="preview")
+    press(d, "Measure the flat board")
+    press(d, "Accept and store", timeout=120)
+    d.execute_script("document.getElementById('cm-detected').scrollIntoView()")
+    wait(d, lambda: note(d) == "Camera lens and liquid plane stored.", what="camera stored")
+
+    # tank: entered as width x depth, the figure shown
+    assert d.find_element(By.ID, "cm-step-title").text == "Tank area"
+    readable_on_a_phone(d, "tank step")
+    d.execute_script("document.getElementById('cm-step').scrollIntoView()")
+    shot(d, "phone", "commission-2-tank")
+    press(d, "Save the tank area")
+    wait(d, lambda: note(d) == "Tank area stored.", what="tank stored")
+    assert "150 x 150 mm = 22500 mm²" in d.find_element(By.ID, "cm-results").text
+
+    # meniscus: a scan of the 25.4 mm ball, processed with the fitted model and measured
+    ball = d.find_element(By.ID, "cm-in-diameter_mm")
+    assert ball.get_attribute("value") == "25.4"
+    press(d, "Start: the ball goes on the base")
+    press(d, "Scan the ball")
+    wait(d, lambda: "Reference scan:" in d.find_element(By.ID, "cm-busy").text, timeout=60, what="scan progress")
+    d.execute_script("document.getElementById('cm-step').scrollIntoView()")
+    shot(d, "phone", "commission-3-scanning")
+    press(d, "Accept and store", timeout=600)
+    wait(d, lambda: note(d) == "Meniscus (reference ball) stored.", what="meniscus stored")
+    ref = d.find_element(By.ID, "cm-reference").text
+    meniscus = box["svc"].commissioning()["steps"][3]
+    err = meniscus["result"]["reference"]["mean_abs_error_mm"]
+    assert ref.startswith(f"This box measures the 25.4 mm ball to {err:.2f} mm"), ref
+    assert statuses(box) == {"level_zero": "done", "camera": "done", "tank": "done", "meniscus": "done"}
+    results = d.find_element(By.ID, "cm-results").text
+    assert results.count(" UTC") == 4, results                         # every result with its date
+    assert d.find_element(By.ID, "cm-step-title").text == "This box is commissioned"
+    d.execute_script("window.scrollTo(0, 0)")
+    readable_on_a_phone(d, "commissioned")
+    shot(d, "phone", "commission-4-done")
+
+    # one file out, the ink changed, the same file back in
+    downloads = box["tmp"] / "downloads-phone"
+    d.find_element(By.ID, "cm-export").click()
+    wait(d, lambda: list(downloads.glob("inkslice-commissioning-*.json"))
+         and not list(downloads.glob("*.crdownload")), what="export downloaded")
+    exported = next(downloads.glob("inkslice-commissioning-*.json"))
+    import json
+    doc = json.loads(exported.read_text())
+    assert doc["format"] == "inkslice.commissioning/1" and set(doc["results"]) == set(statuses(box))
+    press(d, "The ink was changed")
+    wait(d, lambda: "Ink change recorded" in d.find_element(By.ID, "cm-files-note").text, what="ink change")
+    assert statuses(box) == {"level_zero": "stale", "camera": "done", "tank": "done", "meniscus": "stale"}
+    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"        # the sequence starts over there
+    assert "Ink last changed" in d.find_element(By.ID, "cm-ink").text
+    assert len(d.find_elements(By.CSS_SELECTOR, "#cm-results .b-stale")) == 2
+    d.execute_script("window.scrollTo(0, 0)")
+    shot(d, "phone", "commission-5-ink-changed")
+    d.find_element(By.ID, "cm-import-file").send_keys(str(exported))
+    press(d, "Import")
+    wait(d, lambda: "Imported" in d.find_element(By.ID, "cm-files-note").text, what="import")
+    d.execute_script("document.getElementById('cm-files').scrollIntoView()")
+    readable_on_a_phone(d, "after import")
+    shot(d, "phone", "commission-6-files")
+
+
+def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
+    d = phone
+
+    def cancel_then_scan(step, title):
+        press(d, "Cancel")
+        wait(d, lambda: note(d).startswith(f"{title} cancelled"), timeout=60, what=f"{step} cancelled")
+        assert active(box) is None and "The bench is free" in note(d)
+        assert box["svc"].commissioning()["steps"][["level_zero", "camera", "tank", "meniscus"].index(step)]["status"] \
+            == "missing"                                             # nothing was stored
+        bench_takes_a_scan(d, box["url"])
+        open_commissioning(d, box)
+
+    def go_to(title):
+        press(d, f"Do this step: {title}")
+        wait(d, lambda: d.find_element(By.ID, "cm-step-title").text == title, what=title)
+
+    open_commissioning(d, box)
+    # level zero, while its measurement runs: the stage stops and the bench is free at once
+    press(d, "Start")
+    press(d, "Measure level zero")
+    wait(d, lambda: "Working" in d.find_element(By.ID, "cm-busy").text, what="measuring")
+    assert active(box)["holds_bench"]
+    shot(d, "phone", "commission-cancel-level-zero")
+    cancel_then_scan("level_zero", "Level zero")
+
+    # camera, with one view taken
+    go_to("Camera lens and liquid plane")
+    press(d, "Start")
+    press(d, "Take a tilted view", timeout=60)
+    wait(d, lambda: can_press(d, "Take a tilted view (1 taken)"), timeout=60, what="one view")
+    cancel_then_scan("camera", "Camera lens and liquid plane")
+
+    # tank: nothing runs, cancel leaves without storing the figures typed in
+    go_to("Tank area")
+    d.find_element(By.ID, "cm-in-width_mm").clear()
+    d.find_element(By.ID, "cm-in-width_mm").send_keys("120")
+    cancel_then_scan("tank", "Tank area")
+
+    # meniscus, during the reference ball's scan: the scan job is cancelled with it
+    go_to("Meniscus (reference ball)")
+    press(d, "Start: the ball goes on the base")
+    press(d, "Scan the ball")
+    wait(d, lambda: box["svc"].state()["state"] == "scanning", timeout=60, what="reference scan running")
+    job_id = active(box)["job_id"]
+    cancel_then_scan("meniscus", "Meniscus (reference ball)")
+    assert box["svc"].job(job_id)["status"] == "cancelled"

@@ -106,6 +106,23 @@ def calibration():
                            board_text=describe(BOARD))
 
 
+@bp.get("/commission")
+def commission():
+    svc = _ext()["service"]
+    from ..daemon.calibration import BOARD
+    from ..vision.printboard import describe
+    return render_template("commission.html", page="commission", offered=svc.offers("commissioning"),
+                           chessboard=_chessboard_files(), board_text=describe(BOARD))
+
+
+def _chessboard_files() -> dict:
+    """Links to the printable calibration board shipped in static/ (appliance/vision/printboard.py)."""
+    from pathlib import Path
+    static = Path(current_app.static_folder)
+    return {kind: url_for("static", filename=f"chessboard.{kind}")
+            for kind in ("pdf", "png") if (static / f"chessboard.{kind}").is_file()}
+
+
 @bp.get("/api/docs")
 def api_docs():
     return render_template("api_docs.html", page="api")

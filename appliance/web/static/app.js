@@ -255,6 +255,7 @@
     });
   }
 
+  window.InkSlice = { api, show, text };      // for the page scripts of their own (commission.js)
   const pages = { dashboard, jobs, job, settings, calibration, api: apidocs };
   const init = pages[document.body.dataset.page];
   if (init) init();
