@@ -263,11 +263,19 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     shot(d, "phone", "commission-cancel-level-zero")
     cancel_then_scan("level_zero", "Level zero")
 
-    # camera, with one view taken
+    # camera, with one view taken; a scan asked for meanwhile is refused with the way out
     go_to("Camera lens and liquid plane")
     press(d, "Start")
     press(d, "Take a tilted view", timeout=60)
     wait(d, lambda: can_press(d, "Take a tilted view (1 taken)"), timeout=60, what="one view")
+    d.get(box["url"] + "/")
+    press(d, "Start scan")
+    wait(d, lambda: d.find_element(By.ID, "action-fix").is_displayed(), what="refusal with a link")
+    assert "'camera' holds the bench" in d.find_element(By.ID, "action-error").text
+    shot(d, "phone", "commission-held-dashboard")
+    d.find_element(By.CSS_SELECTOR, "#action-fix a").click()
+    wait(d, lambda: d.find_element(By.ID, "cm-step-title").text == "Camera lens and liquid plane", what="back")
+    assert "holding the bench" in d.find_element(By.ID, "cm-step-count").text
     cancel_then_scan("camera", "Camera lens and liquid plane")
 
     # tank: nothing runs, cancel leaves without storing the figures typed in
@@ -284,3 +292,10 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     job_id = active(box)["job_id"]
     cancel_then_scan("meniscus", "Meniscus (reference ball)")
     assert box["svc"].job(job_id)["status"] == "cancelled"
+
+    # skip: stored as skipped, and the sequence goes on with the next open step
+    go_to("Tank area")
+    press(d, "Skip this step")
+    wait(d, lambda: note(d) == "Tank area skipped.", what="tank skipped")
+    assert statuses(box)["tank"] == "skipped"
+    assert d.find_element(By.ID, "cm-step-title").text == "Meniscus (reference ball)"

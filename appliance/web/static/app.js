@@ -105,11 +105,16 @@
       } finally { mapBusy = false; }
     }
     btn.addEventListener("click", async () => {
-      btn.disabled = true; show($("#action-error"), false);
+      btn.disabled = true; show($("#action-error"), false); show($("#action-fix"), false);
       try {
         if (current && ACTIVE.includes(current.state)) await api("POST", "/api/scan/cancel");
         else await api("POST", "/api/scan", {});
-      } catch (e) { text("#action-error", e.message); show($("#action-error"), true); }
+      } catch (e) {
+        text("#action-error", e.message); show($("#action-error"), true);
+        // a commissioning step or the guided calibration holds the bench: the way out is one tap away
+        const held = /commissioning step/.test(e.message) ? "/commission" : (/guided calibration/.test(e.message) ? "/calibration" : null);
+        if (held) { $("#action-fix a").href = held; show($("#action-fix"), true); }
+      }
       poll();
     });
     async function poll() { try { render(await api("GET", "/api/state")); } catch (e) {} }

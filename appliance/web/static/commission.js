@@ -42,7 +42,8 @@
     if (!ref || typeof ref.mean_abs_error_mm !== "number") return "";
     return "This box measures the " + ref.diameter_mm + " mm ball to " + ref.mean_abs_error_mm.toFixed(2) + " mm" +
       (typeof ref.max_error_mm === "number" ? " (largest error " + ref.max_error_mm.toFixed(2) + " mm)" : "") +
-      (step.date_text ? ", measured " + step.date_text : "") + ".";
+      (step.date_text ? ", measured " + step.date_text : "") + "." +
+      (step.status === "stale" ? " The ink was changed since: scan the ball again." : "");
   }
   const stepOf = (id) => cm.steps.find((s) => s.id === id);
   const title = (id) => (stepOf(id) || { title: id }).title;
@@ -241,11 +242,11 @@
     if (!f) return;
     let doc;
     try { doc = JSON.parse(await f.text()); } catch (e) { text("#cm-files-note", "Not imported: " + f.name + " is not a JSON file."); return; }
-    try { render(await api("POST", "/api/commissioning/import", doc)); text("#cm-files-note", "Imported " + f.name + "; the results keep their dates."); }
+    try { clearNote(); render(await api("POST", "/api/commissioning/import", doc)); text("#cm-files-note", "Imported " + f.name + "; the results keep their dates."); }
     catch (e) { text("#cm-files-note", "Not imported: " + e.message); }
   });
   $("#cm-ink-changed").addEventListener("click", async () => {
-    try { render(await api("POST", "/api/commissioning/ink-changed")); focus = nextStep(); renderStep(); text("#cm-files-note", "Ink change recorded: measure the level zero and the meniscus again."); }
+    try { clearNote(); render(await api("POST", "/api/commissioning/ink-changed")); focus = nextStep(); renderStep(); text("#cm-files-note", "Ink change recorded: measure the level zero and the meniscus again."); }
     catch (e) { text("#cm-files-note", e.message); }
   });
 
