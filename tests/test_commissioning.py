@@ -174,6 +174,20 @@ def test_skip_records_the_step_as_skipped_and_keeps_what_was_in_force(tmp_path):
         svc.close()
 
 
+def test_skipping_the_meniscus_during_its_scan_cancels_the_scan(tmp_path):
+    svc, _ = box(tmp_path)
+    try:
+        svc.commission("meniscus", "start", {"diameter_mm": 25.4})
+        job_id = svc.commission("meniscus", "scan")["active"]["job_id"]
+        c = svc.commission("meniscus", "skip")
+        assert c["active"] is None and step(c, "meniscus")["status"] == "skipped"
+        assert wait_final(svc, job_id)["status"] == "cancelled"
+        job = wait_final(svc, svc.start_scan({**SCAN, "levels_to_mm": 6.0}))
+        assert job["status"] == "done", job["reason"]
+    finally:
+        svc.close()
+
+
 def test_export_then_import_on_a_fresh_box_gives_the_same_commissioning(commissioned, tmp_path):
     svc, *_ = commissioned
     doc = json.loads(json.dumps(svc.export_commissioning()))       # as the file carries it

@@ -299,3 +299,13 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     wait(d, lambda: note(d) == "Tank area skipped.", what="tank skipped")
     assert statuses(box)["tank"] == "skipped"
     assert d.find_element(By.ID, "cm-step-title").text == "Meniscus (reference ball)"
+
+    # skip during the ball's scan: the scan stops with it and the bench takes the next one
+    press(d, "Start: the ball goes on the base")
+    press(d, "Scan the ball")
+    wait(d, lambda: box["svc"].state()["state"] == "scanning", timeout=60, what="reference scan running")
+    job_id = active(box)["job_id"]
+    press(d, "Skip this step")
+    wait(d, lambda: note(d) == "Meniscus (reference ball) skipped.", timeout=60, what="meniscus skipped")
+    assert statuses(box)["meniscus"] == "skipped" and box["svc"].job(job_id)["status"] == "cancelled"
+    bench_takes_a_scan(d, box["url"])

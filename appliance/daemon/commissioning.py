@@ -218,6 +218,8 @@ class Commissioning:
         if action == "cancel":
             self.cancel(step)
             return self.describe()
+        if action == "skip" and self.session is not None and self.session.step == step:
+            self.cancel(step)               # skipping stops what the step runs (the ball's scan) first
         if not self.lock.acquire(blocking=False):
             raise SettingError("commissioning", "a commissioning action is already running; wait, or cancel it")
         try:

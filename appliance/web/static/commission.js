@@ -63,11 +63,11 @@
         summary(s) + (s.date_text ? " — " + s.date_text : "") + (s.method && s.method !== "measured" ? " (" + s.method + ")" : "") +
         (s.status === "stale" ? " — " + STATUS.stale : "");
       li.append(head, p);
-      if (s.id !== ((cm.active && cm.active.step) || focus)) {        // the step in hand has its own card
+      if (!cm.active && s.id !== focus) {       // the step in hand has its own card; one step at a time
         const b = document.createElement("button"); b.type = "button"; b.className = "cm-goto";
         b.textContent = s.status === "done" ? "Do again" : "Do this step";
         b.setAttribute("aria-label", b.textContent + ": " + s.title);
-        b.disabled = !!cm.active || busy;
+        b.disabled = busy;
         b.addEventListener("click", () => { focus = s.id; clearNote(); renderStep(); renderResults(); $("#cm-step").scrollIntoView(); });
         li.appendChild(b);
       }
@@ -114,7 +114,7 @@
     if (!id) {
       text("#cm-step-count", "");
       text("#cm-step-title", "This box is commissioned");
-      text("#cm-prompt", "Every step has a result or was skipped. Do a step again from the list above, e.g. after the ink was changed.");
+      text("#cm-prompt", "Every step has a result or was skipped. Do a step again from the results below, e.g. after the ink was changed.");
       show($("#cm-skip"), false); show($("#cm-cancel"), false); show($("#cm-detected"), false); show($("#cm-error"), false);
       show($("#cm-view"), false);
       return;
@@ -123,7 +123,9 @@
     const s = stepOf(id);
     text("#cm-step-count", "Step " + (ORDER.indexOf(id) + 1) + " of " + ORDER.length + (a ? " · in progress" + (a.holds_bench ? ", holding the bench" : "") : ""));
     text("#cm-step-title", s.title);
-    text("#cm-prompt", a && a.prompt ? a.prompt : HELP[id]);
+    const scanning = a && a.stage === "scanning";
+    text("#cm-prompt", scanning ? "The bench is scanning the ball, then fits the meniscus to it: a few minutes. Cancel stops the scan." :
+      (a && a.prompt ? a.prompt : HELP[id]));
     const allowed = a ? a.actions : s.actions;
     if (!a) {
       const form = FORMS[id] || [];
