@@ -149,7 +149,7 @@ def test_usb_export_through_the_api(client, tmp_path):
     mounts = tmp_path / "mounts"
     mounts.write_text("")
     app.extensions["inkslice"]["usb"] = UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),),
-                                                     sys_root=tmp_path / "nosys")
+                                                     sys_root=tmp_path / "nosys", unmount=lambda s: mounts.write_text(""))
     c.post("/api/scan", json={})
     job_id = wait_state(c, {"done"})["job_id"]
     assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}
@@ -160,7 +160,8 @@ def test_usb_export_through_the_api(client, tmp_path):
     r = c.post(f"/api/jobs/{job_id}/usb", json={"file": "toolpath-grbl.nc", "stick": "sdb1"})
     assert r.status_code == 200, r.get_json()
     res = r.get_json()
-    assert res["safe_to_remove"] and res["verified"]
+    assert res["safe_to_remove"] and res["verified"] and res["unmounted"]
+    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}     # unmounted after the copy
     copied = stick / "inkslice" / res["name"]
     assert copied.read_bytes() == svc.job_file(job_id, "toolpath-grbl.nc").read_bytes()
 

@@ -40,7 +40,8 @@ def box(tmp_path_factory):
     mounts = tmp / "mounts"
     mounts.write_text("")
     svc = FakeBenchService(tmp / "bench", level_s=0.08, home_s=0.3, process_s=0.3, frame_px=240)
-    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp / "nosys")
+    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp / "nosys",
+                      unmount=lambda s: mounts.write_text(""))           # what the box's stick unit does
     run = start(svc, tmp / "data", config={"usb": usb})
     ART.mkdir(parents=True, exist_ok=True)
     yield {"url": run.url, "password": run.password, "svc": svc, "mounts": mounts, "stick": stick, "tmp": tmp}
@@ -186,13 +187,17 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
             d.execute_script("arguments[0].scrollIntoView()", usb)
             assert "STICK" in d.find_element(By.ID, "usb-stick").text
             d.find_element(By.ID, "usb-copy").click()
-            wait(d, lambda: "Safe to remove" in d.find_element(By.ID, "usb-result").text, what="USB copy")
+            wait(d, lambda: "unmounted: safe to remove" in d.find_element(By.ID, "usb-result").text,
+                 what="USB copy")
             shot(d, kind, "job-usb")
             copied = box["stick"] / "inkslice" / f"{job_id}-toolpath.gcode"
             assert copied.read_bytes() == box["svc"].job_file(job_id, "toolpath.gcode").read_bytes()
         finally:
             box["mounts"].write_text("")
-        wait(d, lambda: not usb.is_displayed(), timeout=10, what="USB section hides when the stick is gone")
+        # the copy unmounted the stick: the button goes, the outcome stays to be read
+        wait(d, lambda: not d.find_element(By.ID, "usb-copy").is_displayed(), timeout=10,
+             what="the copy button hides when the stick is gone")
+        assert usb.is_displayed() and "safe to remove" in d.find_element(By.ID, "usb-result").text
 
         # -- settings: a bad value is refused naming the key, a good one saved
         d.get(box["url"] + "/settings")

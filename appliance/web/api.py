@@ -422,7 +422,7 @@ def usb_export(job_id):
     if not sticks:
         return err("no USB stick is plugged in", 409, "usb")
     stick_id = body.get("stick") or sticks[0].id
-    result = u.export(path, stick_id, f"{job_id}-{name}")
+    result = u.export(path, stick_id, f"{job_id}-{name}", release=True)     # synced and unmounted after
     return jsonify(result.to_json())
 
 

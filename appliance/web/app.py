@@ -10,7 +10,7 @@ calls nothing else (architecture.md). `config` is a plain dict:
   login_window_s    that window (default 300)
   max_upload_bytes  largest accepted upload (default 256 MiB)
   max_unzipped_bytes largest total size an uploaded zip may expand to (default 1 GiB)
-  usb               an object with sticks() and export(src, stick_id, name) (appliance.hw.usb);
+  usb               an object with sticks() and export(src, stick_id, name, release) (appliance.hw.usb);
                     default: UsbExporter() on the real /proc/mounts; None disables USB
   sse_max_s         how long one Server-Sent-Events connection stays open (default 50 s;
                     the browser reconnects by itself, and a bounded stream keeps waitress's

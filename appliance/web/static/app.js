@@ -154,13 +154,14 @@
     });
     const usb = $("#usb");
     if (usb) {
-      let sticks = [];
+      let sticks = [], told = false;       // told: a copy's outcome stays up after its stick is unmounted
       async function check() {
         try {
           const r = await api("GET", "/api/usb");
           sticks = r.sticks;
-          show(usb, r.available);          // the button exists only while a stick is there
-          if (r.available) text("#usb-stick", "Stick: " + (sticks[0].label || sticks[0].mount) + " (" + Math.round(sticks[0].free_bytes / 1e6) + " MB free)");
+          show(usb, r.available || told);
+          show($("#usb-copy"), r.available); // the button exists only while a stick is there
+          text("#usb-stick", r.available ? "Stick: " + (sticks[0].label || sticks[0].mount) + " (" + Math.round(sticks[0].free_bytes / 1e6) + " MB free)" : "No stick mounted: plug one in to copy.");
         } catch (e) {}
       }
       check(); setInterval(check, 3000);
@@ -168,7 +169,10 @@
         const b = $("#usb-copy"); b.disabled = true; text("#usb-result", "Copying and verifying…");
         try {
           const r = await api("POST", "/api/jobs/" + encodeURIComponent(id) + "/usb", { file: $("#usb-file").value, stick: sticks.length ? sticks[0].id : null });
-          text("#usb-result", "Copied " + r.name + " (" + r.bytes + " bytes, SHA-256 verified). Safe to remove the stick.");
+          text("#usb-result", "Copied " + r.name + " (" + r.bytes + " bytes, SHA-256 verified). " +
+            (r.safe_to_remove ? "The stick is unmounted: safe to remove it."
+                              : "Synced, but the stick could not be unmounted (" + r.unmount_problem + "): wait until it is idle before removing it."));
+          told = true; check();
         } catch (e) { text("#usb-result", "Not copied: " + e.message); }
         b.disabled = false;
       });
