@@ -56,6 +56,11 @@ class Installed:
     site: Path               # the venv's site-packages, where the wheel went
     run_dir: Path            # the working folder of every process (not the checkout)
     env: dict
+    shipped: list = None     # site_files() right after the install
+
+    def site_files(self) -> list[Path]:
+        """What the wheel put into site-packages (byte-code caches aside): nothing may add to it."""
+        return sorted(p for p in (self.site / "appliance").rglob("*") if "__pycache__" not in p.parts)
 
     def bin(self, name: str) -> str:
         return str(self.venv / "bin" / name)
@@ -100,7 +105,9 @@ def installed(tmp_path_factory) -> Installed:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "INKSLICE_", "VIRTUAL_ENV"))}
     env.update(PATH=f"{venv / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}", XDG_CACHE_HOME=str(tmp / "cache"),
                PYTHONUNBUFFERED="1")
-    return Installed(wheel, venv, site, run_dir, env)
+    box = Installed(wheel, venv, site, run_dir, env)
+    box.shipped = box.site_files()
+    return box
 
 
 def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_table(installed):
@@ -142,7 +149,6 @@ def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path)
     (fake_bin / "avrdude").write_text(f"#!{sys.executable}\nimport json, sys\n"
                                       f"json.dump(sys.argv[1:], open({str(record)!r}, 'w'))\n")
     (fake_bin / "avrdude").chmod(0o755)
-    before = sorted(p for p in installed.site.rglob("*") if "__pycache__" not in p.parts)
     env = {**installed.env, "PATH": f"{fake_bin}:{installed.env['PATH']}"}
     r = subprocess.run([installed.bin("inkslice"), "firmware", "flash", "--port", "/dev/ttyACM7"],
                        cwd=installed.run_dir, env=env, capture_output=True, text=True, timeout=300)
@@ -154,8 +160,7 @@ def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path)
     assert hex_file.is_relative_to(Path(installed.env["XDG_CACHE_HOME"]))
     lines = hex_file.read_text().splitlines()
     assert lines[0].startswith(":") and lines[-1] == ":00000001FF" and len(lines) > 100     # Intel HEX
-    after = sorted(p for p in installed.site.rglob("*") if "__pycache__" not in p.parts)
-    assert after == before, "the build wrote into site-packages"
+    assert installed.site_files() == installed.shipped, "the build wrote into site-packages"
 
 
 # ---- both services from the installed copy -------------------------------------------------------
@@ -263,7 +268,7 @@ def scan(client: WebClient, params: dict, timeout: float = 600.0) -> dict:
     return job
 
 
-def test_the_installed_copy_scans_on_the_simulated_bench_through_the_web(box):
+def test_the_installed_copy_scans_on_the_simulated_bench_through_the_web(installed, box):
     client = box
     status, st = client.get("/api/state")
     assert status == 200 and st["state"] == "idle", st
@@ -277,3 +282,4 @@ def test_the_installed_copy_scans_on_the_simulated_bench_through_the_web(box):
     program = parse_gcode(gcode.decode(), "toolpath.gcode")
     feed_z = program.xyz[program.kind == 1, 2]
     assert len(feed_z) > 100 and feed_z.max() - feed_z.min() > 5.0, "the cone's relief is milled"
+    assert installed.site_files() == installed.shipped, "the simulated bench or the scan wrote into site-packages"
