@@ -113,6 +113,23 @@ def test_the_calibration_can_be_cancelled_at_each_step_and_the_bench_then_scans(
         assert "free" in d.find_element(By.ID, "cal-hold").text
         assert box["svc"].calibration()["holds_bench"] is False
         bench_takes_a_scan(d, box["url"])
+    # and the whole guided calibration goes through: the simulated bench lays the board on the
+    # base when the target step asks for it, and the virtual camera shows it
+    d.get(box["url"] + "/calibration")
+    do = d.find_element(By.ID, "cal-do")
+    for step in ("home", "target", "detect"):
+        wait(d, lambda: do.text.endswith(step) and do.is_enabled(), timeout=60, what=f"step {step}")
+        do.click()
+    wait(d, lambda: "corners 54" in d.find_element(By.ID, "cal-detected").text, timeout=60, what="board found")
+    wait(d, lambda: d.execute_script(
+        "const i=document.getElementById('cal-frame');return i.complete && i.naturalWidth > 0"), what="preview")
+    shot(d, "phone", "calibration-detected")
+    wait(d, lambda: do.text.endswith("accept") and do.is_enabled(), what="accept")
+    do.click()
+    wait(d, lambda: do.text.endswith("home"), timeout=30, what="stored")
+    cals = box["svc"].store.calibrations()
+    assert len(cals) == 1 and cals[0]["source"] == "guided" and cals[0]["report"]["plane_rms_mm"] < 0.1, cals
+    bench_takes_a_scan(d, box["url"])
 
 
 # -- the commissioning page ------------------------------------------------------------------

@@ -177,9 +177,10 @@ def test_guided_calibration_on_the_daemon(web):
     cam = svc.store.calibrations()[0]["camera"]
     import numpy as np
     H = np.asarray(cam["homography"])
-    # OpenCV puts pixel centres at integers: the corner drawn at column 150 lies at u = 149.5
-    for (u, v), want in (((149.5, 129.5), (0, 0)), ((149.5 + 40 * 8, 129.5), (80, 0)),
-                         ((149.5, 129.5 + 40 * 5), (0, -50))):
+    # OpenCV puts pixel centres at integers: the corner drawn at column 150 lies at u = 149.5;
+    # the board lies at the jig, its first corner at (10, 75) mm on the base
+    for (u, v), want in (((149.5, 129.5), (10, 75)), ((149.5 + 40 * 8, 129.5), (90, 75)),
+                         ((149.5, 129.5 + 40 * 5), (10, 25))):
         p = H @ [u, v, 1]
         assert np.allclose(p[:2] / p[2], want, atol=0.1), (u, v, p[:2] / p[2])
     assert (cam["width"], cam["height"]) == (640, 480)

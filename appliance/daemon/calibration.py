@@ -12,6 +12,12 @@ The lens (K, distortion) is not found here: it needs several tilted views
 the board's corners are undistorted with them; the plane homography is what
 the guided steps renew (the camera was bumped, the bench moved).
 
+The board lies centred on the base at the jig position (JIG), the same as in
+commissioning's camera step, so both give the same base coordinates. What
+must be on the base is asked through the panel's Operator (hw/base.py): on a
+real box a message, on the simulated bench the board is placed and the
+virtual camera shows it.
+
 The bench's devices stay open from `home` to `accept`, and the service
 refuses scans meanwhile; so every step can be cancelled ("cancel", also while
 a step runs: interrupt() stops the stage, close() gives the devices back and
@@ -28,22 +34,34 @@ import cv2
 import numpy as np
 
 from ..errors import SettingError
+from ..hw.base import Placement
 from ..vision.calibration import Board, BoardPose, camera_json, find_corners, plane_homography
 
 STEPS = (
     ("home", "Empty the base, then home the stage"),
-    ("target", "Lay the printed chessboard flat on the base; the stage raises it to the ink line"),
+    ("target", "Lay the printed chessboard flat on the base, centred, its rows along the base's x side; "
+               "the stage raises it to the ink line"),
     ("detect", "Capture a frame and find the board's corners"),
     ("accept", "Check the preview and accept the camera model"),
 )
 BOARD = Board(9, 6, 10.0)               # 9 x 6 inner corners, 10 mm squares (docs: print at 100 %)
-POSE = BoardPose()                      # the corner nearest the image's top-left is the origin
+# the printed board lies centred on the base, its rows along x: its first inner corner
+# (nearest the image's top-left) at (10, 75) mm, the squares' centre at the base's centre (50, 50)
+JIG = BoardPose(10.0, 75.0, 0.0)
+POSE = JIG
+
+
+def board_details(board: Board = BOARD, pose: BoardPose = JIG) -> dict:
+    """The board and where it lies, as a Placement's details (what the simulated bench renders)."""
+    return {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm,
+            "first_corner_mm": [pose.x0, pose.y0], "angle_deg": pose.angle_deg}
 
 
 class GuidedCalibration:
-    def __init__(self, open_devices, store, settings, show_frame, board: Board = BOARD, pose: BoardPose = POSE):
+    def __init__(self, open_devices, store, settings, show_frame, board: Board = BOARD, pose: BoardPose = POSE,
+                 operator=None):
         self.open_devices, self.store, self.settings = open_devices, store, settings
-        self.show_frame, self.board, self.pose = show_frame, board, pose
+        self.show_frame, self.board, self.pose, self.operator = show_frame, board, pose, operator
         self.step = 0
         self.detected = None
         self._camera = None
@@ -88,11 +106,17 @@ class GuidedCalibration:
                 except Exception:
                     pass
             devices.close()
+            self._ask("clear", "Calibration over: take the board off the base")
         self.step, self.detected, self._camera = 0, None, None
+
+    def _ask(self, kind, text, **details):
+        if self.operator is not None:
+            self.operator.place(Placement(kind, text, details))
 
     # -- the steps ---------------------------------------------------------------
     def _home(self):
         self.close()
+        self._ask("empty", STEPS[0][1])
         self.devices = self.open_devices()
         try:
             self.devices.stage.home()
@@ -102,6 +126,7 @@ class GuidedCalibration:
 
     def _target(self):
         # level 0 = the base's top at the ink line; the board's thickness (paper) is ignored
+        self._ask("board_flat", STEPS[1][1], **board_details(self.board, self.pose))
         self.devices.stage.move_to(float(self.settings["level_at_home_mm"]))
 
     def _detect(self):

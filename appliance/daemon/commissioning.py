@@ -40,18 +40,15 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError
 from ..hw.base import Placement
-from ..vision.calibration import Board, BoardPose, camera_json, find_corners, intrinsics, plane_homography
+from ..vision.calibration import Board, camera_json, find_corners, intrinsics, plane_homography
 from ..vision.printboard import describe as print_instructions, printed_size_mm
-from .calibration import BOARD
+from .calibration import BOARD, JIG, board_details as _board_details
 
 FORMAT = "inkslice.commissioning/1"
 STEPS = ("level_zero", "camera", "tank", "meniscus")
 TITLES = {"level_zero": "Level zero", "camera": "Camera lens and liquid plane", "tank": "Tank area",
           "meniscus": "Meniscus (reference ball)"}
 INK_SENSITIVE = ("level_zero", "meniscus")          # an ink change makes these stale
-# the printed board lies centred on the base, its rows along x: its first inner corner
-# (nearest the image's top-left) at (10, 75) mm, the squares' centre at the base's centre (50, 50)
-JIG = BoardPose(10.0, 75.0, 0.0)
 MIN_VIEWS = 3
 LEVEL_SEARCH_MM = 12.0          # level zero is searched this far either side of the current setting
 LEVEL_RESOLUTION_MM = 0.01
@@ -604,11 +601,6 @@ def reference_processor(reference: dict, options: dict):
 
 
 # -- small helpers --------------------------------------------------------------------------
-
-def _board_details() -> dict:
-    return {"inner_corners": [BOARD.cols, BOARD.rows], "square_mm": BOARD.square_mm,
-            "first_corner_mm": [JIG.x0, JIG.y0], "angle_deg": JIG.angle_deg}
-
 
 def _bright_fraction(frame) -> float:
     """Share of the frame brighter than the ink (the lit base top or part): Otsu between the two."""

@@ -240,7 +240,7 @@ class BenchService:
                 def open_devices():
                     return self.factory.open(self.settings(), self._calibration_params())
                 self._calibration = GuidedCalibration(open_devices, self.store, self.settings(),
-                                                      show_frame=self._show_frame,
+                                                      show_frame=self._show_frame, operator=self._panel.operator,
                                                       **getattr(self.factory, "calibration_target", {}))
             return self._calibration
 
