@@ -225,3 +225,29 @@ def test_an_ink_change_makes_meniscus_and_level_zero_stale(tmp_path):
         assert step(c, "level_zero")["status"] == "done"
     finally:
         svc.close()
+
+
+def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
+    """The web server talks to the daemon over its socket (rpc.BenchClient): the same calls."""
+    from appliance.daemon import rpc
+    svc, _ = box(tmp_path)
+    server = rpc.serve(svc, tmp_path / "daemon.sock")
+    client = rpc.BenchClient(tmp_path / "daemon.sock")
+    try:
+        c = client.commission("tank", "enter", {"width_mm": 140, "depth_mm": 150.5})
+        assert step(c, "tank")["result"]["figure"] == "140 x 150.5 mm = 21070 mm²"
+        with pytest.raises(SettingError, match="possible: start, enter, cancel, skip"):
+            client.commission("level_zero", "measure")
+        c = client.commission("level_zero", "start")
+        assert c["active"]["holds_bench"] and c["active"]["prompt"].startswith("Take everything off the base")
+        assert svc.state()["message"] == c["active"]["prompt"]      # the display and the page say it too
+        assert client.commission("level_zero", "cancel")["active"] is None
+        doc = client.export_commissioning()
+        assert set(doc["results"]) == {"tank"} and client.ink_changed()["ink_changed"]
+        assert step(client.import_commissioning(doc), "tank")["status"] == "done"
+        assert client.commissioning() == svc.commissioning()
+    finally:
+        client.close()
+        server.shutdown()
+        server.server_close()
+        svc.close()
