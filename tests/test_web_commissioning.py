@@ -183,7 +183,11 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     # level zero: measured on the bench (the base rises until its top breaks the ink), then accepted
     press(d, "Start")
     press(d, "Measure level zero")
-    press(d, "Accept and store", timeout=120)
+    wait(d, lambda: can_press(d, "Accept and store"), timeout=120, what="level zero measured")
+    d.execute_script("document.getElementById('cm-step').scrollIntoView()")
+    readable_on_a_phone(d, "level zero measured")
+    shot(d, "phone", "commission-1b-level-zero-measured")
+    press(d, "Accept and store")
     wait(d, lambda: note(d) == "Level zero stored.", what="level zero stored")
     assert d.find_element(By.ID, "cm-step-title").text == "Camera lens and liquid plane"
 
@@ -195,8 +199,10 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     wait(d, lambda: d.execute_script(
         "const i=document.getElementById('cm-frame');return i.complete && i.naturalWidth > 0"), what="preview")
     press(d, "Measure the flat board")
-    press(d, "Accept and store", timeout=120)
-    d.execute_script("document.getElementById('cm-detected').scrollIntoView()")
+    wait(d, lambda: can_press(d, "Accept and store"), timeout=120, what="plane measured")
+    d.execute_script("document.getElementById('cm-step').scrollIntoView()")
+    shot(d, "phone", "commission-1c-camera-measured")
+    press(d, "Accept and store")
     wait(d, lambda: note(d) == "Camera lens and liquid plane stored.", what="camera stored")
 
     # tank: entered as width x depth, the figure shown
@@ -298,7 +304,10 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     # tank: nothing runs, cancel leaves without storing the figures typed in
     go_to("Tank area")
     d.find_element(By.ID, "cm-in-width_mm").clear()
-    d.find_element(By.ID, "cm-in-width_mm").send_keys("120")
+    d.find_element(By.ID, "cm-in-width_mm").send_keys("-120")
+    press(d, "Save the tank area")                                 # refused, naming the field
+    wait(d, lambda: "width_mm" in d.find_element(By.ID, "cm-error").text, what="refusal shown")
+    assert d.find_element(By.ID, "cm-error").is_displayed() and statuses(box)["tank"] == "missing"
     cancel_then_scan("tank", "Tank area")
 
     # meniscus, during the reference ball's scan: the scan job is cancelled with it

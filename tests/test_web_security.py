@@ -10,7 +10,8 @@ import pytest
 from web_helpers import csrf_of, login, make_app, wait_state
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}
-SAMPLE = {"job_id": "20260101-000000-abcd", "name": "toolpath.gcode", "step": "home", "token_id": "0123abcd"}
+SAMPLE = {"job_id": "20260101-000000-abcd", "name": "toolpath.gcode", "step": "home", "token_id": "0123abcd",
+          "action": "start"}
 
 
 @pytest.fixture
@@ -36,7 +37,8 @@ def test_the_app_has_the_state_changing_routes_we_think(env):
     got = {(m, e) for m, _, e in unsafe_routes(app)}
     for want in [("POST", "api.start_scan"), ("POST", "api.cancel_scan"), ("PATCH", "api.patch_settings"),
                  ("POST", "api.usb_export"), ("POST", "api.upload_scan"), ("DELETE", "api.revoke_token"),
-                 ("POST", "api.calibrate"), ("POST", "pages.login"), ("POST", "pages.logout")]:
+                 ("POST", "api.calibrate"), ("POST", "api.commission"), ("POST", "api.commissioning_import"),
+                 ("POST", "api.commissioning_ink_changed"), ("POST", "pages.login"), ("POST", "pages.logout")]:
         assert want in got
 
 

@@ -24,7 +24,7 @@
     tank: "The ink's area, to correct the level for the ink a part displaces.",
     meniscus: "How the ink climbs a part, from a scan of a precision ball of known diameter.",
   };
-  let cm = null, focus = null, busy = false, frameSeq = 0, poller = null;
+  let cm = null, focus = null, busy = false, frameSeq = 0, poller = null, refused = "";
 
   const num = (v, d) => (typeof v === "number" ? v.toFixed(d) : String(v));
   function summary(step) {
@@ -145,7 +145,8 @@
       if (a.stage === "scanning") { show($("#cm-progress"), true); watchScan(); }
     }
     renderDetected(a);
-    text("#cm-error", a && a.error ? a.error : ""); show($("#cm-error"), !!(a && a.error));
+    const err = refused || (a && a.error) || "";          // the daemon's refusal of the last action, or the step's own
+    text("#cm-error", err); show($("#cm-error"), !!err);
     show($("#cm-skip"), true); show($("#cm-cancel"), true);
     $("#cm-skip").disabled = busy;
     show($("#cm-view"), !!a && (id === "camera" || id === "level_zero"));
@@ -170,7 +171,7 @@
   }
 
   // ------------------------------------------------------------------ acting
-  function clearNote() { note(""); }
+  function clearNote() { note(""); refused = ""; }
   function note(t, bad) { text("#cm-note", t); show($("#cm-note"), !!t); $("#cm-note").classList.toggle("bad", !!bad); }
   function render(answer) {
     cm = answer;
@@ -197,8 +198,8 @@
     } catch (e) {
       busy = false;
       note("");
+      refused = e.message;
       try { render(await api("GET", "/api/commissioning")); } catch (e2) { /* keep the old view */ }
-      text("#cm-error", e.message); show($("#cm-error"), true);
     }
     show($("#cm-busy"), false);
     renderStep(); renderResults();
@@ -206,6 +207,7 @@
   async function leave(action) {
     const id = (cm.active && cm.active.step) || focus;
     if (!id) return;
+    refused = "";
     try {
       const answer = await api("POST", "/api/commissioning/" + id + "/" + action, {});
       busy = false;
