@@ -107,6 +107,11 @@ def test_the_scan_carries_the_calibration_in_force(commissioned):
     assert "switched off" in report["calibration"]["used"]["tank"]
     md = svc.job_file(job["id"], "report.md").read_text()
     assert "## Calibration" in md and "commissioned camera (measured, " in md
+    # `inkslice process` on the folder (our pipeline) corrects with what scan.json carries
+    from appliance.process import process
+    ours = process(svc.job_file(job["id"], "scan/scan.json").parent, truth=False)
+    assert ours.diagnostics["corrections"] == {"displacement_tank_area_mm2": 22500.0, "meniscus": True}
+    assert ours.calibration["warnings"] == [] and "meniscus: capillary length" in ours.calibration["used"]["meniscus"]
 
 
 def test_a_scan_without_commissioning_gets_warnings(tmp_path):
