@@ -22,15 +22,19 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from appliance.daemon.processing import in_process        # noqa: E402
+from appliance.outputs import read_heightmap_csv            # noqa: E402
 from appliance.daemon.service import BenchService           # noqa: E402
 from appliance.sim import surfaces                          # noqa: E402
 from appliance.sim.fakes import SimulatedBenchFactory       # noqa: E402
 from appliance.sim.physics import meniscus_rise             # noqa: E402
 from appliance.sim.render import effects_preset             # noqa: E402
 from appliance.sim.rig import Rig                           # noqa: E402
+from appliance.surface.stats import seed_statistics         # noqa: E402
 
 TRUE_LEVEL_ZERO = 57.3
 
@@ -52,17 +56,27 @@ def scan_params(sample, step, effects):
     below = float(meniscus_rise(math.pi / 2)) if effects_preset(effects).meniscus else 0.0
     top = math.floor(part.z_max / step) * step
     bottom = math.floor((part.z_min_top - step - below) / step) * step
-    return {"name": sample, "surface": sample, "levels_to_mm": top, "levels_from_mm": max(bottom, 0.5),
+    return {"name": sample, "levels_to_mm": top, "levels_from_mm": max(bottom, 0.5),
             "level_step_mm": step, "settle_s": 0.0}
 
 
-def scan(svc, params, label):
+def statistics(svc, job, sample):
+    """The job's height map against the part's truth (the daemon itself knows no truth)."""
+    part = surfaces.get(sample)
+    hm = read_heightmap_csv(svc.job_file(job["id"], "heightmap.csv"))
+    X, Y = hm.grid()
+    z_true = np.where(part.inside(X, Y), part.to_dissertation(part.height(X, Y)), np.nan)
+    norm = part.table_normaliser or float(np.nanmax(np.abs(z_true)))
+    return seed_statistics(z_true, part.to_dissertation(hm.z), norm)
+
+
+def scan(svc, params, label, sample):
     t0 = time.monotonic()
     job = wait(svc, svc.start_scan(params))
     if job["status"] != "done":
         raise SystemExit(f"{label}: the scan {job['status']}: {job['reason']}")
     report = json.loads(svc.job_file(job["id"], "report.json").read_text())
-    s = report["statistics"]["inkslice:fit"]
+    s = statistics(svc, job, sample)
     print(f"  {label:<34} Ea {s['Ea']:.4f} mm, sigma {s['sigma']:.4f}, max {s['max_error']:.3f} mm, "
           f"matching {s['matching']:.3f} % ({job['levels_done']} frames, {time.monotonic() - t0:.0f} s)")
     for w in report["calibration"]["warnings"]:
@@ -120,10 +134,10 @@ def main():
             params = scan_params(args.sample, args.step, args.effects)
             if not args.skip_before:
                 # level zero entered right: what is left out is the camera, tank and meniscus
-                before = scan(svc, {**params, "level_at_home_mm": TRUE_LEVEL_ZERO}, "before commissioning")
+                before = scan(svc, {**params, "level_at_home_mm": TRUE_LEVEL_ZERO}, "before commissioning", args.sample)
             print("commissioning:")
             commission(svc, args.views, args.diameter)
-            after = scan(svc, params, "after commissioning")
+            after = scan(svc, params, "after commissioning", args.sample)
             if not args.skip_before:
                 print(f"=> Ea {before['Ea']:.4f} mm before, {after['Ea']:.4f} mm after commissioning "
                       f"({before['Ea'] / after['Ea']:.1f}x lower)")

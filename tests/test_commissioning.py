@@ -9,7 +9,7 @@ import pytest
 
 from appliance.daemon.processing import in_process
 from appliance.daemon.service import BenchService
-from appliance.errors import SettingError
+from appliance.errors import InkSliceError, SettingError
 from appliance.sim.fakes import FakeBench
 from daemon_helpers import wait_final
 
@@ -255,4 +255,18 @@ def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
         client.close()
         server.shutdown()
         server.server_close()
+        svc.close()
+
+
+def test_a_step_that_cannot_start_leaves_nothing_held(tmp_path):
+    bench = FakeBench("cone", faults={"stage": {"unplug_after_moves": 0}})
+    svc = BenchService(tmp_path / "data", bench, processor=in_process, panel_interval_s=0.02)
+    try:
+        for sid in ("level_zero", "camera"):
+            with pytest.raises(InkSliceError, match="unplugged"):
+                svc.commission(sid, "start")
+            c = svc.commissioning()
+            assert c["active"] is None and bench.placement is None, sid
+            assert step(c, sid)["status"] == "missing"
+    finally:
         svc.close()

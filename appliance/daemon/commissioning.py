@@ -231,9 +231,7 @@ class Commissioning:
                 raise SettingError("commissioning", f"the {TITLES[s.step].lower()} step is in progress; "
                                                     "finish, skip or cancel it first")
             allowed = ACTIONS.get((s.step, s.stage), ()) if s else IDLE_ACTIONS[step]
-            if action == "start" and s is None and action in allowed:
-                pass
-            elif action not in allowed:
+            if action not in allowed:
                 raise SettingError("action", f"{action!r} is not possible now in the {TITLES[step].lower()} step; "
                                              f"possible: {', '.join(list(allowed) + ['cancel', 'skip'])}")
             self.h.say(f"commissioning: {TITLES[step]}: {action}")
@@ -394,7 +392,7 @@ class Commissioning:
         try:
             self._open_and_home(s)
         except BaseException:
-            self.session = None
+            self._end("level_zero", "could not start")
             raise
 
     def _level_zero_measure(self, values):
@@ -450,7 +448,7 @@ class Commissioning:
         try:
             self._open_and_home(s)
         except BaseException:
-            self.session = None
+            self._end("camera", "could not start")
             raise
         self._ask_view(s)
 
