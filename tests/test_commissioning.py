@@ -179,6 +179,22 @@ def test_skip_records_the_step_as_skipped_and_keeps_what_was_in_force(tmp_path):
         svc.close()
 
 
+def test_the_guided_calibration_and_a_commissioning_step_never_hold_the_bench_together(tmp_path):
+    svc, _ = box(tmp_path)
+    try:
+        svc.commission("camera", "start")
+        with pytest.raises(SettingError, match="commissioning/camera/cancel"):
+            svc.calibrate("home")
+        svc.commission("camera", "cancel")
+        svc.calibrate("home")
+        with pytest.raises(SettingError, match="guided calibration holds the bench"):
+            svc.commission("level_zero", "start")
+        svc.calibrate("cancel")
+        assert svc.commission("level_zero", "start")["active"]["holds_bench"]
+    finally:
+        svc.close()
+
+
 def test_skipping_the_meniscus_during_its_scan_cancels_the_scan(tmp_path):
     svc, _ = box(tmp_path)
     try:

@@ -264,6 +264,10 @@ class BenchService:
             if self._thread is not None and self._thread.is_alive():
                 raise SettingError("calibration", f"a scan is running ({self._state['job_id']}); "
                                                   "calibrate when it has finished")
+            if step == "home" and self._commissioning.holds_bench:     # one owner of the devices at a time
+                busy = self._commissioning.session.step
+                raise SettingError("calibration", f"the commissioning step {busy!r} holds the bench; finish it or "
+                                                  f"cancel it first (POST /api/commissioning/{busy}/cancel)")
         if not cal.lock.acquire(blocking=False):
             raise SettingError("calibration", "a calibration step is already running")
         try:
