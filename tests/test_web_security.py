@@ -237,6 +237,15 @@ def test_dot_dot_in_any_path_parameter_is_refused(env, tmp_path):
 
 # -- uploads -------------------------------------------------------------------------------
 
+def png_header(width, height):
+    """A PNG's signature and IHDR: all the web reads of a frame before unpacking it."""
+    import struct
+    import zlib
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+            + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)))
+
+
 def scan_zip(frames=2, prefix="", extra=None, scan=None):
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as z:
@@ -245,7 +254,7 @@ def scan_zip(frames=2, prefix="", extra=None, scan=None):
                        "frames": [{"file": f"frames/{i:04d}.png", "level_mm": i * 0.5} for i in range(frames)]}
         z.writestr(prefix + "scan.json", json.dumps(doc))
         for i in range(frames):
-            z.writestr(f"{prefix}frames/{i:04d}.png", b"\x89PNG fake")
+            z.writestr(f"{prefix}frames/{i:04d}.png", png_header(4, 4))
         for name, data in (extra or {}).items():
             z.writestr(name, data)
     return buf.getvalue()

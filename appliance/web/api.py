@@ -8,18 +8,20 @@ Errors are JSON: {"error": "...", "where": "..."} with 400 (bad setting),
 """
 from __future__ import annotations
 
-import io
 import json
 import re
 import secrets
 import shutil
 import stat
+import tempfile
 import time
 import zipfile
+import zlib
 from pathlib import Path, PurePosixPath
 
-from flask import Blueprint, Response, current_app, g, jsonify, request, send_file, session
+from flask import Blueprint, Request, Response, current_app, g, jsonify, request, send_file, session
 
+from ..daemon.importing import read_image_header
 from ..errors import DeviceError, InkSliceError, ScanError, SettingError
 from . import auth
 from .adapter import ACTIVE, NotOffered
@@ -157,7 +159,7 @@ def events():
     if not slots.acquire(blocking=False):
         return err("too many live streams; poll /api/state instead", 503)
 
-    # waitress tells us when the phone has gone (needs channel_request_lookahead, see demo.py),
+    # waitress tells us when the phone has gone (needs channel_request_lookahead, see limits.py),
     # so a closed tab frees its slot within a quarter second, not at the next write
     gone = request.environ.get("waitress.client_disconnected") or (lambda: False)
 
@@ -322,7 +324,6 @@ def job_zip(job_id):
     Written to a temporary file, not memory: a 2048 x 1536 scan is a few hundred MB of PNGs and
     the Pi has 1 GB. Frames are PNGs already, so they are stored, not deflated again.
     """
-    import tempfile
     _check_job_id(job_id)
     info = svc().job(job_id)
     tmp = tempfile.TemporaryFile()
@@ -428,92 +429,183 @@ def usb_export(job_id):
 
 # -- uploads ---------------------------------------------------------------------------------------
 
+def incoming_dir(data_dir) -> Path:
+    """Where uploads are received and unpacked: on the data disk (not /tmp, which may be RAM)."""
+    return Path(data_dir) / "web" / "uploads"
+
+
+def clean_incoming(data_dir) -> int:
+    """Remove what a web killed mid-upload left behind (.incoming-*); returns how many."""
+    folder = incoming_dir(data_dir)
+    gone = 0
+    for p in folder.glob(".incoming-*") if folder.is_dir() else ():
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        gone += 1
+    return gone
+
+
+class UploadRequest(Request):
+    """Flask's request, with uploaded files received into an unnamed file on the data disk.
+
+    Werkzeug would spool them to the system's temporary folder. The file has no name
+    (unlinked at once), so a web killed mid-upload leaves nothing to clean.
+    """
+
+    def _get_file_stream(self, total_content_length, content_type, filename=None, content_length=None):
+        folder = incoming_dir(current_app.extensions["inkslice"]["config"]["data_dir"])
+        folder.mkdir(parents=True, exist_ok=True)
+        return tempfile.TemporaryFile("wb+", dir=folder, prefix=".incoming-")
+
+
 @bp.post("/uploads/scan")
 def upload_scan():
     """A scan folder as a zip (scan.json + frames/...). Validated, unpacked, handed to the daemon.
 
     Refused, leaving nothing behind: not a zip, a member with an absolute path,
     `..`, a backslash, a symlink or a device file; more than MAX_ZIP_MEMBERS
-    members; more than max_unzipped_bytes unpacked (counted while unpacking,
-    not trusted from the header); no scan.json, or one whose frames are not in
-    the zip. The size of the upload itself is capped by MAX_CONTENT_LENGTH (413).
+    members; more than max_unzipped_bytes unpacked or a frame of more than
+    max_frame_pixels (both read from the zip's directory and the frames' headers
+    before anything is unpacked; the sizes are then enforced while unpacking, since
+    zipfile stops a member at its declared size); no scan.json, one too deep to
+    parse, or one whose frames are not in the zip. The upload itself is capped by
+    MAX_CONTENT_LENGTH (413), and waitress refuses a big body from anyone not logged
+    in before reading it (limits.py). Everything is received and unpacked under
+    DATA/web/uploads/.incoming-*, removed at the end and at the web's start.
     The service checks the folder again (the daemon: importing.py) and keeps its own
     copy, so the unpacked folder is removed whether the import succeeds or not.
     """
     if not svc().offers("import_scan"):
         raise NotOffered("bench", "this bench service cannot import scans")
-    f = request.files.get("file")
-    blob = f.stream if f is not None else io.BytesIO(request.get_data(cache=False))
     cfg = ext()["config"]
-    uploads = Path(cfg["data_dir"]) / "web" / "uploads"
+    uploads = incoming_dir(cfg["data_dir"])
     uploads.mkdir(parents=True, exist_ok=True)
+    f = request.files.get("file")
+    blob = f.stream if f is not None else _body_to_disk(uploads, int(cfg["max_upload_bytes"]))
     staging = uploads / f".incoming-{secrets.token_hex(6)}"
     try:
-        folder = _unpack_scan_zip(blob, staging, int(cfg["max_unzipped_bytes"]))
+        folder = _unpack_scan_zip(blob, staging, int(cfg["max_unzipped_bytes"]), int(cfg["max_frame_pixels"]))
         job_id = svc().import_scan(folder)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        blob.close()
     return jsonify(job_id=job_id), 201
 
 
-def _unpack_scan_zip(blob, staging: Path, max_bytes: int) -> Path:
+def _body_to_disk(folder: Path, cap: int):
+    """A raw (not multipart) zip body, copied in chunks to an unnamed file on the data disk."""
+    out = tempfile.TemporaryFile("wb+", dir=folder, prefix=".incoming-")
+    total = 0
+    while True:
+        chunk = request.stream.read(1 << 16)
+        if not chunk:
+            break
+        total += len(chunk)
+        if total > cap:
+            out.close()
+            raise _Refused(f"upload larger than {cap} bytes", 413)
+        out.write(chunk)
+    out.seek(0)
+    return out
+
+
+MAX_SCAN_JSON = 16 * 1024 * 1024
+
+
+def _unpack_scan_zip(blob, staging: Path, max_bytes: int, max_pixels: int = 16 * 1024 * 1024) -> Path:
     try:
         z = zipfile.ZipFile(blob)
     except (zipfile.BadZipFile, OSError, ValueError):
         raise _Refused("not a zip file", 400) from None
-    with z:
-        infos = z.infolist()
-        if len(infos) > MAX_ZIP_MEMBERS:
-            raise _Refused(f"more than {MAX_ZIP_MEMBERS} files in the zip", 400)
-        names = []
-        for info in infos:
-            n = info.filename
-            p = PurePosixPath(n)
-            mode = info.external_attr >> 16
-            if not n or n.startswith("/") or "\\" in n or ":" in n or ".." in p.parts:
-                raise _Refused(f"unsafe path in zip: {n!r}", 400)
-            # type bits are optional in a zip (many tools set only permissions); when present,
-            # anything but a plain file or folder (a symlink above all) is refused
-            if stat.S_IFMT(mode) not in (0, stat.S_IFREG, stat.S_IFDIR):
-                raise _Refused(f"not a plain file in zip: {n!r}", 400)
-            if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
-                names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
-        # scan.json at the top, or in a folder up to two deep (myscan/scan.json, or JOB/scan/scan.json
-        # as in this box's own archive.zip); only that folder is unpacked
-        found = sorted((n for n in names if PurePosixPath(n).name == "scan.json" and len(PurePosixPath(n).parts) <= 3),
-                       key=lambda n: len(PurePosixPath(n).parts))
-        if not found:
-            raise _Refused("no scan.json in the zip", 400)
-        if len(found) > 1 and len(PurePosixPath(found[0]).parts) == len(PurePosixPath(found[1]).parts):
-            raise _Refused(f"several scan.json in the zip ({found[0]}, {found[1]}): which scan?", 400)
-        prefix = found[0][: -len("scan.json")]
-        try:
-            doc = json.loads(z.read(prefix + "scan.json"))
-        except (ValueError, UnicodeDecodeError):
-            raise _Refused("scan.json is not valid JSON", 400) from None
-        frames = doc.get("frames") if isinstance(doc, dict) else None
-        if not isinstance(frames, list) or not frames:
-            raise _Refused("scan.json has no frames", 400)
-        for i, fr in enumerate(frames):
-            if not isinstance(fr, dict) or not isinstance(fr.get("file"), str) or prefix + fr["file"] not in names:
-                raise _Refused(f"scan.json frames[{i}] names a file that is not in the zip", 400)
-        staging.mkdir(parents=True)
-        total = 0
-        for info in infos:
-            if info.is_dir() or info.filename not in names or not info.filename.startswith(prefix):
-                continue
-            dest = staging / info.filename[len(prefix):]
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            with z.open(info) as src, open(dest, "wb") as out:
-                while True:
-                    chunk = src.read(1 << 16)
-                    if not chunk:
-                        break
-                    total += len(chunk)
-                    if total > max_bytes:
-                        raise _Refused(f"the zip unpacks to more than {max_bytes} bytes", 400)
-                    out.write(chunk)
+    try:
+        with z:
+            return _unpack_checked(z, staging, max_bytes, max_pixels)
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as e:
+        # a member whose data disagrees with the directory (CRC, size), or an unknown compression
+        raise _Refused(f"the zip is damaged: {e}", 400) from None
+
+
+def _unpack_checked(z: zipfile.ZipFile, staging: Path, max_bytes: int, max_pixels: int) -> Path:
+    infos = z.infolist()
+    if len(infos) > MAX_ZIP_MEMBERS:
+        raise _Refused(f"more than {MAX_ZIP_MEMBERS} files in the zip", 400)
+    names = []
+    for info in infos:
+        n = info.filename
+        p = PurePosixPath(n)
+        mode = info.external_attr >> 16
+        if not n or n.startswith("/") or "\\" in n or ":" in n or ".." in p.parts:
+            raise _Refused(f"unsafe path in zip: {n!r}", 400)
+        # type bits are optional in a zip (many tools set only permissions); when present,
+        # anything but a plain file or folder (a symlink above all) is refused
+        if stat.S_IFMT(mode) not in (0, stat.S_IFREG, stat.S_IFDIR):
+            raise _Refused(f"not a plain file in zip: {n!r}", 400)
+        if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
+            names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
+    # scan.json at the top, or in a folder up to two deep (myscan/scan.json, or JOB/scan/scan.json
+    # as in this box's own archive.zip); only that folder is unpacked
+    found = sorted((n for n in names if PurePosixPath(n).name == "scan.json" and len(PurePosixPath(n).parts) <= 3),
+                   key=lambda n: len(PurePosixPath(n).parts))
+    if not found:
+        raise _Refused("no scan.json in the zip", 400)
+    if len(found) > 1 and len(PurePosixPath(found[0]).parts) == len(PurePosixPath(found[1]).parts):
+        raise _Refused(f"several scan.json in the zip ({found[0]}, {found[1]}): which scan?", 400)
+    prefix = found[0][: -len("scan.json")]
+    wanted = [info for info in infos
+              if not info.is_dir() and info.filename in names and info.filename.startswith(prefix)]
+    # the budget from the zip's own directory, before a byte is unpacked (zipfile then stops every
+    # member at the size the directory declares, so a lying header cannot overrun it)
+    declared = sum(info.file_size for info in wanted)
+    if declared > max_bytes:
+        raise _Refused(f"the zip unpacks to {declared} bytes, more than {max_bytes}", 400)
+    doc = _read_scan_json(z, z.getinfo(prefix + "scan.json"))
+    frames = doc.get("frames") if isinstance(doc, dict) else None
+    if not isinstance(frames, list) or not frames:
+        raise _Refused("scan.json has no frames", 400)
+    for i, fr in enumerate(frames):
+        if not isinstance(fr, dict) or not isinstance(fr.get("file"), str) or prefix + fr["file"] not in names:
+            raise _Refused(f"scan.json frames[{i}] names a file that is not in the zip", 400)
+    for fr in frames:
+        _check_frame_pixels(z, prefix + fr["file"], max_pixels)
+    staging.mkdir(parents=True)
+    total = 0
+    for info in wanted:
+        dest = staging / info.filename[len(prefix):]
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        with z.open(info) as src, open(dest, "wb") as out:
+            while True:
+                chunk = src.read(1 << 16)
+                if not chunk:
+                    break
+                total += len(chunk)
+                if total > max_bytes:
+                    raise _Refused(f"the zip unpacks to more than {max_bytes} bytes", 400)
+                out.write(chunk)
     return staging
+
+
+def _read_scan_json(z, info):
+    if info.file_size > MAX_SCAN_JSON:
+        raise _Refused(f"scan.json is larger than {MAX_SCAN_JSON} bytes", 400)
+    try:
+        return json.loads(z.read(info))
+    except RecursionError:
+        raise _Refused("scan.json is nested too deep", 400) from None
+    except (ValueError, UnicodeDecodeError):
+        raise _Refused("scan.json is not valid JSON", 400) from None
+
+
+def _check_frame_pixels(z, name, max_pixels):
+    """A frame's size from its header (its first bytes, not the whole image)."""
+    try:
+        with z.open(name) as f:
+            w, h, _bits = read_image_header(f, name)
+    except ScanError:
+        raise _Refused(f"{name} is not a PNG or JPEG image", 400) from None
+    if w * h > max_pixels:
+        raise _Refused(f"{name} is {w} x {h} pixels, more than {max_pixels}", 400)
 
 
 # -- the admin's own account -------------------------------------------------------------------------
@@ -524,13 +616,19 @@ def change_password():
         return err("change the password from a logged-in browser session", 403)
     body = _json_body()
     creds = ext()["creds"]
-    if not creds.check_password(body.get("current", "")):
+    from .app import client_address
+    ok, wait = auth.checked_password(ext()["limiter"], creds, "password:" + client_address(), body.get("current", ""))
+    if ok is None:
+        resp = jsonify(error=f"too many wrong passwords; try again in {int(wait) + 1} s", where="current")
+        return resp, 429, {"Retry-After": str(int(wait) + 1)}
+    if not ok:
         return err("the current password is wrong", 403, "current")
     try:
         gen = creds.set_password(body.get("new", ""))
     except ValueError as e:
         return err(str(e), 400, "new")
     session["gen"] = gen            # this session stays in; every other one is logged out
+    ext()["sessions"].revoke_all(keep=session.get("sid"))
     auth.first_login_done(ext()["config"])
     return jsonify(ok=True)
 

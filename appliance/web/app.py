@@ -8,8 +8,12 @@ calls nothing else (architecture.md). `config` is a plain dict:
   session_hours     session lifetime (default 12)
   login_attempts    failed logins allowed per address per window (default 5)
   login_window_s    that window (default 300)
+  login_global_attempts failed logins allowed from all addresses together in that window (default 50)
+  login_hashes      password checks (32 MiB of scrypt each) running at once; more get 429 (default 2)
   max_upload_bytes  largest accepted upload (default 256 MiB)
   max_unzipped_bytes largest total size an uploaded zip may expand to (default 1 GiB)
+  max_frame_pixels  largest frame (width x height) an uploaded scan may hold (default 16 Mpx;
+                    the camera makes 2048 x 1536)
   usb               an object with sticks() and export(src, stick_id, name, release) (appliance.hw.usb);
                     default: UsbExporter() on the real /proc/mounts; None disables USB
   sse_max_s         how long one Server-Sent-Events connection stays open (default 50 s;
@@ -17,7 +21,8 @@ calls nothing else (architecture.md). `config` is a plain dict:
                     threads from being held forever by phones that went to sleep)
   max_streams       live-event streams open at once (default 8; waitress has 24 threads);
                     past that /api/events answers 503 and the page falls back to polling
-  trusted_proxy     True to take the client address from X-Forwarded-For (default False)
+  trusted_proxy     True when one reverse proxy fronts the box: the client address is then the
+                    right-most X-Forwarded-For entry, the one the proxy appended (default False)
   reset_password    True to replace the admin password by a fresh generated one at start
                     (the demo does, so it can always print one); other sessions end
   bench_data_dir    the daemon's data folder (default: data_dir; the two units share
@@ -39,6 +44,7 @@ from flask import Flask, g, jsonify, redirect, request, session, url_for
 from ..daemon import firstrun
 from . import api, auth, pages
 from .adapter import WebService
+from .sessions import SessionStore
 from .eta import EtaSmoother
 
 DEFAULTS = {
@@ -46,8 +52,11 @@ DEFAULTS = {
     "session_hours": 12,
     "login_attempts": 5,
     "login_window_s": 300.0,
+    "login_global_attempts": 50,
+    "login_hashes": 2,
     "max_upload_bytes": 256 * 1024 * 1024,
     "max_unzipped_bytes": 1024 * 1024 * 1024,
+    "max_frame_pixels": 16 * 1024 * 1024,
     "sse_max_s": 50.0,
     "max_streams": 8,
     "trusted_proxy": False,
@@ -69,10 +78,14 @@ def create_app(service, config: dict | None = None) -> Flask:
     web_dir = Path(cfg["data_dir"]) / "web"
 
     app = Flask(__name__)
+    app.request_class = api.UploadRequest
     creds = auth.Credentials(web_dir)
+    sessions = SessionStore(web_dir / "sessions.sqlite", float(cfg["session_hours"]) * 3600)
+    api.clean_incoming(cfg["data_dir"])       # left by a web that was killed mid-upload
     first_password = creds.ensure_admin()
     if first_password is None and cfg.get("reset_password"):
         first_password = creds.reset_generated()
+        sessions.revoke_all()
     cfg.setdefault("bench_data_dir", cfg["data_dir"])
     if first_password is not None:
         try:
@@ -100,7 +113,10 @@ def create_app(service, config: dict | None = None) -> Flask:
     app.extensions["inkslice"] = {
         "service": WebService(service),
         "creds": creds,
-        "limiter": auth.LoginLimiter(int(cfg["login_attempts"]), float(cfg["login_window_s"])),
+        "limiter": auth.LoginLimiter(int(cfg["login_attempts"]), float(cfg["login_window_s"]),
+                                     int(cfg["login_global_attempts"]), int(cfg["login_hashes"])),
+        "sessions": sessions,
+        "may_send_body": lambda cookie, authorization: _logged_in(app, cookie, authorization),
         "eta": EtaSmoother(),
         "streams": threading.BoundedSemaphore(int(cfg["max_streams"])),
         "usb": cfg["usb"],
@@ -120,11 +136,10 @@ def create_app(service, config: dict | None = None) -> Flask:
                 return _deny("invalid API token")
             g.auth = "token"            # no CSRF for a header a browser never sends on its own
             return None
-        if session.get("user") == "admin" and session.get("gen") == ext["creds"].generation():
-            if session.get("t", 0) + app.permanent_session_lifetime.total_seconds() < time.time():
-                session.clear()
-            else:
-                g.auth = "session"
+        if _session_valid(app, session):
+            g.auth = "session"
+        elif session.get("user"):
+            session.clear()             # logged out, expired or revoked elsewhere
         if g.auth is None and request.endpoint not in PUBLIC_ENDPOINTS:
             return _deny("log in first")
         if request.method not in auth.SAFE_METHODS:
@@ -170,12 +185,39 @@ def create_app(service, config: dict | None = None) -> Flask:
     return app
 
 
+def _session_valid(app, sess) -> bool:
+    ext = app.extensions["inkslice"]
+    return (sess.get("user") == "admin" and sess.get("gen") == ext["creds"].generation()
+            and sess.get("t", 0) + app.permanent_session_lifetime.total_seconds() >= time.time()
+            and ext["sessions"].valid(sess.get("sid")))
+
+
+def _logged_in(app, cookie_header: str, authorization: str) -> bool:
+    """The request's raw headers carry a live session or a valid API token (limits.py asks this
+    before waitress reads a big body, outside any Flask request)."""
+    if authorization.startswith("Bearer "):
+        return app.extensions["inkslice"]["creds"].token_valid(authorization[7:].strip()) is not None
+    from werkzeug.http import parse_cookie
+    value = parse_cookie(cookie_header).get(app.config["SESSION_COOKIE_NAME"])
+    if not value:
+        return False
+    serializer = app.session_interface.get_signing_serializer(app)
+    try:
+        sess = serializer.loads(value, max_age=int(app.permanent_session_lifetime.total_seconds()))
+    except Exception:           # itsdangerous: bad signature, expired, garbage
+        return False
+    return isinstance(sess, dict) and _session_valid(app, sess)
+
+
 def client_address() -> str:
     cfg = current_config()
     if cfg.get("trusted_proxy"):
+        # The proxy appends the address it saw to whatever the client sent: only the
+        # right-most entry is the proxy's word, everything left of it is the client's.
         fwd = request.headers.get("X-Forwarded-For", "")
-        if fwd:
-            return fwd.split(",")[0].strip()
+        last = fwd.rsplit(",", 1)[-1].strip()
+        if last:
+            return last
     return request.remote_addr or "?"
 
 

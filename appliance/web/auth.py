@@ -25,9 +25,14 @@ friends were about exactly that (anonymous control, an open webcam stream).
   is stored (they are 256-bit random, so a slow hash buys nothing). A bearer
   header is never sent by a browser on its own, so token requests need no
   CSRF token.
-- Login rate limit: per client address, at most N failures in a sliding
-  window; past that every attempt (even a right one) gets 429 until the window
-  has moved on. scrypt's cost (~50 ms) slows guessing further.
+- Login rate limit (LoginLimiter): per client address, at most N failures in
+  a sliding window, and a ceiling for all addresses together; past that every
+  attempt (even a right one) gets 429 until the window has moved on. An
+  attempt counts as failed before its hash is checked, and at most two hashes
+  run at once (scrypt takes 32 MiB each). /api/password, which checks the
+  current password, goes through the same limiter.
+- Sessions are also rows in DATA/web/sessions.sqlite (sessions.py): logout
+  and a password change delete them, so a copied cookie stops working.
 """
 from __future__ import annotations
 
@@ -176,40 +181,94 @@ def secret_key(folder) -> bytes:
 
 
 class LoginLimiter:
-    """At most `attempts` failed logins per client address within `window_s` seconds."""
+    """Password guessing, bounded three ways.
 
-    def __init__(self, attempts=5, window_s=300.0, clock=time.monotonic):
+    - per client address: at most `attempts` failures within `window_s` seconds;
+    - from everyone together: at most `global_attempts` failures in that window (an attacker
+      with many addresses on the LAN still gets only so many guesses);
+    - at most `hashes` password checks running at once (scrypt takes 32 MiB each; a burst of
+      thirty would take a gigabyte). Past that, `try_hash()` says no and the caller answers
+      429 at once instead of queueing.
+
+    begin() counts the attempt as a failure BEFORE the hash is checked, so a burst of parallel
+    requests cannot all slip in while the first checks are still running; succeeded() takes
+    it back. checked_password() below puts the steps together.
+    """
+
+    def __init__(self, attempts=5, window_s=300.0, global_attempts=50, hashes=2, clock=time.monotonic):
         self.attempts, self.window_s, self.clock = attempts, window_s, clock
+        self.global_attempts = global_attempts
         self._fails: dict[str, deque] = defaultdict(deque)
+        self._all: deque = deque()
         self._lock = threading.Lock()
+        self._hashing = threading.BoundedSemaphore(hashes)
 
     def _trim(self, q, now):
         while q and now - q[0] > self.window_s:
             q.popleft()
 
+    def _wait(self, who, now) -> float:
+        q = self._fails[who]
+        self._trim(q, now)
+        self._trim(self._all, now)
+        waits = [self.window_s - (now - d[0]) for d, cap in ((q, self.attempts), (self._all, self.global_attempts))
+                 if len(d) >= cap]
+        return max(1.0, max(waits)) if waits else 0.0
+
     def retry_after(self, who: str) -> float:
         """0 if `who` may try now, else seconds to wait."""
         with self._lock:
+            return self._wait(who, self.clock())
+
+    def begin(self, who: str) -> float:
+        """Like retry_after, but a 0 also records the attempt as a failure (until succeeded())."""
+        with self._lock:
             now = self.clock()
-            q = self._fails[who]
-            self._trim(q, now)
-            if len(q) < self.attempts:
-                return 0.0
-            return max(1.0, self.window_s - (now - q[0]))
+            wait = self._wait(who, now)
+            if not wait:
+                self._record(who, now)
+            return wait
 
     def failed(self, who: str):
         with self._lock:
             now = self.clock()
-            q = self._fails[who]
-            self._trim(q, now)
-            q.append(now)
-            if len(self._fails) > 10000:        # bound memory against address-spraying
-                for k in [k for k, v in self._fails.items() if not v][:5000]:
-                    del self._fails[k]
+            self._trim(self._fails[who], now)
+            self._record(who, now)
+
+    def _record(self, who, now):
+        self._fails[who].append(now)
+        self._all.append(now)
+        if len(self._fails) > 10000:        # bound memory against address-spraying
+            for k in [k for k, v in self._fails.items() if not v][:5000]:
+                del self._fails[k]
 
     def succeeded(self, who: str):
         with self._lock:
-            self._fails.pop(who, None)
+            if self._fails.pop(who, None) and self._all:
+                self._all.pop()             # the attempt begin() counted was not a failure
+
+    def try_hash(self) -> bool:
+        """Take one of the password-check slots without waiting; release with done_hash()."""
+        return self._hashing.acquire(blocking=False)
+
+    def done_hash(self):
+        self._hashing.release()
+
+
+def checked_password(limiter: LoginLimiter, creds: Credentials, who: str, password) -> tuple[bool | None, float]:
+    """(True, 0) right, (False, 0) wrong, (None, seconds) not checked: locked out or hashes busy."""
+    if not limiter.try_hash():
+        return None, 1.0
+    try:
+        wait = limiter.begin(who)
+        if wait:
+            return None, wait
+        ok = creds.check_password(password)
+        if ok:
+            limiter.succeeded(who)
+        return ok, 0.0
+    finally:
+        limiter.done_hash()
 
 
 def first_login_done(cfg: dict) -> None:

@@ -10,10 +10,13 @@ the same in a background thread and returns a handle with .url, .password and
 """
 from __future__ import annotations
 
+import tempfile
 import threading
+from pathlib import Path
 
 from waitress.server import create_server
 
+from . import limits
 from .app import create_app
 
 # waitress's default of 4 threads is too few once phones hold Server-Sent-Events
@@ -38,10 +41,10 @@ def _server(service, data_dir, host, port, threads, config):
     cfg = {"data_dir": str(data_dir)}
     cfg.update(config or {})
     app = create_app(service, cfg)
-    # channel_request_lookahead lets waitress notice a client that hung up while its request is
-    # still running (the live-event streams check waitress.client_disconnected)
-    server = create_server(app, host=host, port=port, threads=threads, channel_timeout=60,
-                           connection_limit=200, channel_request_lookahead=5, ident="inkslice")
+    cfg = app.extensions["inkslice"]["config"]
+    server = create_server(app, host=host, port=port, **limits.server_settings(cfg["max_upload_bytes"], threads))
+    limits.gate_server(server, app.extensions["inkslice"]["may_send_body"],
+                       per_address=None if cfg.get("trusted_proxy") else limits.PER_ADDRESS)
     return server, app
 
 
@@ -60,6 +63,12 @@ def _say(text):
 
 def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, config=None, out=_say):
     """Run until interrupted."""
+    limits.raise_open_files()
+    # waitress spools a logged-in upload's body to a temporary file before the app runs: keep
+    # it on the data disk (a RAM /tmp would charge it to the web's memory limit)
+    spool = Path(data_dir) / "web" / "uploads"
+    spool.mkdir(parents=True, exist_ok=True)
+    tempfile.tempdir = str(spool)
     server, app = _server(service, data_dir, host, port, threads, config)
     run = Running(server, app)
     out(banner(run))
@@ -71,6 +80,7 @@ def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, confi
 
 def start(service, data_dir, host="127.0.0.1", port=0, threads=THREADS, config=None) -> Running:
     """Serve in a daemon thread (port 0: any free port); returns at once."""
+    limits.raise_open_files()
     server, app = _server(service, data_dir, host, port, threads, config)
     t = threading.Thread(target=server.run, daemon=True, name="inkslice-web")
     t.start()

@@ -35,28 +35,27 @@ def login():
     code = 200
     if request.method == "POST":
         who = client_address()
-        limiter = _ext()["limiter"]
-        wait = limiter.retry_after(who)
-        if wait:
+        ext = _ext()
+        ok, wait = auth.checked_password(ext["limiter"], ext["creds"], who, request.form.get("password", ""))
+        if ok is None:
             error = f"Too many failed attempts. Try again in {int(wait) + 1} s."
             resp = current_app.make_response((render_template("login.html", error=error), 429))
             resp.headers["Retry-After"] = str(int(wait) + 1)
             return resp
-        creds = _ext()["creds"]
-        if creds.check_password(request.form.get("password", "")):
-            limiter.succeeded(who)
+        if ok:
             session.clear()             # a fresh session (and CSRF token) at every login
             session.permanent = True
-            session.update(user="admin", gen=creds.generation(), t=time.time(), csrf=auth.new_csrf())
-            auth.first_login_done(_ext()["config"])
+            session.update(user="admin", gen=ext["creds"].generation(), sid=ext["sessions"].open(),
+                           t=time.time(), csrf=auth.new_csrf())
+            auth.first_login_done(ext["config"])
             return redirect(_safe_next(request.form.get("next")))
-        limiter.failed(who)
         error, code = "Wrong password.", 401
     return render_template("login.html", error=error, next=request.args.get("next", "")), code
 
 
 @bp.post("/logout")
 def logout():
+    _ext()["sessions"].revoke(session.get("sid"))      # a copy of the cookie stops working too
     session.clear()
     return redirect(url_for("pages.login"))
 
