@@ -57,7 +57,7 @@ def describe(scan, displacement=True, meniscus=None) -> dict:
             text += f"; the {ref['diameter_mm']:g} mm ball measured to {ref['mean_abs_error_mm']:.3f} mm with it"
         used["meniscus"] = text
     else:
-        warnings.append("no meniscus calibration was used: heights on slopes read high by up to the "
+        warnings.append("no meniscus calibration was used: heights on slopes read low by up to the "
                         "ink's capillary rise (commission the meniscus with the reference ball)")
     lz = cal.get("level_zero")
     if lz:
