@@ -3,6 +3,7 @@ every step measured, the calibration then in every scan.json and named in the re
 scan without it warned about; every step cancellable with the bench free afterwards; the
 whole commissioning carried to a fresh box as one file; an ink change marking results stale."""
 import json
+import time
 
 import numpy as np
 import pytest
@@ -23,6 +24,15 @@ SCAN = {"name": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0, "level_step
 def box(tmp_path, name="data"):
     bench = FakeBench("cone", level_at_home_mm=TRUE_LEVEL_ZERO)
     return BenchService(tmp_path / name, bench, processor=in_process, panel_interval_s=0.02), bench
+
+
+def wait_for(condition, timeout=5.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return False
 
 
 def step(c, sid):
@@ -251,7 +261,7 @@ def test_an_ink_change_makes_meniscus_and_level_zero_stale(tmp_path):
 def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
     """The web server talks to the daemon over its socket (rpc.BenchClient): the same calls."""
     from appliance.daemon import rpc
-    svc, _ = box(tmp_path)
+    svc, bench = box(tmp_path)
     server = rpc.serve(svc, tmp_path / "daemon.sock")
     client = rpc.BenchClient(tmp_path / "daemon.sock")
     try:
@@ -261,7 +271,8 @@ def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
             client.commission("level_zero", "measure")
         c = client.commission("level_zero", "start")
         assert c["active"]["holds_bench"] and c["active"]["prompt"].startswith("Take everything off the base")
-        assert svc.state()["message"] == c["active"]["prompt"]      # the display and the page say it too
+        assert svc.state()["message"] == c["active"]["prompt"]      # the page says it, the display in short
+        assert wait_for(lambda: bench.panel.display.lines[:3] == ["SETUP LEVEL 0", "EMPTY THE BASE", "see the phone"])
         assert client.commission("level_zero", "cancel")["active"] is None
         doc = client.export_commissioning()
         assert set(doc["results"]) == {"tank"} and client.ink_changed()["ink_changed"]

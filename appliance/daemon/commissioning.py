@@ -48,6 +48,7 @@ FORMAT = "inkslice.commissioning/1"
 STEPS = ("level_zero", "camera", "tank", "meniscus")
 TITLES = {"level_zero": "Level zero", "camera": "Camera lens and liquid plane", "tank": "Tank area",
           "meniscus": "Meniscus (reference ball)"}
+SHORT = {"level_zero": "LEVEL 0", "camera": "CAMERA", "tank": "TANK", "meniscus": "MENISCUS"}
 INK_SENSITIVE = ("level_zero", "meniscus")          # an ink change makes these stale
 MIN_VIEWS = 3
 LEVEL_SEARCH_MM = 12.0          # level zero is searched this far either side of the current setting
@@ -136,6 +137,14 @@ class Session:
     devices: object = None
     views: list = field(default_factory=list)   # the camera step's board views (frames)
     pending: dict | None = None                 # the result waiting for "accept"
+    placement: str | None = None                # what the operator was last asked to put on the base
+
+    def display_lines(self) -> list[str]:
+        """The front panel's four short lines (16 characters) while the step waits on the person."""
+        what = {"empty": "EMPTY THE BASE", "board_views": "HOLD BOARD TILTD", "board_flat": "BOARD FLAT ON IT",
+                "reference": "BALL ON THE BASE"}.get(self.placement, "")
+        done = f"{len(self.views)} views" if self.step == "camera" and self.stage == "views" else "see the phone"
+        return ["SETUP " + SHORT[self.step], what, done]
 
     def to_json(self, actions) -> dict:
         return {"step": self.step, "stage": self.stage, "prompt": self.prompt,
@@ -309,7 +318,7 @@ class Commissioning:
         request = Placement(what, text, details, view)
         self.h.operator.place(request)
         if self.session is not None:
-            self.session.prompt = text
+            self.session.prompt, self.session.placement = text, what
         self.h.say(text)
 
     def _interrupt(self):

@@ -615,7 +615,8 @@ class BenchService:
                 self._poll_button()
                 st = self.state()
                 self._drive_led(st, tick)
-                lines = self._notice_lines() or self._password_lines(st) or self._display_lines(st)
+                lines = self._notice_lines() or self._commissioning_lines(st) or self._password_lines(st) \
+                    or self._display_lines(st)
                 if lines != last_lines and self._panel.display is not None:
                     self._panel.display.show(lines)
                     last_lines = lines
@@ -674,6 +675,14 @@ class BenchService:
                 self._shown_notice = None
                 return None
         return [*shown[1], lan_address()]
+
+    def _commissioning_lines(self, st) -> list[str] | None:
+        """What a commissioning step asks of the person at the bench; a scan's progress (the
+        reference ball's) takes the screen while it runs."""
+        session = self._commissioning.session
+        if session is None or st["state"] in ACTIVE:
+            return None
+        return [*session.display_lines(), lan_address()]
 
     def _password_lines(self, st) -> list[str] | None:
         """The first-run password (firstrun.py) while nobody has logged in; a scan's
