@@ -333,3 +333,73 @@ def test_what_a_killed_upload_left_is_removed_when_the_web_starts(tmp_path):
     app, svc = make_app(tmp_path)
     assert uploads_left(tmp_path) == ["keep.txt"]
     svc.close()
+
+
+def test_a_web_killed_mid_upload_leaves_nothing_after_its_restart(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    from appliance.web.auth import Credentials
+    data = tmp_path / "data"
+    uploads = data / "web" / "uploads"
+
+    def serve():
+        proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "serve", "--fake", "--host", "127.0.0.1",
+                                 "--port", "0", "--data", str(data), "--no-usb"], stdout=subprocess.PIPE, text=True)
+        port = int(re.search(r":(\d+)/", proc.stdout.readline()).group(1))
+        return proc, port
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED) as z:       # 4 x 10 MB of frames: a few 100 ms to unpack
+        z.writestr("scan.json", json.dumps({"frames": [{"file": f"f{i}.png", "level_mm": i} for i in range(4)]}))
+        for i in range(4):
+            z.writestr(f"f{i}.png", png_header(2048, 1536) + os.urandom(10 * 1024 * 1024))
+    body = buf.getvalue()
+    proc, port = serve()
+    token = Credentials(data / "web").create_token("t")[1]
+    caught = False
+    for _ in range(3):              # the kill must land while .incoming-* exists; retry if it missed
+        s = send_head(port, f"POST /api/uploads/scan HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {token}\r\n"
+                            f"Content-Type: application/zip\r\nContent-Length: {len(body)}\r\n\r\n")
+        s.sendall(body)
+        end = time.monotonic() + 20
+        while time.monotonic() < end and not list(uploads.glob(".incoming-*")):
+            time.sleep(0.001)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        s.close()
+        caught = bool(list(uploads.glob(".incoming-*")))
+        proc, port = serve()
+        if caught:
+            break
+    try:
+        assert caught, "the kill never landed mid-upload"
+        assert list(uploads.glob(".incoming-*")) == []
+        assert sum(p.stat().st_size for p in uploads.rglob("*") if p.is_file()) == 0
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_headers_that_never_end_are_cut_off_small(server):
+    # waitress holds a request's headers in memory until they are complete
+    s = send_head(server.port, "GET / HTTP/1.1\r\nHost: x\r\n")
+    try:
+        for _ in range(8):
+            s.sendall(b"X-Padding: " + b"a" * 4000 + b"\r\n")
+    except (BrokenPipeError, ConnectionResetError):
+        pass
+    assert status_of(s) == 431
+    s.close()
+
+
+def test_the_daemons_audit_counts_what_a_killed_upload_left(tmp_path):
+    from appliance.daemon.recovery import audit
+    from appliance.daemon.store import Store
+    store = Store(tmp_path / "data")          # the daemon and the web share the data folder
+    assert audit(store) == []
+    (tmp_path / "data" / "web" / "uploads" / ".incoming-0123abcd").mkdir(parents=True)
+    assert audit(store) == ["web: uploads left half-unpacked (removed when the web starts): ['.incoming-0123abcd']"]
+    make_app(tmp_path)[1].close()             # the web starts on the same folder
+    assert audit(store) == []

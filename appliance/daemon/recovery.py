@@ -93,4 +93,8 @@ def audit(store: Store) -> list[str]:
         for name in job["outputs"]:
             if not (store.job_dir(jid) / name).is_file():
                 problems.append(f"{jid}: output {name} is listed but missing")
+    # the web shares this data folder; what it was unpacking when killed stays until it restarts
+    stray = sorted(p.name for p in (store.data_dir / "web" / "uploads").glob(".incoming-*"))
+    if stray:
+        problems.append(f"web: uploads left half-unpacked (removed when the web starts): {stray}")
     return problems

@@ -45,6 +45,9 @@ def server_settings(max_upload_bytes: int, threads: int) -> dict:
         "threads": threads,
         "max_request_body_size": int(max_upload_bytes) + MULTIPART_SLACK,
         "inbuf_overflow": 512 * 1024,              # > ANON_BODY_BYTES: anonymous bodies stay in memory
+        # headers are held in memory until complete: 1000 half-sent ones at waitress's default
+        # 256 KiB would be 256 MB; ours (a cookie, a token) fit in a few hundred bytes
+        "max_request_header_size": 16 * 1024,
         "connection_limit": CONNECTION_LIMIT,
         "asyncore_use_poll": True,
         # an idle socket (no request in progress) is closed after channel_timeout; the sweep runs
