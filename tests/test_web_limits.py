@@ -76,8 +76,9 @@ def test_an_anonymous_big_body_is_refused_on_its_headers_before_any_of_it_is_rea
                                f"Content-Length: {3 * 1024 * 1024}\r\n\r\n")
     assert status_of(s) == 401
     s.close()
-    # chunked (no size announced) and a forged cookie are anonymous too
+    # chunked (no size announced) and a forged cookie are anonymous too; asking first changes nothing
     for extra in ("Transfer-Encoding: chunked\r\n",
+                  f"Expect: 100-continue\r\nContent-Length: {2 * 1024 * 1024}\r\n",
                   f"Cookie: inkslice_session=forged.cookie.value\r\nContent-Length: {2 * 1024 * 1024}\r\n"):
         s = send_head(server.port, f"POST /api/uploads/scan HTTP/1.1\r\nHost: x\r\n{extra}\r\n")
         assert status_of(s) == 401, extra

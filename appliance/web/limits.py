@@ -88,6 +88,7 @@ def gate_server(server, may_send_body, per_address: int | None = PER_ADDRESS):
             if was_in_headers and self.headers_finished and not self.error and self._refuse_body():
                 self.error = LoginFirst(f"log in before sending a body of more than {ANON_BODY_BYTES} bytes")
                 self.completed = True
+                self.expect_continue = False        # no "100 Continue": the body is not wanted
                 if self.body_rcv is not None:
                     self.body_rcv.getbuf().close()
             return n
