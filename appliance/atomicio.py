@@ -44,3 +44,118 @@ def write_text(path, text: str):
 
 def write_json(path, obj):
     write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+# -- a whole folder at once ----------------------------------------------------------
+#
+# A job's outputs are a set: a G-code program from one run beside a height map from
+# another is a wrong part waiting to be milled. So an output folder is never edited
+# file by file: the new set is built in a hidden sibling folder (same file system,
+# so renaming is atomic) and swapped in with one rename. A crash at any moment
+# leaves OUT holding either the whole old set or the whole new one.
+
+STAGING_PREFIX = ".inkslice-"
+
+
+def check_output_folder(out):
+    """Refuse an output folder we could not replace, before any long work:
+    -> InkSliceError naming the problem (OUT is a file, its parent is missing or read-only)."""
+    from .errors import InkSliceError
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InkSliceError(out, "exists and is not a folder; give a folder for the outputs")
+    parent = out.absolute().parent
+    probe = parent
+    while not probe.exists():               # OUT and missing parents are created
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InkSliceError(out, f"cannot be created: {probe} is not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InkSliceError(out, f"cannot be written: no permission to write in {probe}")
+    if out.is_dir() and not os.access(out, os.R_OK | os.X_OK):
+        raise InkSliceError(out, "cannot be read, so it cannot be replaced")
+
+
+def replace_folder(out, files: dict, keep=()):
+    """Make folder `out` hold exactly `files` ({name: bytes}) plus the entries named in
+    `keep` that it holds now (the daemon keeps the scan inside its job folder), all at once.
+
+    Kept entries are hard-linked into the new folder (no data copied; copied where the
+    file system cannot link), so the swap never moves or risks them."""
+    import shutil
+    out = Path(out).absolute()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    clear_staging(out)
+    new = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{out.name}.new.", dir=out.parent))
+    try:
+        for name, data in files.items():
+            _write_new(new / name, data)
+        for name in keep:
+            src = out / name
+            if src.is_dir():
+                shutil.copytree(src, new / name, copy_function=_link_or_copy, symlinks=True)
+            elif src.exists():
+                _link_or_copy(src, new / name)
+        fsync_dir(new)
+        if out.exists():
+            os.chmod(new, os.stat(out).st_mode & 0o7777)
+            _swap(new, out)                   # `new` now names the old set
+        else:
+            os.rename(new, out)
+        fsync_dir(out.parent)
+    finally:
+        shutil.rmtree(new, ignore_errors=True)
+
+
+def clear_staging(out):
+    """Tidy what a crashed run left beside `out`: an old set parked mid-swap goes back
+    (`out` is missing only then), half-built new sets are removed."""
+    import shutil
+    out = Path(out).absolute()
+    if not out.parent.is_dir():
+        return
+    parked = sorted(out.parent.glob(f"{STAGING_PREFIX}{out.name}.old.*"))
+    if parked and not out.exists():
+        os.rename(parked[0], out)
+    for old in out.parent.glob(f"{STAGING_PREFIX}{out.name}.*"):
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _write_new(path, data: bytes):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "xb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _link_or_copy(src, dst):
+    import shutil
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+    return dst
+
+
+_RENAME_EXCHANGE = 2
+
+
+def _swap(a: Path, b: Path):
+    """Exchange two folders' names atomically (Linux renameat2); where the kernel or
+    file system cannot, two renames with the old set parked beside under a staging
+    name (a crash between them leaves the old set there and `b` missing, never mixed)."""
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        fn = None
+    if fn is not None:
+        AT_FDCWD = -100
+        if fn(AT_FDCWD, os.fsencode(str(a)), AT_FDCWD, os.fsencode(str(b)), _RENAME_EXCHANGE) == 0:
+            return
+    parked = b.parent / f"{STAGING_PREFIX}{b.name}.old.{os.getpid()}"
+    os.rename(b, parked)
+    os.rename(a, b)
+    os.rename(parked, a)

@@ -14,8 +14,14 @@ With `compare`, the other pipeline's methods are run on the same frames so
 the report can put them side by side. Statistics (eqs 3-27..3-30) are computed
 when the scan has ground truth (a rendered scan's `<scan>.truth.json`).
 
-Everything is computed before the first byte is written, and every file is
-written atomically: a bad scan leaves OUT exactly as it was.
+The output contract: a run either writes the complete set (height map, STL,
+finishing program, report, pictures) or fails naming the reason, and a bad
+scan or a part no program can be made for leaves OUT exactly as it was.
+Everything is computed before the first byte is written, then the set is
+built in a sibling folder and swapped in whole (atomicio.replace_folder): no
+file of an earlier run survives beside the new ones. Our height map stands on
+the base plane before anything is written (surface/base.py: heights below
+the base top clamped, gaps inside the part filled), counted in the report.
 """
 from __future__ import annotations
 
@@ -173,6 +179,7 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
     from .surface.slices import Perspective
     from .surface.meniscus import camera_centre_xy
+    from .surface.base import stand_on_base
     waterlines = extract_waterlines(scan)
     bounds = _waterline_bounds(waterlines)
     # the grid spans the part's outline once the walls' raised edges are put back
@@ -186,10 +193,12 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
         rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model,
                                                                 perspective=view))
         bounds = rec.diagnostics.get("bounds", bounds)
-        out[f"inkslice:{m}"] = rec.heightmap
+        out[f"inkslice:{m}"], fix = stand_on_base(rec.heightmap)
         diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
                                                      if k in ("wall_points", "points", "seconds", "notes",
                                                               "smoothing_mm", "displacement")}}
+        diag[m]["base"] = fix.to_json()
+        diag[m]["base_notes"] = fix.sentences()
     diag["grid"] = {"bounds": bounds, "n": grid_n, "spacing_mm": spacing_mm}
     diag["corrections"] = {"displacement_tank_area_mm2": tank, "meniscus": bool(model)}
     return out, diag, waterlines
@@ -234,6 +243,8 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
         methods = (method,) if not compare else tuple(dict.fromkeys((method, "fit")))
         hms, job.diagnostics, _ = run_inkslice(scan, methods, grid_n, spacing_mm, displacement, meniscus)
         job.heightmaps.update(hms)
+        job.notes += [f"{label('inkslice:' + m)}: {n}" for m in methods
+                      for n in job.diagnostics[m]["base_notes"]]
         job.timings["inkslice_s"] = time.perf_counter() - t0
     if surface is not None:
         for k, hm in job.heightmaps.items():
@@ -256,6 +267,12 @@ def report_markdown(job: Job) -> str:
     if job.calibration:
         from .calibration_used import markdown
         lines += markdown(job.calibration) + [""]
+    base = job.diagnostics.get(job.method, {}).get("base") if job.pipeline == "inkslice" else None
+    if base is not None:
+        lines += ["", "Base plane (the part stands on the base top, z = 0): "
+                  f"{base['clamped_cells']} cells clamped up to it (deepest dip {base['deepest_dip_mm']:.3f} mm), "
+                  f"{base['filled_cells']} gap cells filled from their neighbours, "
+                  f"{base['base_cells']} hole cells set to the base top.", ""]
     if not job.stats:
         lines.append("No ground truth for this scan: statistics need a rendered scan or a known part.")
         return "\n".join(lines) + "\n"
@@ -297,16 +314,18 @@ def toolpath_files(job: Job, cam_options=None) -> dict:
     try:
         settings = FinishSettings(parse_cutter(opts["cutter"]), scallop=opts["scallop"])
         cam = finishing_gcode(hm, settings, dialect=opts["dialect"])
-        files["toolpath.gcode"] = cam.text.encode()
-        job.diagnostics["toolpath"] = {"runtime_min": cam.runtime_s / 60, **{
-            k: v for k, v in cam.summary.items() if isinstance(v, (int, float, str))}}
     except InkSliceError as e:
-        job.notes.append(f"no finishing program: {e} (use `inkslice toolpath` with other settings)")
+        # no program, no outputs: a set without its G-code is not a job's result
+        raise InkSliceError("finishing program", f"cannot be made: {e}") from None
+    files["toolpath.gcode"] = cam.text.encode()
+    job.diagnostics["toolpath"] = {"runtime_min": cam.runtime_s / 60, **{
+        k: v for k, v in cam.summary.items() if isinstance(v, (int, float, str))}}
     return files
 
 
-def write_outputs(job: Job, out_folder, cam_options=None) -> list[str]:
-    """Render every output in memory, then write each file atomically."""
+def write_outputs(job: Job, out_folder, cam_options=None, keep=()) -> list[str]:
+    """Render every output in memory, then make OUT hold exactly them, at once
+    (plus the entries named in `keep`: the daemon's scan inside its job folder)."""
     out = Path(out_folder)
     hm = job.heightmap
     files = {"heightmap.csv": outputs.heightmap_csv_text(hm).encode()}
@@ -329,9 +348,7 @@ def write_outputs(job: Job, out_folder, cam_options=None) -> list[str]:
         "statistics": job.stats, "timings": job.timings, "diagnostics": job.diagnostics, "notes": job.notes,
         "calibration": job.calibration,
     }, indent=2, default=_jsonable) + "\n").encode()
-    out.mkdir(parents=True, exist_ok=True)
-    for name, data in files.items():
-        atomicio.write_bytes(out / name, data)
+    atomicio.replace_folder(out, files, keep)
     return sorted(files)
 
 
@@ -343,8 +360,9 @@ def _jsonable(o):
     return str(o)
 
 
-def process_scan(scan_folder, out_folder, cam_options=None, **options) -> dict:
+def process_scan(scan_folder, out_folder, cam_options=None, keep=(), **options) -> dict:
+    atomicio.check_output_folder(out_folder)        # before the long work, not after it
     job = process(scan_folder, **options)
-    written = write_outputs(job, out_folder, cam_options)
+    written = write_outputs(job, out_folder, cam_options, keep)
     return {"outputs": written, "statistics": job.stats, "key": job.key, "method": job.method,
             "pipeline": job.pipeline, "truth": job.truth, "notes": job.notes, "out": str(out_folder)}

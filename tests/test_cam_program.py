@@ -279,7 +279,6 @@ def bowl_files(tmp_path_factory):
     (["toolpath", "{d}/bowl.csv", "--stepover", "-0.5"], "stepover", "must be > 0"),
     (["toolpath", "{d}/bowl.csv", "--scallop", "-0.01"], "scallop", "must be > 0"),
     (["toolpath", "{d}/bowl.csv", "--angle", "nan"], "angle", "degrees"),
-    (["toolpath", "{d}/holes.csv"], "{d}/holes.csv", "6 cells with no height inside the part"),
     (["verify", "{d}/ok.gcode", "--against", "{d}/holes.csv"], "{d}/holes.csv", "no height inside the part"),
     (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--resolution", "0"], "resolution", "must be > 0"),
     (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--edge-band", "-1"], "edge band", "must be >= 0"),

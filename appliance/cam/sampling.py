@@ -29,6 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import InkSliceError
+from ..surface.base import interior_holes
 from ..surface.heightmap import HeightMap
 
 FLOOR = 0.0
@@ -53,16 +54,6 @@ def check_heightmap(hm: HeightMap, where="height map"):
         raise InkSliceError(where, f"has {int(holes.sum())} cells with no height inside the part "
                                    f"(first at x={hm.x[i]:.2f}, y={hm.y[j]:.2f} mm): fill the holes "
                                    "(re-scan or interpolate) first")
-
-
-def interior_holes(on_part):
-    """Off-part cells not connected to the lattice border: gaps inside the part."""
-    off = ~on_part
-    lab, n = ndimage.label(off)
-    if n == 0:
-        return np.zeros_like(off)
-    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    return off & ~np.isin(lab, border)
 
 
 class Sampler:

@@ -71,8 +71,11 @@ def run(args):
     from ..cam.sampling import check_heightmap
     from ..cam.roughing import RoughSettings
     from ..cam.zigzag import FinishSettings
-    hm = read_heightmap_csv(args.heightmap)
+    from ..surface.base import stand_on_base
+    hm, fix = stand_on_base(read_heightmap_csv(args.heightmap))   # as `inkslice process` mills it
     check_heightmap(hm, where=args.heightmap)          # its problems named by the file
+    for sentence in fix.sentences():
+        print(f"note: {args.heightmap}: {sentence}")
     machine = _machine(args)
     common = dict(material=args.material, feed=args.feed, plunge=args.plunge_feed, rpm=args.spindle,
                   dialect=args.dialect, clearance=args.clearance, z_offset=args.z_offset, machine=machine)

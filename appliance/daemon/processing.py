@@ -9,6 +9,11 @@ InkSliceError in it comes back as its one-line text on stderr, exit code 2.
 
 A processor is any callable (scan_folder, out_folder, options, stop_event)
 -> {"outputs": [file names], ...}; tests pass `in_process` or a fake.
+
+The job folder is the output folder: process_scan replaces it whole, keeping
+only what the daemon itself put there (JOB_OWN: the scan and its truth file),
+so no output of an earlier run is left beside the new ones. A job ends `done`
+only with its finishing program (`checked_outputs`); otherwise `failed`.
 """
 from __future__ import annotations
 
@@ -21,6 +26,20 @@ import time
 
 from ..errors import InkSliceError
 from .runner import Cancelled
+
+
+JOB_OWN = ("scan", "scan.truth.json")     # what a job folder holds besides the outputs
+PROGRAM = "toolpath.gcode"
+
+
+def checked_outputs(result: dict, job_dir) -> list[str]:
+    """The outputs a processor reported, if they include the finishing program on disk."""
+    from pathlib import Path
+    outputs = sorted(result.get("outputs", []))
+    if PROGRAM not in outputs or not (Path(job_dir) / PROGRAM).is_file():
+        raise InkSliceError("processing", f"no finishing program ({PROGRAM}) was written; "
+                                          "the scan is kept, process it again")
+    return outputs
 
 
 def options_for(settings: dict) -> dict:
@@ -37,6 +56,8 @@ def options_for(settings: dict) -> dict:
     if "cam_options" in accepted:
         options["cam_options"] = {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
                                   "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])}
+    if "keep" in accepted:
+        options["keep"] = list(JOB_OWN)
     return {k: v for k, v in options.items() if k in accepted}
 
 

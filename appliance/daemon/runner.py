@@ -263,10 +263,10 @@ class ScanRunner:
         self._check_stop()
         self.store.update_job(self.job_id, status="processing")
         self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
-        from .processing import options_for        # (processing imports Cancelled from here)
+        from .processing import checked_outputs, options_for   # (processing imports Cancelled from here)
         options = options_for(S.full(self.settings))
         result = self.processor(self.scan_dir, self.job_dir, options, self.stop)
         self._check_stop()
         if "peak_rss_mb" in result:
             self.store.event(self.job_id, "processed", f"processing peak memory {result['peak_rss_mb']} MB")
-        return sorted(result.get("outputs", []))
+        return checked_outputs(result, self.job_dir)

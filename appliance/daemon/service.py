@@ -410,7 +410,7 @@ class BenchService:
         self._thread.start()
 
     def _run_import(self, job_id):
-        from .processing import options_for
+        from .processing import checked_outputs, options_for
         from .runner import Cancelled
         job = self.store.get_job(job_id)
         folder = self.store.job_dir(job_id)
@@ -419,7 +419,7 @@ class BenchService:
             result = self.processor(folder / "scan", folder, options_for(S.full(job["settings"])), self._stop)
             if self._stop.is_set():
                 raise Cancelled()
-            status, reason, outputs = "done", "", sorted(result.get("outputs", []))
+            status, reason, outputs = "done", "", checked_outputs(result, folder)
         except Cancelled:
             status, reason, outputs = "cancelled", getattr(self._stop, "reason", "cancelled by the operator"), None
         except InkSliceError as e:
