@@ -603,7 +603,8 @@ def reference_processor(reference: dict, options: dict):
         atomicio.write_json(out / "reference.json", result)
         atomicio.write_json(out / "meniscus.json", meniscus_json(model))
         write_heightmap_csv(out / "heightmap.csv", hm)
-        return {"outputs": ["heightmap.csv", "meniscus.json", "reference.json"]}
+        # a measurement, not a part to mill: the job is done without a finishing program
+        return {"outputs": ["heightmap.csv", "meniscus.json", "reference.json"], "makes_program": False}
     return run
 
 

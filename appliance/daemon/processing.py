@@ -33,9 +33,12 @@ PROGRAM = "toolpath.gcode"
 
 
 def checked_outputs(result: dict, job_dir) -> list[str]:
-    """The outputs a processor reported, if they include the finishing program on disk."""
+    """The outputs a processor reported, if they include the finishing program on disk
+    (a processor that measures, not mills, says so with "makes_program": False)."""
     from pathlib import Path
     outputs = sorted(result.get("outputs", []))
+    if result.get("makes_program", True) is False:
+        return outputs
     if PROGRAM not in outputs or not (Path(job_dir) / PROGRAM).is_file():
         raise InkSliceError("processing", f"no finishing program ({PROGRAM}) was written; "
                                           "the scan is kept, process it again")
