@@ -12,7 +12,9 @@ Two pipelines share this entry point:
 
 With `compare`, the other pipeline's methods are run on the same frames so
 the report can put them side by side. Statistics (eqs 3-27..3-30) are computed
-when the scan has ground truth (a rendered scan's `<scan>.truth.json`).
+when the caller passes the part's ground truth (`truth`: a known part, with
+height(x, y), inside(x, y), to_dissertation(z), table_normaliser and name;
+for a rendered scan the command finds it, see sim/truth.py).
 
 The output contract: a run either writes the complete set (height map, STL,
 finishing program, report, pictures) or fails naming the reason, and a bad
@@ -37,7 +39,6 @@ from . import atomicio, outputs, plots
 from .cam.dissertation import dissertation_gcode
 from .errors import InkSliceError, ScanError, SettingError
 from .scanfile import load_scan, read_frame
-from .sim import surfaces
 from .surface import seed as seed_methods
 from .surface.heightmap import HeightMap
 from .surface.seedtables import TABLES
@@ -57,7 +58,8 @@ class Job:
     method: str
     heightmaps: dict                            # "pipeline:method" -> HeightMap
     stats: dict = field(default_factory=dict)   # same keys -> statistics (when truth is known)
-    truth: str | None = None
+    truth: str | None = None                    # the ground truth's name
+    reference: object = None                    # the ground truth itself (a known part)
     timings: dict = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
@@ -77,27 +79,6 @@ def label(key: str) -> str:
     if pipeline == "seed":
         return f"{LABELS[method]} (dissertation)"
     return LABELS[method] if method == "fit" else f"{LABELS[method]} (our waterlines)"
-
-
-def find_truth(scan_folder: Path, truth=None):
-    """Ground truth for a rendered scan: `<scan>.truth.json` beside the folder, or a surface name."""
-    if truth is False:
-        return None
-    if isinstance(truth, str) and truth in surfaces.SURFACES:
-        return surfaces.get(truth)
-    path = Path(truth) if truth else scan_folder.parent / f"{scan_folder.name}.truth.json"
-    if not path.is_file():
-        if truth:
-            raise ScanError(path, "ground-truth file does not exist")
-        return None
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        name = doc["surface"]
-    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as e:
-        raise ScanError(path, f"not a ground-truth file ({e})") from None
-    if name not in surfaces.SURFACES:
-        raise ScanError(path, f"unknown surface {name!r}")
-    return surfaces.get(name)
 
 
 def _frames_top_down(scan):
@@ -229,8 +210,8 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
     if not (isinstance(grid_n, int) and 3 <= grid_n <= 2000):
         raise SettingError("grid", f"grid must be 3..2000 cells a side, got {grid_n!r}")
     scan = load_scan(scan_folder)
-    surface = find_truth(scan_folder, truth)
-    job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None)
+    surface = truth
+    job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None, reference=surface)
     from .calibration_used import describe
     ours = pipeline == "inkslice" or compare                # the dissertation's pipeline corrects neither
     job.calibration = describe(scan, displacement and ours, meniscus if ours else False)
@@ -333,8 +314,8 @@ def write_outputs(job: Job, out_folder, cam_options=None, keep=()) -> list[str]:
     if job.pipeline == "inkslice":
         from .surface.stl import heightmap_to_stl
         files["surface.stl"] = heightmap_to_stl(hm)
-    if job.truth:
-        surface = surfaces.get(job.truth)
+    if job.reference is not None:
+        surface = job.reference
         errs = {}
         for k, h in job.heightmaps.items():
             X, Y = h.grid()

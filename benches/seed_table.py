@@ -90,7 +90,7 @@ def run_sample(sample, step, effects, tmp, camera=None, meniscus=None):
     if camera:
         use_camera(folder, camera)
     t1 = time.perf_counter()
-    job = proc.process(folder, compare=True, meniscus=meniscus)
+    job = proc.process(folder, compare=True, meniscus=meniscus, truth=surface)
     t2 = time.perf_counter()
     print(f"\n{sample}, level step {step:g} mm, effects {effects}: {len(json.loads((folder / 'scan.json').read_text())['frames'])} "
           f"frames (render {t1 - t0:.0f} s, both pipelines {t2 - t1:.0f} s)")
@@ -103,7 +103,7 @@ def run_sample(sample, step, effects, tmp, camera=None, meniscus=None):
     if effects == "physics":
         for name, kw in (("without displacement correction", dict(displacement=False, meniscus=meniscus)),
                          ("without meniscus correction", dict(meniscus=False))):
-            s = proc.process(folder, **kw).stats["inkslice:fit"]
+            s = proc.process(folder, truth=surface, **kw).stats["inkslice:fit"]
             extra[name] = s["Ea"]
             print(row(f"InkSlice fit {name}", s))
     best = best_ea(sample)

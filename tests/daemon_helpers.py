@@ -8,11 +8,11 @@ from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 
 FINAL = ("done", "failed", "cancelled")
-# the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm; the first level
-# shows a tip 5.5 mm across (a smaller one is taken for a speck by the vision pipeline)
+# the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm; the first level is
+# above its tip (a first frame showing the part makes the scan start higher, see levels.py)
 # The dissertation's pipeline: our finishing toolpath takes minutes on a busy 2-core box,
 # and these tests are about the daemon, not the CAM.
-SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
+SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
         "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
 
 

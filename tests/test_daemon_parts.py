@@ -112,7 +112,7 @@ def test_the_socket_client_is_the_facade(tmp_path):
         with pytest.raises(InkSliceError):
             client.job_file(job_id, "../../inkslice.db")
         jpeg, info = client.latest_frame()
-        assert jpeg[:2] == b"\xff\xd8" and info["level_mm"] == 2.0
+        assert jpeg[:2] == b"\xff\xd8" and info["level_mm"] == 6.0
         assert client.update_settings({"settle_s": 0.2})["settle_s"] == 0.2
         assert client.settings()["settle_s"] == 0.2
         assert any(e["kind"] == "done" for e in client.events(job_id))

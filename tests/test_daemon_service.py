@@ -33,7 +33,7 @@ def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):
         # the scan folder: levels from the top down, every frame listed and on disk
         scan_dir = svc.store.job_dir(job_id) / "scan"
         doc = json.loads((scan_dir / "scan.json").read_text())
-        assert [f["level_mm"] for f in doc["frames"]] == [20.0 - 2 * k for k in range(10)]
+        assert [f["level_mm"] for f in doc["frames"]] == [24.0 - 2 * k for k in range(10)]
         assert audit(svc.store) == []
         # the same folder through `inkslice process` (its defaults = the daemon's) gives the same files
         ref = tmp_path / "ref"
@@ -70,7 +70,7 @@ def test_the_facade_refuses_what_it_must(tmp_path):
             svc.resume(job_id)
         svc.cancel()
         svc.update_settings({"settle_s": 0.0})
-        done = svc.start_scan({**SCAN, "levels_to_mm": 4.0})
+        done = svc.start_scan({**SCAN, "levels_to_mm": 8.0})
         assert wait_final(svc, done)["status"] == "done"
         with pytest.raises(SettingError, match="only a failed"):
             svc.resume(done)
@@ -110,7 +110,7 @@ def test_latest_frame_is_a_small_jpeg_with_the_waterline(tmp_path):
         wait_final(svc, svc.start_scan({**SCAN, "preview_width": 160}))
         jpeg, info = svc.latest_frame()
         img = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
-        assert img.shape[1] == 160 and info["level_mm"] == 2.0 and info["waterline"]
+        assert img.shape[1] == 160 and info["level_mm"] == 6.0 and info["waterline"]
         red = img[..., 2].astype(int) - img[..., 1] > 60          # the drawn waterline
         assert red.sum() > 50
     finally:

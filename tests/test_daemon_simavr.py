@@ -16,7 +16,7 @@ from daemon_helpers import read_heightmap, wait_final
 pytestmark = [pytest.mark.simavr,
               pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
                                  reason="needs gcc-avr and simavr (scripts/setup.sh)")]
-PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0,
+PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
           "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
 
 
@@ -30,7 +30,7 @@ def factory():
 
 @pytest.fixture(scope="module")
 def reference(factory, tmp_path_factory):
-    svc = BenchService(tmp_path_factory.mktemp("simref") / "data", factory, processor=in_process)
+    svc = BenchService(tmp_path_factory.mktemp("simref") / "data", factory, processor=factory.processor(in_process))
     try:
         job = wait_final(svc, svc.start_scan(PARAMS), timeout=120)
         return svc, job
@@ -44,10 +44,10 @@ def test_a_whole_scan_on_simavr_matches_inkslice_process(reference, factory, tmp
     job_dir = svc.store.job_dir(job["id"])
     scan = json.loads((job_dir / "scan/scan.json").read_text())
     # nominal levels come from the position the firmware reports: exact steps of 1/1600 mm
-    assert [f["level_mm"] for f in scan["frames"]] == [20.0 - 2 * k for k in range(10)]
+    assert [f["level_mm"] for f in scan["frames"]] == [24.0 - 2 * k for k in range(10)]
     # the stage really went there: the last level's position, counted from STEP edges
     at_home = job["settings"]["level_at_home_mm"]
-    assert abs(factory.bench.stage_position_mm() - (at_home - 2.0)) < 1e-9
+    assert abs(factory.bench.stage_position_mm() - (at_home - 6.0)) < 1e-9
     assert cli_main(["process", str(job_dir / "scan"), "-o", str(tmp_path / "cli"), "--pipeline", "seed"]) == 0
     for name in ("heightmap.csv", "toolpath.gcode"):
         assert (tmp_path / "cli" / name).read_bytes() == (job_dir / name).read_bytes(), name

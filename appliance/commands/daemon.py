@@ -63,5 +63,10 @@ def make_factory(args):
 
 def run(args):
     from ..daemon.main import run as run_daemon, setup_logging
+    from ..daemon.processing import child_process, in_process
     setup_logging(args.log_level)
-    return run_daemon(make_factory(args), args.data, args.socket, args.processor)
+    factory = make_factory(args)
+    processor = child_process if args.processor == "child" else in_process
+    if args.sim is not None:
+        processor = factory.processor(processor)    # the simulated part's truth: statistics in the report
+    return run_daemon(factory, args.data, args.socket, processor)

@@ -63,6 +63,7 @@ def serve_appliance(out: Path, part: str, port: int):
     """The whole appliance on this machine: the AVR firmware under simavr driven by the real
     stage driver, the virtual camera watching where the simulated stage really is, the
     daemon, and the web UI on loopback. Runs until interrupted."""
+    from ..daemon.processing import child_process
     from ..daemon.service import BenchService
     from ..sim import surfaces
     from ..sim.fakes import SimulatedBenchFactory, small_rig
@@ -73,7 +74,7 @@ def serve_appliance(out: Path, part: str, port: int):
     print(f"\nStarting the appliance on the simulated bench (firmware under simavr, part '{part}', "
           f"data in {data}) ...", flush=True)
     factory = SimulatedBenchFactory(part, small_rig(640, 480))
-    service = BenchService(data, factory)
+    service = BenchService(data, factory, processor=factory.processor(child_process))
     try:
         serve(service, data, host="127.0.0.1", port=port, config={"reset_password": True})
     except KeyboardInterrupt:
@@ -107,7 +108,7 @@ def run(args):
     t1 = time.perf_counter()
     print(f"  rendered in {t1 - t0:.1f} s. Processing with ours and with the dissertation's pipeline ...",
           flush=True)
-    job = proc.process(scan_dir, compare=True)
+    job = proc.process(scan_dir, compare=True, truth=surface)
     written = proc.write_outputs(job, result_dir)
     t2 = time.perf_counter()
     print(f"  processed in {t2 - t1:.1f} s.")

@@ -30,8 +30,10 @@ def add_arguments(p):
 
 
 def run(args):
+    from ..sim.truth import find_truth
+    truth = find_truth(args.scan, args.truth)
     result = process_scan(args.scan, args.out, pipeline=args.pipeline, method=args.method, grid_n=args.grid,
-                          spacing_mm=args.spacing, truth=args.truth, compare=args.compare,
+                          spacing_mm=args.spacing, truth=truth, compare=args.compare,
                           displacement=not args.no_displacement, meniscus=args.meniscus,
                           cam_options={"cutter": args.cutter, "scallop": args.scallop,
                                        "dialect": args.dialect})

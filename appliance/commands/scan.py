@@ -17,7 +17,8 @@ def add_arguments(p):
     p.add_argument("--bench", choices=("fake", "simavr"), default="simavr",
                    help="simavr: the real firmware under simavr (default); fake: in-memory stage")
     p.add_argument("--frame", default="640x480", help="frame size WxH (default 640x480)")
-    p.add_argument("--top", type=float, default=None, help="first level, mm (default: just above the part)")
+    p.add_argument("--top", type=float, default=None,
+                   help="first level, mm (default: the daemon's; the scan starts higher when the part shows)")
     p.add_argument("--bottom", type=float, default=0.0, help="last level, mm (default 0: the base top)")
     p.add_argument("--step", type=float, default=1.0, help="level step, mm (default 1)")
     p.add_argument("--adaptive", action="store_true", help="adaptive step between --step-min and --step-max")
@@ -38,13 +39,13 @@ def run(args):
         raise SettingError("-o", f"{out} exists and is not empty")
     rig = small_rig(*frame_size(args.frame))
     factory = FakeBench(surface.name, rig) if args.bench == "fake" else SimulatedBenchFactory(surface.name, rig)
-    top = args.top if args.top is not None else round(surface.z_max + 1.0, 1)
-    params = {"name": f"sim {surface.name}", "surface": surface.name, "levels_to_mm": top,
-              "levels_from_mm": args.bottom, "level_step_mm": args.step, "settle_s": args.settle,
+    params = {"name": f"sim {surface.name}", "surface": surface.name, "levels_from_mm": args.bottom, "level_step_mm": args.step, "settle_s": args.settle,
               "step_mode": "adaptive" if args.adaptive else "fixed",
               "step_min_mm": args.step_min, "step_max_mm": args.step_max}
+    if args.top is not None:
+        params["levels_to_mm"] = args.top
     with tempfile.TemporaryDirectory(prefix="inkslice-scan-") as data:
-        service = BenchService(data, factory, processor=in_process)
+        service = BenchService(data, factory, processor=factory.processor(in_process))
         try:
             job_id = service.start_scan(params)
             for st in service.subscribe(timeout=24 * 3600):
@@ -57,8 +58,7 @@ def run(args):
             job = service.job(job_id)
         finally:
             service.close()
-            if hasattr(factory, "close"):
-                factory.close()
+            factory.close()
         if job["status"] != "done":
             raise InkSliceError(f"scan {job_id}", job["reason"])
         shutil.copytree(Path(data) / "jobs" / job_id, out, dirs_exist_ok=True)

@@ -4,11 +4,11 @@ Levels run from the top down, so the first level at which a point of the
 plane is seen standing out of the ink is (to within one step) its height. A
 coarse regular grid in mm over the camera's field (the image corners mapped
 through scan.json's homography) is looked up in each frame's part mask
-(levels.part_mask, the cheap mask the level planner already uses) and every
-cell seen for the first time gets that level.
+(vision/part.py, the mask the level planner already has) and every cell seen
+for the first time gets that level.
 
-A preview, not the result: the lens distortion is ignored and the mask is the
-planner's plain threshold; processing builds the real height map.
+A preview, not the result: the lens distortion is ignored and the mask is
+coarse; processing builds the real height map.
 Shape of to_json(), as the web's live view expects:
     {"x": [mm...], "y": [mm...], "z": [[mm or None, ...] per y]}
 """
@@ -17,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..scanfile import CameraModel
-from .levels import part_mask
 
 CELLS = 40
 
@@ -42,8 +41,8 @@ class LiveMap:
         self.v = np.where(self.inside, self.v, 0.0)
         self.z = np.full((n, n), np.nan)
 
-    def add(self, frame: np.ndarray, level_mm: float) -> None:
-        mask = part_mask(frame)
+    def add(self, mask: np.ndarray, level_mm: float) -> None:
+        """`mask`: where the part stands out of the ink in the frame at `level_mm` (find_part's)."""
         mh, mw = mask.shape
         r = np.clip((self.v * mh).astype(int, copy=False), 0, mh - 1)
         c = np.clip((self.u * mw).astype(int, copy=False), 0, mw - 1)

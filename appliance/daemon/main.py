@@ -16,7 +16,6 @@ from pathlib import Path
 from . import rpc
 from .notify import notify, watchdog_interval
 from .processing import child_process, in_process
-from .runner import free_mb
 from .service import BenchService
 
 log = logging.getLogger("inkslice.daemon")
@@ -34,16 +33,18 @@ def setup_logging(level="INFO"):
 
 
 def run(factory, data, socket_path=None, processor="child") -> int:
+    """`factory`: a hw.base.BenchFactory; `processor`: "child", "inprocess" or a processor
+    callable (see processing.py)."""
     data = data_dir(data)
     data.mkdir(parents=True, exist_ok=True)
     socket_path = Path(socket_path or data / "daemon.sock")
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    from ..hw.usb import UsbExporter             # the bench button's long press copies to a stick
-    service = BenchService(data, factory, processor=child_process if processor == "child" else in_process,
-                           disk_free_mb=getattr(factory, "disk_free_mb", free_mb),
-                           usb=getattr(factory, "usb", None) or UsbExporter())
+    if not callable(processor):
+        processor = child_process if processor == "child" else in_process
+    service = BenchService(data, factory, processor=processor, disk_free_mb=factory.disk_free_mb,
+                           usb=factory.usb())          # the bench button's long press copies to a stick
     server = rpc.serve(service, socket_path)
     if service.interrupted:
         log.warning("interrupted jobs found at start: %s", ", ".join(service.interrupted))
@@ -67,6 +68,5 @@ def run(factory, data, socket_path=None, processor="child") -> int:
         server.shutdown()
         server.server_close()
         socket_path.unlink(missing_ok=True)
-        if hasattr(factory, "close"):
-            factory.close()
+        factory.close()
     return 0

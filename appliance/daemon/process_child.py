@@ -5,11 +5,12 @@ import sys
 from ..errors import InkSliceError
 
 
-def main(argv):
+def main(argv, truth_for=lambda scan_folder: None):
+    """`truth_for(scan_folder)`: the part's ground truth for the statistics, or None (a real scan)."""
     scan, out, options = argv[0], argv[1], json.loads(argv[2])
     from ..process import process_scan
     try:
-        result = process_scan(scan, out, **options)
+        result = process_scan(scan, out, truth=truth_for(scan), **options)
     except InkSliceError as e:
         print(f"{e.where}: {e.problem}", file=sys.stderr)
         return 2

@@ -80,9 +80,10 @@ def _die_with_parent():
         pass
 
 
-def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0.2) -> dict:
-    cmd = [sys.executable, "-m", "appliance.daemon.process_child", str(scan_folder), str(out_folder),
-           json.dumps(options)]
+def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0.2,
+                  module: str = "appliance.daemon.process_child") -> dict:
+    """`module`: the child's main (process_child.py, or one that adds to it with the same protocol)."""
+    cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, preexec_fn=_die_with_parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
         while True:

@@ -1,7 +1,10 @@
 """One scan, start to finish (or to a clear reason why not).
 
     home -> for each level: move, check the stage, settle, light on, capture,
-    light off, write the frame -> processing -> done
+    light off, find the part (vision/part.py), write the frame -> processing -> done
+
+The levels come from levels.py's plan: it starts higher when the first frame
+shows the part, and ends when the base is fully exposed.
 
 The frame PNG is written atomically first, then scan.json (atomically) with
 the new frame listed, then the job row: scan.json never lists a frame that is
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import math
 import shutil
 import threading
 import time
@@ -25,13 +29,13 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import atomicio
 from ..errors import DeviceError, InkSliceError
 from ..hw.devices import Devices
 from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
 from . import settings as S
+from ..vision.part import find_part
 from .commissioning import scan_extra, stored_camera
-from .levels import LevelPlan, part_mask, waterline_change
+from .levels import LevelPlan, waterline_change
 
 log = logging.getLogger("inkslice.runner")
 
@@ -58,7 +62,7 @@ class ScanRunner:
         self.params = job["params"]
         self.job_dir = store.job_dir(job_id)
         self.scan_dir = self.job_dir / "scan"
-        self.plan = LevelPlan(self.settings)
+        self.plan: LevelPlan | None = None         # made in run(), once the stage's travel is known
         self._mask = None
         self._level_times: list[float] = []
 
@@ -67,6 +71,7 @@ class ScanRunner:
         """Returns the final status: done, failed or cancelled (also stored with the reason)."""
         try:
             scan = self._open_scan()
+            self.plan = LevelPlan(self.settings, self._ceiling())
             if self.plan.next_target(scan.frames) is not None:
                 self._home()
                 self._capture_all(scan)
@@ -140,16 +145,14 @@ class ScanRunner:
         if (self.scan_dir / "scan.json").is_file():
             scan = load_scan(self.scan_dir)         # a resume: continue from its frames
             if scan.frames:
-                self._mask = part_mask(read_frame(scan, scan.frames[-1]))
+                last = scan.frames[-1]
+                self._mask = find_part(read_frame(scan, last), scan.camera, last.level_mm)
             return scan
         camera = self._calibrated_camera()
         self.scan_dir.mkdir(parents=True, exist_ok=True)
         extra = {"job": self.job_id, "name": self.params.get("name", ""),
                  "level_at_home_mm": self.settings["level_at_home_mm"]}
         extra.update(scan_extra(self.store, self.settings))     # tank, meniscus, what was used and when
-        if self.params.get("surface"):
-            extra["surface"] = self.params["surface"]
-            atomicio.write_json(self.job_dir / "scan.truth.json", {"surface": self.params["surface"]})
         # scan.json is written with the first frame: load_scan rejects an empty frame list
         return Scan(self.scan_dir, camera, [], extra)
 
@@ -187,13 +190,15 @@ class ScanRunner:
             if self.stop.wait(self.settings["settle_s"]):
                 raise Cancelled()
             frame = self._capture()
-            mask = part_mask(frame)
-            change = waterline_change(self._mask, mask)
+            mask = find_part(frame, scan.camera, level)
+            rising = bool(scan.frames) and target > float(scan.frames[-1].extra.get("target_mm", -math.inf))
+            change = waterline_change(None if rising else self._mask, mask)
             self._mask = mask
-            extra = {"target_mm": target, "step_mm": step, "change": round(change, 6)}
+            extra = {"target_mm": target, "step_mm": step, "change": round(change, 6),
+                     "shows_part": bool(mask.any())}
             extra.update(self._sensor_reading(level))
             self._save_frame(scan, frame, FrameRef(f"frames/{len(scan.frames) + 1:04d}.png", level, extra))
-            self.on_frame(frame, {"level_mm": level, "time": time.time()})
+            self.on_frame(frame, {"level_mm": level, "time": time.time(), "part": mask})
             del frame
             self._level_times.append(time.monotonic() - t0)
             total = self.plan.estimate_total(scan.frames)
@@ -201,13 +206,14 @@ class ScanRunner:
             self.report(levels_done=len(scan.frames), levels_total=total,
                         eta_s=self._eta(len(scan.frames), total))
 
+    def _ceiling(self) -> float:
+        """The highest level the stage reaches: the ink's level with the stage at the home end of its travel."""
+        return float(self.settings["level_at_home_mm"]) - self.dev.stage.travel_mm()[0]
+
     def _move_to_level(self, target: float) -> float:
         """Move so the ink stands at `target`; return the nominal level the stage really reached."""
         at_home = float(self.settings["level_at_home_mm"])
         self.dev.stage.move_to(at_home - target)
-        hint = getattr(self.dev.camera, "note_move_finished", None)
-        if hint is not None:
-            hint()                                  # the virtual bench starts its ripple clock here
         st = self.dev.stage.status()
         if not st.homed or st.flags.get("fresh_boot"):
             raise DeviceError("stage", "the controller was reset during the scan (position lost); "

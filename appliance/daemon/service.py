@@ -22,13 +22,7 @@ Beyond the facade, what the web UI offers when a service has it:
     import_scan(folder)     a scan folder from elsewhere becomes a job that is
                             processed (importing.py checks and copies it) Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
-or the in-memory fakes.
-
-A device factory has:
-    open(settings, params) -> runner.Devices    stage, camera, light, camera model...
-    open_panel() -> runner.Devices              led, display, button (may be missing)
-    check(params)                               SettingError for bad extra params
-    extra_params                                names start_scan accepts beyond settings
+or the in-memory fakes: a device factory is a hw.base.BenchFactory.
 """
 from __future__ import annotations
 
@@ -119,7 +113,7 @@ class BenchService:
 
     def start_scan(self, params: dict) -> str:
         params = dict(params or {})
-        extra = set(getattr(self.factory, "extra_params", ())) | {"name"}
+        extra = set(self.factory.extra_params) | {"name"}
         for key in params:
             if key not in S.DEFAULTS and key not in extra:
                 raise SettingError(key, "unknown scan parameter")
@@ -241,7 +235,7 @@ class BenchService:
                     return self.factory.open(self.settings(), self._calibration_params())
                 self._calibration = GuidedCalibration(open_devices, self.store, self.settings(),
                                                       show_frame=self._show_frame, operator=self._panel.operator,
-                                                      **getattr(self.factory, "calibration_target", {}))
+                                                      **self.factory.calibration_target)
             return self._calibration
 
     def _calibration_params(self) -> dict:
@@ -568,17 +562,17 @@ class BenchService:
         small = cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
         if small.ndim == 2:
             small = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
-        from .levels import PART_THRESHOLD
-        mask = (cv2.cvtColor(small, cv2.COLOR_BGR2GRAY) > PART_THRESHOLD).astype(np.uint8)
+        part = info.pop("part")                     # the runner's part mask (vision/part.py)
+        mask = cv2.resize(part.astype(np.uint8), (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST)
         contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
         cv2.drawContours(small, contours, -1, (0, 0, 255), 2, cv2.LINE_AA)
         ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
         if ok:
             with self._lock:
                 self._frame = (buf.tobytes(), {**info, "waterline": bool(contours)})
-        self._grow_live_map(image, info.get("level_mm"))
+        self._grow_live_map(part, info.get("level_mm"))
 
-    def _grow_live_map(self, image, level_mm):
+    def _grow_live_map(self, part, level_mm):
         """The dashboard's height map so far; a preview must never fail the scan."""
         job_id = self._state["job_id"]
         try:
@@ -587,7 +581,7 @@ class BenchService:
                 from ..scanfile import load_scan
                 live = (job_id, LiveMap(load_scan(self.store.job_dir(job_id) / "scan").camera))
             if level_mm is not None:
-                live[1].add(image, float(level_mm))
+                live[1].add(part, float(level_mm))
             with self._lock:
                 self._live = live
         except Exception as e:

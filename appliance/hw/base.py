@@ -43,6 +43,11 @@ class Stage(abc.ABC):
     def stop(self) -> None:
         """Emergency stop: halt now; position is then unknown until re-homed."""
 
+    @abc.abstractmethod
+    def travel_mm(self) -> tuple[float, float]:
+        """The lowest and highest positions a move may ask for (the soft limits), mm above home.
+        The lowest sets the highest level a scan can start at (see daemon/levels.py)."""
+
     def close(self) -> None:
         pass
 
@@ -110,3 +115,37 @@ class HumanOperator(Operator):
 
     def place(self, request: Placement) -> None:
         self.current = request
+
+
+class BenchFactory(abc.ABC):
+    """Opens the devices the daemon drives: the real bench (hw/devices.py), the
+    simulated one and the in-memory fakes (sim/fakes.py). The daemon knows no
+    more of a bench than this."""
+
+    extra_params: tuple = ()        # scan parameters start_scan accepts beyond the settings
+    calibration_target: dict = {}   # the guided calibration's board and pose, when not the printed default
+
+    @abc.abstractmethod
+    def open(self, settings: dict, params: dict):
+        """The devices for one scan (hw.devices.Devices): stage, camera, light, camera model..."""
+
+    @abc.abstractmethod
+    def open_panel(self):
+        """The front panel (hw.devices.Devices): LED, button, display, each possibly missing."""
+
+    def check(self, params: dict) -> dict:
+        """The extra scan parameters, checked (SettingError) and completed."""
+        return params
+
+    def disk_free_mb(self, path) -> float:
+        """Free space where the scans are written; scans stop before the disk is full."""
+        import shutil
+        return shutil.disk_usage(path).free / 1e6
+
+    def usb(self):
+        """What copies G-code to a USB stick (hw.usb.UsbExporter), or None for no USB export."""
+        from .usb import UsbExporter
+        return UsbExporter()
+
+    def close(self) -> None:
+        pass

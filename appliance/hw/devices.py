@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DeviceError, InkSliceError, SettingError
+from .base import BenchFactory
 
 log = logging.getLogger("inkslice.devices")
 
@@ -80,15 +81,11 @@ def _optional(hardware, name, opener):
     return dev
 
 
-class HardwareBench:
-    """Device factory for the real bench (see service.py for the protocol)."""
-    extra_params = ()
+class HardwareBench(BenchFactory):
+    """Device factory for the real bench (see hw/base.py BenchFactory)."""
 
     def __init__(self, wiring: dict | None = None):
         self.w = {**WIRING, **(wiring or {})}
-
-    def check(self, params):
-        pass
 
     def _reset_mcu(self):
         from .gpio import GpioOutput, pulse

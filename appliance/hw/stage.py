@@ -296,6 +296,9 @@ class SerialStage(Stage):
                         break
                     time.sleep(self.poll_interval)
 
+    def travel_mm(self) -> tuple[float, float]:
+        return self._settings["soft_min"] / self.steps_per_mm, self._settings["soft_max"] / self.steps_per_mm
+
     def stop(self) -> None:
         """Emergency stop: three Ctrl-X bytes (one may be lost on the wire),
         outside the command lock so it preempts a move in progress."""

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, SettingError
-from ..hw.base import Camera, Display, OutputLine, Stage, StageStatus
+from ..hw.base import BenchFactory, Camera, Display, OutputLine, Stage, StageStatus
 
 
 class FakeStage(Stage):
@@ -101,6 +101,9 @@ class FakeStage(Stage):
         state = "estop" if self.estopped else "idle"
         return StageStatus(state, self.position_steps, self.position_mm, self.homed,
                            {"fresh_boot": self.fresh_boot})
+
+    def travel_mm(self) -> tuple[float, float]:
+        return 0.0, self.travel_steps / self.steps_per_mm
 
     def stop(self) -> None:
         self.calls.append("stop")
@@ -220,7 +223,37 @@ class FakeLevelSensor:
 
 # -- device factories for BenchService (see appliance/daemon/service.py) --------
 
-class FakeBench:
+class _KnownPart:
+    """What the simulated benches add to a device factory: they know the part in the tank.
+
+    `processor(inner)` wraps one of daemon/processing.py's processors: while a
+    scan's devices are open (the job being captured, then processed), the
+    part is written beside the scan folder as its ground truth and the report
+    gets statistics against it. An imported scan, processed with no devices
+    open, gets none.
+    """
+    part_in_view = None             # the surface name while a scan's devices are open
+
+    def _showing(self, devices, part):
+        self.part_in_view = part
+        devices.closers.append(lambda: setattr(self, "part_in_view", None))
+        return devices
+
+    def processor(self, inner):
+        from ..daemon.processing import child_process
+        from .truth import find_truth, write_truth
+
+        def process(scan_folder, out_folder, options, stop=None):
+            if self.part_in_view is not None:
+                write_truth(scan_folder, self.part_in_view)
+            if inner is child_process:
+                return child_process(scan_folder, out_folder, options, stop, module="appliance.sim.process_child")
+            from ..process import process_scan
+            return process_scan(scan_folder, out_folder, truth=find_truth(scan_folder), **options)
+        return process
+
+
+class FakeBench(_KnownPart, BenchFactory):
     """The whole bench in memory: FakeStage + FakeCamera over a known surface,
     fake light, LED, button and display. `faults` switches faults on:
 
@@ -284,7 +317,7 @@ class FakeBench:
             sensor = FakeLevelSensor(lambda: true_level(part, level(), area))
         self.last = Devices(stage, camera, self.rig.camera_model(), light=light, level_sensor=sensor,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"})
-        return self.last
+        return self._showing(self.last, get(params.get("surface") or self.surface).name)
 
     def open_panel(self):
         from ..hw.devices import Devices
@@ -321,7 +354,42 @@ def LevelSeededCamera(surface, rig, level_mm, effects=None, clock=None):
     return _Camera(surface, rig, level_mm, effects=effects, clock=clock)
 
 
-class SimulatedBenchFactory:
+class _SettledStage(Stage):
+    """The simulated stage as the rippling virtual ink needs it: when a move or
+    a homing ends, the camera's ripple clock restarts (the ink rings from the
+    moment the base stops, and the daemon's settle time waits it out)."""
+
+    def __init__(self, stage, camera):
+        self.stage, self.camera = stage, camera
+
+    def __getattr__(self, name):                    # counters, info, ...: the real driver's
+        return getattr(self.stage, name)
+
+    def identify(self):
+        return self.stage.identify()
+
+    def home(self, timeout=60.0):
+        self.stage.home(timeout)
+        self.camera.note_move_finished()
+
+    def move_to(self, position_mm, timeout=60.0):
+        self.stage.move_to(position_mm, timeout)
+        self.camera.note_move_finished()
+
+    def status(self):
+        return self.stage.status()
+
+    def stop(self):
+        self.stage.stop()
+
+    def travel_mm(self):
+        return self.stage.travel_mm()
+
+    def close(self):
+        self.stage.close()
+
+
+class SimulatedBenchFactory(_KnownPart, BenchFactory):
     """The simulated bench: the real firmware under simavr (appliance/sim/hil.py)
     driven by the real SerialStage, and the renderer's VirtualCamera looking at
     where the simulated stage really is. Falls back to FakeCamera when the
@@ -356,10 +424,12 @@ class SimulatedBenchFactory:
         model = self.rig.camera_model(distorted=part.effects.lens_distortion)
         camera = StagedCamera(self, part, lambda other: self._camera(other, level), level, self.rig, part.effects)
         light = FakeLine("light")
+        if self.clock is not None:
+            stage = _SettledStage(stage, part)
         self.last = Devices(stage, camera, model, light=light,
                             hardware={"stage": "ok", "camera": "ok", "light": "ok"},
                             closers=[camera.close, stage.close])
-        return self.last
+        return self._showing(self.last, part.surface.name)
 
     def open_panel(self):
         return FakeBench.open_panel(self)

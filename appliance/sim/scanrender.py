@@ -20,6 +20,7 @@ from ..scanfile import FrameRef, Scan, write_frame, write_scan_json
 from . import surfaces as _surfaces
 from .render import Effects, effects_preset, liquid_level, render_frame, surface_grid
 from .rig import Rig, pixel_map
+from .truth import truth_path
 
 
 def scan_levels(surface, step_mm: float) -> list[float]:
@@ -37,9 +38,6 @@ def scan_levels(surface, step_mm: float) -> list[float]:
     return [lv for lv in levels if lv >= 0.5 - 1e-9] or [round(first, 6)]
 
 
-def truth_path(folder) -> Path:
-    folder = Path(folder)
-    return folder.parent / (folder.name + ".truth.json")
 
 
 _FORKED = {}      # what forked workers inherit (a Surface holds closures: not picklable)

@@ -122,6 +122,7 @@ class WaterlineExtractor:
         self._level = None
         self.events: list[Event] = []
         self.last_mode = None             # "coarse", "band" or "full": how the last frame was read
+        self.outline = []                 # the last frame's kept loops: (pixel contour, is a hole)
 
     LATTICE = 16                          # px between the samples that watch the rest of the tank
 
@@ -137,6 +138,7 @@ class WaterlineExtractor:
 
     def extract(self, frame: np.ndarray, level_mm: float) -> Waterline:
         cut = self.glare_cut
+        self.outline = []
         try:
             return self._extract(frame, level_mm)
         except NoPartError:
@@ -531,6 +533,7 @@ class WaterlineExtractor:
     def _finish(self, loops, level_mm, where):
         if not loops:
             raise NoPartError(where, "no part above the liquid (only ink, glare or specks)")
+        self.outline = [(lp.pixels, lp.hole) for lp, _ in loops]
         out = []
         for lp, pts in loops:
             mm = self.to_mm(pts)
