@@ -210,7 +210,7 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
     if not (isinstance(grid_n, int) and 3 <= grid_n <= 2000):
         raise SettingError("grid", f"grid must be 3..2000 cells a side, got {grid_n!r}")
     scan = load_scan(scan_folder)
-    surface = truth
+    surface = truth or None                     # False: none (as None)
     job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None, reference=surface)
     from .calibration_used import describe
     ours = pipeline == "inkslice" or compare                # the dissertation's pipeline corrects neither

@@ -16,9 +16,12 @@ from daemon_helpers import wait_final
 
 TRUE_LEVEL_ZERO = 57.3          # the bench's truth; the daemon's setting starts at 60
 # a short scan of the cone with the dissertation's (fast) pipeline: these tests are about what
-# goes into scan.json and the report, not the science
-SCAN = {"name": "cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0, "level_step_mm": 2.0,
+# goes into scan.json and the report, not the science. It starts above the cone's tip (23.2 mm,
+# with the ink 2.7 mm below the setting's level): a first frame showing the part would make the
+# scan start higher (daemon/levels.py)
+SCAN = {"name": "cone", "levels_to_mm": 28.0, "levels_from_mm": 10.0, "level_step_mm": 2.0,
         "settle_s": 0.0, "pipeline": "seed"}
+SHORT = {"levels_to_mm": 28.0, "levels_from_mm": 22.0}
 
 
 def box(tmp_path, name="data"):
@@ -165,7 +168,7 @@ def test_cancel_at_each_step_then_a_scan_starts(tmp_path):
             c = svc.commission(sid, "cancel")
             assert c["active"] is None and bench.placement is None, (sid, actions)
             assert step(c, sid)["status"] == "missing", (sid, actions)
-            job = wait_final(svc, svc.start_scan({**SCAN, "levels_to_mm": 6.0}))
+            job = wait_final(svc, svc.start_scan({**SCAN, **SHORT}))
             assert job["status"] == "done", (sid, actions, job["reason"])
         # the meniscus scan cancelled mid-way is a cancelled job, nothing stored
         refs = [j for j in svc.jobs() if j["params"].get("reference")]
@@ -213,7 +216,7 @@ def test_skipping_the_meniscus_during_its_scan_cancels_the_scan(tmp_path):
         c = svc.commission("meniscus", "skip")
         assert c["active"] is None and step(c, "meniscus")["status"] == "skipped"
         assert wait_final(svc, job_id)["status"] == "cancelled"
-        job = wait_final(svc, svc.start_scan({**SCAN, "levels_to_mm": 6.0}))
+        job = wait_final(svc, svc.start_scan({**SCAN, **SHORT}))
         assert job["status"] == "done", job["reason"]
     finally:
         svc.close()

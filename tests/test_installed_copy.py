@@ -44,8 +44,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.simavr,
               pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
                                  reason="needs gcc-avr and simavr (scripts/setup.sh)")]
 
-# a small part: the cone, 10 levels 2 mm apart, read with the seed pipeline
-SCAN = {"name": "installed copy: cone", "levels_to_mm": 20.0, "levels_from_mm": 2.0, "level_step_mm": 2.0,
+# a small part: the cone (23.2 mm), 10 levels 2 mm apart from above its tip, read with the seed pipeline
+SCAN = {"name": "installed copy: cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0, "level_step_mm": 2.0,
         "settle_s": 0.0, "pipeline": "seed"}
 
 

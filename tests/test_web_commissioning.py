@@ -26,7 +26,7 @@ if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
 
 # a short scan: the dashboard's Start takes the bench, the test stops it again
-SHORT_SCAN = {"levels_to_mm": 6.0, "levels_from_mm": 2.0, "level_step_mm": 2.0, "settle_s": 0.0}
+SHORT_SCAN = {"levels_to_mm": 28.0, "levels_from_mm": 22.0, "level_step_mm": 2.0, "settle_s": 0.0}  # above the cone
 
 
 @pytest.fixture(scope="module")
