@@ -11,7 +11,8 @@ A processor is any callable (scan_folder, out_folder, options, stop_event)
 -> {"outputs": [file names], ...}; tests pass `in_process` or a fake.
 
 The job folder is the output folder: process_scan replaces it whole, keeping
-only what the daemon itself put there (JOB_OWN: the scan and its truth file),
+only what the daemon itself put there (JOB_OWN: the scan; a processor may add to
+`keep`, as the simulated bench does for its truth file),
 so no output of an earlier run is left beside the new ones. A job ends `done`
 only with its finishing program (`checked_outputs`); otherwise `failed`.
 """
@@ -28,7 +29,7 @@ from ..errors import InkSliceError
 from .runner import Cancelled
 
 
-JOB_OWN = ("scan", "scan.truth.json")     # what a job folder holds besides the outputs
+JOB_OWN = ("scan",)                       # what a job folder holds besides the outputs
 PROGRAM = "toolpath.gcode"
 
 

@@ -241,11 +241,13 @@ class _KnownPart:
 
     def processor(self, inner):
         from ..daemon.processing import child_process
-        from .truth import find_truth, write_truth
+        from .truth import find_truth, truth_path, write_truth
 
         def process(scan_folder, out_folder, options, stop=None):
             if self.part_in_view is not None:
                 write_truth(scan_folder, self.part_in_view)
+            # the job folder is replaced by the outputs: the truth file stays beside the scan
+            options = {**options, "keep": [*options.get("keep", ()), truth_path(scan_folder).name]}
             if inner is child_process:
                 return child_process(scan_folder, out_folder, options, stop, module="appliance.sim.process_child")
             from ..process import process_scan
