@@ -112,6 +112,23 @@ def _lagrange_at_zero(s, z, ok):
     return out
 
 
+def _passed_near(slices, q, start, stop, tol):
+    """Per point: the first level k in [start, stop) whose waterline passes within `tol`,
+    else `start`."""
+    out = np.array(start, copy=True)
+    todo = np.flatnonzero(stop > start + 1)
+    found = np.zeros(len(q), bool)
+    for k in range(int(start[todo].min()) if todo.size else 0, int(stop[todo].max()) if todo.size else 0):
+        ask = todo[(start[todo] <= k) & (k < stop[todo]) & ~found[todo]]
+        if ask.size == 0 or slices[k].empty:
+            continue
+        d, _ = polyline_distance(slices[k], q[ask])
+        hit = ask[d <= tol]
+        out[hit] = k
+        found[hit] = True
+    return out
+
+
 def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, order: int = 4):
     """-> (z_fe with NaN where no value, first index per node (len = never), footprint mask).
 
@@ -157,10 +174,13 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
             fr[d <= tol] = k
         # a wall edge put back a little off the node can miss it: more than a level later
         # than the nodes just inside it is such a miss (a summit on the rim would otherwise
-        # be clamped to the lowest level); it then comes out with them
+        # be clamped to the lowest level); it then comes out with the first of the levels
+        # between whose waterline passes near it, or else with the nodes inside. On a steep
+        # face the nodes inside came out levels earlier (a sphere's rim, 0.5 mm steps: its
+        # outline nodes would be clamped 2 mm high)
         inner = np.where(on_outline, K, first)
         near = ndimage.minimum_filter(inner, size=3, mode="nearest")[on_outline]
-        first[on_outline] = np.where(fr > near + 1, near, fr)
+        first[on_outline] = np.where(fr > near + 1, _passed_near(slices, oq, near, fr, 2 * tol), fr)
     hmax = max(lat.hx, lat.hy)
     for k in range(top, K):
         sel = first == k
