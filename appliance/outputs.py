@@ -30,11 +30,20 @@ def write_heightmap_csv(path, hm: HeightMap):
     atomicio.write_text(path, heightmap_csv_text(hm))
 
 
+# A height map is of a part on a bench box: a lattice beyond these is a broken or hostile
+# file, refused with its reason before anything the size of the lattice is allocated.
+MAX_HEIGHTMAP_BYTES = 512 * 1024 ** 2
+MAX_EXTENT_MM = 2000.0            # x and y span; and |z|
+MAX_CELLS = 16_000_000            # a 4000 x 4000 lattice
+
+
 def read_heightmap_csv(path) -> HeightMap:
     """Rebuild the lattice from the x and y values present (they must form a regular grid)."""
     path = Path(path)
     if not path.is_file():
         raise InkSliceError(path, "height map file does not exist")
+    if path.stat().st_size > MAX_HEIGHTMAP_BYTES:
+        raise InkSliceError(path, f"is {path.stat().st_size} bytes; a height map is at most {MAX_HEIGHTMAP_BYTES}")
     text = path.read_text(encoding="utf-8", errors="replace")
     lines = text.splitlines()
     if not lines or lines[0].replace(" ", "").lower() != "x,y,z":
@@ -42,11 +51,20 @@ def read_heightmap_csv(path) -> HeightMap:
     try:
         data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
     except ValueError as e:
-        raise InkSliceError(path, f"not three numbers per line ({e})") from None
+        raise InkSliceError(path, f"not three numbers per line ({str(e)[:120]})") from None
     if data.size == 0 or data.shape[1] != 3:
         raise InkSliceError(path, "no x,y,z rows")
     if not np.all(np.isfinite(data)):
         raise InkSliceError(path, "a value is not finite")
+    data = _one_height_per_point(path, data)
+    span = np.ptp(data, axis=0)
+    for k, name in enumerate("xy"):
+        if span[k] > MAX_EXTENT_MM:
+            raise InkSliceError(path, f"spans {span[k]:.6g} mm in {name}; a part on the bench is at most "
+                                      f"{MAX_EXTENT_MM:g} mm across")
+    if np.max(np.abs(data)) > 1e6 or np.max(np.abs(data[:, 2])) > MAX_EXTENT_MM:
+        raise InkSliceError(path, f"has a coordinate of {np.max(np.abs(data)):.6g} mm, beyond any bench "
+                                  f"(heights at most {MAX_EXTENT_MM:g} mm, positions at most 1e6 mm)")
     xs = np.unique(np.round(data[:, 0], 4))
     ys = np.unique(np.round(data[:, 1], 4))
     for name, v in (("x", xs), ("y", ys)):
@@ -57,6 +75,10 @@ def read_heightmap_csv(path) -> HeightMap:
             k = d / step
             if np.any(np.abs(k - np.round(k)) > 1e-3):
                 raise InkSliceError(path, f"{name} values are not on a regular grid")
+    nx, ny = _axis_size(xs), _axis_size(ys)
+    if nx * ny > MAX_CELLS:
+        raise InkSliceError(path, f"its rows span a lattice of {nx} x {ny} cells, more than {MAX_CELLS} "
+                                  "(is a row's x or y wrong, or the grid too fine?)")
     x = _regular_axis(xs)
     y = _regular_axis(ys)
     z = np.full((y.size, x.size), np.nan)
@@ -64,6 +86,28 @@ def read_heightmap_csv(path) -> HeightMap:
     iy = np.rint((data[:, 1] - y[0]) / (y[1] - y[0])).astype(int) if y.size > 1 else np.zeros(len(data), int)
     z[iy, ix] = data[:, 2]
     return HeightMap(x, y, z)
+
+
+def _one_height_per_point(path, data):
+    """Rows repeating an x,y with the same z are dropped; with another z they are an error."""
+    xy = np.round(data[:, :2], 4)
+    _, first, inverse = np.unique(xy, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    if len(first) == len(data):
+        return data
+    clash = np.abs(data[:, 2] - data[first[inverse], 2]) > 1e-4
+    if np.any(clash):
+        i = int(np.argmax(clash))
+        j = int(first[inverse[i]])
+        raise InkSliceError(path, f"rows {j + 2} and {i + 2} give x={data[i, 0]:g}, y={data[i, 1]:g} two heights "
+                                  f"({data[j, 2]:g} and {data[i, 2]:g} mm)")
+    return data[np.sort(first)]
+
+
+def _axis_size(v):
+    if v.size < 2:
+        return v.size
+    return int(round((v[-1] - v[0]) / float(np.min(np.diff(v))))) + 1
 
 
 def _regular_axis(v):

@@ -38,7 +38,7 @@ import numpy as np
 from . import atomicio, outputs, plots
 from .cam.dissertation import dissertation_gcode
 from .errors import InkSliceError, ScanError, SettingError
-from .scanfile import load_scan, read_frame
+from .scanfile import check_frames, load_scan, read_frame
 from .surface import seed as seed_methods
 from .surface.heightmap import HeightMap
 from .surface.seedtables import TABLES
@@ -210,10 +210,13 @@ def process(scan_folder, method=None, pipeline="inkslice", grid_n=50, spacing_mm
     if not (isinstance(grid_n, int) and 3 <= grid_n <= 2000):
         raise SettingError("grid", f"grid must be 3..2000 cells a side, got {grid_n!r}")
     scan = load_scan(scan_folder)
+    check_frames(scan)
     surface = truth or None                     # False: none (as None)
     job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None, reference=surface)
     from .calibration_used import describe
     ours = pipeline == "inkslice" or compare                # the dissertation's pipeline corrects neither
+    if ours:
+        meniscus_model(scan, meniscus)                      # a bad model fails now, not after the vision
     job.calibration = describe(scan, displacement and ours, meniscus if ours else False)
     if pipeline == "seed" or compare:
         t0 = time.perf_counter()

@@ -27,6 +27,22 @@ from .sampling import Sampler, check_heightmap
 from .zigzag import FinishSettings, finishing
 
 
+# The lattice a plan or a simulation works on, at its resolution over the part's
+# bounding box: beyond this the run would take gigabytes (and hours), so it is refused
+# with the setting to change, before anything that size is allocated.
+MAX_WORK_CELLS = 40_000_000
+
+
+def check_work(hm: HeightMap, resolution: float, setting: str):
+    if not np.isfinite(resolution) or resolution <= 0:
+        raise SettingError(setting, f"must be > 0 mm, got {resolution}")
+    wx, wy = float(hm.x[-1] - hm.x[0]), float(hm.y[-1] - hm.y[0])
+    cells = (wx / resolution + 1) * (wy / resolution + 1)
+    if cells > MAX_WORK_CELLS:
+        raise SettingError(setting, f"{resolution:g} mm over a {wx:.1f} x {wy:.1f} mm part is a lattice of "
+                                    f"{cells:.3g} cells, more than {MAX_WORK_CELLS:.3g}: use a coarser {setting}")
+
+
 @dataclass
 class Job:
     text: str
@@ -61,6 +77,7 @@ def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, mater
         return jobs
     cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     settings.check()
+    check_work(hm, settings.resolution, "resolution")
     check_frame(clearance, z_offset)
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     fin = finishing(sampler, settings)
@@ -90,6 +107,7 @@ def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_M
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
     cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
     settings.check()
+    check_work(hm, settings.resolution, "resolution")
     check_frame(clearance, z_offset)
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     runs = roughing(sampler, settings)
@@ -130,6 +148,7 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
                            ("edge band", edge_band, 0.0), ("uncut tolerance", uncut_tol, 0.0)):
         if not np.isfinite(v) or (v <= 0 if least is None else v < least):
             raise SettingError(name, f"must be {'> 0' if least is None else '>= 0'} mm, got {v}")
+    check_work(hm, resolution, "resolution")
     parsed = parse_gcode(text, where)
     for ax, name in enumerate("XYZ"):
         if np.all(np.isnan(parsed.xyz[:, ax])):

@@ -1,10 +1,20 @@
-"""inkslice verify toolpath.gcode --against heightmap.csv"""
+"""inkslice verify toolpath.gcode --against heightmap.csv
+
+Exit codes: 0 the program keeps within --max-gouge of the design; 1 it cuts deeper
+(the report is printed, and one error line says by how much); 2 bad input.
+"""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from .. import atomicio
 from ..errors import InkSliceError, SettingError
+from .toolpath import check_output_file
+
+# our finishing programs keep within 0.005 mm (tests/test_cam_scallop.py); twice that
+# tolerates the simulation's lattice, and a program that digs into the part fails
+DEFAULT_MAX_GOUGE = 0.01
 from ..outputs import read_heightmap_csv
 
 NAME = "verify"
@@ -27,7 +37,8 @@ def add_arguments(p):
                    "cutter's opening of the design is within this of it, mm")
     p.add_argument("--uncut-tol", type=float, default=0.1, help="material above the design counted as uncut, mm")
     p.add_argument("--png", default=None, help="deviation map to write (default: GCODE with .png)")
-    p.add_argument("--max-gouge", type=float, default=None, help="exit 1 if the gouge exceeds this, mm")
+    p.add_argument("--max-gouge", type=float, default=DEFAULT_MAX_GOUGE,
+                   help=f"exit 1 if the program cuts deeper than this into the design, mm (default {DEFAULT_MAX_GOUGE})")
 
 
 def run(args):
@@ -40,9 +51,11 @@ def run(args):
         raise InkSliceError(path, "G-code file does not exist")
     if not np.isfinite(args.scallop) or args.scallop <= 0:
         raise SettingError("--scallop", f"must be > 0 mm, got {args.scallop}")
-    if args.max_gouge is not None and not (np.isfinite(args.max_gouge) and args.max_gouge >= 0):
+    if not (np.isfinite(args.max_gouge) and args.max_gouge >= 0):
         # NaN compared false with every gouge: the check always passed
         raise SettingError("--max-gouge", f"must be >= 0 mm, got {args.max_gouge}")
+    png = Path(args.png) if args.png else path.with_suffix(".png")
+    check_output_file(png, "--png")                  # before the simulation, not after it
     text = path.read_text(encoding="utf-8", errors="replace")
     hm = read_heightmap_csv(args.against)
     check_heightmap(hm, where=args.against)          # its problems named by the file
@@ -62,10 +75,10 @@ def run(args):
           "above the base top")
     for line in rep.lines():
         print(line)
-    png = Path(args.png) if args.png else path.with_suffix(".png")
     atomicio.write_bytes(png, deviation_png(rep, scallop_scale=2 * args.scallop))
     print(f"deviation map: {png}")
-    if args.max_gouge is not None and rep.gouge > args.max_gouge:
-        print(f"FAIL: gouge {rep.gouge:.4f} mm exceeds {args.max_gouge:g} mm")
+    if not rep.gouge <= args.max_gouge:
+        print(f"inkslice: error: {path}: cuts {rep.gouge:.4f} mm into the design at x={rep.gouge_at[0]:.2f} "
+              f"y={rep.gouge_at[1]:.2f} mm, more than --max-gouge {args.max_gouge:g} mm", file=sys.stderr)
         return 1
     return 0

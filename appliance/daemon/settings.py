@@ -53,7 +53,17 @@ def surface_methods() -> tuple:
     return ("",) + tuple(METHODS)
 BOOLS = {"auto_resume"}
 INTS = {"grid": (3, 2000), "preview_width": (64, 2048)}
-MAY_BE_ZERO = {"levels_from_mm", "settle_s", "min_free_mb"}
+# (lowest, highest, whether the lowest itself is allowed): what a bench box can do.
+# A setting outside is a typo or an attack, and a disk-space floor of 0 is no floor.
+RANGES = {
+    "levels_to_mm": (0.0, 1000.0, False), "levels_from_mm": (0.0, 1000.0, True),
+    "level_step_mm": (0.0, 100.0, False), "step_min_mm": (0.0, 100.0, False), "step_max_mm": (0.0, 100.0, False),
+    "adaptive_change": (0.0, 1.0, False), "settle_s": (0.0, 600.0, True),
+    "level_at_home_mm": (0.0, 1000.0, False), "min_free_mb": (50.0, 1e6, True),
+    "scallop_mm": (0.0, 5.0, False), "cutter_diameter_mm": (0.1, 100.0, True), "stepover_mm": (0.0, 100.0, False),
+    "feed_mm_min": (1.0, 100000.0, True),
+    "envelope_x_mm": (1.0, 10000.0, True), "envelope_y_mm": (1.0, 10000.0, True), "envelope_z_mm": (1.0, 10000.0, True),
+}
 MAX_LEVELS = 5000
 
 
@@ -88,8 +98,12 @@ def _check_value(key, value):
         if int(value) != value or not lo <= value <= hi:
             raise SettingError(key, f"must be a whole number in {lo}..{hi}, got {value!r}")
         return int(value)
-    if value < 0 or (value == 0 and key not in MAY_BE_ZERO):
-        raise SettingError(key, f"must be positive, got {value!r}")
+    lo, hi, lo_ok = RANGES[key]
+    if not ((value >= lo if lo_ok else value > lo) and value <= hi):
+        if lo == 0 and not lo_ok and value <= 0:
+            raise SettingError(key, f"must be positive, got {value!r}")
+        raise SettingError(key, f"must be {'at least' if lo_ok else 'more than'} {lo:g} and at most {hi:g}, "
+                                f"got {value!r}")
     return float(value)
 
 
