@@ -84,11 +84,11 @@ def folder_hash(folder: Path) -> dict:
 
 
 def scan_json(edit):
-    """Build step: load the scan's scan.json, let `edit(doc)` change it, write it back."""
+    """Build step: load the scan's scan.json, let `edit(doc)` change it in place, write it back."""
     def build(w: Path):
         path = w / "scan" / "scan.json"
         doc = json.loads(path.read_text())
-        doc = edit(doc) or doc
+        edit(doc)
         path.write_text(json.dumps(doc))
     return build
 
@@ -222,6 +222,9 @@ CASES = [
          lambda w: (w / "prog.gcode").write_text("G21 G90\nG0 Z30\nG0 X5 Y5\nG1 Z-500 F200\nG1 X15 Y15\nG0 Z30\nM2\n"),
          ("verify", "{gcode}", "--against", "{map}", "--cutter", "ball6", "--png", "{work}/verify.png"), 1,
          "prog.gcode: cuts 50"),
+    Case("levels that contradict the frames (17 and 7 mm swapped)",
+         scan_json(lambda d: (d["frames"][1].update(level_mm=7.0), d["frames"][6].update(level_mm=17.0))), P, 2,
+         "level 15 mm: shows 79 mm² of the part, less than the 532 mm² at 17 mm above it"),
     Case("a frame symlinked outside the scan folder", symlink_frame_outside, P, 2,
          "0003.png: is a link to a file outside the scan folder"),
     # -- more of our own: scan.json ------------------------------------------------------------

@@ -138,7 +138,24 @@ def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
         if s.empty:
             raise InkSliceError(f"level {s.level:g} mm", "no part visible although higher levels "
                                 "showed it (part out of view or a failed frame)")
+    _check_emerging(slices[first:])
     return slices, notes
+
+
+def _check_emerging(slices):
+    """Seen from above, the part only emerges as the ink drops: a frame that shows clearly
+    less of it than a frame at a higher level contradicts its level (levels swapped or
+    typed wrong, a frame from another scan). Ripples and noise move an outline by a
+    fraction of a millimetre, far inside the tolerance."""
+    most, at = 0.0, None
+    for s in slices:
+        area = s.area()
+        if area < most - max(0.1 * most, 5.0):
+            raise InkSliceError(f"level {s.level:g} mm", f"shows {area:.0f} mm² of the part, less than the "
+                                f"{most:.0f} mm² at {at:g} mm above it: the part only emerges as the ink drops, "
+                                "so the frames contradict their levels")
+        if area > most:
+            most, at = area, s.level
 
 
 def polyline_distance(sl: Slice, q: np.ndarray, signed: bool = False):
