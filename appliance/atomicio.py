@@ -76,6 +76,20 @@ def check_output_folder(out):
         raise InkSliceError(out, "cannot be read, so it cannot be replaced")
 
 
+def check_output_file(path, option="-o"):
+    """Refuse a file we could not write at `path` (created or replaced), before the work:
+    -> InkSliceError naming the problem (a folder, a missing or read-only parent)."""
+    from .errors import InkSliceError
+    path = Path(path)
+    if path.is_dir():
+        raise InkSliceError(path, f"is a folder; give {option} a file name")
+    parent = path.absolute().parent
+    if not parent.is_dir():
+        raise InkSliceError(path, f"cannot be written: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InkSliceError(path, f"cannot be written: no permission to write in {parent} (or read-only)")
+
+
 def replace_folder(out, files: dict, keep=()):
     """Make folder `out` hold exactly `files` ({name: bytes}) plus the entries named in
     `keep` that it holds now (the daemon keeps the scan inside its job folder), all at once.

@@ -1,11 +1,7 @@
 """inkslice toolpath HEIGHTMAP -o toolpath.gcode [--rough-out rough.gcode]"""
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 from .. import atomicio
-from ..errors import InkSliceError
 from ..outputs import read_heightmap_csv
 
 NAME = "toolpath"
@@ -72,9 +68,9 @@ def run(args):
     from ..cam.sampling import check_heightmap
     from ..cam.roughing import RoughSettings
     from ..cam.zigzag import FinishSettings
-    check_output_file(args.out, "-o")                # before the work, not after it
+    atomicio.check_output_file(args.out, "-o")       # before the work, not after it
     if args.rough_out:
-        check_output_file(args.rough_out, "--rough-out")
+        atomicio.check_output_file(args.rough_out, "--rough-out")
     from ..surface.base import stand_on_base
     hm, fix = stand_on_base(read_heightmap_csv(args.heightmap))   # as `inkslice process` mills it
     check_heightmap(hm, where=args.heightmap)          # its problems named by the file
@@ -110,18 +106,6 @@ def run(args):
     return 0
 
 
-def check_output_file(path, option):
-    """A file we can write at `path` (created or replaced), or an error naming why not."""
-    path = Path(path)
-    if path.is_dir():
-        raise InkSliceError(path, f"is a folder; give {option} a file name")
-    parent = path.absolute().parent
-    if not parent.is_dir():
-        raise InkSliceError(path, f"cannot be written: {parent} is not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InkSliceError(path, f"cannot be written: no permission to write in {parent} (or read-only)")
-
-
 def _write(path, text):
-    check_output_file(path, "-o")
+    atomicio.check_output_file(path, "-o")
     atomicio.write_text(path, text)

@@ -10,12 +10,11 @@ from pathlib import Path
 
 from .. import atomicio
 from ..errors import InkSliceError, SettingError
-from .toolpath import check_output_file
+from ..outputs import read_heightmap_csv
 
 # our finishing programs keep within 0.005 mm (tests/test_cam_scallop.py); twice that
 # tolerates the simulation's lattice, and a program that digs into the part fails
 DEFAULT_MAX_GOUGE = 0.01
-from ..outputs import read_heightmap_csv
 
 NAME = "verify"
 ORDER = 31
@@ -55,7 +54,7 @@ def run(args):
         # NaN compared false with every gouge: the check always passed
         raise SettingError("--max-gouge", f"must be >= 0 mm, got {args.max_gouge}")
     png = Path(args.png) if args.png else path.with_suffix(".png")
-    check_output_file(png, "--png")                  # before the simulation, not after it
+    atomicio.check_output_file(png, "--png")                  # before the simulation, not after it
     text = path.read_text(encoding="utf-8", errors="replace")
     hm = read_heightmap_csv(args.against)
     check_heightmap(hm, where=args.against)          # its problems named by the file
