@@ -5,17 +5,21 @@ a module defines NAME, HELP, add_arguments(parser) and run(args) -> exit code.
 Each is a thin layer over library functions that tests call directly.
 
 Any InkSliceError becomes one line on stderr, `inkslice: error: WHERE: PROBLEM`,
-and exit code 2.
+and exit code 2; so does a file system that refuses our writes (full, over quota,
+read-only): every file is written atomically, so what was there before is intact.
 """
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import pkgutil
 import sys
 
 from . import __version__, commands
 from .errors import InkSliceError
+
+WRITE_REFUSED = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
 
 
 def _command_modules():
@@ -47,6 +51,12 @@ def main(argv=None) -> int:
         return int(args._run(args) or 0)
     except InkSliceError as e:
         print(f"inkslice: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        if e.errno not in WRITE_REFUSED:
+            raise
+        print(f"inkslice: error: {e.filename or 'writing the outputs'}: {e.strerror} "
+              "(the files already there are unchanged)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("inkslice: interrupted", file=sys.stderr)

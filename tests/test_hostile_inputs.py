@@ -338,6 +338,31 @@ def test_hostile_input_is_one_line_and_keeps_the_outputs(case, work, capsys):
     assert after == before, "the output folder changed"
 
 
+def test_a_full_disk_while_writing_the_outputs_is_one_line_and_keeps_the_old_set(work):
+    # issue 19: a full disk left 2 of 6 outputs new and 4 old, after a traceback. The real
+    # `inkslice` in a child whose files may not grow past 20 kB (RLIMIT_FSIZE: a disk that
+    # fills during the writing); the dissertation's pipeline, to be quick
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def small_disk():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+
+    before = folder_hash(work / "out")
+    TRIED.append("OUT on a full disk")
+    r = subprocess.run([sys.executable, "-m", "appliance.cli", "process", str(work / "scan"), "-o",
+                        str(work / "out"), "--pipeline", "seed"], preexec_fn=small_disk, capture_output=True,
+                       text=True, cwd=Path(__file__).resolve().parents[1], timeout=300)
+    lines = r.stderr.splitlines()
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1 and lines[0].startswith("inkslice: error: ") and "File too large" in lines[0], r.stderr
+    assert folder_hash(work / "out") == before
+    assert [p.name for p in work.iterdir() if p.name.startswith(".inkslice-")] == []
+
+
 # -- what must still be accepted -------------------------------------------------------------
 
 
@@ -416,6 +441,6 @@ def test_every_default_setting_is_inside_its_range():
 
 def test_the_suite_says_how_many_cases_it_tried(capsys):
     with capsys.disabled():
-        print(f"\nhostile inputs: {len(TRIED)} of {len(CASES)} cases tried through the CLI")
+        print(f"\nhostile inputs: {len(TRIED)} of {len(CASES) + 1} cases tried through the CLI")
     assert len(CASES) >= 60
     assert len({c.name for c in CASES}) == len(CASES)
