@@ -1,4 +1,5 @@
 """python -m appliance.daemon.process_child SCAN OUT OPTIONS_JSON (see processing.py)."""
+import errno
 import json
 import sys
 
@@ -13,6 +14,12 @@ def main(argv, truth_for=lambda scan_folder: None):
         result = process_scan(scan, out, truth=truth_for(scan), **options)
     except InkSliceError as e:
         print(f"{e.where}: {e.problem}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        if e.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        print(f"disk: full while writing the outputs ({e.strerror}); the scan is kept, "
+              "free some space and resume", file=sys.stderr)
         return 2
     print(json.dumps({"outputs": result["outputs"], "method": result.get("method"),
                       "truth": result.get("truth")}))

@@ -64,13 +64,14 @@ class ScanRunner:
         self.scan_dir = self.job_dir / "scan"
         self.plan: LevelPlan | None = None         # made in run(), once the stage's travel is known
         self._mask = None
+        self._scan: Scan | None = None
         self._level_times: list[float] = []
 
     # -- the whole job ----------------------------------------------------------
     def run(self) -> str:
         """Returns the final status: done, failed or cancelled (also stored with the reason)."""
         try:
-            scan = self._open_scan()
+            scan = self._scan = self._open_scan()
             self.plan = LevelPlan(self.settings, self._ceiling())
             if self.plan.next_target(scan.frames) is not None:
                 self._home()
@@ -110,12 +111,14 @@ class ScanRunner:
         fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
         if outputs is not None:
             fields["outputs"] = outputs
+        if self._scan is not None:                  # the row may lag scan.json if a write failed
+            fields["levels_done"] = len(self._scan.frames)
         try:
             self.store.update_job(self.job_id, **fields)
             self.store.event(self.job_id, status, reason or "scan finished")
         except Exception:
-            # e.g. the disk is so full SQLite cannot commit: the job stays "active" in the
-            # store, and the next start's recovery marks it interrupted. Say so, carry on.
+            # e.g. the disk is so full SQLite cannot commit: the store holds the end in memory
+            # and writes it when there is room (store.py). Say so, carry on.
             log.exception("could not record the end of job %s (%s: %s)", self.job_id, status, reason)
         self.report(state=status, message=reason or "scan finished", eta_s=0 if status == "done" else None)
 

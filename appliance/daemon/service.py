@@ -39,7 +39,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..errors import InkSliceError, SettingError
+from ..errors import DeviceError, InkSliceError, SettingError
 from . import settings as S
 from .calibration import GuidedCalibration
 from .commissioning import Commissioning, reference_processor
@@ -51,7 +51,7 @@ from .processing import child_process
 from .recovery import recover
 from ..hw.devices import Devices
 from .runner import ScanRunner, free_mb
-from .store import ACTIVE, Store
+from .store import ACTIVE, DiskFull, Store
 
 log = logging.getLogger("inkslice.service")
 STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
@@ -408,8 +408,8 @@ class BenchService:
         from .runner import Cancelled
         job = self.store.get_job(job_id)
         folder = self.store.job_dir(job_id)
-        self.store.update_job(job_id, status="processing")
         try:
+            self.store.update_job(job_id, status="processing")
             result = self.processor(folder / "scan", folder, options_for(S.full(job["settings"])), self._stop)
             if self._stop.is_set():
                 raise Cancelled()
@@ -424,8 +424,11 @@ class BenchService:
         fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
         if outputs is not None:
             fields["outputs"] = outputs
-        self.store.update_job(job_id, **fields)
-        self.store.event(job_id, status, reason or "imported scan processed")
+        try:
+            self.store.update_job(job_id, **fields)
+            self.store.event(job_id, status, reason or "imported scan processed")
+        except DiskFull as e:                       # held in memory, written when there is room
+            log.warning("job %s: %s", job_id, e)
         self._set(state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None)
 
     def export_latest_gcode(self) -> dict:
@@ -476,6 +479,12 @@ class BenchService:
 
     # == internals ================================================================
     def _refuse_if_busy(self):
+        try:
+            self.store.flush_unwritten()            # what a full disk held back is written first
+        except DiskFull:
+            held = ", ".join(f"job {k} ({v['status']})" for k, v in self.store.unwritten().items())
+            raise DeviceError("disk", f"full: the end of {held or 'the last job'} is not yet stored; free some "
+                                      "space (delete old jobs), then start or resume") from None
         if self._calibration is not None and self._calibration.active:
             raise SettingError("scan", "a guided calibration holds the bench; finish it or cancel it "
                                        "(the Calibrate page, or POST /api/calibration/cancel)")
