@@ -170,3 +170,57 @@ def test_sigterm_cancels_the_scan_cleanly(tmp_path):
         assert audit(store) == []
     finally:
         store.close()
+
+
+def big_scan_folder(reference_scan, folder, frames=1500):
+    """A scan folder of `frames` frames (hard links to one real frame), so that copying it
+    into the daemon takes long enough to be killed in the middle of."""
+    doc = json.loads((reference_scan / "scan.json").read_text())
+    (folder / "frames").mkdir(parents=True)
+    one = reference_scan / doc["frames"][0]["file"]
+    doc["frames"] = []
+    for i in range(frames):
+        os.link(one, folder / "frames" / f"{i:05d}.png")
+        doc["frames"].append({"file": f"frames/{i:05d}.png", "level_mm": round(2 + 0.01 * i, 3)})
+    (folder / "scan.json").write_text(json.dumps(doc))
+    return folder
+
+
+def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restart_removes(tmp_path):
+    import threading
+    ref, _ = service(tmp_path / "ref")
+    try:
+        ref_job = wait_final(ref, ref.start_scan(SCAN))
+        assert ref_job["status"] == "done"
+        source = big_scan_folder(ref.store.job_dir(ref_job["id"]) / "scan", tmp_path / "big")
+    finally:
+        ref.close()
+    daemon = Daemon(tmp_path)
+    jobs = daemon.data / "jobs"
+    threading.Thread(target=lambda: pytest.raises(Exception, daemon.client.import_scan, source), daemon=True).start()
+    end = time.monotonic() + 60
+    while not [d for d in jobs.glob(".import-*") if len(list(d.glob("scan/frames/*"))) >= 100]:
+        assert time.monotonic() < end, "the import never started copying"
+        time.sleep(0.002)
+    daemon.kill()
+    stray = list(jobs.glob(".import-*"))
+    assert len(stray) == 1 and not list(jobs.glob("2*")), "killed after the copy was complete"
+    store = Store(daemon.data)
+    try:
+        found = audit(store)
+        assert len(found) == 1 and found[0].startswith("jobs: imports left half-copied (removed when the "
+                                                       "daemon starts), ") and stray[0].name in found[0], found
+    finally:
+        store.close()
+    daemon = Daemon(tmp_path)                          # start-up removes it
+    try:
+        assert list(jobs.glob(".import-*")) == []
+        assert daemon.client.jobs() == []
+    finally:
+        daemon.stop()
+    store = Store(daemon.data)
+    try:
+        assert audit(store) == []
+    finally:
+        store.close()
+

@@ -7,8 +7,9 @@ scan-format rules (scanfile.load_scan), and checks every frame it lists
     - is a PNG or JPEG whose header says the size scan.json's camera says, 8 bits;
     - adds up, with the others, to at most MAX_BYTES;
 and at most MAX_FRAMES frames. Only scan.json and the listed frames are copied
-(into JOBS/.import-XXXX, renamed to the job's folder when complete), so a
-refusal or a failure half-way leaves nothing behind. Reading the headers, not
+(into JOBS/.import-XXXX on the data disk, renamed to the job's folder when
+complete), so a refusal or a failure half-way leaves nothing behind; a kill
+half-way leaves the staging folder, which the next start removes (recovery.py). Reading the headers, not
 decoding every frame, keeps the check to milliseconds: a whole scan is decoded
 by processing anyway, which fails the job with a clear reason if a frame's
 body is corrupt.
