@@ -125,3 +125,31 @@ def test_a_damaged_reply_makes_the_driver_resend_the_same_line():
         stage.close()
     finally:
         fake.close()
+
+
+def test_on_a_link_that_slows_down_the_driver_waits_as_long_as_the_measured_round_trip_needs():
+    """The replies slow from 10 ms to 1.5 s, past the driver's 1 s timeout (a loaded host, a
+    congested hub). A fixed wait would give up; this one has measured the round trips on the way
+    and gives each command the time the link needs, resending little."""
+    delay = [0.01]
+    script = firmware()
+
+    def answer(body):
+        for line in script(body):
+            threading.Timer(delay[0], lambda out=line: os.write(fake.master, out)).start()
+        return []
+    fake = FakeController(answer)
+    stage = SerialStage(fake.port, timeout=1.0, reply_timeout=0.05)
+    try:
+        while delay[0] < 1.5:
+            delay[0] = min(1.5, delay[0] * 1.3)
+            assert stage.get_setting("max_rate") == P.SETTINGS["max_rate"].default
+        c = stage.counters
+        assert c["worst_round_trip_s"] >= 1.4
+        assert c["longest_command_s"] > stage.timeout          # longer than the fixed timeout, and fine
+        assert c["resends"] <= c["commands"] // 2
+        assert c["over_budget"] == 0
+    finally:
+        stage.close()
+        time.sleep(delay[0])                                    # the last replies land before the pty closes
+        fake.close()

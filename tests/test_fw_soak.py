@@ -3,14 +3,19 @@
 
 Acceptance (issue 6): every move is executed exactly once -- after every
 move the stage's counted steps equal the commanded position, including after
-each re-home -- and no driver command takes longer than its timeout."""
+each re-home -- and no driver command takes longer than its budget.
+
+Under load (issue 19: 5 runs in a row beside 2 busy processes) the simulated
+MCU runs slower and its replies come late: the driver's budget follows the
+measured round trip instead of a fixed 3 s (hw/stage.py). The figures printed
+are the run's time, the worst round trip and the largest budget given."""
 import random
 import threading
 import time
 
 import pytest
 
-from appliance.hw.stage import SerialStage
+from appliance.hw.stage import ATTEMPTS, MAX_WAIT_S, SerialStage
 from appliance.sim.hil import SimulatedBench
 from fw_helpers import fw_build  # noqa: F401  (fixture)
 
@@ -56,10 +61,13 @@ def test_1000_moves_through_a_noisy_line_and_3_resets_each_execute_exactly_once(
     faults = {k: v for k, v in s.items() if k.startswith(("rx_", "tx_"))}
     print(f"\nsoak: {MOVES} moves in {took:.1f} s; resets {s['resets']}; wire {faults}")
     print(f"driver: {c}; slowest move {slowest:.2f} s")
+    print(f"worst round trip {c['worst_round_trip_s'] * 1000:.0f} ms; longest command "
+          f"{c['longest_command_s']:.2f} s of a budget up to {c['longest_budget_s']:.2f} s")
     assert s["resets"] == RESETS
     assert c["rehomes"] >= RESETS                      # every reset was noticed and recovered from
     assert c["idle_off_target"] == 0                   # no acknowledged move was ever found not done
-    assert c["longest_command_s"] <= stage.timeout     # no command outlived its timeout
+    assert c["over_budget"] == 0                       # no command outlived its budget,
+    assert c["longest_budget_s"] <= max(stage.timeout, ATTEMPTS * MAX_WAIT_S)   # and that stays bounded
     assert s["stalls"] == 0
     assert s["rx_overruns"] == 0                       # a real 2-byte receive FIFO would have kept up
     injected = sum(v for k, v in faults.items() if not k.endswith("bytes"))

@@ -17,6 +17,13 @@ The rules it follows (appliance/firmware/stepper/PROTOCOL.md has the whole contr
   The driver notices it in the next status or reply, re-homes (unless
   auto_rehome=False, then it raises) and re-issues the interrupted move.
   The counters in `.counters` say how often each of these happened.
+* The waits follow the line, not a fixed clock.  Every reply that answers a
+  single send is a round-trip sample; the wait for one reply is the smoothed
+  round trip plus four deviations (as TCP does), never below `reply_timeout`,
+  and half as long again after each silent one.  A command may keep trying for
+  `timeout` or ATTEMPTS such waits, whichever is longer: on a slow link (a
+  loaded host, a USB hub) commands get the time the link needs, while a dead
+  line, which gives no samples, still fails after `timeout`.
 """
 from __future__ import annotations
 
@@ -31,6 +38,39 @@ from appliance.hw import protocol as P
 from appliance.hw.base import Stage, StageStatus
 
 BAUD = 115200
+ATTEMPTS = 8                # a command's budget: at least this many waits at the measured pace
+MAX_WAIT_S = 2.0            # no single wait for a reply is longer, however slow the line looked
+
+
+class RoundTrip:
+    """The line's reply time, measured (Jacobson/Karels smoothing, Karn's rule: only a
+    reply to a single send is a sample, a resent line's reply is ambiguous)."""
+
+    def __init__(self, floor: float):
+        self.floor = floor
+        self.srtt: float | None = None
+        self.var = 0.0
+        self.carry = floor          # grown by silence, kept until the next clean sample
+        self.worst = 0.0
+
+    def sample(self, rtt: float) -> None:
+        self.worst = max(self.worst, rtt)
+        if self.srtt is None:
+            self.srtt, self.var = rtt, rtt / 2
+        else:
+            self.var += (abs(self.srtt - rtt) - self.var) / 4
+            self.srtt += (rtt - self.srtt) / 8
+        self.carry = self.floor
+
+    def wait(self) -> float:
+        """How long to wait for one reply before sending again."""
+        base = self.floor if self.srtt is None else self.srtt + 4 * self.var
+        return min(MAX_WAIT_S, max(self.floor, base, self.carry))
+
+    def silence(self) -> None:
+        """A wait ended without a reply: the next ones wait half as long again (a slow link then
+        gets replies within the wait, hence samples; a lost byte costs one longer wait)."""
+        self.carry = min(MAX_WAIT_S, self.wait() * 1.5)
 
 
 class SerialStage(Stage):
@@ -43,7 +83,9 @@ class SerialStage(Stage):
         self.poll_interval = poll_interval
         self.counters = dict(commands=0, resends=0, damaged_lines=0, status_polls=0,
                              resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0,
-                             idle_off_target=0, longest_command_s=0.0)
+                             idle_off_target=0, longest_command_s=0.0, worst_round_trip_s=0.0,
+                             longest_budget_s=0.0, over_budget=0)
+        self.rtt = RoundTrip(self.reply_timeout)
         self._stop_requested = False
         self._ready = False         # the boot banner seen while connecting is no reset
         self._lock = threading.RLock()
@@ -92,6 +134,21 @@ class SerialStage(Stage):
             except P.ProtocolError:
                 self.counters["damaged_lines"] += 1
 
+    def budget(self) -> float:
+        """How long one command may keep trying: `timeout`, or longer on a link measured slow."""
+        return max(self.timeout, ATTEMPTS * self.rtt.wait())
+
+    def _note_round_trip(self, rtt: float) -> None:
+        self.rtt.sample(rtt)
+        self.counters["worst_round_trip_s"] = self.rtt.worst
+
+    def _note_took(self, start: float, budget: float) -> None:
+        took = time.monotonic() - start
+        self.counters["longest_command_s"] = max(self.counters["longest_command_s"], took)
+        self.counters["longest_budget_s"] = max(self.counters["longest_budget_s"], budget)
+        if took > budget:
+            self.counters["over_budget"] += 1
+
     def _note_reset(self):
         if self._ready:
             self.counters["resets_seen"] += 1
@@ -103,18 +160,21 @@ class SerialStage(Stage):
             data = P.encode_command(seq, verb, *args)
             self.counters["commands"] += 1
             start = time.monotonic()
-            deadline = start + self.timeout
+            budget = self.budget()
+            deadline = start + budget
             tries = 0
             while time.monotonic() < deadline:
                 if tries:
                     self.counters["resends"] += 1
                 tries += 1
                 self._ser.write(data)
-                attempt_end = min(deadline, time.monotonic() + self.reply_timeout)
+                sent = time.monotonic()
+                attempt_end = min(deadline, sent + self.rtt.wait())
                 while True:
                     item = self._readline(attempt_end)
                     if item is None:
-                        break                               # silence: resend
+                        self.rtt.silence()                  # silence: resend, waiting longer
+                        break
                     if isinstance(item, P.Banner):
                         self._note_reset()
                         continue
@@ -123,14 +183,14 @@ class SerialStage(Stage):
                     if item.seq == seq:
                         if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
                             break                           # our line arrived damaged: resend
-                        took = time.monotonic() - start
-                        if took > self.counters["longest_command_s"]:
-                            self.counters["longest_command_s"] = took
+                        if tries == 1:
+                            self._note_round_trip(time.monotonic() - sent)
+                        self._note_took(start, budget)
                         return item
                     if item.seq == 0 and not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
                         break                               # a damaged line, perhaps ours: resend
             raise DeviceError(self._where(), f"no valid reply to {verb} after {tries} tries in "
-                                             f"{self.timeout:.1f} s: is the controller connected and powered?")
+                                             f"{budget:.1f} s: is the controller connected and powered?")
 
     def command(self, verb: str, *args) -> str:
         """transact() and turn an error reply into a DeviceError naming the code."""
@@ -143,21 +203,30 @@ class SerialStage(Stage):
     def raw_status(self) -> P.Status:
         """A real-time status report ('?'), retried until one arrives intact."""
         with self._lock:
-            deadline = time.monotonic() + self.timeout
+            start = time.monotonic()
+            budget = self.budget()
+            deadline = start + budget
+            polls = 0
             while time.monotonic() < deadline:
                 self._ser.reset_input_buffer()               # drop stale reports
                 self._ser.write(P.RT_STATUS)
+                sent = time.monotonic()
+                polls += 1
                 self.counters["status_polls"] += 1
-                attempt_end = min(deadline, time.monotonic() + self.reply_timeout)
+                attempt_end = min(deadline, sent + self.rtt.wait())
                 while True:
                     item = self._readline(attempt_end)
                     if item is None:
+                        self.rtt.silence()
                         break
                     if isinstance(item, P.Banner):
                         self._note_reset()
                     elif isinstance(item, P.Status):
+                        if polls == 1:
+                            self._note_round_trip(time.monotonic() - sent)
+                        self._note_took(start, budget)
                         return item
-            raise DeviceError(self._where(), f"no status report in {self.timeout:.1f} s")
+            raise DeviceError(self._where(), f"no status report in {budget:.1f} s")
 
     # ---- the Stage interface ---------------------------------------------
     def identify(self) -> dict:
@@ -304,7 +373,7 @@ class SerialStage(Stage):
         outside the command lock so it preempts a move in progress."""
         self._stop_requested = True
         self._ser.write(P.RT_ESTOP * 3)
-        deadline = time.monotonic() + self.timeout
+        deadline = time.monotonic() + self.budget()
         with self._lock:
             while time.monotonic() < deadline:
                 st = self.raw_status()
