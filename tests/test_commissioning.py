@@ -168,7 +168,7 @@ def test_cancel_at_each_step_then_a_scan_starts(tmp_path):
             c = svc.commission(sid, "cancel")
             assert c["active"] is None and bench.placement is None, (sid, actions)
             assert step(c, sid)["status"] == "missing", (sid, actions)
-            job = wait_final(svc, svc.start_scan({**SCAN, **SHORT}))
+            job = wait_final(svc, svc.start_scan({**SCAN, **SHORT}), timeout=180)
             assert job["status"] == "done", (sid, actions, job["reason"])
         # the meniscus scan cancelled mid-way is a cancelled job, nothing stored
         refs = [j for j in svc.jobs() if j["params"].get("reference")]

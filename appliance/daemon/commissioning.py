@@ -588,9 +588,16 @@ def reference_processor(reference: dict, options: dict):
         from ..process import extract_waterlines, process
         from ..scanfile import load_scan
         from ..surface.reference import Ball, fit_meniscus, reference_error
+        from .runner import Cancelled
+
+        def check_stop():                   # it runs in the scan's thread: a cancel must not wait for it
+            if stop is not None and stop.is_set():
+                raise Cancelled()
         scan = load_scan(scan_folder)
         waterlines = extract_waterlines(scan)
+        check_stop()
         model, ball = fit_meniscus(scan, Ball(float(reference["diameter_mm"])), waterlines)
+        check_stop()
         job = process(scan_folder, truth=False, meniscus=model,
                       **{k: v for k, v in options.items() if k in ("grid_n", "method")})
         hm = job.heightmap
@@ -611,7 +618,7 @@ def reference_processor(reference: dict, options: dict):
 # -- small helpers --------------------------------------------------------------------------
 
 def _bright_fraction(frame) -> float:
-    """Share of the frame brighter than the ink (the lit base top or part): Otsu between the two."""
+    """Share of the frame brighter than the ink (the lit base top or part)."""
     gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
     small = cv2.resize(gray, (256, max(1, round(gray.shape[0] * 256 / gray.shape[1]))), interpolation=cv2.INTER_AREA)
     return float(np.mean(small > 90))
