@@ -218,3 +218,20 @@ def test_a_store_that_cannot_even_open_says_the_disk_is_full(small_disk):
     small_disk.fill()
     with pytest.raises(DiskFull, match="^disk: full: the job store cannot write"):
         Store(data)
+
+
+def test_a_jobs_end_held_back_by_a_full_disk_is_written_when_the_daemon_stops_after_space_returns(small_disk):
+    data = small_disk.mount / "data"
+    store = Store(data)
+    store.create_job("j1", "cone", {}, {}, 10)
+    store.update_job("j1", status="scanning")
+    small_disk.fill()
+    with pytest.raises(DiskFull):
+        store.update_job("j1", status="failed", reason="disk: full while writing")
+    small_disk.free()
+    store.close()                                       # nobody started a scan in between
+    again = Store(data)
+    try:
+        assert (again.get_job("j1")["status"], again.get_job("j1")["reason"]) == ("failed", "disk: full while writing")
+    finally:
+        again.close()

@@ -528,8 +528,11 @@ class BenchService:
         except Exception as e:                      # missing stage or camera, a bad wiring file ...
             reason = f"cannot start: {e}"
             self._note_fault(str(e))
-            self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
-            self.store.event(job_id, "failed", reason)
+            try:
+                self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
+                self.store.event(job_id, "failed", reason)
+            except DiskFull as full:                # held in memory, written when there is room
+                log.warning("job %s: %s", job_id, full)
             self._set(state="failed", message=reason)
             return
         self._set(hardware={**self._state["hardware"], **devices.hardware})

@@ -100,6 +100,11 @@ class Store:
 
     def close(self):
         with self._lock:
+            try:
+                self.flush_unwritten()              # a job's end held back while the disk was full
+            except DiskFull as e:
+                log.warning("closing with %d job end(s) unwritten (%s); the next start marks those "
+                            "jobs interrupted", len(self._unwritten), e)
             self._db.close()
 
     def _tx(self, sql, args=()):
