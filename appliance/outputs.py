@@ -124,7 +124,8 @@ def _regular_axis(v):
 def meniscus_json(model) -> dict:
     """Only the ink's own parameters: the camera's place comes from each scan's calibration."""
     return {"format": "inkslice.meniscus/1", "capillary_length_mm": float(model.capillary_length_mm),
-            "contact_angle_deg": float(np.degrees(model.contact_angle_rad))}
+            "contact_angle_deg": float(np.degrees(model.contact_angle_rad)),
+            "contact_line_curvature": float(model.curvature)}
 
 
 def meniscus_model(doc, camera, where="meniscus"):
@@ -133,10 +134,12 @@ def meniscus_model(doc, camera, where="meniscus"):
     try:
         lc = float(doc["capillary_length_mm"])
         theta = float(doc["contact_angle_deg"])
+        curvature = float(doc.get("contact_line_curvature", 0.0))      # older files: a straight line
     except (KeyError, TypeError, ValueError) as e:
         raise InkSliceError(where, f"not a meniscus model (needs capillary_length_mm and contact_angle_deg: {e})") \
             from None
-    if not (0 <= lc <= 20 and -90 <= theta <= 90):
-        raise InkSliceError(where, f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg")
+    if not (0 <= lc <= 20 and -90 <= theta <= 90 and -5 <= curvature <= 5):
+        raise InkSliceError(where, f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg, "
+                                   f"contact line curvature weight {curvature}")
     centre = camera_centre_xy(camera.K, camera.homography) if camera.K is not None else None
-    return MeniscusModel(lc, float(np.radians(theta)), centre, camera.height_mm)
+    return MeniscusModel(lc, float(np.radians(theta)), centre, camera.height_mm, curvature)

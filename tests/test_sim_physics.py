@@ -113,3 +113,71 @@ def test_rendered_contact_line_obeys_the_model_right_up_to_the_walls():
     print(f"contact line vs model: {P.shape[0]} points, max |resid| {np.abs(resid).max():.4f} mm, "
           f"within 5 mm of a wall {np.abs(resid[near]).max():.4f} mm ({near.sum()} points)")
     assert np.abs(resid).max() < 0.01        # was 0.15-2.6 mm before the renderer's fixes
+
+
+SECOND_INK = Effects(meniscus=True, capillary_length_mm=2.3, contact_angle_deg=35.0, contact_line_curvature=True)
+
+
+def test_second_model_rise_is_a_depression_on_flat_faces_and_follows_the_lines_bend():
+    theta = math.radians(35)
+    flat, steep = physics.meniscus_rise_curved(np.radians([0.0, 60.0]), 0.0, 2.3, theta)
+    assert math.isclose(flat, -2 * 2.3 * math.sin(theta / 2)) and flat < -1.3   # flatter than 35 deg: below the ink
+    assert steep > 0
+    # a line bending round the part (a peak, kappa > 0) lowers the meniscus, round the ink raises it
+    beta = np.radians(50.0)
+    straight = physics.meniscus_rise(beta, 2.3, theta)
+    peak, pit = physics.meniscus_rise_curved(beta, np.array([0.1, -0.1]), 2.3, theta)
+    assert 0.85 * straight < peak < 0.9 * straight and 1.08 * straight < pit < 1.12 * straight
+    # a depression shrinks and grows the same way
+    assert abs(physics.meniscus_rise_curved(0.0, 0.1, 2.3, theta)) < abs(flat)
+
+
+def test_second_model_keeps_a_flat_top_dry_under_the_ink():
+    """The mesa's flat top is 25 mm up; with the ink 0.8 mm above it the first ink covers
+    it, the second (35 deg, depressed 1.38 mm on a flat) leaves it out."""
+    part, rig = S.get("plateau"), Rig()
+    first = _gray(render_frame(part, 25.8, rig, Effects(meniscus=True)))
+    second = _gray(render_frame(part, 25.8, rig, SECOND_INK))
+    ink = float(np.median(first))
+    assert (first > ink + 40).sum() == 0
+    # a disc of radius ~22 mm: ~240 000 pixels of 0.079 mm
+    assert (second > ink + 40).sum() > 150_000
+
+
+def test_rendered_second_model_is_the_contact_line_with_its_own_curvature():
+    """The crater at 15 mm: contact lines on the ridge's outer flank (bending round the
+    part) and in the crater (bending round the ink). Every edge point is the contact line
+    at L + h(beta, kappa) seen from that height; the straight-line rise misses both
+    flanks, in opposite directions."""
+    from appliance.sim.render import curvature_grid, surface_grid
+    from scipy import ndimage
+    part, L, rig = S.get("crater"), 15.0, Rig()
+    img = render_frame(part, L, rig, SECOND_INK)
+    uv = np.vstack([_crossings(_gray(img), 1), _crossings(_gray(img), 0)])
+    P = _to_plane(rig, uv)
+    P = P[np.hypot(P[:, 0] - 50, P[:, 1] - 50) < 40]          # off the disc's wall
+    grid = surface_grid(part)
+    kgrid = np.asarray(curvature_grid(part)[0][..., 0], float)
+    C, theta = rig.centre, math.radians(35)
+
+    def residual(curved):
+        Q = P.copy()
+        for _ in range(4):                    # contact point, its slope and bend, its rise
+            e = 1e-3
+            gx = (part.height(Q[:, 0] + e, Q[:, 1]) - part.height(Q[:, 0] - e, Q[:, 1])) / (2 * e)
+            gy = (part.height(Q[:, 0], Q[:, 1] + e) - part.height(Q[:, 0], Q[:, 1] - e)) / (2 * e)
+            beta = np.arctan(np.hypot(gx, gy))
+            ix, iy = grid.coords(Q[:, 0], Q[:, 1])
+            kappa = ndimage.map_coordinates(kgrid, [iy, ix], order=1) if curved else 0.0
+            h = physics.meniscus_rise_curved(beta, kappa, 2.3, theta)
+            Q = P + (C[:2] - P) * (h / C[2])[:, None]
+        return part.height(Q[:, 0], Q[:, 1]) - (L + h), np.hypot(Q[:, 0] - 50, Q[:, 1] - 50)
+
+    resid, r = residual(True)
+    inner, outer = r < 20, r > 20
+    assert inner.sum() > 200 and outer.sum() > 200
+    print(f"crater contact line vs the second model: max |resid| {np.abs(resid).max():.4f} mm")
+    assert np.abs(resid).max() < 0.01
+    straight, _ = residual(False)
+    # in the crater the line stands higher than a straight one would, outside lower
+    assert np.median(straight[inner]) > 0.05 and np.median(straight[outer]) < -0.03

@@ -120,5 +120,6 @@ def run_reference(args):
         atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())
     atomicio.write_text(out, json.dumps(meniscus_json(model), indent=2) + "\n")
     print(f"meniscus written to {out}: capillary length {model.capillary_length_mm:.3f} mm, "
-          f"contact angle {math.degrees(model.contact_angle_rad):.2f} deg")
+          f"contact angle {math.degrees(model.contact_angle_rad):.2f} deg, "
+          f"contact line curvature weight {model.curvature:.2f}")
     return 0

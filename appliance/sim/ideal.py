@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from ..vision.types import Waterline, signed_area
+from . import physics
 
 _EPS = 1e-4
 
@@ -66,25 +67,41 @@ class _MeniscusView:
     """A part seen through the ink's meniscus: its level_sdf at L is that of the
     contact line, the level curve at L + h(beta) of the top (walls stay walls)."""
 
-    def __init__(self, surface, capillary_length_mm, contact_angle_rad):
+    def __init__(self, surface, capillary_length_mm, contact_angle_rad, curved=False):
         self.s = surface
         self.bounds = surface.bounds
-        self.l_c, self.theta = capillary_length_mm, contact_angle_rad
+        self.l_c, self.theta, self.curved = capillary_length_mm, contact_angle_rad, curved
+
+    def _gradient(self, x, y, e=1e-4):
+        s = self.s
+        return ((s.height(x + e, y) - s.height(x - e, y)) / (2 * e),
+                (s.height(x, y + e) - s.height(x, y - e)) / (2 * e))
+
+    def _curvature(self, x, y):
+        """The contact line's curvature as the renderer takes it (render.curvature_grid)."""
+        from .render import curvature_grid, surface_grid
+        grid = surface_grid(self.s)
+        k = np.asarray(curvature_grid(self.s)[0][..., 0], float)
+        gx, gy = grid.coords(np.asarray(x, float).ravel(), np.asarray(y, float).ravel())
+        from scipy import ndimage
+        return ndimage.map_coordinates(k, [gy, gx], order=1, mode="nearest").reshape(np.shape(x))
 
     def level_sdf(self, x, y, level):
-        s, e = self.s, 1e-4
-        gx = (s.height(x + e, y) - s.height(x - e, y)) / (2 * e)
-        gy = (s.height(x, y + e) - s.height(x, y - e)) / (2 * e)
+        gx, gy = self._gradient(x, y)
         beta = np.arctan(np.hypot(gx, gy))
-        h = 2 * self.l_c * np.sin((beta - self.theta) / 2)
-        return s.level_sdf(x, y, level + h)
+        if self.curved:
+            h = physics.meniscus_rise_curved(beta, self._curvature(x, y), self.l_c, self.theta)
+        else:
+            h = physics.meniscus_rise(beta, self.l_c, self.theta)
+        return self.s.level_sdf(x, y, level + h)
 
 
 def meniscus_waterlines(surface, levels, capillary_length_mm=2.7, contact_angle_rad=0.0,
-                        resolution_mm=0.05) -> list[Waterline]:
+                        resolution_mm=0.05, curved=False) -> list[Waterline]:
     """Waterlines as the ink's contact lines, observed straight down (no perspective).
 
     Valid on the sculptured top away from walls (there the renderer lets the ink
-    climb the wall instead): meant for parts like the calibration references."""
-    view = _MeniscusView(surface, capillary_length_mm, contact_angle_rad)
+    climb the wall instead): meant for parts like the calibration references. `curved`: the
+    second meniscus model (the contact line's own curvature, physics.meniscus_rise_curved)."""
+    view = _MeniscusView(surface, capillary_length_mm, contact_angle_rad, curved)
     return [ideal_waterline(view, lv, resolution_mm) for lv in levels]

@@ -62,6 +62,7 @@ class Effects:
     meniscus: bool = False           # ink climbs the part at the contact line
     capillary_length_mm: float = physics.CAPILLARY_LENGTH_MM
     contact_angle_deg: float = 0.0
+    contact_line_curvature: bool = False   # the second meniscus model (physics.meniscus_rise_curved)
     ripple_mm: float = 0.0           # amplitude of the free surface's oscillation just after a move
     ripple_age_s: float = 0.0        # time since the move stopped (VirtualCamera sets it)
     ripple_decay_s: float = 0.6
@@ -78,6 +79,12 @@ PRESETS = {
     "physics": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
                        vignetting=0.25, lens_distortion=True, dust_specks=30,
                        displacement=True, meniscus=True),
+    # a second ink, another meniscus model: wets at 35 deg (a depression on flatter faces),
+    # the contact line's own curvature raising the meniscus in pits and lowering it on ridges
+    "physics2": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
+                        vignetting=0.25, lens_distortion=True, dust_specks=30,
+                        displacement=True, meniscus=True, capillary_length_mm=2.3,
+                        contact_angle_deg=35.0, contact_line_curvature=True),
     "harsh": Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, glare_spots=8,
                      glare_strength=200.0, vignetting=0.4, lens_distortion=True, dust_specks=120,
                      displacement=True, meniscus=True, ripple_mm=0.05, ripple_age_s=0.5),
@@ -141,6 +148,30 @@ def surface_grid(surface) -> SurfaceGrid:
         Nrm = np.dstack([Tx, Ty, Fx, Fy]).astype(np.float32)
         tiers.append(TierGrid(FT, Nrm, slope * 1.05 + 1e-3))
     return SurfaceGrid(float(xs[0]), float(ys[0]), step, margin, tiers, z_max)
+
+
+@functools.lru_cache(maxsize=4)
+def curvature_grid(surface) -> list:
+    """Per tier, on surface_grid's lattice: the in-plane curvature (1/mm) of the top's
+    level curves (physics.level_curve_curvature), as (ny, nx, 1) float32 for _lookup."""
+    grid = surface_grid(surface)
+    out = []
+    for tg in grid.tiers:
+        T = tg.FT[..., 1].astype(np.float64)
+        out.append(physics.level_curve_curvature(T, grid.step).astype(np.float32)[..., None])
+    return out
+
+
+def _contact_curvature(surface, grid, x, y, tier):
+    """Curvature of the contact line through plane points x, y on each one's tier's top."""
+    kg = curvature_grid(surface)
+    gx, gy = grid.coords(x, y)
+    out = np.zeros(x.size, np.float32)
+    for ti, k in enumerate(kg):
+        sel = tier == ti
+        if sel.any():
+            out[sel] = _lookup(k, gx[sel], gy[sel], (0.0, 0.0, 0.0, 0.0))[:, 0]
+    return out
 
 
 _REMAP_COLS = 4096
@@ -554,13 +585,23 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
         # sharp edge the contact line pins, so the top near a wall comes out with its own
         # slope's rise, and on the wall itself the ink climbs h(90 deg) - which only moves
         # where a wall facing the camera shows its waterline.
+        # With the second model the rise also depends on the contact line's own curvature
+        # there (the top's level curve through the contact point).
         theta = math.radians(effects.contact_angle_deg)
-        rise = lambda b: physics.meniscus_rise(b, effects.capillary_length_mm, theta).astype(np.float32)
-        h = rise(np.arctan(wslope))
+        l_c = effects.capillary_length_mm
+
+        def rise(b, x=None, y=None, tier=None):
+            if x is None or not effects.contact_line_curvature:
+                return physics.meniscus_rise(b, l_c, theta).astype(np.float32)
+            kappa = _contact_curvature(surface, grid, x, y, tier)
+            return physics.meniscus_rise_curved(b, kappa, l_c, theta).astype(np.float32)
+
+        h = rise(np.arctan(wslope), x0, y0, wtier)
         for _ in range(2):
             lc = lvl + h
-            approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, x0 + kx * h, y0 + ky * h, lc)
-            h = rise(np.arctan(wslope))
+            xs, ys = x0 + kx * h, y0 + ky * h
+            approx, wtier, wwall, wslope, fgx, fgy = _approx_sdf(grid, xs, ys, lc)
+            h = rise(np.arctan(wslope), xs, ys, wtier)
         lc = lvl + h
         # on a wall the ink climbs h(90 deg), but never past the wall's top edge
         seen_h = h.copy()

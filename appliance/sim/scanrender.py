@@ -18,7 +18,7 @@ from .. import atomicio
 from ..errors import SettingError
 from ..scanfile import FrameRef, Scan, write_frame, write_scan_json
 from . import surfaces as _surfaces
-from .render import Effects, effects_preset, liquid_level, render_frame, surface_grid
+from .render import Effects, curvature_grid, effects_preset, liquid_level, render_frame, surface_grid
 from .rig import Rig, pixel_map
 from .truth import truth_path
 
@@ -84,6 +84,8 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
         import multiprocessing as mp
         pixel_map(rig, effects.lens_distortion)
         surface_grid(surface)
+        if effects.meniscus and effects.contact_line_curvature:
+            curvature_grid(surface)
         _FORKED["surface"] = surface
         try:
             pool = mp.get_context("fork").Pool(min(workers, len(jobs)))
@@ -120,7 +122,8 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
         "effects": effects.to_json(),
         "meniscus": {"enabled": effects.meniscus,
                      "capillary_length_mm": effects.capillary_length_mm,
-                     "contact_angle_deg": effects.contact_angle_deg},
+                     "contact_angle_deg": effects.contact_angle_deg,
+                     "contact_line_curvature": effects.contact_line_curvature},
         "displacement": {"enabled": effects.displacement,
                          "tank_inner_area_mm2": float(rig.tank_area_mm2)},
         "render_seconds": round(time.perf_counter() - t0, 3),

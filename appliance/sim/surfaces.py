@@ -204,6 +204,33 @@ RING = Surface(
     (5.0, 95.0, 5.0, 95.0), (Tier(ring_sdf(50, 50, 15, 45), _ring_top),))
 
 
+def _crater_top(x, y):
+    # a ridge cresting at 22 mm on radius 20 mm, falling to a bowl 5.1 mm deep in the middle
+    # and to 5 mm at the disc's edge
+    r = np.hypot(x - 50, y - 50)
+    return 5 + 17 * np.exp(-((r - 20) / 9) ** 2)
+
+
+CRATER = Surface(
+    "crater", "a ring-shaped ridge round a crater with a floor, on a disc of radius 42 mm: contact "
+    "lines that bend round the ink inside and round the part outside",
+    (8.0, 92.0, 8.0, 92.0), (Tier(disc_sdf(50, 50, 42), _crater_top),))
+
+
+def _steep_front_top(x, y):
+    # a body rising gently from the back (x = 90) to its brow at x ~ 55, then dropping 20 mm
+    # in ~10 mm (slopes to 2, 63 deg) to a 4 mm apron; rounded off sideways
+    front = 1.0 / (1.0 + np.exp(-(x - 52) / 2.5))
+    side = np.exp(-((y - 40) / 24) ** 2)
+    return 4 + 20 * front * side * (0.55 + 0.45 * np.clip((90 - x) / 38, 0, 1))
+
+
+STEEP_FRONT = Surface(
+    "steep-front", "a body with a steep front: a rounded hump whose face drops 20 mm at up to "
+    "63 deg to a 4 mm apron, on a 90 x 80 mm block",
+    (0.0, 90.0, 0.0, 80.0), (Tier(rect_sdf(0, 90, 0, 80), _steep_front_top),))
+
+
 def _flat(h):
     return lambda x, y: np.full(np.broadcast(np.asarray(x), np.asarray(y)).shape, float(h))
 
@@ -252,7 +279,7 @@ CONE = Surface(
 
 
 SURFACES = {s.name: s for s in (SAMPLE1, SAMPLE2, SAMPLE3, SAMPLE4,
-                                TWIN_PEAKS, RING, STEPS, PLATEAU, SPHERE, CONE)}
+                                TWIN_PEAKS, RING, CRATER, STEEP_FRONT, STEPS, PLATEAU, SPHERE, CONE)}
 DISSERTATION_SAMPLES = ("sample1", "sample2", "sample3", "sample4")
 
 

@@ -17,13 +17,28 @@ sharp edge the contact line pins (the virtual bench renders it so); the ink
 climbing the wall itself (h(pi/2)) is hidden behind the wall's edge and wall
 points are no data for the top anyway.
 
+The contact line's own curvature: where the line bends round the part (a peak,
+a ridge's outside) the meniscus also curves round it and stands lower; where it
+bends round the ink (a pit, a crater) higher. To first order in kappa l_c
+(Young-Laplace integrated along a straight meniscus' profile)
+    h = h_straight sqrt(1 - 2 c f(psi) kappa l_c),  f = (1 - cos^3(psi/2)) / (3 sin^2(psi/2)),
+psi = beta - theta, kappa the curvature of the top's level curve through the
+contact point (level_curve_curvature: regularised on flats, limited and
+averaged over a millimetre). c is the model's `curvature` weight: 1 is the
+physics, 0 a straight line; the calibration measures it, so an ink (or a
+bench) whose contact lines do not feel their bend gets c ~ 0 and the old
+correction back. The solve takes kappa from the top it is solving for (the
+contact lines are its level curves), refreshed at every step.
+
 The dissertation's methods, which have no surface to solve on, get a cruder
 correction: the slope from the spacing of neighbouring waterlines
 (correct_slices_from_spacing).
 
 Calibration: a reference part of known shape (sphere or cone) is scanned; the
-(l_c, theta) that make every observed point sit on the known surface at
-L + h(beta) are found by robust least squares.
+(l_c, theta, c) that make every observed point sit on the known surface at
+L + h(beta, kappa) are found by robust least squares. On a ball the contact
+lines' bend (1/r) and slope change together, yet the three separate: from exact
+contact lines of a 30 mm ball they come back to 1e-3.
 """
 from __future__ import annotations
 
@@ -40,29 +55,65 @@ from .gridfit import FitProblem, Lattice, bilinear, fill_nearest
 from .slices import check_waterlines, mark_walls, polyline_distance
 
 
+CURVATURE_FLAT = 0.05        # slopes under ~3 deg: no level curve to take a curvature of
+CURVATURE_LIMIT = 1.0        # |kappa l_c| beyond which the first-order correction stops growing
+CURVATURE_CLIP = 0.5         # 1/mm: a tighter bend is a crest's kink, not a contact line's
+CURVATURE_SMOOTHING_MM = 1.0
+
+
+def curvature_shape(psi):
+    """f(psi) of the curvature term: 1/2 on a flat, 0.43 on a vertical wall."""
+    half = np.abs(np.asarray(psi, float)) / 2.0
+    s2 = np.sin(half) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(s2 > 1e-8, (1.0 - np.cos(half) ** 3) / (3.0 * np.maximum(s2, 1e-300)), 0.5)
+
+
+def level_curve_curvature(z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM):
+    """In-plane curvature (1/mm) of the level curves of a height grid (rows y, columns x):
+    -div(grad z / |grad z|), > 0 round a peak, < 0 round a pit; limited to +-clip and
+    averaged over smoothing_mm (a meniscus feels the line's mean bend, not a crest's kink)."""
+    zy, zx = np.gradient(np.asarray(z, float), hy, hx)
+    norm = np.sqrt(zx * zx + zy * zy + flat * flat)
+    k = np.clip(-(np.gradient(zx / norm, hx, axis=1) + np.gradient(zy / norm, hy, axis=0)), -clip, clip)
+    return ndimage.gaussian_filter(k, (smoothing_mm / hy, smoothing_mm / hx), mode="nearest")
+
+
 @dataclass(frozen=True)
 class MeniscusModel:
     capillary_length_mm: float = 2.7
     contact_angle_rad: float = 0.0
     camera_xy_mm: tuple | None = None      # camera centre over the base, for the perspective
     camera_height_mm: float | None = None  # camera centre above the liquid plane
+    curvature: float = 0.0                 # weight of the contact line's own curvature (1: Young-Laplace)
 
-    def rise(self, beta):
-        return 2.0 * self.capillary_length_mm * np.sin((np.asarray(beta, float) - self.contact_angle_rad) / 2.0)
+    def rise(self, beta, kappa=None):
+        psi = np.asarray(beta, float) - self.contact_angle_rad
+        return 2.0 * self.capillary_length_mm * np.sin(psi / 2.0) * self.curvature_factor(psi, kappa)
 
-    def rise_on_slope(self, g):
+    def curvature_factor(self, psi, kappa):
+        """h / h_straight where the contact line bends by kappa (1/mm, > 0 round the part)."""
+        if kappa is None or self.curvature == 0.0:
+            return 1.0
+        k = np.clip(self.curvature * np.asarray(kappa, float) * self.capillary_length_mm,
+                    -CURVATURE_LIMIT, CURVATURE_LIMIT)
+        return np.sqrt(np.maximum(1.0 - 2.0 * curvature_shape(psi) * k, 0.25))
+
+    def rise_on_slope(self, g, kappa=None):
         """h on a surface whose slope (rise over run) is g."""
-        return self.rise(np.arctan(g))
+        return self.rise(np.arctan(g), kappa)
 
-    def rise_on_slope_derivative(self, g):
-        """dh / dg."""
+    def rise_on_slope_derivative(self, g, kappa=None):
+        """dh / dg (the curvature factor's own slow change with the slope left out)."""
         g = np.asarray(g, float)
-        return self.capillary_length_mm * np.cos((np.arctan(g) - self.contact_angle_rad) / 2.0) / (1.0 + g * g)
+        beta = np.arctan(g)
+        return (self.capillary_length_mm * np.cos((beta - self.contact_angle_rad) / 2.0) / (1.0 + g * g)
+                * self.curvature_factor(beta - self.contact_angle_rad, kappa))
 
     def scaled(self, f):
         """The same ink with its capillary length times f (the solver turns the meniscus on in steps)."""
         return MeniscusModel(f * self.capillary_length_mm, self.contact_angle_rad, self.camera_xy_mm,
-                             self.camera_height_mm)
+                             self.camera_height_mm, self.curvature)
 
     def unproject(self, P, h):
         """Plane positions of contact points standing h above the ink."""
@@ -170,16 +221,35 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel):
     if fp.sum() < 9:
         return apparent
     h = max(sub.hx, sub.hy)
+    kappa = contact_line_curvature(sub, A) if model.curvature else None
     if min(sub.shape) >= 20:
         coarse = Lattice(sub.x[::2], sub.y[::2])
         Ac = A[::2, ::2]
-        tc = _solve_top(coarse, Ac, fp[::2, ::2], model, 3 * 2 * h, Ac, steps=(0.5, 1.0), iterations=5)
+        kc = None if kappa is None else kappa[::2, ::2]
+        tc = _solve_top(coarse, Ac, fp[::2, ::2], model, 3 * 2 * h, Ac, steps=(0.5, 1.0), iterations=5,
+                        kappa=kc)
         start = A + _resample_rise(tc - Ac, coarse, sub)
-        top = _solve_top(sub, A, fp, model, h, start, steps=(1.0,), iterations=FINE_ITERATIONS)
+        top = _solve_top(sub, A, fp, model, h, start, steps=(1.0,), iterations=FINE_ITERATIONS, kappa=kappa)
     else:
-        top = _solve_top(sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5)
+        top = _solve_top(sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa)
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
+
+
+CURVATURE_STEP_MM = 0.2       # the fine grid the curvature is taken on
+
+
+def contact_line_curvature(lat, top):
+    """The contact lines' own curvature (1/mm) at every node: that of the top's level curves,
+    taken on a CURVATURE_STEP_MM grid (bicubic from the lattice) so that a crest's clipped
+    spike is as narrow as it really is, whatever the lattice's spacing."""
+    ky = max(1, int(np.ceil(lat.hy / CURVATURE_STEP_MM)))
+    kx = max(1, int(np.ceil(lat.hx / CURVATURE_STEP_MM)))
+    fj = np.arange((top.shape[0] - 1) * ky + 1) / ky
+    fi = np.arange((top.shape[1] - 1) * kx + 1) / kx
+    FJ, FI = np.meshgrid(fj, fi, indexing="ij")
+    fine = ndimage.map_coordinates(top, [FJ, FI], order=3, mode="nearest")     # C2: curvature needs it
+    return level_curve_curvature(fine, lat.hy / ky, lat.hx / kx)[::ky, ::kx]
 
 
 def _resample_rise(phi, src, dst):
@@ -190,7 +260,7 @@ def _resample_rise(phi, src, dst):
     return ndimage.map_coordinates(fill_nearest(phi), [FJ, FI], order=3, mode="nearest")
 
 
-def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7):
+def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
     problem = FitProblem(lat, footprint)
@@ -207,9 +277,18 @@ def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, to
     a, on = A[act], trusted[act].astype(float)
     I = sp.identity(problem.n, format="csc")
     t = start[act].astype(float)
+    curved = kappa is not None
+
+    def curvature_of(t):
+        """The contact lines' curvature where the top is t: that of its level curves."""
+        full = np.full(lat.shape, np.nan)
+        full[act] = t
+        return contact_line_curvature(lat, fill_nearest(full))[act]
+
+    kap = kappa[act] if curved else None
 
     def objective(t, m):
-        r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t)) - a)
+        r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
         p = t - a
         return float(r @ r + lam * (p @ (R @ p)))
 
@@ -217,10 +296,12 @@ def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, to
     for f in steps:
         m = model.scaled(f)
         for _ in range(iterations):
+            if curved:
+                kap = curvature_of(t)
             gx, gy = Dx @ t, Dy @ t
             g = np.hypot(gx, gy)
-            r = on * (t - m.rise_on_slope(g) - a)
-            c = m.rise_on_slope_derivative(g) / np.sqrt(g * g + 1e-6)   # dh/d(grad) = h' grad / |grad|
+            r = on * (t - m.rise_on_slope(g, kap) - a)
+            c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)   # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
             M = (J.T @ J + lam * R).tocsc()
             rhs = -(J.T @ r) - lam * (R @ (t - a))
@@ -269,6 +350,21 @@ def _reference_slopes(surface, P, eps=1e-3):
     return np.hypot(gx, gy)
 
 
+def _reference_curvature(surface):
+    """kappa(P): the curvature of the reference top's level curve through each point P, as
+    the correction takes it (level_curve_curvature on a CURVATURE_STEP_MM grid)."""
+    x0, x1, y0, y1 = surface.bounds
+    step = CURVATURE_STEP_MM
+    xs, ys = np.arange(x0 - 2, x1 + 2 + step, step), np.arange(y0 - 2, y1 + 2 + step, step)
+    X, Y = np.meshgrid(xs, ys)
+    k = level_curve_curvature(surface.height(X, Y), step, step)
+
+    def at(P):
+        return ndimage.map_coordinates(k, [(P[:, 1] - ys[0]) / step, (P[:, 0] - xs[0]) / step],
+                                       order=1, mode="nearest")
+    return at
+
+
 def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera_xy_mm=None,
                        camera_height_mm=None, wall_tol_mm=0.03) -> MeniscusModel:
     """(l_c, theta) from a scan of a reference part whose `height(x, y)` is known.
@@ -301,15 +397,18 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
     if len(P) > 20000:
         P, L = P[:: len(P) // 20000], L[:: len(P) // 20000]
     beta = np.arctan(_reference_slopes(reference_surface, P))
+    curvature = _reference_curvature(reference_surface)
+    kappa = curvature(P)
     cam = dict(camera_xy_mm=camera_xy_mm, camera_height_mm=camera_height_mm)
 
     def residual(params):
-        m = MeniscusModel(params[0], params[1], **cam)
-        h = m.rise(beta)
-        for _ in range(2):      # the slope where the contact point really is
-            h = m.rise(np.arctan(_reference_slopes(reference_surface, m.unproject(P, h))))
+        m = MeniscusModel(params[0], params[1], curvature=params[2], **cam)
+        h = m.rise(beta, kappa)
+        for _ in range(2):      # the slope and curvature where the contact point really is
+            Q = m.unproject(P, h)
+            h = m.rise(np.arctan(_reference_slopes(reference_surface, Q)), curvature(Q))
         return reference_surface.height(*m.unproject(P, h).T) - (L + h)
 
-    sol = least_squares(residual, x0=[2.0, 0.1], bounds=([0.0, -np.pi / 2], [10.0, np.pi / 2]),
+    sol = least_squares(residual, x0=[2.0, 0.1, 0.5], bounds=([0.0, -np.pi / 2, -1.0], [10.0, np.pi / 2, 3.0]),
                         loss="soft_l1", f_scale=0.05)
-    return MeniscusModel(float(sol.x[0]), float(sol.x[1]), **cam)
+    return MeniscusModel(float(sol.x[0]), float(sol.x[1]), curvature=float(sol.x[2]), **cam)

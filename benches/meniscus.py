@@ -1,0 +1,114 @@
+"""Does the meniscus correction hold for an ink it was not written for?
+
+For each meniscus model of the virtual bench (effects presets):
+  physics   the first model: capillary length 2.7 mm, contact angle 0, a straight contact line
+  physics2  the second: 2.3 mm, 35 deg (a depression on faces flatter than that), and the
+            contact line's own curvature (higher in pits, lower on ridges; sim/physics.py)
+the bench does what a user does: calibrates the camera from rendered chessboards, scans the
+reference ball (the `sphere` part) and commissions the meniscus from it with `inkslice
+calibrate --reference sphere`, then scans each part with displacement and that meniscus and
+processes it with the commissioned file. Nothing is read from the renderer's settings.
+
+Per part it prints Ea, the interior's 99th percentile (nodes more than 3 mm inside the
+outline) and the largest error, in mm, against the part's truth.
+
+    nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
+    nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
+    nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from appliance import process as proc                      # noqa: E402
+from appliance.cli import main as cli                       # noqa: E402
+from appliance.sim import surfaces                          # noqa: E402
+from appliance.sim.levels import sculpture_levels           # noqa: E402
+from appliance.sim.physics import meniscus_rise             # noqa: E402
+from appliance.sim.render import effects_preset             # noqa: E402
+from appliance.sim.scanrender import render_scan            # noqa: E402
+from seed_table import calibrated_camera, use_camera        # noqa: E402
+
+PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
+
+
+def commission(tmp: Path, model: str, camera) -> tuple[Path, dict]:
+    scan = tmp / f"sphere-{model}"
+    if not (scan / "scan.json").is_file():
+        render_scan("sphere", scan, step_mm=1.0, effects=model, seed=11, workers=2)
+        use_camera(scan, camera)
+    out = tmp / f"meniscus-{model}.json"
+    assert cli(["calibrate", "--reference", "sphere", "--scan", str(scan), "--out", str(out)]) == 0
+    return out, json.loads(out.read_text())
+
+
+def errors(surface, hm, inset_mm=3.0):
+    X, Y = hm.grid()
+    inside = surface.inside(X, Y)
+    err = np.abs(hm.z - surface.height(X, Y))
+    cell = min(abs(X[0, 1] - X[0, 0]), abs(Y[1, 0] - Y[0, 0]))
+    interior = ndimage.binary_erosion(inside, iterations=max(1, int(math.ceil(inset_mm / cell))))
+    e_all = err[inside & np.isfinite(err)]
+    e_in = err[interior & np.isfinite(err)]
+    return float(e_all.mean()), float(np.percentile(e_in, 99)), float(e_all.max())
+
+
+def scan_part(name, model, tmp, camera, meniscus, step=1.0):
+    surface = surfaces.get(name)
+    folder = tmp / f"{name}-{model}"
+    e = effects_preset(model)
+    below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
+    if not (folder / "scan.json").is_file():
+        render_scan(surface, folder, levels=sculpture_levels(surface, step, max(below, 0.0)), effects=model,
+                    seed=1, workers=2)
+        use_camera(folder, camera)
+    job = proc.process(folder, meniscus=meniscus)
+    return errors(surface, job.heightmap)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--models", default="physics,physics2")
+    ap.add_argument("--parts", default=PARTS)
+    ap.add_argument("--keep", default=None, metavar="DIR",
+                    help="render into DIR and reuse what is there (to compare corrections on the same scans)")
+    args = ap.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="meniscus-bench-") as tmp:
+        tmp = Path(args.keep) if args.keep else Path(tmp)
+        tmp.mkdir(parents=True, exist_ok=True)
+        saved = tmp / "calibration.json"
+        camera = json.loads(saved.read_text()) if saved.is_file() else calibrated_camera(tmp)
+        for model in args.models.split(","):
+            t0 = time.perf_counter()
+            meniscus, doc = commission(tmp, model, camera)
+            print(f"\n{model}: commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
+                  + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in doc.items()),
+                  flush=True)
+            for name in args.parts.split(","):
+                t0 = time.perf_counter()
+                ea, p99, mx = scan_part(name, model, tmp, camera, meniscus)
+                rows.append((model, name, ea, p99, mx))
+                print(f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    print("\nsummary (mm)")
+    print(f"  {'model':<9} {'part':<12} {'Ea':>7} {'p99 in':>7} {'max':>7}")
+    for model, name, ea, p99, mx in rows:
+        flag = "" if ea <= 0.05 else "  > 0.05"
+        print(f"  {model:<9} {name:<12} {ea:7.4f} {p99:7.3f} {mx:7.3f}{flag}")
+
+
+if __name__ == "__main__":
+    main()
