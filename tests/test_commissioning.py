@@ -110,6 +110,8 @@ def test_the_scan_carries_the_calibration_in_force(commissioned):
     assert doc["tank"] == {"inner_area_mm2": 22500.0}
     men = step(c, "meniscus")["result"]
     assert doc["meniscus"]["capillary_length_mm"] == men["capillary_length_mm"]
+    # and how much the contact line's own bend counts (surface/meniscus.py), measured with them
+    assert doc["meniscus"]["contact_line_curvature"] == men["contact_line_curvature"]
     assert doc["level_at_home_mm"] == step(c, "level_zero")["result"]["level_at_home_mm"]
     used = doc["calibration"]
     for sid in ("camera", "tank", "meniscus", "level_zero"):

@@ -103,7 +103,8 @@ def scan_extra(store, settings: dict) -> dict:
     if "meniscus" in force:
         r = force["meniscus"]["result"]
         extra["meniscus"] = {"format": "inkslice.meniscus/1", "capillary_length_mm": r["capillary_length_mm"],
-                             "contact_angle_deg": r["contact_angle_deg"]}
+                             "contact_angle_deg": r["contact_angle_deg"],
+                             "contact_line_curvature": r.get("contact_line_curvature", 0.0)}
         used["meniscus"] = {"date": force["meniscus"]["date"], "method": force["meniscus"]["method"],
                             "reference": r.get("reference")}
     at_home = float(settings["level_at_home_mm"])
@@ -605,6 +606,7 @@ def reference_processor(reference: dict, options: dict):
         out = Path(out_folder)
         result = {"capillary_length_mm": round(model.capillary_length_mm, 4),
                   "contact_angle_deg": round(math.degrees(model.contact_angle_rad), 3),
+                  "contact_line_curvature": round(model.curvature, 3),
                   "reference": {**ball.to_json(), **err}, "reference_job": scan.extra.get("job"),
                   "tank_area_mm2": (scan.extra.get("tank") or {}).get("inner_area_mm2")}
         atomicio.write_json(out / "reference.json", result)
