@@ -409,6 +409,8 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
             h = m.rise(np.arctan(_reference_slopes(reference_surface, Q)), curvature(Q))
         return reference_surface.height(*m.unproject(P, h).T) - (L + h)
 
-    sol = least_squares(residual, x0=[2.0, 0.1, 0.5], bounds=([0.0, -np.pi / 2, -1.0], [10.0, np.pi / 2, 3.0]),
+    # the weight is no less than 0: a line bending round the part never raises its meniscus
+    sol = least_squares(residual, x0=[2.0, 0.1, 0.5], bounds=([0.0, -np.pi / 2, 0.0], [10.0, np.pi / 2, 3.0]),
                         loss="soft_l1", f_scale=0.05)
-    return MeniscusModel(float(sol.x[0]), float(sol.x[1]), curvature=float(sol.x[2]), **cam)
+    weight = float(sol.x[2]) if sol.x[2] > 1e-6 else 0.0      # at its bound: a straight line, exactly
+    return MeniscusModel(float(sol.x[0]), float(sol.x[1]), curvature=weight, **cam)
