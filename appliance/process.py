@@ -125,8 +125,10 @@ def run_seed(scan, grid_n=50):
 
 def extract_waterlines(scan):
     from .vision.pipeline import WaterlineExtractor
+    from .surface.slices import shows_waterline
     extractor = WaterlineExtractor(scan.camera, no_part="empty")   # a scan starts above the part
-    return [extractor.extract(read_frame(scan, ref), ref.level_mm) for ref in _frames_top_down(scan)]
+    frames = [ref for ref in _frames_top_down(scan) if shows_waterline(ref.level_mm)]
+    return [extractor.extract(read_frame(scan, ref), ref.level_mm) for ref in frames]
 
 
 def _waterline_bounds(waterlines):
@@ -178,6 +180,11 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
         diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
                                                      if k in ("wall_points", "points", "seconds", "notes",
                                                               "smoothing_mm", "displacement")}}
+        at_base = len(scan.frames) - len(waterlines)
+        if at_base:
+            diag[m]["notes"] = list(diag[m].get("notes", [])) + [
+                f"{at_base} frame(s) at or below level 0 mm not used: the base top is out of the ink "
+                "there, and its outline is not the part's waterline"]
         diag[m]["base"] = fix.to_json()
         diag[m]["base_notes"] = fix.sentences()
     diag["grid"] = {"bounds": bounds, "n": grid_n, "spacing_mm": spacing_mm}

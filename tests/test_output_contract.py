@@ -231,3 +231,34 @@ def test_a_daemon_job_folder_is_replaced_whole_but_its_scan_is_kept(tmp_path):
     assert (job / "scan" / "frames" / "0001.png").is_file()
     with pytest.raises(Exception, match="no finishing program"):
         checked_outputs({"outputs": ["heightmap.csv"]}, job)
+
+
+# -- a scan that runs down to the base ----------------------------------------------
+
+
+def test_a_scan_whose_last_frame_is_at_level_0_gets_its_program_and_the_clamp_is_counted(tmp_path):
+    """A real scan runs until the base top reaches the ink, and the base is lit like the part:
+    its outline in that last frame is not the part's waterline, the part is not that wide,
+    and the set (with its finishing program) is written, the base plane counted."""
+    import dataclasses
+    from appliance.sim import surfaces
+    from appliance.sim.render import Effects
+    from appliance.sim.rig import Rig
+    from appliance.sim.scanrender import render_scan, scan_levels
+    sphere = surfaces.get("sphere")                  # a cap on a disc of radius 29 mm at (50, 50)
+    levels = scan_levels(sphere, 2.0) + [0.0]
+    rig = Rig(width=1024, height=768, focal_px=1900.0, principal_u=515.0, principal_v=381.5)
+    render_scan(sphere, tmp_path / "sphere", levels=levels, rig=rig,
+                effects=dataclasses.replace(Effects(), base_shows=True))
+    out = tmp_path / "out"
+    assert main(["process", str(tmp_path / "sphere"), "-o", str(out), "--grid", "40", "--scallop", "0.2"]) == 0
+    assert SET <= set(_files(out))
+    report = json.loads((out / "report.json").read_text())
+    fit = report["diagnostics"]["fit"]
+    assert any("level 0 mm not used" in n for n in fit["notes"])
+    hm = read_heightmap_csv(out / "heightmap.csv")
+    assert hm.x[0] > 19 and hm.x[-1] < 81 and hm.y[0] > 19 and hm.y[-1] < 81     # the part, not the base
+    assert np.nanmin(hm.z) >= 0.0
+    assert set(fit["base"]) == {"clamped_cells", "deepest_dip_mm", "filled_cells", "base_cells"}
+    assert "Base plane" in (out / "report.md").read_text()
+    assert report["statistics"]["inkslice:fit"]["Ea"] < 0.1

@@ -66,6 +66,8 @@ class Effects:
     ripple_mm: float = 0.0           # amplitude of the free surface's oscillation just after a move
     ripple_age_s: float = 0.0        # time since the move stopped (VirtualCamera sets it)
     ripple_decay_s: float = 0.6
+    base_shows: bool = False         # the base top, once at or above the ink, is drawn (lit, like the part)
+    base_half_mm: float = 60.0       # half the side of the square base, centred under the parts
 
     def to_json(self):
         return asdict(self)
@@ -732,6 +734,8 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
     else:
         img = np.empty((rig.height, rig.width, 3), np.float32)
         img[:] = np.asarray(rig.ink_bgr, np.float32)
+    if effects.base_shows and level <= 0.0:
+        _draw_base(img, rig, pm, level, effects.base_half_mm)
     if res is not None:
         # only the part's rectangle needs compositing; the rest is ink
         (r0, r1, c0, c1), alpha, shade = res
@@ -740,6 +744,19 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
         view *= 1.0 - a3
         view += (alpha * shade)[..., None] * np.asarray(rig.part_bgr, np.float32)
     return camera_effects(img, rig, effects, pm, rng)
+
+
+BASE_SHADE = 0.8      # the base's top is lit like a flat face of the part
+
+
+def _draw_base(img, rig: Rig, pm: PixelMap, level, half_mm):
+    """The base top (z = 0) where the ink has left it: a real bench sees it light, which is
+    how commissioning finds level 0. Drawn under the part (the part is composited over it)."""
+    up = -float(level)                                 # the base top's height above the ink
+    x = pm.x0 + pm.kx * up
+    y = pm.y0 + pm.ky * up
+    on = (np.abs(x - 50.0) <= half_mm) & (np.abs(y - 50.0) <= half_mm)
+    img[on] = BASE_SHADE * np.asarray(rig.part_bgr, np.float32)
 
 
 def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.ndarray:

@@ -100,6 +100,20 @@ def make_slice(level, loops) -> Slice:
     return Slice(float(level), loops, P, nxt, prv, np.full(len(P), float(level)), np.zeros(len(P), bool))
 
 
+BASE_TOP_MM = 0.0
+
+
+def shows_waterline(level_mm: float) -> bool:
+    """Whether a frame at this level can hold a waterline of the part.
+
+    At level 0 the base top reaches the ink (a real scan runs down to it) and
+    below it the base stands out: the base is lit like the part, so the bright
+    region's edge is the base's outline, not a level curve of the part. Read as
+    one, it pinned the fit to z = 0 out at the base's edge and pulled the rim
+    below the base top. Such a frame says nothing the frames above it do not."""
+    return level_mm > BASE_TOP_MM + 1e-9
+
+
 def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
     """Sorted (highest level first), de-duplicated slices, and notes on what was done."""
     notes = []
@@ -116,6 +130,11 @@ def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
     if order != list(range(len(items))):
         notes.append("levels were out of order: sorted highest first")
     slices = []
+    at_base = [items[i].level_mm for i in order if not shows_waterline(items[i].level_mm)]
+    if at_base:
+        order = [i for i in order if shows_waterline(items[i].level_mm)]
+        notes.append(f"{len(at_base)} frame(s) at or below level 0 mm not used: the base top is out of "
+                     "the ink there, and its outline is not the part's waterline")
     for i in order:
         s = make_slice(items[i].level_mm, items[i].loops)
         if slices and abs(slices[-1].level - s.level) < 1e-6:
