@@ -12,6 +12,21 @@ processes it with the commissioned file. Nothing is read from the renderer's set
 Per part it prints Ea, the interior's 99th percentile (nodes more than 3 mm inside the
 outline) and the largest error, in mm, against the part's truth.
 
+Measured (2 December 2026, 2048 x 1536, 1 mm steps; a loaded machine: 3-13 min a part).
+Second ink, Ea mm, the correction before this bench (straight line, commissioned 2.150 mm /
+34.66 deg) -> now (commissioned 2.304 mm / 34.98 deg / curvature weight 1.001):
+    sample1 0.0254 -> 0.0145   sample2 0.0569 -> 0.0602   sample3 0.0819 -> 0.0764
+    sample4 0.2820 -> 0.0688   crater  0.1707 -> 0.1779   steep-front 0.5229 -> 0.4777
+    twin-peaks -> 0.1617
+Not yet 0.05 mm. What is left is the flat faces: on twin-peaks nodes sloping under 0.05 are
+0.62 mm low on average (0.17 under 0.2, 0.004-0.014 on steeper ones). A flat face under a
+depression comes out of the ink at once, up to a level step early, and the fit puts its
+apparent height at the level that uncovered it, the bottom of its bracket. The same holds
+for the crater's flat outer rim (0.26-0.67 mm low within 6 mm of its wall) and the steep
+front's apron. The first ink commissions to 2.704 mm / 0.04 deg / weight 0, the correction
+it had: its figures (benches/seed_table.py --effects physics) do not change (sample 1 re-measured:
+0.0081 mm).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
