@@ -37,6 +37,10 @@ class ChessboardBench(FakeBench):
     9 x 6 chessboard of 10 mm squares at 4 px/mm, its first inner corner at pixel (150, 130)."""
     PX_PER_MM, ORIGIN = 4.0, (150.0, 130.0)
 
+    def __init__(self, surface, **kw):
+        from appliance.sim.fakes import small_rig
+        super().__init__(surface, rig=small_rig(640, 480), **kw)    # the frames' size: the camera model's
+
     def open(self, settings, params):
         import numpy as np
         devices = super().open(settings, params)
@@ -55,7 +59,6 @@ class ChessboardBench(FakeBench):
             def close(self):
                 pass
         devices.camera = Board()
-        devices.camera_model = None             # scans use the calibration taken of the board
         return devices
 
 
