@@ -49,6 +49,7 @@ MAX_DIST_COEF = 1000.0             # lens distortion coefficients are of order 1
 MAX_TANK_AREA_MM2 = 1e7            # 10 m²
 LEVEL_EPS_MM = 1e-6                # two levels closer than this are one level
 PNG_SIG = b"\x89PNG\r\n\x1a\n"
+JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
 
 @dataclass
@@ -398,26 +399,31 @@ def _inside(folder: Path, path: Path) -> bool:
 def image_header(path) -> tuple[int, int, int]:
     """(width, height, bits per sample) from a PNG's IHDR or a JPEG's SOF marker, without decoding."""
     with open(path, "rb") as f:
-        head = f.read(33)
-        if head[:8] == PNG_SIG and head[12:16] == b"IHDR":
-            return struct.unpack(">IIB", head[16:25])
-        if head[:2] == b"\xff\xd8":
-            f.seek(2)
-            while True:
-                marker = f.read(2)
-                if len(marker) < 2 or marker[0] != 0xFF:
-                    break
-                if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
-                    continue
-                seg = f.read(2)
-                if len(seg) < 2:
-                    break
-                length = struct.unpack(">H", seg)[0]
-                if 0xC0 <= marker[1] <= 0xCF and marker[1] not in (0xC4, 0xC8, 0xCC):
-                    bits, h, w = struct.unpack(">BHH", f.read(5))
-                    return w, h, bits
-                f.seek(length - 2, os.SEEK_CUR)
-    raise ScanError(path, "not a PNG or JPEG image (or its header is cut off)")
+        return read_image_header(f, path)
+
+
+def read_image_header(f, where) -> tuple[int, int, int]:
+    """image_header() of an open binary file (the web reads a zip member's first bytes with it)."""
+    head = f.read(33)
+    if head[:8] == PNG_SIG and head[12:16] == b"IHDR":
+        return struct.unpack(">IIB", head[16:25])
+    if head[:2] == b"\xff\xd8":
+        f.seek(2)
+        while True:
+            marker = f.read(2)
+            if len(marker) < 2 or marker[0] != 0xFF:
+                break
+            if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
+                continue
+            seg = f.read(2)
+            if len(seg) < 2:
+                break
+            length = struct.unpack(">H", seg)[0]
+            if marker[1] in JPEG_SOF:
+                bits, h, w = struct.unpack(">BHH", f.read(5))
+                return w, h, bits
+            f.seek(length - 2, os.SEEK_CUR)
+    raise ScanError(where, "not a PNG or JPEG image (or its header is cut off)")
 
 
 def check_frames(scan: Scan):

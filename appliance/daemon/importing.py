@@ -20,47 +20,13 @@ import os
 import secrets
 import shutil
 import stat
-import struct
 from pathlib import Path
 
 from ..errors import ScanError
-from ..scanfile import Scan, load_scan
+from ..scanfile import Scan, image_header, load_scan, read_image_header  # noqa: F401 (the web's)
 
 MAX_FRAMES = 5000
 MAX_BYTES = 4 * 1024 ** 3
-PNG_SIG = b"\x89PNG\r\n\x1a\n"
-SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
-
-
-def image_header(path: Path) -> tuple[int, int, int]:
-    """(width, height, bits per sample) from a PNG's IHDR or a JPEG's SOF marker."""
-    with open(path, "rb") as f:
-        return read_image_header(f, path)
-
-
-def read_image_header(f, where) -> tuple[int, int, int]:
-    """image_header() of an open binary file (the web reads a zip member's first bytes with it)."""
-    head = f.read(33)
-    if head[:8] == PNG_SIG and head[12:16] == b"IHDR":
-        w, h, bits = struct.unpack(">IIB", head[16:25])
-        return w, h, bits
-    if head[:2] == b"\xff\xd8":
-        f.seek(2)
-        while True:
-            marker = f.read(2)
-            if len(marker) < 2 or marker[0] != 0xFF:
-                break
-            if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
-                continue
-            seg = f.read(2)
-            if len(seg) < 2:
-                break
-            length = struct.unpack(">H", seg)[0]
-            if marker[1] in SOF:
-                bits, h, w = struct.unpack(">BHH", f.read(5))
-                return w, h, bits
-            f.seek(length - 2, os.SEEK_CUR)
-    raise ScanError(where, "not a PNG or JPEG image (or its header is cut off)")
 
 
 def check(folder) -> Scan:
