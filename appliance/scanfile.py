@@ -254,11 +254,17 @@ def _camera(where, cam):
             _check_distortion(where, K, dist, w, h)
     hmm = None
     if cam.get("height_mm") is not None:
-        hmm = _number(where, cam["height_mm"], "camera.height_mm")
-        if not 0 < hmm <= MAX_CAMERA_HEIGHT_MM:
-            raise ScanError(where, f"camera.height_mm is {hmm:g}: the camera must be above the liquid "
-                                   f"(0 < height <= {MAX_CAMERA_HEIGHT_MM:g} mm)")
+        hmm = _positive_up_to(where, cam["height_mm"], "camera.height_mm", MAX_CAMERA_HEIGHT_MM,
+                              f"the camera must be above the liquid (0 < height <= {MAX_CAMERA_HEIGHT_MM:g} mm)")
     return CameraModel(w, h, H, K, dist, hmm, {k: v for k, v in cam.items() if k not in known})
+
+
+def _positive_up_to(where, value, key, top, why):
+    """A finite number in (0, top]; otherwise `KEY is X: WHY`."""
+    x = _number(where, value, key)
+    if not 0 < x <= top:
+        raise ScanError(where, f"{key} is {x:g}: {why}")
+    return x
 
 
 def _optional_number(where, obj, key, label):
@@ -277,10 +283,9 @@ def _check_extras(where, doc):
     """The blocks processing and its report read: their types and physical ranges."""
     top = MAX_LEVEL_MM
     if doc.get("level_at_home_mm") is not None:
-        top = _number(where, doc["level_at_home_mm"], "level_at_home_mm")
-        if not 0 < top <= MAX_LEVEL_MM:
-            raise ScanError(where, f"level_at_home_mm is {top:g}: the liquid with the stage at home must be "
-                                   f"above the base top, at most {MAX_LEVEL_MM:g} mm")
+        top = _positive_up_to(where, doc["level_at_home_mm"], "level_at_home_mm", MAX_LEVEL_MM,
+                              f"the liquid with the stage at home must be above the base top, "
+                              f"at most {MAX_LEVEL_MM:g} mm")
     if "tank" in doc and doc["tank"] is not None:
         tank = doc["tank"]
         if not isinstance(tank, dict):
@@ -288,10 +293,8 @@ def _check_extras(where, doc):
                                    f"{type(tank).__name__} {_short(tank)}")
         if tank.get("inner_area_mm2") is None:
             raise ScanError(where, "tank.inner_area_mm2 is missing")
-        area = _number(where, tank["inner_area_mm2"], "tank.inner_area_mm2")
-        if not 0 < area <= MAX_TANK_AREA_MM2:
-            raise ScanError(where, f"tank.inner_area_mm2 is {area:g}: a tank's inner area must be > 0 and at "
-                                   f"most {MAX_TANK_AREA_MM2:g} mm²")
+        _positive_up_to(where, tank["inner_area_mm2"], "tank.inner_area_mm2", MAX_TANK_AREA_MM2,
+                        f"a tank's inner area must be > 0 and at most {MAX_TANK_AREA_MM2:g} mm²")
     if doc.get("meniscus"):
         men = _object(where, doc["meniscus"], "meniscus")
         for key in ("capillary_length_mm", "contact_angle_deg"):

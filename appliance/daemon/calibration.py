@@ -100,12 +100,7 @@ class GuidedCalibration:
     def close(self):
         devices, self.devices = self.devices, None
         if devices is not None:
-            if devices.light is not None:
-                try:
-                    devices.light.set(False)
-                except Exception:
-                    pass
-            devices.close()
+            devices.release()
             self._ask("clear", "Calibration over: take the board off the base")
         self.step, self.detected, self._camera = 0, None, None
 
@@ -130,14 +125,7 @@ class GuidedCalibration:
         self.devices.stage.move_to(float(self.settings["level_at_home_mm"]))
 
     def _detect(self):
-        light = self.devices.light
-        if light is not None:
-            light.set(True)
-        try:
-            frame = self.devices.camera.capture()
-        finally:
-            if light is not None:
-                light.set(False)
+        frame = self.devices.capture_lit()
         lens = self._lens()
         K, dist = lens.get("K"), lens.get("dist")
         K = np.asarray(K, float) if K is not None else None

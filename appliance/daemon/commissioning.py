@@ -333,12 +333,7 @@ class Commissioning:
     def _close_devices(self, s: Session):
         devices, s.devices = s.devices, None
         if devices is not None:
-            if devices.light is not None:
-                try:
-                    devices.light.set(False)
-                except Exception:
-                    pass
-            devices.close()
+            devices.release()
 
     def _end(self, step, how):
         s = self.session
@@ -356,14 +351,7 @@ class Commissioning:
             raise
 
     def _frame(self, s: Session) -> np.ndarray:
-        light = s.devices.light
-        if light is not None:
-            light.set(True)
-        try:
-            frame = s.devices.camera.capture()
-        finally:
-            if light is not None:
-                light.set(False)
+        frame = s.devices.capture_lit()
         if frame is None or frame.ndim not in (2, 3):
             raise InkSliceError("camera", "returned no image")
         return frame

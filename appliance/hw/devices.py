@@ -56,6 +56,25 @@ class Devices:
             except Exception:                        # closing must never hide the real error
                 log.exception("closing a device")
 
+    def capture_lit(self):
+        """One frame, with the light on only while it is taken."""
+        if self.light is not None:
+            self.light.set(True)
+        try:
+            return self.camera.capture()
+        finally:
+            if self.light is not None:
+                self.light.set(False)
+
+    def release(self):
+        """Light off, then every device closed: how any use of the bench ends, however it ends."""
+        if self.light is not None:
+            try:
+                self.light.set(False)
+            except Exception:
+                log.warning("could not switch the light off while releasing the bench")
+        self.close()
+
 
 def load_wiring(path) -> dict:
     if path is None or not Path(path).is_file():
