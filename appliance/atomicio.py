@@ -57,13 +57,22 @@ def write_json(path, obj):
 STAGING_PREFIX = ".inkslice-"
 
 
-def check_output_folder(out):
+def check_output_folder(out, ours=None, keep=()):
     """Refuse an output folder we could not replace, before any long work:
-    -> InkSliceError naming the problem (OUT is a file, its parent is missing or read-only)."""
+    -> InkSliceError naming the problem (OUT is a file, its parent is missing or read-only).
+
+    `ours(name)` says whether a file name is one a run writes: the folder is replaced whole,
+    so one holding anything else (`-o .`, the scan itself) is refused, not emptied."""
     from .errors import InkSliceError
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InkSliceError(out, "exists and is not a folder; give a folder for the outputs")
+    if ours is not None and out.is_dir():
+        foreign = sorted(p.name for p in out.iterdir() if p.name not in keep
+                         and not (p.is_file() and ours(p.name)))
+        if foreign:
+            raise InkSliceError(out, f"holds {foreign[0]!r}, which no run wrote; the output folder is "
+                                     "replaced whole, so give a new or empty folder (or an earlier output folder)")
     parent = out.absolute().parent
     probe = parent
     while not probe.exists():               # OUT and missing parents are created

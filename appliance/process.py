@@ -282,6 +282,13 @@ def report_markdown(job: Job) -> str:
     return "\n".join(lines) + "\n"
 
 
+def is_output_name(name: str) -> bool:
+    """A file name a run of `process` writes (any pipeline, method or dialect)."""
+    import fnmatch
+    return any(fnmatch.fnmatch(name, p) for p in ("heightmap.csv", "surface.stl", "toolpath*.gcode",
+                                                   "report.md", "report.json", "error_*.png"))
+
+
 def png_name(key):
     """error_lsq3.png for the dissertation's methods (its figures 5-1..5-16), error_inkslice_fit.png for ours."""
     pipeline, method = key.split(":")
@@ -352,7 +359,7 @@ def _jsonable(o):
 
 
 def process_scan(scan_folder, out_folder, cam_options=None, keep=(), **options) -> dict:
-    atomicio.check_output_folder(out_folder)        # before the long work, not after it
+    atomicio.check_output_folder(out_folder, is_output_name, keep)   # before the long work
     job = process(scan_folder, **options)
     written = write_outputs(job, out_folder, cam_options, keep)
     return {"outputs": written, "statistics": job.stats, "key": job.key, "method": job.method,

@@ -220,7 +220,6 @@ def test_a_daemon_job_folder_is_replaced_whole_but_its_scan_is_kept(tmp_path):
     from scan_helpers import write_cone_scan
     job = tmp_path / "job"
     write_cone_scan(job / "scan")
-    (job / "scan.truth.json").write_text(json.dumps({"surface": "cone"}))
     (job / "surface.stl").write_bytes(b"an earlier run's mesh")
     options = options_for({**DEFAULTS, "pipeline": "seed"})
     assert options["keep"] == list(JOB_OWN)
@@ -262,3 +261,13 @@ def test_a_scan_whose_last_frame_is_at_level_0_gets_its_program_and_the_clamp_is
     assert set(fit["base"]) == {"clamped_cells", "deepest_dip_mm", "filled_cells", "base_cells"}
     assert "Base plane" in (out / "report.md").read_text()
     assert report["statistics"]["inkslice:fit"]["Ea"] < 0.1
+
+
+def test_a_folder_holding_other_files_is_refused_not_emptied(cone_scan, tmp_path, capsys):
+    """OUT is replaced whole, so `-o .` or `-o SCAN` must not wipe what is there."""
+    for out in (cone_scan, tmp_path):
+        before = sorted(p.name for p in out.iterdir())
+        assert main(["process", str(cone_scan), "-o", str(out), "--pipeline", "seed"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "which no run wrote; the output folder is replaced whole" in err[0]
+        assert sorted(p.name for p in out.iterdir()) == before
