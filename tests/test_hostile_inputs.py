@@ -60,7 +60,7 @@ def work(valid, tmp_path):
     out.mkdir()
     (out / "heightmap.csv").write_text("x,y,z\n0,0,1\n")
     (out / "toolpath.gcode").write_text("G21 G90\nM2\n")
-    (out / "verify.png").write_bytes(b"\x89PNG\r\n\x1a\nold")
+    (out / "error_inkslice_fit.png").write_bytes(b"\x89PNG\r\n\x1a\nold")
     return tmp_path
 
 
