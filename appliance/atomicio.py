@@ -7,6 +7,7 @@ folder is fsynced too so the rename itself survives a power cut.
 """
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -105,7 +106,6 @@ def replace_folder(out, files: dict, keep=()):
 
     Kept entries are hard-linked into the new folder (no data copied; copied where the
     file system cannot link), so the swap never moves or risks them."""
-    import shutil
     out = Path(out).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
     clear_staging(out)
@@ -133,7 +133,6 @@ def replace_folder(out, files: dict, keep=()):
 def clear_staging(out):
     """Tidy what a crashed run left beside `out`: an old set parked mid-swap goes back
     (`out` is missing only then), half-built new sets are removed."""
-    import shutil
     out = Path(out).absolute()
     if not out.parent.is_dir():
         return
@@ -153,7 +152,6 @@ def _write_new(path, data: bytes):
 
 
 def _link_or_copy(src, dst):
-    import shutil
     try:
         os.link(src, dst)
     except OSError:

@@ -76,6 +76,15 @@ def reference(tmp_path_factory):
         svc.close()
 
 
+def audit_of(data):
+    """What `inkslice audit` finds in a stopped daemon's data folder."""
+    store = Store(data)
+    try:
+        return audit(store)
+    finally:
+        store.close()
+
+
 def check_result(client, job_id, ref_map, ref_levels):
     job = wait_job(client, job_id)
     assert job["status"] == "done", job["reason"]
@@ -149,11 +158,7 @@ def test_faults_in_the_daemon_process_end_with_a_clear_reason(tmp_path, faults, 
         assert daemon.client.state()["hardware"][text.split(":")[0]].startswith("fault")
     finally:
         daemon.stop()
-    store = Store(daemon.data)
-    try:
-        assert audit(store) == []
-    finally:
-        store.close()
+    assert audit_of(daemon.data) == []
 
 
 def test_sigterm_cancels_the_scan_cleanly(tmp_path):
@@ -205,22 +210,14 @@ def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restar
     daemon.kill()
     stray = list(jobs.glob(".import-*"))
     assert len(stray) == 1 and not list(jobs.glob("2*")), "killed after the copy was complete"
-    store = Store(daemon.data)
-    try:
-        found = audit(store)
-        assert len(found) == 1 and found[0].startswith("jobs: imports left half-copied (removed when the "
-                                                       "daemon starts), ") and stray[0].name in found[0], found
-    finally:
-        store.close()
+    found = audit_of(daemon.data)
+    assert len(found) == 1 and found[0].startswith("jobs: imports left half-copied (removed when the "
+                                                   "daemon starts), ") and stray[0].name in found[0], found
     daemon = Daemon(tmp_path)                          # start-up removes it
     try:
         assert list(jobs.glob(".import-*")) == []
         assert daemon.client.jobs() == []
     finally:
         daemon.stop()
-    store = Store(daemon.data)
-    try:
-        assert audit(store) == []
-    finally:
-        store.close()
+    assert audit_of(daemon.data) == []
 
