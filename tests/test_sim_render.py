@@ -239,3 +239,53 @@ def test_effects_are_deterministic_and_do_something():
     # glare brightens the ink somewhere far more than noise could
     ink_region = clean[..., 0] < 80
     assert (a[..., 0][ink_region].astype(int) - clean[..., 0][ink_region] > 40).sum() > 500
+
+
+def _lit(effects, level, i):
+    """Where glare (much brighter than the ink) and anything else (not the ink's colour) lie in frame i."""
+    from appliance.sim.render import _liquid_layer
+    ink = _liquid_layer(RIG, effects, level, np.random.default_rng([1, i]))
+    plain = np.asarray(RIG.ink_bgr, np.float32)
+    diff = np.abs(ink - plain).max(axis=2)
+    return diff > 40, diff > 5
+
+
+def test_harsh_glare_and_dust_move_and_flicker_from_frame_to_frame():
+    from dataclasses import replace
+    harsh = PRESETS["harsh"]
+    glare = replace(harsh, dust_specks=0)
+    g1, _ = _lit(glare, 20.0, 1)
+    g1_again, _ = _lit(glare, 20.0, 1)
+    g2, _ = _lit(glare, 19.0, 2)
+    assert np.array_equal(g1, g1_again)                        # a pure function of level and frame seed
+    assert g1.sum() > 5000 and g2.sum() > 5000
+    # from one frame to the next the highlights move, resize and come and go...
+    assert (g1 != g2).sum() > 0.3 * min(g1.sum(), g2.sum())
+    # ...and ten frames on they are elsewhere
+    g11, _ = _lit(glare, 10.0, 11)
+    assert (g1 & g11).sum() < 0.3 * min(g1.sum(), g11.sum())
+    # at the same level, another frame seed still moves, resizes or hides them (jitter, flicker)
+    g1_other, _ = _lit(glare, 20.0, 7)
+    assert (g1 != g1_other).sum() > 0.1 * g1.sum()
+    dust = replace(harsh, glare_spots=0)
+    _, d1 = _lit(dust, 20.0, 1)
+    _, d2 = _lit(dust, 10.0, 2)
+    assert d1.sum() > 500
+    assert (d1 & d2).sum() < 0.2 * d1.sum()                   # the specks drifted away
+
+
+def test_harsh_stage_wobble_and_lamp_flicker_differ_per_frame():
+    from appliance.sim.render import _wobbled, camera_effects
+    harsh = PRESETS["harsh"]
+    pm = pixel_map(RIG, True)
+    shifts = []
+    for i in range(12):
+        w = _wobbled(pm, harsh, np.random.default_rng([1, i]))
+        shifts.append((float(pm.x0[0, 0] - w.x0[0, 0]), float(pm.y0[0, 0] - w.y0[0, 0])))
+    r = np.hypot(*np.array(shifts).T)
+    assert r.max() <= 0.05 + 1e-5 and r.max() > 0.02
+    assert len({round(s[0], 5) for s in shifts}) == 12
+    only_flicker = Effects(flicker=harsh.flicker)
+    means = [camera_effects(np.full((64, 64, 3), 150.0, np.float32), RIG, only_flicker, pm,
+                            np.random.default_rng([1, i])).mean() for i in range(12)]
+    assert max(means) - min(means) > 1.0 and max(means) <= 150 * 1.015 + 1 and min(means) >= 150 * 0.985 - 1

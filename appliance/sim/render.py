@@ -22,12 +22,15 @@ seen. Three layers:
    from P0 is occluded by it: the part hides the waterline there (walls and
    rims that face away from the optical axis).
 3. Lambertian shading of the part (normal from the grids), the flat ink with
-   glare and dust on it, then the camera: vignetting, blur, noise, salt and
-   pepper. Lens distortion is in the per-pixel map (each pixel of the
-   distorted image is traced along its true ray).
+   glare and dust on it, then the camera: lamp flicker, vignetting, blur,
+   noise, salt and pepper, JPEG. Lens distortion is in the per-pixel map
+   (each pixel of the distorted image is traced along its true ray); stage
+   wobble shifts that map by a fraction of a pixel.
 
 Everything random is drawn from the `rng` passed in, so a frame is a pure
-function of (surface, level, rig, effects, rng state).
+function of (surface, level, rig, effects, rng state). Drifting glare and
+dust (the harsh preset) follow paths laid out from effects.drift_seed, so a
+scan's frames share them: they move with the level and jitter per frame.
 """
 from __future__ import annotations
 
@@ -68,6 +71,15 @@ class Effects:
     ripple_decay_s: float = 0.6
     base_shows: bool = False         # the base top, once at or above the ink, is drawn (lit, like the part)
     base_half_mm: float = 60.0       # half the side of the square base, centred under the parts
+    # A scan's worth of nuisances that move (the harsh bench). Off, glare and dust are drawn
+    # afresh in every frame; on, they follow paths laid out once (seeded by drift_seed) that
+    # drift as the level changes, jitter from frame to frame (the frame's rng), and each glare
+    # blob flickers and now and then vanishes: a bright thing that comes and goes.
+    drifting: bool = False
+    drift_seed: int = 0
+    flicker: float = 0.0             # the lamp's brightness per frame: x (1 + u * flicker), u in [-1, 1]
+    jpeg_quality: int = 0            # the frame passes through JPEG at this quality (0: it does not)
+    wobble_mm: float = 0.0           # lateral stage play: each frame sees the part shifted up to this far
 
     def to_json(self):
         return asdict(self)
@@ -87,9 +99,17 @@ PRESETS = {
                         vignetting=0.25, lens_distortion=True, dust_specks=30,
                         displacement=True, meniscus=True, capillary_length_mm=2.3,
                         contact_angle_deg=35.0, contact_line_curvature=True),
-    "harsh": Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, glare_spots=8,
+    # Everything at once, moving: glare that drifts, jitters and flickers from frame to frame,
+    # drifting dust and bubbles, salt and pepper, JPEG q85, 1.5 % lamp flicker, 0.05 mm of
+    # stage wobble no calibration knows about, a rippling surface, and a meniscus that is not
+    # the first model's: another capillary length and the contact line's own curvature. Its
+    # contact angle stays 0: a depression on flat faces (physics2) is the meniscus model's
+    # open question (benches/meniscus.py), not the images'.
+    "harsh": Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, glare_spots=6,
                      glare_strength=200.0, vignetting=0.4, lens_distortion=True, dust_specks=120,
-                     displacement=True, meniscus=True, ripple_mm=0.05, ripple_age_s=0.5),
+                     displacement=True, meniscus=True, capillary_length_mm=2.5,
+                     contact_line_curvature=True, ripple_mm=0.05, ripple_age_s=0.5,
+                     drifting=True, drift_seed=18, flicker=0.015, jpeg_quality=85, wobble_mm=0.05),
 }
 
 
@@ -671,16 +691,71 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     return roi, a.reshape(r1 - r0, c1 - c0), s.reshape(r1 - r0, c1 - c0)
 
 
-def _liquid_layer(rig, effects, alpha, rng):
+def _fresh_glare(W, H, effects, rng, level_mm):
+    """Glare drawn afresh for this frame: (cx, cy, sx, sy, peak) per blob."""
+    for _ in range(effects.glare_spots):
+        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+        sx, sy = rng.uniform(15, 70), rng.uniform(15, 70)
+        yield cx, cy, sx, sy, effects.glare_strength * rng.uniform(0.5, 1.0)
+
+
+def _fresh_dust(W, H, effects, rng, level_mm):
+    """Dust and bubbles drawn afresh for this frame: (cx, cy, radius, is_bubble, shade)."""
+    for _ in range(effects.dust_specks):
+        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+        rad = rng.uniform(0.8, 3.5)
+        bubble = rng.uniform() < 0.4
+        yield cx, cy, rad, bubble, (1.0 if bubble else rng.uniform(0.6, 1.4))
+
+
+DRIFT_JITTER_PX = 6.0      # frame-to-frame wander of a drifting glare blob (ripples, the lamp)
+
+
+def _layout(effects, n, speed_px_per_mm):
+    """Where drifting things start and how fast they move, the same for every frame of a scan."""
+    lay = np.random.default_rng([effects.drift_seed, n])
+    start = lay.uniform(0.0, 1.0, (n, 2))
+    angle = lay.uniform(0.0, 2 * np.pi, n)
+    speed = lay.uniform(*speed_px_per_mm, n)
+    return start, speed[:, None] * np.column_stack([np.cos(angle), np.sin(angle)]), lay
+
+
+GLARE_WINDOW = 0.6         # drifting glare wanders over the middle 60 % of the frame, where parts are
+
+
+def _drifting_glare(W, H, effects, rng, level_mm):
+    start, vel, lay = _layout(effects, effects.glare_spots, (8.0, 40.0))
+    size = lay.uniform(15, 70, (effects.glare_spots, 2))
+    w, h = GLARE_WINDOW * W, GLARE_WINDOW * H
+    for (x0, y0), (vx, vy), (sx, sy) in zip(start, vel, size):
+        jx, jy = rng.normal(0.0, DRIFT_JITTER_PX, 2)
+        grow = rng.uniform(0.8, 1.2)
+        peak = effects.glare_strength * rng.uniform(0.4, 1.0)
+        if rng.uniform() < 0.35:           # the highlight is gone in this frame
+            continue
+        yield ((W - w) / 2 + (x0 * w + vx * level_mm + jx) % w,
+               (H - h) / 2 + (y0 * h + vy * level_mm + jy) % h, sx * grow, sy * grow, peak)
+
+
+def _drifting_dust(W, H, effects, rng, level_mm):
+    start, vel, lay = _layout(effects, effects.dust_specks, (3.0, 15.0))
+    rad = lay.uniform(0.8, 3.5, effects.dust_specks)
+    bubble = lay.uniform(size=effects.dust_specks) < 0.4
+    shade = lay.uniform(0.6, 1.4, effects.dust_specks)
+    for i in range(effects.dust_specks):
+        jx, jy = rng.normal(0.0, 1.0, 2)
+        yield ((start[i, 0] * W + vel[i, 0] * level_mm + jx) % W,
+               (start[i, 1] * H + vel[i, 1] * level_mm + jy) % H, rad[i], bubble[i], shade[i])
+
+
+def _liquid_layer(rig, effects, level_mm, rng):
     """The ink as the camera sees it: flat dark blue, plus glare and dust on it."""
     H, W = rig.height, rig.width
     ink = np.empty((H, W, 3), np.float32)
     ink[:] = np.asarray(rig.ink_bgr, np.float32)
-    for _ in range(effects.glare_spots):
+    glare = _drifting_glare if effects.drifting else _fresh_glare
+    for cx, cy, sx, sy, peak in glare(W, H, effects, rng, level_mm):
         # a specular highlight: a soft, slightly elongated blob of the lamp's colour
-        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
-        sx, sy = rng.uniform(15, 70), rng.uniform(15, 70)
-        peak = effects.glare_strength * rng.uniform(0.5, 1.0)
         r = int(3.5 * max(sx, sy))
         xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
         ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
@@ -690,9 +765,8 @@ def _liquid_layer(rig, effects, alpha, rng):
         v = np.arange(ya, yb, dtype=np.float32) - cy
         blob = peak * np.exp(-0.5 * ((v[:, None] / sy) ** 2 + (u[None, :] / sx) ** 2))
         ink[ya:yb, xa:xb] += blob[..., None] * np.array([1.0, 0.97, 0.95], np.float32)
-    for _ in range(effects.dust_specks):
-        cx, cy = rng.uniform(0, W), rng.uniform(0, H)
-        rad = rng.uniform(0.8, 3.5)
+    dust = _drifting_dust if effects.drifting else _fresh_dust
+    for cx, cy, rad, bubble, shade in dust(W, H, effects, rng, level_mm):
         r = int(rad + 3)
         xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
         ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
@@ -702,16 +776,25 @@ def _liquid_layer(rig, effects, alpha, rng):
         v = np.arange(ya, yb, dtype=np.float32) - cy
         d = np.sqrt(v[:, None] ** 2 + u[None, :] ** 2)
         cover = np.clip(rad + 0.5 - d, 0, 1)[..., None]
-        if rng.uniform() < 0.4:
+        if bubble:
             # a bubble: bright rim around a dark centre
             rim = np.clip(1.0 - np.abs(d - rad * 0.8) / max(rad * 0.35, 0.6), 0, 1)[..., None]
             colour = np.asarray(rig.ink_bgr, np.float32) * 0.6 + 140.0 * rim
         else:
             # dust: grey-brown speck
-            colour = np.array([90, 100, 110], np.float32) * rng.uniform(0.6, 1.4)
+            colour = np.array([90, 100, 110], np.float32) * shade
         patch = ink[ya:yb, xa:xb]
         patch[:] = patch * (1 - cover) + colour * cover
     return ink
+
+
+def _wobbled(pm: PixelMap, effects: Effects, rng) -> PixelMap:
+    """The pixel map of a frame whose part sits up to wobble_mm off where the stage says."""
+    if effects.wobble_mm <= 0:
+        return pm
+    r = effects.wobble_mm * math.sqrt(rng.uniform())
+    a = rng.uniform(0.0, 2 * math.pi)
+    return replace(pm, x0=pm.x0 - np.float32(r * math.cos(a)), y0=pm.y0 - np.float32(r * math.sin(a)))
 
 
 def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = None,
@@ -727,10 +810,10 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
     effects = effects or Effects()
     rng = rng if rng is not None else np.random.default_rng(0)
     level = liquid_level(surface, level_mm, rig, effects)
-    pm = pixel_map(rig, effects.lens_distortion)
+    pm = _wobbled(pixel_map(rig, effects.lens_distortion), effects, rng)
     res = part_layer_roi(surface, level, rig, effects, pm)
     if effects.glare_spots > 0 or effects.dust_specks > 0:
-        img = _liquid_layer(rig, effects, None, rng)
+        img = _liquid_layer(rig, effects, float(level_mm), rng)
     else:
         img = np.empty((rig.height, rig.width, 3), np.float32)
         img[:] = np.asarray(rig.ink_bgr, np.float32)
@@ -762,6 +845,8 @@ def _draw_base(img, rig: Rig, pm: PixelMap, level, half_mm):
 def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.ndarray:
     """What the lens and sensor do to the light: vignetting, blur, noise, stuck pixels.
     `img` is float32 BGR (0..255), modified in place; returns 8-bit BGR."""
+    if effects.flicker > 0:
+        img *= np.float32(1.0 + effects.flicker * rng.uniform(-1.0, 1.0))
     if effects.vignetting > 0:
         img *= (1.0 - effects.vignetting * pm.vignette_r2)[..., None]
     if effects.blur_sigma_px > 0:
@@ -781,4 +866,8 @@ def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.nda
             img[r, c] = np.where(rng.uniform(size=n) < 0.5, 0.0, 255.0)[:, None]
     # round and saturate to 8 bits (convertScaleAbs would fold negatives up: clamp first)
     cv2.max(img, 0.0, dst=img)
-    return cv2.convertScaleAbs(img)
+    out = cv2.convertScaleAbs(img)
+    if effects.jpeg_quality:
+        ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(effects.jpeg_quality)])
+        out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    return out
