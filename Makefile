@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test setup setup-test bench clean install
+.PHONY: demo test setup setup-test bench clean install lock docs
 
 demo: setup
 	$(VENV)/bin/inkslice demo --serve
@@ -19,6 +19,15 @@ setup-test:
 
 bench: setup-test
 	for b in benches/*.py; do $(PY) $$b --quick || exit 1; done
+
+# The pinned Python packages (requirements.lock, requirements-test.lock): newest versions
+# in pyproject.toml's ranges, with their hashes; run `make test` before committing them
+lock:
+	scripts/lock.sh
+
+# docs/settings.md from the settings' definitions (tests/test_docs.py checks it is current)
+docs: setup
+	$(PY) scripts/gen_settings_doc.py
 
 # On the bench box (Raspberry Pi OS): services, udev rules, user; see systemd/install.sh
 install:

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Installs everything InkSlice needs on a Debian machine, idempotently:
 # the Debian packages (AVR toolchain, simavr, LinuxCNC's G-code interpreter,
-# chromium for browser tests, ...), then a venv in .venv with the package in
-# editable mode. A second run with nothing missing does no network traffic.
+# chromium for browser tests, ...), then a venv in .venv: the Python dependencies at
+# the versions and hashes of the lock files (requirements.lock, and
+# requirements-test.lock for the tests; `make lock` refreshes them), then the
+# package itself in editable mode without resolving anything. A second run with
+# nothing missing does no network traffic.
 #
 #   scripts/setup.sh          what `make demo` needs
 #   scripts/setup.sh --test   plus what `make test` needs
@@ -40,11 +43,16 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   "$PY" -m venv .venv
 fi
+# The stamp records what was installed from which files: a --test install also serves `make demo`.
+lock=requirements.lock; mode=run
+[ "$want_test" = 1 ] && { lock=requirements-test.lock; mode=test; }
 stamp=.venv/.inkslice-installed
-sig=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
-if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$sig" ]; then
-  echo "setup: installing Python packages into .venv"
+sig=$(cat pyproject.toml requirements.lock requirements-test.lock | sha256sum | cut -d' ' -f1)
+have=$(cat "$stamp" 2>/dev/null || true)
+if [ "$have" != "$sig test" ] && [ "$have" != "$sig $mode" ]; then
+  echo "setup: installing Python packages into .venv (pinned by $lock)"
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e ".[test]"
-  echo "$sig" > "$stamp"
+  .venv/bin/python -m pip install -q --require-hashes -r "$lock"
+  .venv/bin/python -m pip install -q --no-deps -e .
+  echo "$sig $mode" > "$stamp"
 fi

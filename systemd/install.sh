@@ -5,7 +5,7 @@
 #
 # What it does: a system user `inkslice` in the dialout, video, gpio and i2c
 # groups; the checkout copied to /opt/inkslice and installed (not editable) into
-# its venv; the two units, the udev rules and an example /etc/inkslice/bench.json
+# its venv, its dependencies at the versions and hashes of requirements.lock; the two units, the udev rules and an example /etc/inkslice/bench.json
 # (never overwritten); USB stick mounting (a udev rule starting
 # inkslice-stick@DEV.service, which mounts FAT/exFAT sticks under
 # /media/inkslice for the inkslice user, and a polkit rule that lets that user
@@ -47,7 +47,9 @@ fi
 # polkitd: the rule that lets the daemon unmount a stick; avrdude and gcc-avr: `inkslice firmware flash`
 apt-get install -y -qq --no-install-recommends python3-venv python3-dev polkitd avrdude gcc-avr avr-libc make >/dev/null
 [ -x "$PREFIX/.venv/bin/python" ] || python3 -m venv "$PREFIX/.venv"
-"$PREFIX/.venv/bin/python" -m pip install -q "$PREFIX"
+# the dependencies exactly as the tests ran them (versions and hashes), then the package alone
+"$PREFIX/.venv/bin/python" -m pip install -q --require-hashes -r "$PREFIX/requirements.lock"
+"$PREFIX/.venv/bin/python" -m pip install -q --no-deps "$PREFIX"
 command -v raspi-config >/dev/null && raspi-config nonint do_i2c 0 || true
 udevadm control --reload-rules
 udevadm trigger --subsystem-match=tty --subsystem-match=video4linux --subsystem-match=gpio --subsystem-match=i2c-dev

@@ -240,7 +240,8 @@ def test_install_script_lays_the_files_out(tmp_path):
                  "etc/udev/rules.d/99-inkslice.rules", "etc/inkslice/bench.json",
                  "etc/udev/rules.d/99-inkslice-usb.rules", "etc/systemd/system/inkslice-stick@.service",
                  "usr/local/lib/inkslice/inkslice-stick", "etc/polkit-1/rules.d/50-inkslice-stick.rules",
-                 "opt/inkslice/pyproject.toml", "opt/inkslice/appliance/daemon/service.py"):
+                 "opt/inkslice/pyproject.toml", "opt/inkslice/requirements.lock",
+                 "opt/inkslice/appliance/daemon/service.py"):
         assert (root / path).is_file(), path
     assert not (root / "opt/inkslice/.git").exists()
     assert (root / "usr/local/lib/inkslice/inkslice-stick").stat().st_mode & 0o111, "the mount script runs"
