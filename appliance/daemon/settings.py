@@ -42,6 +42,43 @@ DEFAULTS = {
 }
 CHOICES = {"step_mode": ("fixed", "adaptive"), "cutter_type": ("ball", "flat"),
            "dialect": ("linuxcnc", "grbl", "fanuc")}
+# What each setting means, for the operator: docs/settings.md is generated from these
+# definitions (scripts/gen_settings_doc.py), so a new setting needs its sentence here.
+HELP = {
+    "levels_to_mm": "The first (highest) level of a scan, in mm above the base top. Set it a little above "
+                    "the part's top; when the first frame already shows the part the scan starts higher "
+                    "by itself.",
+    "levels_from_mm": "The last (lowest) level: 0 is the base top, where the part is fully out of the ink.",
+    "step_mode": "`fixed` steps by `level_step_mm`; `adaptive` goes finer where the waterline changes fast "
+                 "and coarser where it hardly moves.",
+    "level_step_mm": "The step between levels (fixed mode), and the first step of an adaptive scan. Smaller "
+                     "steps follow steep and detailed parts better and take longer.",
+    "step_min_mm": "The smallest step an adaptive scan takes.",
+    "step_max_mm": "The largest step an adaptive scan takes.",
+    "adaptive_change": "What an adaptive scan aims at: the fraction of the part's outline that moves from "
+                       "one frame to the next.",
+    "settle_s": "Seconds to wait after each move before the frame is taken, for ripples on the ink to die out.",
+    "level_at_home_mm": "The ink's level above the base top with the stage at home. Commissioning measures "
+                        "it (level zero); every level of a scan is counted from it.",
+    "min_free_mb": "A scan stops (keeping its frames) before the data disk has less than this free.",
+    "preview_width": "Width in pixels of the live camera picture on the dashboard.",
+    "auto_resume": "Resume a scan that a power cut or crash interrupted as soon as the daemon starts again.",
+    "pipeline": "Which processing a finished scan gets: empty for ours, `seed` for the dissertation's "
+                "(faster, much less accurate).",
+    "method": "The surface method: empty for the pipeline's own (`fit` for ours, `lsq3` for the "
+              "dissertation's), or another one to compare (the dissertation's methods run on our waterlines).",
+    "grid": "Cells a side of the height map written to heightmap.csv.",
+    "scallop_mm": "The ridge height the finishing program leaves between two passes; the stepover is "
+                  "chosen for it. Smaller is smoother and slower to compute and to mill.",
+    "cutter_type": "The finishing cutter's end: `ball` or `flat`.",
+    "cutter_diameter_mm": "The finishing cutter's diameter.",
+    "stepover_mm": "Accepted and checked, not used yet: the stepover follows from `scallop_mm`.",
+    "feed_mm_min": "Accepted and checked, not used yet: feeds come from the cutter and the material.",
+    "dialect": "The controller the G-code is written for: `linuxcnc`, `grbl` or `fanuc`.",
+    "envelope_x_mm": "Accepted and checked, not used yet (the machine's X travel).",
+    "envelope_y_mm": "Accepted and checked, not used yet (the machine's Y travel).",
+    "envelope_z_mm": "The machine's Z travel; the top level of a scan may not exceed it.",
+}
 
 
 def surface_methods() -> tuple:
