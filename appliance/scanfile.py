@@ -1,4 +1,4 @@
-"""Reading and writing scan folders (shared/docs/scan-format.md).
+"""Reading and writing scan folders (docs/scan-format.md).
 
 A scan is a folder with scan.json and frames/NNNN.png. This module is the only
 place that knows the file layout; everything downstream gets a `Scan` whose

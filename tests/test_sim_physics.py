@@ -28,7 +28,7 @@ def _cone_volume_above(L):
     return math.pi * r * r * h / 3
 
 
-def test_meniscus_rise_matches_the_brief():
+def test_meniscus_rise_matches_the_figures_in_the_method_doc():
     h = physics.meniscus_rise(np.radians([5, 15, 30, 90]))
     assert np.allclose(h[:3], [0.24, 0.71, 1.40], atol=0.006)
     assert math.isclose(h[3], 2 * 2.7 * math.sin(math.pi / 4))
@@ -45,7 +45,7 @@ def test_emerged_volume_and_true_level_on_the_cone():
         got = physics.true_level(cone, nominal, A)
         assert abs(got - want) < 0.002, (nominal, got, want)
         assert got < nominal
-    # ~30 % of a step on a 50 cm^2 waterline in a 225 cm^2 tank (seed brief)
+    # ~30 % of a step on a 50 cm^2 waterline in a 225 cm^2 tank (docs/method.md)
     assert abs(physics.emerged_area(S.get("sample1"), 2.0) / A - 0.44) < 0.01
 
 

@@ -39,7 +39,7 @@ def test_table_normalisation_reproduces_the_tables(ea, normaliser, ep_table, mat
 
 
 def test_matching_from_the_printed_percentage():
-    """The seed brief's check: 1.0678 % error is 98.9322 % matching."""
+    """Table 5-3's check (docs/method.md): 1.0678 % error is 98.9322 % matching."""
     zt = np.array([49.81, 10.0])
     s = seed_statistics(zt, zt + 1.0678 * 49.81 / 100, normaliser=49.81)
     assert round(s["matching"], 4) == 98.9322

@@ -25,7 +25,7 @@ def test_sample2_reproduces_appendix_c():
 
 
 def test_sample1_reproduces_appendix_b_corner():
-    assert diss("sample1", [0, 2.040857], [0, 0]) == pytest.approx([-32.4225, -32.2794], abs=5e-3)  # the brief: a fit, exact to ~3 um
+    assert diss("sample1", [0, 2.040857], [0, 0]) == pytest.approx([-32.4225, -32.2794], abs=5e-3)  # a fit, exact to ~3 um (docs/method.md)
 
 
 @pytest.mark.parametrize("name", list(surfaces.SURFACES))

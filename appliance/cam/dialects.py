@@ -2,8 +2,8 @@
 
 LinuxCNC's own interpreter (`rs274 -g`) checks the LinuxCNC and Mach3/4
 output in the tests; GRBL and Fanuc controllers are not available, so these
-checkers encode their documented rules (and the traps in the toolchain
-notes). Each returns a list of problems, "line N: what", empty when clean.
+checkers encode their documented rules (and the traps listed in
+docs/method.md). Each returns a list of problems, "line N: what", empty when clean.
 """
 from __future__ import annotations
 

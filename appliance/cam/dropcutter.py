@@ -12,7 +12,7 @@ the answer cannot miss a contact that lies on the sampling lattice.
 How we make it fast and exact enough
 ------------------------------------
 * We never dilate the coarse map directly (on a 1 mm grid that errs by
-  ~0.1 mm, toolchain notes): Z is read through sampling.Sampler (piecewise
+  ~0.1 mm, measured): Z is read through sampling.Sampler (piecewise
   linear on triangles) at a fine offset lattice of spacing `d` (0.1 mm by
   default) *centred on each tool position*, so each toolpath point sees the
   cutter's disc sampled symmetrically around it.

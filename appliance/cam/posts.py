@@ -1,6 +1,6 @@
 """Post-processors: one Program, several controllers' dialects.
 
-Each dialect's traps (toolchain notes, checked by tests with LinuxCNC's own
+Each dialect's traps (docs/method.md, checked by tests with LinuxCNC's own
 interpreter `rs274 -g` and by our GRBL/Fanuc rule checkers in dialects.py):
 
 linuxcnc  No program number (LinuxCNC rejects `O0000`: O-words are

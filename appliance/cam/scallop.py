@@ -1,6 +1,6 @@
 """Scallops: what a stepover leaves between two neighbouring passes.
 
-Formulas (toolchain notes). A ball of radius R stepping s over a flat leaves
+Formulas (docs/method.md). A ball of radius R stepping s over a flat leaves
 
     h = R - sqrt(R^2 - s^2 / 4)          and conversely    s = 2 sqrt(h (2R - h)),
 

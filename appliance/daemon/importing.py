@@ -2,7 +2,7 @@
 
 The web server has already unpacked the zip with its own checks (size, paths,
 member types). The daemon does not trust that: it reads scan.json with the
-scan-format rules (scanfile.load_scan), and checks every frame it lists
+scan-format rules (scanfile.load_scan, docs/scan-format.md), and checks every frame it lists
     - is a regular file inside the folder (no symlink, no "..");
     - is a PNG or JPEG whose header says the size scan.json's camera says, 8 bits;
     - adds up, with the others, to at most MAX_BYTES;

@@ -2,7 +2,7 @@
 
 Each part is a block standing on the base: vertical walls up from the base
 top (z = 0) along a footprint, and a sculptured top z = top(x, y). The
-dissertation's four samples (closed forms recovered in shared/docs/seed-brief.md)
+dissertation's four samples (closed forms recovered from its appendices, docs/method.md)
 are here, lifted by `diss_offset` so they stand on the base, plus parts of our
 own that exercise what the samples do not: islands that merge, a ring with a
 hole, steep walls, a flat plateau, and two reference shapes for calibration.
@@ -114,7 +114,7 @@ class Surface:
         return np.asarray(z) - self.diss_offset
 
 
-# -- the dissertation's samples (seed brief, appendices B-E) ------------------
+# -- the dissertation's samples (appendices B-E, docs/method.md) ------------------
 
 
 def _sample1(x, y):

@@ -1,7 +1,7 @@
 """The numbers to beat: the dissertation's tables 5-1..5-4 (Ea mm, sigma, Ep %).
 
 "lsq" is the dissertation's "least square fitting" column; which degree it
-used is not certain (see the seed brief's table anomalies), so we compare it
+used is not certain (see the table anomalies in docs/method.md), so we compare it
 with our best least-squares degree.
 """
 

@@ -1,7 +1,7 @@
 """The Flask application factory: create_app(service, config).
 
 `service` is the daemon's BenchService (or FakeBenchService); the web room
-calls nothing else (architecture.md). `config` is a plain dict:
+calls nothing else (docs/architecture.md). `config` is a plain dict:
 
   data_dir          folder for the web's own files (web/admin.json, tokens, key); required
   https             True when served over HTTPS: session cookie gets `Secure` (default False)
