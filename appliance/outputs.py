@@ -1,5 +1,10 @@
 """Job outputs as plain files: heightmap.csv (x,y,z in mm) and friends.
 
+heightmap.csv: x,y,z first (spreadsheets and other tools read those), then,
+for a map that knows them, `source` (how the cell was obtained: seen,
+interpolated, extrapolated, occluded, wall, clamped, filled) and
+`uncertainty_mm` (surface/uncertainty.py). Files with only x,y,z still load.
+
 All writes are atomic (see atomicio). Readers validate and raise
 InkSliceError naming the file and the problem.
 """
@@ -17,12 +22,22 @@ from .surface.heightmap import HeightMap
 
 def heightmap_csv_text(hm: HeightMap) -> str:
     """Rows for every on-part cell, row by row; off-part cells are omitted."""
+    from .surface.uncertainty import SOURCES
     X, Y = hm.grid()
     keep = hm.on_part
-    buf = io.StringIO()
-    buf.write("x,y,z\n")
     pts = np.column_stack([X[keep], Y[keep], hm.z[keep]])
-    np.savetxt(buf, pts, fmt="%.4f", delimiter=",")
+    buf = io.StringIO()
+    if hm.sigma is None:
+        buf.write("x,y,z\n")
+        np.savetxt(buf, pts, fmt="%.4f", delimiter=",")
+        return buf.getvalue()
+    buf.write("x,y,z,source,uncertainty_mm\n")
+    codes = hm.source[keep] if hm.source is not None else np.full(int(keep.sum()), -1)
+    names = np.array(list(SOURCES) + ["unknown"])[np.where(codes >= 0, codes, len(SOURCES))]
+    u = hm.sigma[keep]
+    for (x, y, z), name, ui in zip(pts, names, u):
+        buf.write(f"{x:.4f},{y:.4f},{z:.4f},{name},{ui:.4f}\n" if np.isfinite(ui)
+                  else f"{x:.4f},{y:.4f},{z:.4f},{name},\n")
     return buf.getvalue()
 
 
@@ -46,17 +61,15 @@ def read_heightmap_csv(path) -> HeightMap:
         raise InkSliceError(path, f"is {path.stat().st_size} bytes; a height map is at most {MAX_HEIGHTMAP_BYTES}")
     text = path.read_text(encoding="utf-8", errors="replace")
     lines = text.splitlines()
-    if not lines or lines[0].replace(" ", "").lower() != "x,y,z":
-        raise InkSliceError(path, "first line must be the header 'x,y,z'")
-    try:
-        data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
-    except ValueError as e:
-        raise InkSliceError(path, f"not three numbers per line ({str(e)[:120]})") from None
+    header = [c.strip().lower() for c in lines[0].split(",")] if lines else []
+    if header[:3] != ["x", "y", "z"]:
+        raise InkSliceError(path, "first line must be the header 'x,y,z' (further columns may follow)")
+    data, extra = _rows(path, lines[1:], header)
     if data.size == 0 or data.shape[1] != 3:
         raise InkSliceError(path, "no x,y,z rows")
     if not np.all(np.isfinite(data)):
         raise InkSliceError(path, "a value is not finite")
-    data = _one_height_per_point(path, data)
+    data, extra = _one_height_per_point(path, data, extra)
     span = np.ptp(data, axis=0)
     for k, name in enumerate("xy"):
         if span[k] > MAX_EXTENT_MM:
@@ -85,23 +98,76 @@ def read_heightmap_csv(path) -> HeightMap:
     ix = np.rint((data[:, 0] - x[0]) / (x[1] - x[0])).astype(int) if x.size > 1 else np.zeros(len(data), int)
     iy = np.rint((data[:, 1] - y[0]) / (y[1] - y[0])).astype(int) if y.size > 1 else np.zeros(len(data), int)
     z[iy, ix] = data[:, 2]
-    return HeightMap(x, y, z)
+    sigma = source = None
+    if "uncertainty_mm" in extra:
+        sigma = np.full(z.shape, np.nan)
+        sigma[iy, ix] = extra["uncertainty_mm"]
+    if "source" in extra:
+        source = np.full(z.shape, -1, np.int8)
+        source[iy, ix] = extra["source"]
+    return HeightMap(x, y, z, sigma, source)
 
 
-def _one_height_per_point(path, data):
+def _rows(path, rows, header):
+    """-> (x,y,z array, {column: values} of the known extra columns: source, uncertainty_mm).
+    Other extra columns are read past: another tool may have added its own."""
+    from .surface.uncertainty import SOURCES
+    if len(header) == 3:
+        try:
+            return np.loadtxt(io.StringIO("\n".join(rows)), delimiter=",", ndmin=2), {}
+        except ValueError as e:
+            raise InkSliceError(path, f"not three numbers per line ({str(e)[:120]})") from None
+    known = {name: header.index(name) for name in ("source", "uncertainty_mm") if name in header}
+    xyz, src, unc = [], [], []
+    codes = {name: k for k, name in enumerate(SOURCES)}
+    for n, line in enumerate(rows, start=2):
+        if not line.strip():
+            continue
+        cells = line.split(",")
+        if len(cells) != len(header):
+            raise InkSliceError(path, f"line {n} has {len(cells)} values, the header names {len(header)}")
+        try:
+            xyz.append([float(c) for c in cells[:3]])
+        except ValueError:
+            raise InkSliceError(path, f"line {n}: x, y and z must be numbers") from None
+        if "source" in known:
+            name = cells[known["source"]].strip().lower()
+            if name not in codes and name not in ("", "unknown"):
+                raise InkSliceError(path, f"line {n}: unknown source {name!r}; known: {', '.join(SOURCES)}")
+            src.append(codes.get(name, -1))
+        if "uncertainty_mm" in known:
+            cell = cells[known["uncertainty_mm"]].strip()
+            try:
+                u = float(cell) if cell else float("nan")
+            except ValueError:
+                raise InkSliceError(path, f"line {n}: uncertainty_mm must be a number") from None
+            if u < 0 or np.isinf(u):
+                raise InkSliceError(path, f"line {n}: uncertainty_mm must be a finite number >= 0")
+            unc.append(u)
+    data = np.array(xyz, float).reshape(-1, 3)
+    extra = {}
+    if "source" in known:
+        extra["source"] = np.array(src, np.int8)
+    if "uncertainty_mm" in known:
+        extra["uncertainty_mm"] = np.array(unc, float)
+    return data, extra
+
+
+def _one_height_per_point(path, data, extra):
     """Rows repeating an x,y with the same z are dropped; with another z they are an error."""
     xy = np.round(data[:, :2], 4)
     _, first, inverse = np.unique(xy, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
     if len(first) == len(data):
-        return data
+        return data, extra
     clash = np.abs(data[:, 2] - data[first[inverse], 2]) > 1e-4
     if np.any(clash):
         i = int(np.argmax(clash))
         j = int(first[inverse[i]])
         raise InkSliceError(path, f"rows {j + 2} and {i + 2} give x={data[i, 0]:g}, y={data[i, 1]:g} two heights "
                                   f"({data[j, 2]:g} and {data[i, 2]:g} mm)")
-    return data[np.sort(first)]
+    keep = np.sort(first)
+    return data[keep], {k: v[keep] for k, v in extra.items()}
 
 
 def _axis_size(v):

@@ -2,6 +2,8 @@
 
 error_map: a height-map-shaped array of errors as a colour map, with a title,
 axis extents and a colour bar, like the dissertation's figures 5-1..5-16.
+uncertainty_map: the same for each cell's uncertainty, with the low-confidence
+regions boxed and numbered as the report and the G-code header list them.
 """
 from __future__ import annotations
 
@@ -18,6 +20,30 @@ def _text(img, text, org, scale=0.5, color=(30, 30, 30), thickness=1):
 def error_map(err: np.ndarray, x: np.ndarray, y: np.ndarray, title: str,
               vmax: float | None = None, units: str = "mm", size: int = 480) -> bytes:
     """Render |error| per cell; NaN cells grey. Row 0 of err is the smallest y (drawn at the bottom)."""
+    canvas, _ = _field_picture(err, x, y, title, vmax, f"|err| {units}", size)
+    ok, buf = cv2.imencode(".png", canvas)
+    return buf.tobytes()
+
+
+def uncertainty_map(hm, threshold_mm: float, title: str, most: int = 8, size: int = 480) -> bytes:
+    """Uncertainty per cell (the colour bar tops at 3 x the threshold, so everything above
+    the threshold is in the upper two thirds), low-confidence regions boxed and numbered."""
+    from .surface.uncertainty import low_confidence_regions
+    u = np.where(hm.on_part, hm.sigma, np.nan)
+    canvas, to_px = _field_picture(u, hm.x, hm.y, title + f" (boxes: over {threshold_mm:g} mm)",
+                                   3 * threshold_mm, "1-sigma mm", size)
+    for i, r in enumerate(low_confidence_regions(hm, threshold_mm)[:most], start=1):
+        p0, p1 = to_px(r.xmin, r.ymax), to_px(r.xmax, r.ymin)
+        cv2.rectangle(canvas, p0, p1, (255, 255, 255), 2)
+        cv2.rectangle(canvas, p0, p1, (0, 0, 0), 1)
+        _text(canvas, str(i), (p0[0] + 3, p0[1] + 14), 0.5, (255, 255, 255), 2)
+        _text(canvas, str(i), (p0[0] + 3, p0[1] + 14), 0.5, (0, 0, 0), 1)
+    ok, buf = cv2.imencode(".png", canvas)
+    return buf.tobytes()
+
+
+def _field_picture(err, x, y, title, vmax, bar_label, size):
+    """-> (BGR canvas, mm -> canvas pixel function)."""
     err = np.asarray(err, float)
     finite = np.isfinite(err)
     top = float(vmax) if vmax else (float(np.nanmax(err)) if finite.any() else 1.0)
@@ -42,6 +68,10 @@ def error_map(err: np.ndarray, x: np.ndarray, y: np.ndarray, title: str,
     for frac in (0.0, 0.25, 0.5, 0.75, 1.0):
         yy = margin_t + int((1 - frac) * (size - 1))
         _text(canvas, f"{frac * top:.3g}", (bx + 25, yy + 5), 0.45)
-    _text(canvas, f"|err| {units}", (bx - 5, margin_t + size + 30), 0.45)
-    ok, buf = cv2.imencode(".png", canvas)
-    return buf.tobytes()
+    _text(canvas, bar_label, (bx - 5, margin_t + size + 30), 0.45)
+
+    def to_px(xm, ym):
+        fx = (xm - x[0]) / max(x[-1] - x[0], 1e-9)
+        fy = (ym - y[0]) / max(y[-1] - y[0], 1e-9)
+        return (int(round(margin_l + fx * (size - 1))), int(round(margin_t + (1 - fy) * (size - 1))))
+    return canvas, to_px

@@ -157,6 +157,17 @@ def meniscus_model(scan, meniscus):
     return outputs.meniscus_model(doc, scan.camera, path)
 
 
+def pixel_mm(camera) -> float:
+    """The camera's pixel on the liquid plane at the frame's centre, mm (the side of the
+    square of equal area): how finely a waterline can be placed."""
+    H = np.asarray(camera.homography, float)
+    c = np.array([[camera.width / 2, camera.height / 2, 1.0], [camera.width / 2 + 1, camera.height / 2, 1.0],
+                  [camera.width / 2, camera.height / 2 + 1, 1.0]]) @ H.T
+    p = c[:, :2] / c[:, 2:3]
+    a, b = p[1] - p[0], p[2] - p[0]
+    return float(np.sqrt(abs(a[0] * b[1] - a[1] * b[0])))
+
+
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
@@ -174,7 +185,7 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
     out, diag = {}, {}
     for m in methods:
         rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model,
-                                                                perspective=view))
+                                                                perspective=view, pixel_mm=pixel_mm(scan.camera)))
         bounds = rec.diagnostics.get("bounds", bounds)
         out[f"inkslice:{m}"], fix = stand_on_base(rec.heightmap)
         diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
@@ -264,6 +275,7 @@ def report_markdown(job: Job) -> str:
                   f"{base['clamped_cells']} cells clamped up to it (deepest dip {base['deepest_dip_mm']:.3f} mm), "
                   f"{base['filled_cells']} gap cells filled from their neighbours, "
                   f"{base['base_cells']} hole cells set to the base top.", ""]
+    lines += uncertainty_markdown(job)
     if not job.stats:
         lines.append("No ground truth for this scan: statistics need a rendered scan or a known part.")
         return "\n".join(lines) + "\n"
@@ -282,11 +294,53 @@ def report_markdown(job: Job) -> str:
     return "\n".join(lines) + "\n"
 
 
+UNCERTAINTY_PNG = "uncertainty.png"
+
+
+def uncertainty_summary(job: Job, threshold_mm=None) -> dict | None:
+    """Where the written height map is sure and where not: sources, low-confidence regions."""
+    from .surface.uncertainty import DEFAULT_UNCERTAIN_MM, low_confidence_regions, source_summary
+    hm = job.heightmap
+    if hm.sigma is None:
+        return None
+    t = DEFAULT_UNCERTAIN_MM if threshold_mm is None else threshold_mm
+    on = hm.on_part & np.isfinite(hm.sigma)
+    regions = low_confidence_regions(hm, t)
+    return {"threshold_mm": t, "sources": source_summary(hm),
+            "median_mm": float(np.median(hm.sigma[on])) if on.any() else None,
+            "low_confidence_share": float(sum(r.share for r in regions)),
+            "regions": [{"xmin": r.xmin, "xmax": r.xmax, "ymin": r.ymin, "ymax": r.ymax, "share": r.share,
+                         "worst_mm": r.worst_mm, "source": r.source} for r in regions]}
+
+
+def uncertainty_markdown(job: Job, most=8) -> list[str]:
+    u = job.diagnostics.get("uncertainty") or uncertainty_summary(job)
+    if u is None:
+        return []
+    src = ", ".join(f"{name} {100 * share:.1f} %" for name, share in u["sources"].items())
+    out = ["", f"Uncertainty per cell (`{UNCERTAINTY_PNG}`, and the columns source, uncertainty_mm of "
+               f"heightmap.csv): median {u['median_mm']:.3f} mm. How the cells were obtained: {src}.", ""]
+    if not u["regions"]:
+        out += [f"Every cell is within {u['threshold_mm']:g} mm.", ""]
+        return out
+    out += [f"Low confidence (uncertainty over {u['threshold_mm']:g} mm): {100 * u['low_confidence_share']:.1f} % "
+            f"of the part in {len(u['regions'])} region(s), largest first (the G-code header lists them too):", "",
+            "| region | x mm | y mm | share % | up to mm | mostly |", "|---|---|---|---|---|---|"]
+    for i, r in enumerate(u["regions"][:most], start=1):
+        out.append(f"| {i} | {r['xmin']:.1f} .. {r['xmax']:.1f} | {r['ymin']:.1f} .. {r['ymax']:.1f} "
+                   f"| {100 * r['share']:.1f} | {r['worst_mm']:.2f} | {r['source']} |")
+    if len(u["regions"]) > most:
+        out.append(f"| ... | {len(u['regions']) - most} smaller regions | | "
+                   f"{100 * sum(r['share'] for r in u['regions'][most:]):.1f} | | |")
+    return out + [""]
+
+
 def is_output_name(name: str) -> bool:
     """A file name a run of `process` writes (any pipeline, method or dialect)."""
     import fnmatch
     return any(fnmatch.fnmatch(name, p) for p in ("heightmap.csv", "surface.stl", "toolpath*.gcode",
-                                                   "report.md", "report.json", "error_*.png"))
+                                                   "report.md", "report.json", "error_*.png",
+                                                   UNCERTAINTY_PNG))
 
 
 def png_name(key):
@@ -307,11 +361,12 @@ def toolpath_files(job: Job, cam_options=None) -> dict:
     from .cam.zigzag import FinishSettings
     # 0.05 mm: a 0.01 mm finish on a 100 mm part costs our planner ~100 s of CPU here (minutes
     # on a Pi); ask for it with --scallop or the bench setting when the part deserves it
-    opts = dict(cutter="ball6", scallop=0.05, dialect="linuxcnc")
+    from .surface.uncertainty import DEFAULT_UNCERTAIN_MM
+    opts = dict(cutter="ball6", scallop=0.05, dialect="linuxcnc", uncertain_mm=DEFAULT_UNCERTAIN_MM)
     opts.update(cam_options or {})
     try:
         settings = FinishSettings(parse_cutter(opts["cutter"]), scallop=opts["scallop"])
-        cam = finishing_gcode(hm, settings, dialect=opts["dialect"])
+        cam = finishing_gcode(hm, settings, dialect=opts["dialect"], uncertain_mm=opts["uncertain_mm"])
     except InkSliceError as e:
         # no program, no outputs: a set without its G-code is not a job's result
         raise InkSliceError("finishing program", f"cannot be made: {e}") from None
@@ -331,6 +386,11 @@ def write_outputs(job: Job, out_folder, cam_options=None, keep=()) -> list[str]:
     if job.pipeline == "inkslice":
         from .surface.stl import heightmap_to_stl
         files["surface.stl"] = heightmap_to_stl(hm)
+    summary = uncertainty_summary(job, (cam_options or {}).get("uncertain_mm"))
+    if summary is not None:
+        job.diagnostics["uncertainty"] = summary
+        files[UNCERTAINTY_PNG] = plots.uncertainty_map(hm, summary["threshold_mm"],
+                                                       f"{job.scan_folder.name}: uncertainty per cell")
     if job.reference is not None:
         surface = job.reference
         errs = {}

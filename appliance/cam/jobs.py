@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError
 from ..surface.heightmap import HeightMap
+from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM, header_notes
 from .cutters import Cutter, parse_cutter
 from .dissertation import dissertation_gcode
 from .feeds import DEFAULT_MATERIAL, conditions
@@ -65,8 +66,9 @@ def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, dialect=DEFAULT_
 
 def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, material=DEFAULT_MATERIAL,
                      feed=None, plunge=None, rpm=None, clearance=DEFAULT_CLEARANCE, z_offset=0.0,
-                     machine: Machine = Machine(), stock_top=None) -> dict:
-    """One finishing plan written in several dialects: {dialect: Job}."""
+                     machine: Machine = Machine(), stock_top=None, uncertain_mm=DEFAULT_UNCERTAIN_MM) -> dict:
+    """One finishing plan written in several dialects: {dialect: Job}. A map that carries
+    its uncertainty has its low-confidence regions (over `uncertain_mm`) named in the header."""
     check_heightmap(hm)
     jobs = {}
     if "dissertation" in dialects:
@@ -86,6 +88,7 @@ def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, mater
               else f"stepover {settings.stepover:g} mm")
     notes = [f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
              f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"]
+    notes += header_notes(hm, uncertain_mm)
     so = fin.stepovers
     for d in ours:
         prog, text, rt, slowed = _post(hm, fin.runs, settings.cutter, cond, top, "InkSlice finishing program",

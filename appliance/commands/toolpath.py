@@ -33,6 +33,8 @@ def add_arguments(p):
     g.add_argument("--margin", type=float, default=0.0, help="how far the cutter axis may go past the "
                    "part's edge, mm (0..radius)")
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
+    g.add_argument("--uncertain-mm", type=float, default=None, help="the header lists the height map's "
+                   "regions whose uncertainty exceeds this, mm (default 0.1; needs a map with uncertainty_mm)")
     g = p.add_argument_group("roughing (optional, written to its own program)")
     g.add_argument("--rough-out", default=None, help="also write a z-level roughing program here")
     g.add_argument("--rough-cutter", default="flat6")
@@ -92,7 +94,7 @@ def run(args):
         _write(args.rough_out, rough.text)
         print(f"{args.rough_out}: roughing, {rough.summary['runs']} runs, "
               f"estimated run time {rough.runtime_s / 60:.1f} min")
-    job = finishing_gcode(hm, st, **{k: v for k, v in common.items()})
+    job = finishing_gcode(hm, st, uncertain_mm=_uncertain_mm(args), **common)
     _write(args.out, job.text)
     if args.dialect == "dissertation":
         print(f"{args.out}: dissertation format, {job.summary['lines']} lines (no cutter compensation)")
@@ -104,6 +106,17 @@ def run(args):
         print(f"{s['slowed_moves']} moves slowed to the machine's axis feed limits")
     print(f"estimated run time {job.runtime_s / 60:.1f} min")
     return 0
+
+
+def _uncertain_mm(args):
+    import math
+    from ..errors import SettingError
+    from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM
+    if args.uncertain_mm is None:
+        return DEFAULT_UNCERTAIN_MM
+    if not (math.isfinite(args.uncertain_mm) and args.uncertain_mm > 0):
+        raise SettingError("--uncertain-mm", f"must be a number of mm > 0, got {args.uncertain_mm}")
+    return args.uncertain_mm
 
 
 def _write(path, text):

@@ -9,7 +9,10 @@ waterlines missed (narrow, beside a steep wall); the first are the base,
 the second are filled from the cells around them.
 
 None of this is fatal: a finishing program for every scan, with what was
-done counted so the report can say it. `stand_on_base` is applied to the
+done counted so the report can say it. Each changed cell says so in the
+map's source (clamped, filled) and its uncertainty grows by what the change
+reveals: a clamped cell was at least its dip off; a filled one is known no
+better than the spread of the heights around it. `stand_on_base` is applied to the
 height map `inkslice process` writes and to any map `inkslice toolpath`
 reads, so both mill the same surface.
 """
@@ -69,11 +72,13 @@ def stand_on_base(hm: HeightMap) -> tuple[HeightMap, BaseFix]:
     z = hm.z.copy()
     fix = BaseFix()
     below = np.isfinite(z) & (z < 0.0)
+    dip = np.where(below, -z, 0.0)
     if below.any():
         fix.clamped_cells = int(below.sum())
         fix.deepest_dip_mm = float(-z[below].min())
         z[below] = 0.0
     holes = interior_holes(np.isfinite(z))
+    to_base = gaps = np.zeros_like(holes)
     if holes.any():
         dx, dy = hm.spacing
         depth = ndimage.distance_transform_edt(holes, sampling=(dy, dx))   # to the nearest part cell
@@ -87,10 +92,29 @@ def stand_on_base(hm: HeightMap) -> tuple[HeightMap, BaseFix]:
         z = _fill_from_neighbours(z, gaps)
     if not fix.changed:
         return hm, fix
+    sigma, source = _mark(hm, z, below, dip, gaps, to_base)
+    return HeightMap(hm.x, hm.y, z, sigma, source), fix
+
+
+def _mark(hm, z, clamped, dip, gaps, to_base):
+    """The changed cells' source and uncertainty (see the module's docstring)."""
+    from .uncertainty import CLAMPED, FILLED
     sigma = hm.sigma
-    if sigma is not None and holes.any():
-        sigma = np.where(holes, np.nanmax(sigma) if np.isfinite(sigma).any() else np.nan, sigma)
-    return HeightMap(hm.x, hm.y, z, sigma), fix
+    if sigma is not None:
+        sigma = np.where(clamped, np.hypot(np.nan_to_num(sigma), dip), sigma)
+        if gaps.any():
+            ring = ndimage.binary_dilation(gaps, np.ones((3, 3))) & ~gaps & np.isfinite(hm.z)
+            around = z[ring]
+            spread = float(np.ptp(around)) if around.size else 0.0
+            worst = float(np.nanmax(sigma[ring])) if ring.any() and np.isfinite(sigma[ring]).any() else 0.0
+            sigma = np.where(gaps, np.hypot(worst, spread / 2), sigma)
+        sigma = np.where(to_base, 0.0, sigma)          # the base top itself is exact
+    source = hm.source                                   # a map that never said stays silent
+    if source is not None:
+        source = source.copy()
+        source[clamped | to_base] = CLAMPED
+        source[gaps] = FILLED
+    return sigma, source
 
 
 def _fill_from_neighbours(z, gaps):

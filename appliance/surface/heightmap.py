@@ -4,6 +4,8 @@ A regular lattice in the object frame (mm): `x` holds the column centres
 (increasing), `y` the row centres (increasing, away from the viewer), and
 `z[j, i]` is the height above the base top at (x[i], y[j]). NaN marks a cell
 that is not on the part (off its footprint, or inside a hole down to the base).
+Where the reconstruction knows it, each cell also carries its uncertainty in mm
+(`sigma`) and how it was obtained (`source`, codes of uncertainty.SOURCES).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ class HeightMap:
     y: np.ndarray
     z: np.ndarray
     sigma: np.ndarray | None = None   # 1-sigma uncertainty per cell, mm, where known
+    source: np.ndarray | None = None  # int8 per cell: index into uncertainty.SOURCES, -1 unknown
 
     def __post_init__(self):
         self.x = np.asarray(self.x, float)
@@ -25,6 +28,10 @@ class HeightMap:
         self.z = np.asarray(self.z, float)
         if self.z.shape != (self.y.size, self.x.size):
             raise ValueError(f"z has shape {self.z.shape}, expected {(self.y.size, self.x.size)}")
+        for name in ("sigma", "source"):
+            v = getattr(self, name)
+            if v is not None and np.shape(v) != self.z.shape:
+                raise ValueError(f"{name} has shape {np.shape(v)}, expected {self.z.shape}")
 
     @property
     def spacing(self):

@@ -13,7 +13,8 @@ Steps, each in its own module:
 5. meniscus (meniscus.py): that fit is of the contact lines, the apparent
    surface top - h(beta); the top is solved from it, and each contact point's
    rise puts it back by the perspective for the next pass;
-6. the output grid sampled from the lattice, with a 1-sigma estimate per cell.
+6. the output grid sampled from the lattice, with each cell's source and
+   uncertainty in mm (uncertainty.py).
 
 The dissertation's methods stay selectable (options.method = "nearest",
 "spline", "lsq1".."lsq3", "captured") on the same checked, corrected waterlines.
@@ -33,6 +34,7 @@ from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, e
                       first_exposure, point_data)
 from .heightmap import HeightMap
 from .meniscus import contact_points, top_from_apparent
+from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
 from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
 METHODS = ("fit",) + seed_methods.METHODS
@@ -81,6 +83,7 @@ class ReconstructOptions:
     tank_area_mm2: float | None = None       # displacement correction when given
     meniscus: object = None                  # meniscus.MeniscusModel when the correction is wanted
     perspective: Perspective | None = None   # camera foot and height: walls seen by their raised edges
+    pixel_mm: float = 0.0                    # the camera's pixel on the liquid plane (waterline placement)
 
 
 @dataclass
@@ -184,30 +187,6 @@ def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
         curve.append((mult * h, float(np.sqrt(np.mean(r ** 2)))))
     best = min(curve, key=lambda c: c[1])[0]
     return best, curve
-
-
-def _sigma(lat, z, slices, cv_rms, footprint, first):
-    """1-sigma per node: local RMS of the fit's residuals at the waterline points,
-    growing with the distance to the nearest data where the fit extrapolates."""
-    pts, zp = point_data(slices, min(lat.hx, lat.hy))
-    res = bilinear(lat, z, pts) - zp
-    ok = np.isfinite(res)
-    fi, fj = lat.to_index(pts[ok])
-    ii = np.clip(np.round(fi).astype(int), 0, lat.shape[1] - 1)
-    jj = np.clip(np.round(fj).astype(int), 0, lat.shape[0] - 1)
-    s2 = np.zeros(lat.shape)
-    cnt = np.zeros(lat.shape)
-    np.add.at(s2, (jj, ii), res[ok] ** 2)
-    np.add.at(cnt, (jj, ii), 1.0)
-    s2 = ndimage.gaussian_filter(s2, 3)
-    cnt = ndimage.gaussian_filter(cnt, 3)
-    local = np.sqrt(s2 / np.maximum(cnt, 1e-9))
-    has = cnt > 1e-3
-    dist = ndimage.distance_transform_edt(~has, sampling=(lat.hy, lat.hx))
-    base = cv_rms if cv_rms is not None else float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else 0.0
-    sig = np.where(has, np.maximum(local, 0.5 * base), base)
-    sig = np.sqrt(sig ** 2 + (base * dist / max(lat.hx, 1e-9) * 0.1) ** 2)
-    return np.where(footprint, sig, np.nan)
 
 
 def _seed_method(name, slices, xo, yo):
@@ -386,16 +365,18 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     z = np.where(footprint, z, np.nan)
-    cv_rms = min(c[1] for c in curve) if curve else None
-    sig = _sigma(lat, z, slices, cv_rms, footprint, first)
+    exposed = np.stack([exposed_mask(lat, s) for s in slices])
+    src, sig = node_uncertainty(CellEvidence(lat, z, z_fe, first, footprint, slices, exposed,
+                                             opt.pixel_mm, diag.get("occluded_nodes")))
     zo = _to_output(lat, z, r, xo, yo)
-    so = _to_output(lat, sig, r, xo, yo)
+    srco, so = uncertainty_to_output(lat, src, sig, r, xo, yo)
     fo = _to_output(lat, footprint.astype(float), r, xo, yo) > 0.5
     zo = np.where(fo, zo, np.nan)
     so = np.where(fo, so, np.nan)
+    srco = np.where(fo, srco, -1).astype(np.int8)
     diag.update({"cross_validation": curve, "smoothing_mm": length,
                  "first_exposure_nodes": int(np.isfinite(z_fe).sum()),
                  "cap_nodes": int((footprint & (first == next(k for k, s in enumerate(slices)
                                                               if not s.empty))).sum()),
                  "seconds": time.perf_counter() - t0})
-    return Reconstruction(HeightMap(xo, yo, zo, so), length, diag)
+    return Reconstruction(HeightMap(xo, yo, zo, so, srco), length, diag)

@@ -1,6 +1,8 @@
 // A small hand-written WebGL viewer: the height map as a lit, height-coloured mesh and the
 // toolpath as a polyline. About 250 lines instead of a vendored 600 kB library; it needs
 // nothing from the internet. Drag turns, wheel or pinch zooms, "Reset view" goes back.
+// A map with an uncertainty_mm column can be coloured by it instead of by height (a toggle):
+// green is sure, red is over 3 x the low-confidence threshold (0.1 mm).
 "use strict";
 (function () {
   const canvas = document.getElementById("view3d");
@@ -30,26 +32,39 @@
     return [Math.min(1, Math.max(0, 2 * t - 0.6)), 0.35 + 0.6 * t, Math.max(0.15, 1 - 1.1 * t)];
   }
 
-  let mesh = null, path = null, centre = [0, 0, 0], size = 50;
+  const UNCERTAIN_MM = 0.1;
+  function uncertaintyColour(u) { // green (sure) -> yellow (at the threshold) -> red (3 x over it)
+    if (!isFinite(u)) return [0.55, 0.55, 0.55];
+    const t = Math.min(1, Math.max(0, u / (3 * UNCERTAIN_MM)));
+    return t < 1 / 3 ? [0.2 + 2.4 * t, 0.75, 0.25] : [1, Math.max(0.15, 0.75 - 0.9 * (t - 1 / 3)), 0.2];
+  }
+
+  let mesh = null, path = null, centre = [0, 0, 0], size = 50, heightmap = null;
   const view = { yaw: -0.6, pitch: 0.95, dist: 2.1 };
   const home = Object.assign({}, view);
 
   function parseHeightmap(text) {
-    const rows = text.trim().split(/\r?\n/).slice(1).map((l) => l.split(",").map(Number)).filter((r) => r.length === 3 && r.every(isFinite));
+    // x,y,z first; further columns by their header names (old files have none)
+    const lines = text.trim().split(/\r?\n/);
+    const head = (lines[0] || "").split(",").map((c) => c.trim().toLowerCase());
+    const ui = head.indexOf("uncertainty_mm");
+    const rows = lines.slice(1).map((l) => l.split(",")).filter((c) => c.length === head.length)
+      .map((c) => [Number(c[0]), Number(c[1]), Number(c[2]), ui >= 0 && c[ui] !== "" ? Number(c[ui]) : NaN])
+      .filter((r) => r.slice(0, 3).every(isFinite));
     const xs = [...new Set(rows.map((r) => r[0].toFixed(4)))].map(Number).sort((a, b) => a - b);
     const ys = [...new Set(rows.map((r) => r[1].toFixed(4)))].map(Number).sort((a, b) => a - b);
     const dx = xs.length > 1 ? Math.min(...xs.slice(1).map((v, i) => v - xs[i])) : 1;
     const dy = ys.length > 1 ? Math.min(...ys.slice(1).map((v, i) => v - ys[i])) : 1;
     const nx = Math.round((xs[xs.length - 1] - xs[0]) / dx) + 1, ny = Math.round((ys[ys.length - 1] - ys[0]) / dy) + 1;
-    const z = new Float32Array(nx * ny).fill(NaN);
-    rows.forEach((r) => { z[Math.round((r[1] - ys[0]) / dy) * nx + Math.round((r[0] - xs[0]) / dx)] = r[2]; });
-    return { x0: xs[0], y0: ys[0], dx, dy, nx, ny, z, n: rows.length };
+    const z = new Float32Array(nx * ny).fill(NaN), u = new Float32Array(nx * ny).fill(NaN);
+    rows.forEach((r) => { const k = Math.round((r[1] - ys[0]) / dy) * nx + Math.round((r[0] - xs[0]) / dx); z[k] = r[2]; u[k] = r[3]; });
+    return { x0: xs[0], y0: ys[0], dx, dy, nx, ny, z, u, n: rows.length, hasU: ui >= 0 };
   }
-  function buildMesh(h) {
+  function buildMesh(h, byUncertainty) {
     let lo = Infinity, hi = -Infinity; h.z.forEach((v) => { if (!isNaN(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); } });
     const P = [], N = [], C = [];
     const at = (i, j) => h.z[j * h.nx + i];
-    const vtx = (i, j) => [h.x0 + i * h.dx, h.y0 + j * h.dy, at(i, j)];
+    const vtx = (i, j) => [h.x0 + i * h.dx, h.y0 + j * h.dy, at(i, j), h.u[j * h.nx + i]];
     for (let j = 0; j + 1 < h.ny; j++) for (let i = 0; i + 1 < h.nx; i++) {
       const q = [[i, j], [i + 1, j], [i, j + 1], [i + 1, j + 1]];
       for (const tri of [[0, 1, 2], [1, 3, 2]]) {
@@ -57,7 +72,8 @@
         if (v.some((p) => isNaN(p[2]))) continue;
         const a = [v[1][0] - v[0][0], v[1][1] - v[0][1], v[1][2] - v[0][2]], b = [v[2][0] - v[0][0], v[2][1] - v[0][1], v[2][2] - v[0][2]];
         const nrm = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-        v.forEach((p) => { P.push(...p); N.push(...nrm); C.push(...colour(hi > lo ? (p[2] - lo) / (hi - lo) : 0.5)); });
+        v.forEach((p) => { P.push(p[0], p[1], p[2]); N.push(...nrm);
+          C.push(...(byUncertainty ? uncertaintyColour(p[3]) : colour(hi > lo ? (p[2] - lo) / (hi - lo) : 0.5))); });
       }
     }
     centre = [h.x0 + (h.nx - 1) * h.dx / 2, h.y0 + (h.ny - 1) * h.dy / 2, (lo + hi) / 2];
@@ -123,13 +139,16 @@
   canvas.addEventListener("wheel", (e) => { e.preventDefault(); view.dist = Math.min(8, Math.max(0.3, view.dist * Math.exp(e.deltaY * 0.001))); redraw(); }, { passive: false });
   document.getElementById("reset-view").addEventListener("click", () => { Object.assign(view, home); redraw(); });
   ["show-path", "show-surface"].forEach((id) => document.getElementById(id).addEventListener("change", redraw));
+  const byU = document.getElementById("colour-uncertainty");
+  if (byU) byU.addEventListener("change", () => { if (heightmap) { mesh = buildMesh(heightmap, byU.checked); redraw(); } });
   window.addEventListener("resize", redraw);
 
   const get = (u) => fetch(u, { credentials: "same-origin" }).then((r) => { if (!r.ok) throw new Error(u + ": " + r.status); return r.text(); });
   (async () => {
     try {
-      const hm = parseHeightmap(await get(canvas.dataset.heightmap));
-      mesh = buildMesh(hm);
+      const hm = heightmap = parseHeightmap(await get(canvas.dataset.heightmap));
+      if (byU) { byU.disabled = !hm.hasU; byU.parentElement.title = hm.hasU ? "" : "this height map carries no uncertainty"; }
+      mesh = buildMesh(hm, byU && byU.checked && hm.hasU);
       let msg = hm.n + " height-map points, z " + mesh.lo.toFixed(2) + " to " + mesh.hi.toFixed(2) + " mm";
       if (canvas.dataset.gcode) { path = parseGcode(await get(canvas.dataset.gcode)); msg += ", " + path.moves + " toolpath moves"; }
       info.textContent = msg + ". Drag to turn, pinch or wheel to zoom.";

@@ -1,0 +1,306 @@
+"""How each height-map cell was obtained, and how far it may be off (mm).
+
+A height map is not equally sure everywhere. A cell on a waterline the camera
+saw is pinned to within the waterline's own error; a cell between two
+waterlines is interpolated across the gap; a cell above the highest frame that
+showed the part is extrapolated; a cell on a wall or under an occluding face
+only has the edge above it; a cell clamped to the base plane or filled from its
+neighbours had no good height at all. The source says which, and the
+uncertainty (one number in mm per cell, about one standard deviation) is built
+from what limits each:
+
+- lateral: the waterline is placed to about half a pixel, and the fit's lattice
+  can place it to a fraction of its spacing; on a slope s a lateral error dx is
+  a height error s dx (a steep face or a wall is uncertain, a flat top is not);
+- gap: between waterlines the surface is continued from the curves around it;
+  the further from the nearest seen waterline (d) and the more the surface bends
+  (curvature k), the more that continuation can miss: k d^2 / 2, never more than
+  the frames' own bracket (the level step: the cell came out of the ink between
+  two levels, a step apart);
+- extrapolation above the top frame: the part's top lies between the highest
+  level that showed it and the one above that did not; the further in from the
+  top waterline, the more of that step is unknown;
+- disagreement: the fit's residual at the waterline points near the cell, and
+  frames that contradict each other (exposure is monotone: a point out of the
+  ink at one level is out at every lower one; a cell seen out, then under, then
+  out again came from a transient bright thing or a misread frame, and its height
+  is only known to within the span of the levels that disagree).
+
+`DEFAULT_UNCERTAIN_MM` is the threshold above which a cell counts as low
+confidence: the G-code header lists such regions (`low_confidence_regions`),
+and the report names them.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+# the sources, in the order of their codes (HeightMap.source holds the codes)
+SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled")
+SEEN, INTERPOLATED, EXTRAPOLATED, OCCLUDED, WALL, CLAMPED, FILLED = range(len(SOURCES))
+NO_SOURCE = -1                     # off the part, or a map that does not say
+
+DEFAULT_UNCERTAIN_MM = 0.1         # cells above this are low confidence (G-code header, report)
+LATERAL_PX = 0.5                   # a waterline is placed to about half a pixel
+LATTICE_FRACTION = 0.1             # ... and the fit's lattice to about a tenth of its spacing
+FAR_GAPS = 4.0                     # this many times the part's typical distance to a waterline: unpinned
+STEEP_SLOPE = 3.0                  # |grad z| above this (72 deg) the cell is on a wall
+
+
+def source_code(name: str) -> int:
+    return SOURCES.index(name)
+
+
+@dataclass
+class CellEvidence:
+    """What the lattice fit knows per node, the inputs of `node_uncertainty`."""
+    lat: object                    # gridfit.Lattice
+    z: np.ndarray                  # the fitted heights (NaN off the part)
+    z_fe: np.ndarray               # first-exposure heights (NaN where the fit filled in)
+    first: np.ndarray              # index of the level where each node came out of the ink
+    footprint: np.ndarray
+    slices: list                   # the slices the fit used (at their corrected heights)
+    exposed: np.ndarray            # (K, ny, nx) bool: inside each slice's waterline
+    pixel_mm: float = 0.0
+    occluded: np.ndarray | None = None   # nodes under a face that hid the waterline
+
+
+def _levels_and_steps(slices):
+    lv = np.array([s.level for s in slices], float)
+    steps = -np.diff(lv)
+    step = float(np.median(steps)) if steps.size else 1.0
+    return lv, step
+
+
+def _frames_disagree(ev: CellEvidence, lv):
+    """Per node, the span of levels over which the frames contradict themselves (mm):
+    out of the ink at `first`, under again at a lower level. 0 where they agree. A node
+    within a lattice spacing of the lower frame's waterline is on its edge, where the
+    raster's side is not sure: that is no contradiction."""
+    from .slices import polyline_distance
+    K = len(ev.slices)
+    lat = ev.lat
+    span = np.zeros(lat.shape)
+    first = np.where(ev.footprint, ev.first, K)
+    last_under = np.full(lat.shape, -1)
+    X, Y = np.meshgrid(lat.x, lat.y)
+    tol = max(lat.hx, lat.hy)
+    for k in range(K):
+        cand = ~ev.exposed[k] & (first < k)
+        if not cand.any() or ev.slices[k].empty:
+            continue
+        jj, ii = np.nonzero(cand)
+        d, _ = polyline_distance(ev.slices[k], np.column_stack([X[jj, ii], Y[jj, ii]]))
+        far = d > tol
+        last_under[jj[far], ii[far]] = k
+    bad = last_under >= 0
+    if bad.any():
+        fk = np.clip(first[bad], 0, K - 1)
+        span[bad] = lv[fk] - lv[last_under[bad]]
+    return span
+
+
+def _nearest_distance(points, lat):
+    X, Y = np.meshgrid(lat.x, lat.y)
+    if len(points) == 0:
+        return np.full(lat.shape, np.inf)
+    d, _ = cKDTree(points).query(np.column_stack([X.ravel(), Y.ravel()]))
+    return d.reshape(lat.shape)
+
+
+def _fit_residual(ev: CellEvidence, pts, zp):
+    """Local RMS of the fit's misfit at the waterline points around each node."""
+    from .gridfit import bilinear
+    lat = ev.lat
+    if len(pts) == 0:
+        return np.zeros(lat.shape)
+    res = bilinear(lat, ev.z, pts) - zp
+    ok = np.isfinite(res)
+    fi, fj = lat.to_index(pts[ok])
+    ii = np.clip(np.round(fi).astype(int), 0, lat.shape[1] - 1)
+    jj = np.clip(np.round(fj).astype(int), 0, lat.shape[0] - 1)
+    s2 = np.zeros(lat.shape)
+    cnt = np.zeros(lat.shape)
+    np.add.at(s2, (jj, ii), res[ok] ** 2)
+    np.add.at(cnt, (jj, ii), 1.0)
+    s2 = ndimage.gaussian_filter(s2, 1.5)
+    cnt = ndimage.gaussian_filter(cnt, 1.5)
+    return np.sqrt(s2 / np.maximum(cnt, 1e-9)) * (cnt > 1e-3)
+
+
+def node_uncertainty(ev: CellEvidence):
+    """-> (source codes, uncertainty in mm) on the lattice, NO_SOURCE / NaN off the part."""
+    from .gridfit import fill_nearest
+    lat = ev.lat
+    h = min(lat.hx, lat.hy)
+    lv, step = _levels_and_steps(ev.slices)
+    K = len(ev.slices)
+    top = next(k for k, s in enumerate(ev.slices) if not s.empty)
+    curve_pts, curve_z, wall_pts = [], [], []
+    for s in ev.slices:
+        if s.empty:
+            continue
+        wall = s.wall if s.wall is not None else np.zeros(len(s.P), bool)
+        curve_pts.append(s.P[~wall])
+        curve_z.append(s.z[~wall])
+        wall_pts.append(s.P[wall])
+    curve_pts = np.vstack(curve_pts) if curve_pts else np.zeros((0, 2))
+    curve_z = np.concatenate(curve_z) if curve_z else np.zeros(0)
+    wall_pts = np.vstack(wall_pts) if wall_pts else np.zeros((0, 2))
+    d_seen = _nearest_distance(curve_pts, lat)
+    d_wall = _nearest_distance(wall_pts, lat)
+
+    zf = fill_nearest(ev.z)
+    gy, gx = np.gradient(zf, lat.y, lat.x)
+    slope = np.hypot(gx, gy)
+    gyy, gyx = np.gradient(gy, lat.y, lat.x)
+    gxy, gxx = np.gradient(gx, lat.y, lat.x)
+    # the larger principal curvature of the height field (its Hessian's larger |eigenvalue|)
+    tr, det = gxx + gyy, gxx * gyy - 0.5 * (gxy + gyx) * 0.5 * (gxy + gyx)
+    bend = np.abs(tr) / 2 + np.sqrt(np.maximum((tr / 2) ** 2 - det, 0.0))
+    bend = ndimage.maximum_filter(bend, size=3)      # a kink's neighbours bend too
+
+    # the level step around each node's first exposure (the bracket the frames give)
+    fk = np.clip(ev.first, 0, K - 1)
+    above = np.clip(fk - 1, 0, K - 1)
+    local_step = np.where(fk > top, lv[above] - lv[fk], step)
+    local_step = np.where(local_step > 0, local_step, step)
+
+    lateral = math.hypot(LATERAL_PX * ev.pixel_mm, LATTICE_FRACTION * h)
+    u_lat = slope * lateral
+    # between waterlines: the nearest seen one is d away; the bend over that distance,
+    # bounded by the bracket (uniform over a step: step / sqrt(12)). Far from every
+    # waterline - much further than they usually are apart on this part - nothing pins
+    # the height inside its bracket: a plateau or a ridge between two levels
+    d = np.where(np.isfinite(d_seen), d_seen, 0.0)
+    bracket = local_step / math.sqrt(12.0)
+    typical = max(float(np.median(d[ev.footprint])) if ev.footprint.any() else h, h)
+    u_gap = np.minimum(0.5 * bend * d ** 2, bracket)
+    u_gap = np.maximum(u_gap, bracket * np.clip(d / (FAR_GAPS * typical), 0.0, 1.0) ** 2)
+    # above the top frame: the top lies somewhere in the step above the highest level
+    # that showed the part; the waterline pins its edge, the middle is free
+    cap = (ev.first == top) & ev.footprint
+    reach = math.sqrt(max(abs(ev.slices[top].area()), h * h) / math.pi)   # the top loop's radius
+    u_cap = np.where(cap, bracket * np.minimum(1.0, d / max(reach, h)), 0.0)
+    u_gap = np.maximum(u_gap, u_cap)
+    # the outline: beyond it the part drops to the base; an outline placed dx off puts a
+    # rim cell on the wall, up to its whole height off
+    rim = ev.footprint & ~ndimage.binary_erosion(ev.footprint, np.ones((3, 3)), border_value=0)
+    u_rim = np.where(rim, np.abs(zf) * np.minimum(1.0, lateral / h), 0.0)
+    # the fit against the data: residuals at the waterline points near the node, and the
+    # node's own first-exposure height where it has one
+    pts_res = _fit_residual(ev, curve_pts, curve_z)
+    own = np.where(np.isfinite(ev.z_fe), np.abs(ev.z - ev.z_fe), 0.0)
+    u_fit = np.hypot(pts_res, own)
+    u_frames = 0.5 * _frames_disagree(ev, lv)
+    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2)
+
+    src = np.full(lat.shape, INTERPOLATED, np.int8)
+    near = max(0.5 * h, 2 * ev.pixel_mm)
+    src[d_seen <= near] = SEEN
+    src[cap & (d_seen > near)] = EXTRAPOLATED
+    src[((d_wall <= near) & (d_wall < d_seen)) | (slope > STEEP_SLOPE)] = WALL
+    if ev.occluded is not None:
+        src[ev.occluded] = OCCLUDED
+    src[~ev.footprint] = NO_SOURCE
+    u = np.where(ev.footprint, u, np.nan)
+    return src, u
+
+
+def to_output(lat, src, u, r, xo, yo):
+    """Lattice fields on the output grid: the nearest node's source, the uncertainty
+    bilinear (and never below the nearest node's: a wall node must not be averaged away)."""
+    from .gridfit import fill_nearest
+    if r is not None:
+        return src[::r, ::r].copy(), u[::r, ::r].copy()
+    fi = (xo - lat.x[0]) / lat.hx
+    fj = (yo - lat.y[0]) / lat.hy
+    FJ, FI = np.meshgrid(fj, fi, indexing="ij")
+    ii = np.clip(np.rint(FI).astype(int), 0, lat.shape[1] - 1)
+    jj = np.clip(np.rint(FJ).astype(int), 0, lat.shape[0] - 1)
+    so = src[jj, ii]
+    uo = ndimage.map_coordinates(fill_nearest(u), [FJ, FI], order=1, mode="nearest")
+    return so, np.maximum(uo, np.where(np.isfinite(u[jj, ii]), u[jj, ii], 0.0))
+
+
+# -- low-confidence regions --------------------------------------------------------------
+
+
+@dataclass
+class Region:
+    xmin: float
+    xmax: float
+    ymin: float
+    ymax: float
+    cells: int
+    share: float                   # of the part's cells
+    worst_mm: float
+    source: str                    # the commonest source in it
+
+    def describe(self):
+        return (f"X {self.xmin:.1f}..{self.xmax:.1f} Y {self.ymin:.1f}..{self.ymax:.1f} mm, "
+                f"{100 * self.share:.1f} % of the part, up to {self.worst_mm:.2f} mm, mostly {self.source}")
+
+
+def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
+    """Connected regions of cells whose uncertainty exceeds the threshold, largest first
+    (8-connected; the bounding boxes are of cell centres +- half a cell). [] when the
+    map carries no uncertainty."""
+    if hm.sigma is None:
+        return []
+    on = hm.on_part
+    low = on & np.isfinite(hm.sigma) & (hm.sigma > threshold_mm)
+    total = int(on.sum())
+    if not low.any() or total == 0:
+        return []
+    lab, n = ndimage.label(low, structure=np.ones((3, 3)))
+    dx, dy = hm.spacing
+    dx = dx if np.isfinite(dx) else 0.0
+    dy = dy if np.isfinite(dy) else 0.0
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(lab), start=1):
+        m = lab[sl] == k
+        src = None if hm.source is None else hm.source[sl][m]
+        common = "unknown"
+        if src is not None and (src >= 0).any():
+            common = SOURCES[int(np.bincount(src[src >= 0].astype(int)).argmax())]
+        out.append(Region(float(max(hm.x[sl[1].start] - dx / 2, hm.x[0])),
+                          float(min(hm.x[sl[1].stop - 1] + dx / 2, hm.x[-1])),
+                          float(max(hm.y[sl[0].start] - dy / 2, hm.y[0])),
+                          float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
+                          int(m.sum()), float(m.sum()) / total, float(np.max(hm.sigma[sl][m])), common))
+    out.sort(key=lambda r: -r.cells)
+    return out
+
+
+def header_notes(hm, threshold_mm=DEFAULT_UNCERTAIN_MM, most=8):
+    """G-code comment lines naming the low-confidence regions (nothing without an uncertainty)."""
+    if hm.sigma is None:
+        return []
+    regions = low_confidence_regions(hm, threshold_mm)
+    if not regions:
+        return [f"confidence: every cell of the height map within {threshold_mm:g} mm"]
+    share = sum(r.share for r in regions)
+    lines = [f"low confidence: {100 * share:.1f} % of the part in {len(regions)} region(s) "
+             f"with uncertainty over {threshold_mm:g} mm; check these after milling"]
+    for i, r in enumerate(regions[:most], start=1):
+        lines.append(f"low confidence {i}: {r.describe()}")
+    if len(regions) > most:
+        rest = regions[most:]
+        lines.append(f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
+                     "of the part")
+    return lines
+
+
+def source_summary(hm):
+    """{source: share of the part's cells} for the report."""
+    if hm.source is None:
+        return {}
+    on = hm.on_part & (hm.source >= 0)
+    total = int(hm.on_part.sum())
+    return {name: float(np.sum(on & (hm.source == k))) / total
+            for k, name in enumerate(SOURCES) if total and np.any(on & (hm.source == k))}

@@ -1,0 +1,166 @@
+"""The tail of the error, the honesty of the uncertainty map, and the part a machinist gets.
+
+Per part, on scans of the virtual bench (default: the harsh preset, 1 mm steps, 2048 x 1536),
+processed as `inkslice process` does (displacement, a meniscus model, the base plane):
+
+- Ea, the interior's 99th percentile (cells more than 3 mm inside the outline) and the
+  largest interior error, mm, against the part's truth;
+- honesty: of the cells whose |error| exceeds 0.1 mm, the share the map marks uncertain
+  (uncertainty_mm over 0.1 mm), beside the share of all cells it marks so (marking
+  everything would be honest and useless); and the same over all parts together;
+- milled (--mill): the finishing program `process` writes (ball 6 mm, scallop 0.05 mm)
+  simulated by `verify` against the TRUE surface, sampled from the part's definition, not
+  the reconstructed one: the deepest gouge below the true part and the most material
+  left above it where the cutter reaches (excess), with where they are and the source and
+  uncertainty the height map gave that spot.
+
+The meniscus model is the one the renderer used (its parameters, from the scan's truth):
+this bench measures the map, not the commissioning (benches/meniscus.py does that).
+
+    nice -n 10 .venv/bin/python benches/uncertainty.py --keep /tmp/scans            # all parts
+    nice -n 10 .venv/bin/python benches/uncertainty.py --parts sample1 --mill --keep /tmp/scans
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np                                           # noqa: E402
+from scipy import ndimage                                    # noqa: E402
+
+from appliance import process as proc                        # noqa: E402
+from appliance.outputs import meniscus_model                 # noqa: E402
+from appliance.scanfile import load_scan                     # noqa: E402
+from appliance.sim import surfaces                           # noqa: E402
+from appliance.sim.scanrender import render_scan             # noqa: E402
+from appliance.surface.heightmap import HeightMap            # noqa: E402
+from appliance.surface.uncertainty import DEFAULT_UNCERTAIN_MM, SOURCES   # noqa: E402
+
+PARTS = "sample1,sample2,sample3,sample4,twin-peaks,crater"
+BIG_MM = 0.1            # an error a machinist would feel; also the low-confidence threshold
+
+
+def scan_of(name, preset, step, root: Path, seed=1):
+    folder = root / f"{name}-{preset}"
+    if not (folder / "scan.json").is_file():
+        render_scan(name, folder, step_mm=step, effects=preset, seed=seed)
+    truth = json.loads((root / f"{name}-{preset}.truth.json").read_text())
+    return folder, truth
+
+
+def truth_meniscus(folder, truth):
+    """The renderer's own meniscus as a model (None when the preset has none)."""
+    men = truth.get("meniscus")
+    if not men or not men.get("enabled"):
+        return None
+    doc = {"capillary_length_mm": men["capillary_length_mm"], "contact_angle_deg": men["contact_angle_deg"],
+           "contact_line_curvature": 1.0 if men.get("contact_line_curvature") else 0.0}
+    return meniscus_model(doc, load_scan(folder).camera, "truth")
+
+
+def errors(surface, hm, inset_mm=3.0):
+    X, Y = hm.grid()
+    inside = surface.inside(X, Y) & hm.on_part
+    err = np.where(inside, np.abs(hm.z - surface.height(X, Y)), np.nan)
+    cell = min(abs(hm.spacing[0]), abs(hm.spacing[1]))
+    interior = ndimage.binary_erosion(surface.inside(X, Y), iterations=max(1, int(math.ceil(inset_mm / cell))))
+    return err, inside, interior & inside
+
+
+def true_heightmap(surface, hm, spacing=0.25):
+    """The part as it is, on a fine lattice over the reconstructed map's extent."""
+    x = np.arange(hm.x[0], hm.x[-1] + 1e-9, spacing)
+    y = np.arange(hm.y[0], hm.y[-1] + 1e-9, spacing)
+    X, Y = np.meshgrid(x, y)
+    return HeightMap(x, y, np.where(surface.inside(X, Y), surface.height(X, Y), np.nan))
+
+
+def at(hm, field, xy):
+    i = int(np.clip(np.rint((xy[0] - hm.x[0]) / hm.spacing[0]), 0, hm.x.size - 1))
+    j = int(np.clip(np.rint((xy[1] - hm.y[0]) / hm.spacing[1]), 0, hm.y.size - 1))
+    return field[j, i]
+
+
+def mill(surface, job, resolution):
+    """The program `process` writes, cut into a block and compared with the true part."""
+    from appliance.cam.jobs import verify_gcode
+    text = proc.toolpath_files(job)["toolpath.gcode"].decode()
+    true = true_heightmap(surface, job.heightmap)
+    rep, _ = verify_gcode(text, true, resolution=resolution)
+    dev = np.where(rep.measured, rep.deviation, np.nan)
+    k = np.unravel_index(np.nanargmax(dev), dev.shape) if np.isfinite(dev).any() else None
+    hm = job.heightmap
+    g_src = SOURCES[int(at(hm, hm.source, rep.gouge_at))] if hm.source is not None else "?"
+    g_u = float(at(hm, hm.sigma, rep.gouge_at)) if hm.sigma is not None else float("nan")
+    return rep, (float(np.nanmax(dev)) if k is not None else float("nan")), g_src, g_u
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--parts", default=PARTS)
+    ap.add_argument("--preset", default="harsh")
+    ap.add_argument("--step", type=float, default=1.0)
+    ap.add_argument("--keep", help="folder to keep rendered scans in (and reuse)")
+    ap.add_argument("--mill", action="store_true", help="also mill the finishing program against the true part")
+    ap.add_argument("--mill-resolution", type=float, default=0.2)
+    a = ap.parse_args()
+    tmp = tempfile.TemporaryDirectory(prefix="uncertainty-bench-")
+    root = Path(a.keep or tmp.name)
+    root.mkdir(parents=True, exist_ok=True)
+    print(f"{a.preset} preset, {a.step:g} mm steps; errors in mm; 'uncertain' = uncertainty_mm > "
+          f"{DEFAULT_UNCERTAIN_MM:g}; honest = share of the cells off by more than {BIG_MM:g} mm that are uncertain")
+    print(f"  {'part':<11} {'Ea':>7} {'p99 in':>7} {'max in':>7} {'>0.1':>6} {'honest':>7} {'marked':>7}   sources")
+    big_all = honest_all = cells_all = marked_all = 0
+    milled = []
+    for name in a.parts.split(","):
+        surface = surfaces.get(name)
+        t0 = time.perf_counter()
+        folder, truth = scan_of(name, a.preset, a.step, root)
+        job = proc.process(folder, truth=surface, meniscus=truth_meniscus(folder, truth) or False)
+        hm = job.heightmap
+        err, inside, interior = errors(surface, hm)
+        e = err[inside]
+        u = hm.sigma[inside]
+        big = e > BIG_MM
+        marked = u > DEFAULT_UNCERTAIN_MM
+        honest = float((big & marked).sum()) / max(int(big.sum()), 1)
+        big_all += int(big.sum())
+        honest_all += int((big & marked).sum())
+        cells_all += e.size
+        marked_all += int(marked.sum())
+        ei = err[interior]
+        src = hm.source[inside]
+        mix = ", ".join(f"{n} {100 * np.mean(src == k):.0f}%" for k, n in enumerate(SOURCES) if np.any(src == k))
+        print(f"  {name:<11} {np.mean(e):7.4f} {np.percentile(ei, 99):7.3f} {np.max(ei):7.3f} {int(big.sum()):6d} "
+              f"{100 * honest:6.1f}% {100 * np.mean(marked):6.1f}%   {mix}   ({time.perf_counter() - t0:.0f} s)",
+              flush=True)
+        missed = big & ~marked
+        if missed.any():
+            worst = np.argsort(-np.where(missed, e, -1))[:3]
+            print("      missed (error / uncertainty / source): " + ", ".join(
+                f"{e[i]:.3f}/{u[i]:.3f}/{SOURCES[src[i]] if src[i] >= 0 else '?'}" for i in worst if missed[i]))
+        if a.mill:
+            rep, excess, g_src, g_u = mill(surface, job, a.mill_resolution)
+            milled.append((name, rep, excess, g_src, g_u))
+    if cells_all:
+        print(f"  all parts: {big_all} cells off by more than {BIG_MM:g} mm, {100 * honest_all / max(big_all, 1):.1f} % "
+              f"of them marked uncertain; {100 * marked_all / cells_all:.1f} % of all cells marked")
+    if milled:
+        print(f"\nmilled against the true part (verify, {a.mill_resolution:g} mm): what a machinist would see")
+        print(f"  {'part':<11} {'gouge':>7} {'at x,y':>15} {'map said':>22} {'excess':>7} {'uncut %':>8}")
+        for name, rep, excess, g_src, g_u in milled:
+            print(f"  {name:<11} {rep.gouge:7.3f} {rep.gouge_at[0]:7.1f},{rep.gouge_at[1]:<7.1f} "
+                  f"{g_src + f' +-{g_u:.2f}':>22} {excess:7.3f} {100 * rep.uncut_fraction:8.2f}")
+
+
+if __name__ == "__main__":
+    main()
