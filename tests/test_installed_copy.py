@@ -10,9 +10,14 @@ on the import path:
   - the firmware builds into a cache folder (never into site-packages) and
     `inkslice firmware flash` hands avrdude the HEX;
   - both services run from the venv: the daemon on the simulated bench (the
-    firmware under simavr, the virtual camera) and the web; a client logs in,
-    commissions the box (commission(), below), scans a small part and gets
-    the G-code.
+    firmware under simavr, the virtual camera with the physics effects: the
+    ink's displacement and its meniscus) and the web. A client logs in and
+    scans dissertation sample 3 on the new box: the report warns that no
+    meniscus, tank, camera or level-zero calibration was used. It then
+    commissions the box through the web API as the phone's page does
+    (commission(), below) and scans the part again: the G-code comes out and
+    the height map is within Ea 0.03 mm of the true surface, the figure
+    `benches/seed_table.py --effects physics` reaches.
 
 To keep the wheel's dependencies from being downloaded again, the fresh venv
 sees the test venv's site-packages through a .pth line (numpy, scipy, OpenCV,
@@ -43,10 +48,6 @@ REPO = Path(__file__).resolve().parents[1]
 pytestmark = [pytest.mark.slow, pytest.mark.simavr,
               pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
                                  reason="needs gcc-avr and simavr (scripts/setup.sh)")]
-
-# a small part: the cone (23.2 mm), 10 levels 2 mm apart from above its tip, read with the seed pipeline
-SCAN = {"name": "installed copy: cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0, "level_step_mm": 2.0,
-        "settle_s": 0.0, "pipeline": "seed"}
 
 
 @dataclass
@@ -186,12 +187,12 @@ class WebClient:
         self.opener.open(self.url + "/login", data=form, timeout=10)
         self.csrf = self._csrf_of("/")
 
-    def call(self, method, path, body=None):
+    def call(self, method, path, body=None, timeout=30.0):
         req = urllib.request.Request(self.url + path, method=method,
                                      data=None if body is None else json.dumps(body).encode(),
                                      headers={"Content-Type": "application/json", "X-CSRF-Token": self.csrf or ""})
         try:
-            with self.opener.open(req, timeout=30) as r:
+            with self.opener.open(req, timeout=timeout) as r:
                 data = r.read()
                 return r.status, (json.loads(data) if r.headers.get_content_type() == "application/json" else data)
         except urllib.error.HTTPError as e:
@@ -200,8 +201,13 @@ class WebClient:
     def get(self, path):
         return self.call("GET", path)
 
-    def post(self, path, body=None):
-        return self.call("POST", path, body if body is not None else {})
+    def post(self, path, body=None, timeout=30.0):
+        return self.call("POST", path, body if body is not None else {}, timeout)
+
+    def file(self, job_id, name):
+        status, data = self.get(f"/api/jobs/{job_id}/files/{name}")
+        assert status == 200, (name, data)
+        return data
 
 
 def read_until(proc, pattern, timeout=120.0):
@@ -229,11 +235,33 @@ def stop(proc):
             proc.wait()
 
 
-@pytest.fixture
-def box(installed, tmp_path):
-    """The daemon (simulated bench, the cone on the base) and the web, both from the venv."""
-    data = tmp_path / "data"
-    daemon = installed.start(installed.bin("inkslice"), "daemon", "--sim", "simavr", "--surface", "cone",
+# The bench: dissertation sample 3 (a 100 x 100 mm Bezier patch, 28.7 .. 49.8 mm high) in ink with
+# the physics effects (displacement in a 150 x 150 mm tank, a meniscus of 2.7 mm capillary length),
+# and the stage's true level zero where the daemon's setting (60 mm) does not expect it.
+#
+# The frame is 1024 x 768, not the bench's 2048 x 1536: the smallest tried that still gives
+# Ea <= 0.03 mm on sample 3 through the daemon. Measured with the daemon's service in-process
+# on this bench, commissioned the same way, levels 1 mm apart from 50 mm down (2 busy shared cores):
+#   2048 x 1536: Ea 0.0234 mm; commissioning 173 s, the scan with processing and CAM 173 s
+#   1024 x  768: Ea 0.0250 mm; commissioning  71 s, the scan with processing and CAM 113 s
+#    640 x  480: Ea 0.0318 mm (misses);        71 s,                                  99 s
+# (the first two down to 20 mm, the last to 24 mm as here). This test itself measures Ea 0.0244 mm.
+# Below 1024 x 768 little time is left to save: processing and the CAM take most of a scan.
+FRAME = "1024x768"
+TRUE_LEVEL_ZERO = 57.3
+# the dissertation's levels for sample 3 (benches/seed_table.py's sculpture_levels): from just
+# above its top down until the top's lowest point (28.7 mm) is a meniscus rise clear of the ink
+SAMPLE3 = {"levels_to_mm": 50.0, "levels_from_mm": 24.0, "level_step_mm": 1.0, "settle_s": 0.0}
+BENCH_EA_MM = 0.03          # what benches/seed_table.py --effects physics reaches on sample 3 (0.0238)
+COMMISSION_TIMEOUT = 600.0  # an action on the bench (the level-zero search) answers when it is done
+
+
+@pytest.fixture(scope="module")
+def box(installed, tmp_path_factory):
+    """The daemon (the simulated bench above) and the web, both from the venv, a client logged in."""
+    data = tmp_path_factory.mktemp("box") / "data"
+    daemon = installed.start(installed.bin("inkslice"), "daemon", "--sim", "simavr", "--surface", "sample3",
+                             "--frame", FRAME, "--effects", "physics", "--level-zero", str(TRUE_LEVEL_ZERO),
                              "--data", str(data))
     web = None
     try:
@@ -251,12 +279,41 @@ def box(installed, tmp_path):
         stop(daemon)
 
 
-def commission(client: WebClient) -> None:
-    """Once per box, from the phone: camera, level zero, tank area, meniscus from a reference ball.
-    The commissioning API's steps go here, before the first scan."""
+def act(client: WebClient, step: str, action: str, values: dict | None = None) -> dict:
+    """One button on the commissioning page."""
+    status, c = client.post(f"/api/commissioning/{step}/{action}", values or {}, timeout=COMMISSION_TIMEOUT)
+    assert status == 200, (step, action, c)
+    return c
 
 
-def scan(client: WebClient, params: dict, timeout: float = 600.0) -> dict:
+def commission(client: WebClient) -> dict:
+    """Once per box, from the phone, in the page's order and with what the page sends: level zero
+    measured, the camera from three tilted views of the board and the board flat on the base, the
+    tank entered (150 x 150 mm), the meniscus from a scan of the 25.4 mm reference ball."""
+    act(client, "level_zero", "start")
+    c = act(client, "level_zero", "measure")
+    assert c["active"]["stage"] == "check", c["active"]
+    act(client, "level_zero", "accept")
+    act(client, "camera", "start")
+    for n in (1, 2, 3):
+        c = act(client, "camera", "view")
+        assert c["active"]["detected"]["views"] == n, c["active"]
+    act(client, "camera", "plane")
+    act(client, "camera", "accept")
+    act(client, "tank", "enter", {"width_mm": 150, "depth_mm": 150})
+    act(client, "meniscus", "start", {"diameter_mm": 25.4})
+    c = act(client, "meniscus", "scan")
+    assert c["active"]["stage"] == "scanning", c["active"]
+    end = time.monotonic() + COMMISSION_TIMEOUT
+    while c["active"]["stage"] == "scanning" and time.monotonic() < end:   # the page polls the same way
+        time.sleep(1.0)
+        status, c = client.get("/api/commissioning")
+        assert status == 200, c
+    assert c["active"]["stage"] == "check", c["active"]
+    return act(client, "meniscus", "accept")
+
+
+def scan(client: WebClient, params: dict, timeout: float = 900.0) -> dict:
     status, body = client.post("/api/scan", params)
     assert status == 201, body
     job_id = body["job_id"]
@@ -272,18 +329,68 @@ def scan(client: WebClient, params: dict, timeout: float = 600.0) -> dict:
     return job
 
 
-def test_the_installed_copy_scans_on_the_simulated_bench_through_the_web(installed, box):
+def height_map_error(client: WebClient, job: dict, tmp_path: Path) -> dict:
+    """The job's heightmap.csv, as the web hands it out, against sample 3's true surface."""
+    from appliance.outputs import read_heightmap_csv
+    from appliance.process import statistics_against
+    from appliance.sim import surfaces
+    path = tmp_path / f"{job['id']}-heightmap.csv"
+    path.write_bytes(client.file(job["id"], "heightmap.csv"))
+    return statistics_against(surfaces.get("sample3"), read_heightmap_csv(path))
+
+
+@pytest.fixture(scope="module")
+def scans(installed, box, tmp_path_factory):
+    """A new box's story: a scan before commissioning, the commissioning, the same part again."""
     client = box
     status, st = client.get("/api/state")
     assert status == 200 and st["state"] == "idle", st
-    commission(client)
-    job = scan(client, SCAN)
+    # this scan is about its report: a coarse scallop keeps the finishing program short (its height
+    # map, level zero unmeasured, is ~3 mm off and rough; at 0.05 mm the CAM took 4.5 minutes)
+    before = scan(client, {**SAMPLE3, "name": "sample 3, not commissioned", "scallop_mm": 0.5})
+    commissioned = commission(client)
+    after = scan(client, {**SAMPLE3, "name": "sample 3, commissioned"})
+    return {"client": client, "before": before, "commissioning": commissioned, "after": after,
+            "tmp": tmp_path_factory.mktemp("downloads")}
+
+
+def test_before_commissioning_the_report_warns_that_no_meniscus_or_tank_calibration_was_used(scans):
+    client, job = scans["client"], scans["before"]
     assert job["status"] == "done", job
-    assert "toolpath.gcode" in job["outputs"]
-    status, gcode = client.get(f"/api/jobs/{job['id']}/files/toolpath.gcode")
-    assert status == 200
+    report = client.file(job["id"], "report.json")
+    warnings = " | ".join(report["calibration"]["warnings"])
+    for expected in ("no meniscus calibration was used", "no tank area calibration was used",
+                     "the camera was not commissioned", "level zero was not measured"):
+        assert expected in warnings, warnings
+    md = client.file(job["id"], "report.md").decode()
+    assert "no meniscus calibration was used" in md and "no tank area calibration was used" in md
+
+
+def test_the_commissioning_through_the_web_measures_the_box(scans):
+    c = scans["commissioning"]
+    steps = {s["id"]: s for s in c["steps"]}
+    assert c["active"] is None
+    assert {k: s["status"] for k, s in steps.items()} == dict.fromkeys(("level_zero", "camera", "tank", "meniscus"),
+                                                                       "done")
+    assert abs(steps["level_zero"]["result"]["level_at_home_mm"] - TRUE_LEVEL_ZERO) <= 0.01
+    assert steps["camera"]["result"]["plane_rms_mm"] < 0.1
+    assert steps["tank"]["result"]["area_mm2"] == 22500.0
+    men = steps["meniscus"]["result"]
+    # the physics preset's ink: capillary length 2.7 mm, contact angle 0
+    assert abs(men["capillary_length_mm"] - 2.7) < 0.2 and abs(men["contact_angle_deg"]) < 5.0, men
+    assert men["reference"]["mean_abs_error_mm"] < 0.1, men["reference"]
+
+
+def test_the_commissioned_installed_copy_scans_sample_3_as_accurately_as_the_bench(installed, scans):
+    client, job = scans["client"], scans["after"]
+    assert job["status"] == "done", job
+    report = client.file(job["id"], "report.json")
+    assert report["calibration"]["warnings"] == [], report["calibration"]
+    assert report["diagnostics"]["corrections"] == {"displacement_tank_area_mm2": 22500.0, "meniscus": True}
+    err = height_map_error(client, job, scans["tmp"])
+    assert err["Ea"] <= BENCH_EA_MM, err
     from appliance.cam.gcodeparse import parse_gcode
-    program = parse_gcode(gcode.decode(), "toolpath.gcode")
+    program = parse_gcode(client.file(job["id"], "toolpath.gcode").decode(), "toolpath.gcode")
     feed_z = program.xyz[program.kind == 1, 2]
-    assert len(feed_z) > 100 and feed_z.max() - feed_z.min() > 5.0, "the cone's relief is milled"
+    assert len(feed_z) > 100 and feed_z.max() - feed_z.min() > 15.0, "sample 3's relief (21 mm) is milled"
     assert installed.site_files() == installed.shipped, "the simulated bench or the scan wrote into site-packages"
