@@ -386,6 +386,10 @@ def test_the_commissioned_installed_copy_scans_sample_3_as_accurately_as_the_ben
     assert job["status"] == "done", job
     report = client.file(job["id"], "report.json")
     assert report["calibration"]["warnings"] == [], report["calibration"]
+    used = report["calibration"]["used"]
+    assert used["tank"].startswith("tank area 22500 mm² (entered, ")
+    assert "the 25.4 mm ball measured to" in used["meniscus"] and used["camera"].startswith("commissioned camera")
+    assert used["level_zero"].startswith("level zero at stage position 57.30")
     assert report["diagnostics"]["corrections"] == {"displacement_tank_area_mm2": 22500.0, "meniscus": True}
     err = height_map_error(client, job, scans["tmp"])
     assert err["Ea"] <= BENCH_EA_MM, err
