@@ -84,6 +84,7 @@ class ReconstructOptions:
     meniscus: object = None                  # meniscus.MeniscusModel when the correction is wanted
     perspective: Perspective | None = None   # camera foot and height: walls seen by their raised edges
     pixel_mm: float = 0.0                    # the camera's pixel on the liquid plane (waterline placement)
+    explain_uncertainty: bool = False        # diagnostics["uncertainty_terms"]: each term on the output grid
 
 
 @dataclass
@@ -366,8 +367,13 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
-    src, sig = node_uncertainty(CellEvidence(lat, z, z_fe, first, footprint, slices, exposed,
-                                             opt.pixel_mm, diag.get("occluded_nodes")))
+    # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
+    z_fe_top = z_fe if rise is None else z_fe + np.where(np.isfinite(rise), rise, 0.0)
+    explain = {} if opt.explain_uncertainty else None
+    src, sig = node_uncertainty(CellEvidence(lat, z, z_fe_top, first, footprint, slices, exposed,
+                                             opt.pixel_mm, diag.get("occluded_nodes")), explain)
+    if explain is not None:
+        diag["uncertainty_terms"] = {k: uncertainty_to_output(lat, src, v, r, xo, yo)[1] for k, v in explain.items()}
     zo = _to_output(lat, z, r, xo, yo)
     srco, so = uncertainty_to_output(lat, src, sig, r, xo, yo)
     fo = _to_output(lat, footprint.astype(float), r, xo, yo) > 0.5

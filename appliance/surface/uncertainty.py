@@ -132,8 +132,9 @@ def _fit_residual(ev: CellEvidence, pts, zp):
     return np.sqrt(s2 / np.maximum(cnt, 1e-9)) * (cnt > 1e-3)
 
 
-def node_uncertainty(ev: CellEvidence):
-    """-> (source codes, uncertainty in mm) on the lattice, NO_SOURCE / NaN off the part."""
+def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
+    """-> (source codes, uncertainty in mm) on the lattice, NO_SOURCE / NaN off the part.
+    `explain`, a dict, receives each term's field (for benches and the curious)."""
     from .gridfit import fill_nearest
     lat = ev.lat
     h = min(lat.hx, lat.hy)
@@ -198,6 +199,8 @@ def node_uncertainty(ev: CellEvidence):
     u_fit = np.hypot(pts_res, own)
     u_frames = 0.5 * _frames_disagree(ev, lv)
     u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2)
+    if explain is not None:
+        explain.update(lateral=u_lat, gap=u_gap, fit=u_fit, frames=u_frames, rim=u_rim)
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
