@@ -80,7 +80,8 @@ def errors(surface, hm, inset_mm=3.0):
     return float(e_all.mean()), float(np.percentile(e_in, 99)), float(e_all.max())
 
 
-def scan_part(name, model, tmp, camera, meniscus, step=1.0):
+def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None):
+    """-> (Ea, interior p99, max) in mm; the height map is appended to `maps` when given."""
     surface = surfaces.get(name)
     folder = tmp / f"{name}-{model}"
     e = effects_preset(model)
@@ -90,6 +91,8 @@ def scan_part(name, model, tmp, camera, meniscus, step=1.0):
                     seed=1, workers=2)
         use_camera(folder, camera)
     job = proc.process(folder, meniscus=meniscus)
+    if maps is not None:
+        maps.append(job.heightmap)
     return errors(surface, job.heightmap)
 
 

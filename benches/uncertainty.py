@@ -76,6 +76,15 @@ def errors(surface, hm, inset_mm=3.0):
     return err, inside, interior & inside
 
 
+def honesty(surface, hm):
+    """-> (share of the cells off by more than BIG_MM that the map marks uncertain, how many
+    such cells, share of all cells marked), over the cells on the part."""
+    err, inside, _ = errors(surface, hm)
+    big = err[inside] > BIG_MM
+    marked = hm.sigma[inside] > DEFAULT_UNCERTAIN_MM
+    return float((big & marked).sum()) / max(int(big.sum()), 1), int(big.sum()), float(np.mean(marked))
+
+
 def true_heightmap(surface, hm, spacing=0.25):
     """The part as it is, on a fine lattice over the reconstructed map's extent."""
     x = np.arange(hm.x[0], hm.x[-1] + 1e-9, spacing)
@@ -97,11 +106,16 @@ def mill(surface, job, resolution):
     true = true_heightmap(surface, job.heightmap)
     rep, _ = verify_gcode(text, true, resolution=resolution)
     dev = np.where(rep.measured, rep.deviation, np.nan)
-    k = np.unravel_index(np.nanargmax(dev), dev.shape) if np.isfinite(dev).any() else None
     hm = job.heightmap
-    g_src = SOURCES[int(at(hm, hm.source, rep.gouge_at))] if hm.source is not None else "?"
-    g_u = float(at(hm, hm.sigma, rep.gouge_at)) if hm.sigma is not None else float("nan")
-    return rep, (float(np.nanmax(dev)) if k is not None else float("nan")), g_src, g_u
+
+    def said(xy):
+        src = SOURCES[int(at(hm, hm.source, xy))] if hm.source is not None else "?"
+        return f"{src} +-{float(at(hm, hm.sigma, xy)):.2f}"
+    if not np.isfinite(dev).any():
+        return rep, float("nan"), (float("nan"),) * 2, said(rep.gouge_at), "?"
+    k = np.unravel_index(np.nanargmax(dev), dev.shape)
+    ex_at = (float(true.x[0] + k[1] * resolution), float(true.y[0] + k[0] * resolution))   # the stock's lattice
+    return rep, float(dev[k]), ex_at, said(rep.gouge_at), said(ex_at)
 
 
 def main():
@@ -149,17 +163,17 @@ def main():
             print("      missed (error / uncertainty / source): " + ", ".join(
                 f"{e[i]:.3f}/{u[i]:.3f}/{SOURCES[src[i]] if src[i] >= 0 else '?'}" for i in worst if missed[i]))
         if a.mill:
-            rep, excess, g_src, g_u = mill(surface, job, a.mill_resolution)
-            milled.append((name, rep, excess, g_src, g_u))
+            milled.append((name,) + mill(surface, job, a.mill_resolution))
     if cells_all:
         print(f"  all parts: {big_all} cells off by more than {BIG_MM:g} mm, {100 * honest_all / max(big_all, 1):.1f} % "
               f"of them marked uncertain; {100 * marked_all / cells_all:.1f} % of all cells marked")
     if milled:
         print(f"\nmilled against the true part (verify, {a.mill_resolution:g} mm): what a machinist would see")
-        print(f"  {'part':<11} {'gouge':>7} {'at x,y':>15} {'map said':>22} {'excess':>7} {'uncut %':>8}")
-        for name, rep, excess, g_src, g_u in milled:
-            print(f"  {name:<11} {rep.gouge:7.3f} {rep.gouge_at[0]:7.1f},{rep.gouge_at[1]:<7.1f} "
-                  f"{g_src + f' +-{g_u:.2f}':>22} {excess:7.3f} {100 * rep.uncut_fraction:8.2f}")
+        print(f"  {'part':<11} {'gouge':>7} {'at x,y':>13} {'map said':>20} {'excess':>7} {'at x,y':>13} "
+              f"{'map said':>20} {'uncut %':>8}")
+        for name, rep, excess, ex_at, g_said, ex_said in milled:
+            print(f"  {name:<11} {rep.gouge:7.3f} {rep.gouge_at[0]:6.1f},{rep.gouge_at[1]:<6.1f} {g_said:>20} "
+                  f"{excess:7.3f} {ex_at[0]:6.1f},{ex_at[1]:<6.1f} {ex_said:>20} {100 * rep.uncut_fraction:8.2f}")
 
 
 if __name__ == "__main__":
