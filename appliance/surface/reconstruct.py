@@ -371,7 +371,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     z_fe_top = z_fe if rise is None else z_fe + np.where(np.isfinite(rise), rise, 0.0)
     explain = {} if opt.explain_uncertainty else None
     src, sig = node_uncertainty(CellEvidence(lat, z, z_fe_top, first, footprint, slices, exposed,
-                                             opt.pixel_mm, diag.get("occluded_nodes")), explain)
+                                             opt.pixel_mm, diag.get("occluded_nodes"), rise,
+                                             opt.meniscus.capillary_length_mm if opt.meniscus else 0.0), explain)
     if explain is not None:
         diag["uncertainty_terms"] = {k: uncertainty_to_output(lat, src, v, r, xo, yo)[1] for k, v in explain.items()}
     zo = _to_output(lat, z, r, xo, yo)

@@ -24,7 +24,10 @@ from what limits each:
   frames that contradict each other (exposure is monotone: a point out of the
   ink at one level is out at every lower one; a cell seen out, then under, then
   out again came from a transient bright thing or a misread frame, and its height
-  is only known to within the span of the levels that disagree).
+  is only known to within the span of the levels that disagree);
+- the meniscus: its correction models a contact line on an open face; near the
+  outline the ink also meets the part's edge, within about a capillary length,
+  so the correction there is unsure by its size times exp(-distance / length).
 
 `DEFAULT_UNCERTAIN_MM` is the threshold above which a cell counts as low
 confidence: the G-code header lists such regions (`low_confidence_regions`),
@@ -67,6 +70,8 @@ class CellEvidence:
     exposed: np.ndarray            # (K, ny, nx) bool: inside each slice's waterline
     pixel_mm: float = 0.0
     occluded: np.ndarray | None = None   # nodes under a face that hid the waterline
+    rise: np.ndarray | None = None       # the meniscus correction applied per node (top - contact line)
+    capillary_mm: float = 0.0            # the ink's capillary length (how far a meniscus reaches)
 
 
 def _levels_and_steps(slices):
@@ -198,9 +203,17 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     own = np.where(np.isfinite(ev.z_fe), np.abs(ev.z - ev.z_fe), 0.0)
     u_fit = np.hypot(pts_res, own)
     u_frames = 0.5 * _frames_disagree(ev, lv)
-    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2)
+    # the meniscus correction models a contact line on an open face; within a capillary
+    # length of the outline the ink also meets the part's edge, which the model does not
+    # know: the correction there is unsure by as much of it as the edge's reach leaves
+    u_men = np.zeros(lat.shape)
+    if ev.rise is not None and ev.capillary_mm > 0:
+        # the lattice's border is the outline too (a part that fills its bounds)
+        d_out = ndimage.distance_transform_edt(np.pad(ev.footprint, 1), sampling=(lat.hy, lat.hx))[1:-1, 1:-1]
+        u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
+    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2 + u_men ** 2)
     if explain is not None:
-        explain.update(lateral=u_lat, gap=u_gap, fit=u_fit, frames=u_frames, rim=u_rim)
+        explain.update(lateral=u_lat, gap=u_gap, fit=u_fit, frames=u_frames, rim=u_rim, meniscus=u_men)
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
