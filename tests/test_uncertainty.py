@@ -161,3 +161,18 @@ def test_a_sure_map_says_so_and_a_map_without_uncertainty_says_nothing():
     hm.sigma[:] = 0.02
     assert header_notes(hm, 0.1) == ["confidence: every cell of the height map within 0.1 mm"]
     assert header_notes(HeightMap(hm.x, hm.y, hm.z), 0.1) == []
+
+
+def test_cells_under_an_occluding_face_are_labelled_occluded_and_a_step_unsure():
+    from appliance.surface.reconstruct import _occluded_cells
+    from appliance.surface.slices import make_slice
+    src = np.full((4, 5), source_code("interpolated"), np.int8)
+    src[0, 0] = -1                                  # off the part stays off
+    sig = np.full((4, 5), 0.01)
+    hidden = np.zeros((4, 5), bool)
+    hidden[:2, :2] = True
+    slices = [make_slice(L, [[(0, 0), (1, 0), (1, 1)]]) for L in (10.0, 9.0, 8.0)]
+    src2, sig2 = _occluded_cells(src, sig, hidden, slices)
+    assert [SOURCES[k] for k in src2[:2, :2].ravel() if k >= 0] == ["occluded"] * 3 and src2[0, 0] == -1
+    assert sig2[1, 1] == pytest.approx(1 / np.sqrt(12)) and sig2[3, 4] == 0.01
+    assert _occluded_cells(src, sig, 7, slices)[0] is src      # a count, not a mask: nothing to mark

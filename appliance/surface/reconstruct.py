@@ -371,7 +371,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     z_fe_top = z_fe if rise is None else z_fe + np.where(np.isfinite(rise), rise, 0.0)
     explain = {} if opt.explain_uncertainty else None
     src, sig = node_uncertainty(CellEvidence(lat, z, z_fe_top, first, footprint, slices, exposed,
-                                             opt.pixel_mm, diag.get("occluded_nodes"), rise,
+                                             opt.pixel_mm, None, rise,
                                              opt.meniscus.capillary_length_mm if opt.meniscus else 0.0), explain)
     if explain is not None:
         diag["uncertainty_terms"] = {k: uncertainty_to_output(lat, src, v, r, xo, yo)[1] for k, v in explain.items()}
@@ -386,4 +386,20 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
                  "cap_nodes": int((footprint & (first == next(k for k, s in enumerate(slices)
                                                               if not s.empty))).sum()),
                  "seconds": time.perf_counter() - t0})
+    srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
     return Reconstruction(HeightMap(xo, yo, zo, so, srco), length, diag)
+
+
+def _occluded_cells(src, sig, occluded, slices):
+    """Cells under a face that hid the waterline behind it (diagnostics["occluded_cells"],
+    a mask on the output grid): their height comes from the frames where they were still
+    seen, so it is known to within a level step (uniform over it: step / sqrt(12))."""
+    if not isinstance(occluded, np.ndarray) or occluded.shape != src.shape or not occluded.any():
+        return src, sig
+    from .uncertainty import OCCLUDED
+    levels = np.array([s.level for s in slices])
+    step = float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
+    on = occluded & (src >= 0)
+    src = np.where(on, OCCLUDED, src).astype(np.int8)
+    sig = np.where(on, np.maximum(np.nan_to_num(sig), step / math.sqrt(12.0)), sig)
+    return src, sig
