@@ -56,6 +56,18 @@ def test_our_pipeline_writes_mesh_and_compensated_gcode(scan, tmp_path):
     assert len(stl) == 84 + 50 * int.from_bytes(stl[80:84], "little")
     gcode = (out / "toolpath.gcode").read_text()
     assert "G1" in gcode and "M30" in gcode
+    # every cell says how sure it is; the report, its picture and the program's header agree
+    assert hm.sigma is not None and np.all(np.isfinite(hm.sigma[np.isfinite(hm.z)]))
+    assert (out / "uncertainty.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    unc = json.loads((out / "report.json").read_text())["diagnostics"]["uncertainty"]
+    report = (out / "report.md").read_text()
+    assert "Uncertainty per cell" in report
+    if unc["regions"]:                               # the cone's apex sits above the top frame
+        first = unc["regions"][0]
+        assert f"| 1 | {first['xmin']:.1f} .. {first['xmax']:.1f} |" in report
+        assert f"low confidence 1: X {first['xmin']:.1f}..{first['xmax']:.1f}" in gcode
+    else:
+        assert "confidence: every cell of the height map within 0.1 mm" in gcode
 
 
 def test_process_with_truth_reports_statistics(scan, tmp_path):
