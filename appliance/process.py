@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -123,12 +124,37 @@ def run_seed(scan, grid_n=50):
 # -- ours ---------------------------------------------------------------------------
 
 
+CONFIRMING_FRAMES = 2      # lower frames that must agree a pixel is part (vision/pipeline.py)
+REREAD_ABOVE = 3           # frames above the first showing the part read again for its top
+
+
 def extract_waterlines(scan):
+    """Every frame's waterline, top level first. Each frame is read with the next lower
+    ones beside it (exposure is monotone: what is part here is part below, so what they
+    do not show is glare or flotsam); only those few frames are held at a time."""
     from .vision.pipeline import WaterlineExtractor
     from .surface.slices import shows_waterline
     extractor = WaterlineExtractor(scan.camera, no_part="empty")   # a scan starts above the part
     frames = [ref for ref in _frames_top_down(scan) if shows_waterline(ref.level_mm)]
-    return [extractor.extract(read_frame(scan, ref), ref.level_mm) for ref in frames]
+    ahead = deque()
+    out = []
+    above = deque(maxlen=REREAD_ABOVE)     # the last frames, while none has shown the part
+    for i, ref in enumerate(frames):
+        while len(ahead) < CONFIRMING_FRAMES + 1 and i + len(ahead) < len(frames):
+            nxt = frames[i + len(ahead)]
+            ahead.append((nxt.level_mm, read_frame(scan, nxt)))
+        level, frame = ahead.popleft()
+        out.append(extractor.extract(frame, level, below=list(ahead)))
+        if above and out[-1].loops:
+            # the first frame showing the part: the ones above may show its top as a sliver
+            found = extractor.read_above(list(reversed(above)), below=[(level, frame)] + list(ahead))
+            for k, wl in enumerate(found):
+                out[-2 - k] = wl
+        if any(wl.loops for wl in out):
+            above.clear()
+        else:
+            above.append((level, frame))
+    return out
 
 
 def _waterline_bounds(waterlines):

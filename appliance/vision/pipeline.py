@@ -30,9 +30,20 @@ and is dropped. One that appears while the liquid falls is a new peak coming
 out, and is kept if it is big enough to be more than a speck. An island that
 vanishes while the liquid falls means last frame's was spurious; that is
 recorded in `events` (the caller may drop it from the slice stack).
+
+Exposure is monotone, and that is what keeps a bright thing that comes and goes
+out of the part. Seen from above, a ray that meets the part above the liquid at
+level L still meets it at every lower level: a pixel that shows part at L shows
+part in every lower frame. Glare that drifts and flickers, a bubble, a speck
+float on the ink and move on. So `extract` may be given the next lower frames
+(`below`, nearest first; process.extract_waterlines reads two ahead): a pixel
+counts as part only if it is part-like in each of them too (the same threshold
+and colour test, without the glare cut, grown by a pixel for the stage's play).
+Only 8-bit masks of those frames are kept, one per frame.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import cv2
@@ -74,7 +85,7 @@ class WaterlineExtractor:
       tile_px: tile side of the band (default 24);
       min_area_px: smallest island or hole kept, pixels (default 60);
       min_new_island_px: smallest island kept that is not connected to the
-        part of the previous frame (default 400);
+        part of the previous frame (default 400; min_area_px when lower frames confirm it);
       min_contrast: smallest part/ink grey-level difference trusted (default 24);
       half_width: samples each side of the contour along the normal (default 4);
       threshold_fraction: where the part/ink threshold sits between the ink and
@@ -123,6 +134,9 @@ class WaterlineExtractor:
         self.events: list[Event] = []
         self.last_mode = None             # "coarse", "band" or "full": how the last frame was read
         self.outline = []                 # the last frame's kept loops: (pixel contour, is a hole)
+        self._below = []                  # the next lower frames, (level, frame)
+        self._support_masks = {}          # level -> 0/255 part-like mask of that frame (grown 1 px)
+        self._cut = None                  # (box, mask): where this frame's part was cut back by them
 
     LATTICE = 16                          # px between the samples that watch the rest of the tank
 
@@ -136,9 +150,16 @@ class WaterlineExtractor:
 
     # -- the frame ---------------------------------------------------------------
 
-    def extract(self, frame: np.ndarray, level_mm: float) -> Waterline:
+    def extract(self, frame: np.ndarray, level_mm: float, below=()) -> Waterline:
+        """The waterline of `frame`. `below`: the frames of the next lower levels as
+        (level_mm, frame) pairs, nearest first; a pixel is part only if they agree."""
         cut = self.glare_cut
         self.outline = []
+        self._cut = None
+        self._below = [(float(lv), f) for lv, f in below]
+        for lv in list(self._support_masks):
+            if lv not in {b[0] for b in self._below}:
+                del self._support_masks[lv]
         try:
             return self._extract(frame, level_mm)
         except NoPartError:
@@ -278,6 +299,7 @@ class WaterlineExtractor:
         if self.hue is not None:
             other = self._plane(frame, y0, y1, x0, x1, self.hue.other, "other")
             self._apply_hue(main, other, binary, "diff")
+        self._confirm(self.roi)
         read = np.ones(self.grid.shape, bool)
         return self._loops(frame, self.roi, level_mm, read, full=True)
 
@@ -315,8 +337,9 @@ class WaterlineExtractor:
             return None
         return self._read_band(frame, level_mm, where, band, lattice=False, mode="coarse")
 
-    def _read_band(self, frame, level_mm, where, band=None, lattice=True, mode="band"):
-        """Read the band tiles (+ tiles where the sparse lattice saw a change); None: read in full."""
+    def _read_band(self, frame, level_mm, where, band=None, lattice=True, mode="band", learn=True):
+        """Read the band tiles (+ tiles where the sparse lattice saw a change); None: read in full.
+        With `learn` False the threshold is the one already learned, however little part there is."""
         self.last_mode = mode
         grid = self.grid
         band = self._band if band is None else band
@@ -333,9 +356,9 @@ class WaterlineExtractor:
         hist = cv2.calcHist([smooth[::2]], [0], None, [256], [0, 256]).ravel()
         if not_glare is not None:
             hist = self._glare_free(hist, smooth[::2], not_glare[::2])
-        split = self._split(hist)
+        split = self._split(hist) if learn else self.split
         mc = self.options["min_contrast"]
-        if split.separability < 0.6 or split.contrast < mc:
+        if learn and (split.separability < 0.6 or split.contrast < mc):
             return None                       # the band lost the edge: read everything
         self.split = split
         # The glare cut stays as the whole-tank sample set it - the band is where glare
@@ -343,7 +366,7 @@ class WaterlineExtractor:
         # test has taken the glare out of the band's histogram: then a face brighter than
         # the cut is part coming out of the ink (a sliver along a rim the lattice misses),
         # and the cut only ever rises to take it in.
-        if not_glare is not None:
+        if not_glare is not None and learn:
             self.glare_cut = max(self.glare_cut, glare_cut(hist, split))
         binary = part_mask(smooth, split, self.glare_cut)
         if not_glare is not None:
@@ -354,7 +377,96 @@ class WaterlineExtractor:
         T = grid.tile
         box = (grid.ox + cols[0] * T, grid.oy + rows[0] * T,
                grid.ox + (cols[-1] + 1) * T, grid.oy + (rows[-1] + 1) * T)
+        self._confirm(box)
         return self._loops(frame, box, level_mm, read, full=False)
+
+    # -- monotone exposure: what the lower frames confirm --------------------------------
+
+    def read_above(self, above, below=()) -> list[Waterline]:
+        """The frames just above the first one that showed the part, read again.
+
+        A top comes out of the ink as a sliver or a speck, too thin or faint for a frame on
+        its own to tell from noise (the scan's first frames also teach the threshold and the
+        colour test). Read with what the frame below taught - its channel, threshold, colour
+        test - over the tiles of its part, and confirmed by the frames below, the sliver is
+        found; then the frame above that, over the sliver's tiles, until one shows nothing.
+
+        above: (level_mm, frame) pairs going up, nearest first; below: the frames below the
+        first one that showed the part, (level_mm, frame), nearest first, that one included.
+        Returns the waterlines found, nearest first. This extractor is left as it was.
+        """
+        if self.split is None or not self._islands:
+            return []
+        probe = copy.deepcopy(self)
+        below = list(below)
+        out = []
+        for level_mm, frame in above:
+            where = f"frame at level {level_mm:g} mm"
+            check_frame(frame, self.width, self.height, where)
+            probe.outline = []
+            probe._decimated = None
+            probe._below = [(float(lv), f) for lv, f in below[:max(1, len(self._below))]]   # as many as it used
+            read = probe._band.copy()
+            g = probe.grid
+            for island in probe._islands:          # the tiles of the part below, not just its edge
+                x, y, w, h = cv2.boundingRect(island)
+                t = ((np.array([[x, y], [x + w, y + h]]) - (g.ox, g.oy)) // g.tile).astype(int)
+                read[max(0, t[0, 1]):t[1, 1] + 1, max(0, t[0, 0]):t[1, 0] + 1] = True
+            try:
+                loops = probe._read_band(frame, level_mm, where, band=read, lattice=False, mode="above",
+                                         learn=False)
+                wl = probe._finish(loops or [], level_mm, where)
+            except NoPartError:
+                break
+            out.append(wl)
+            below.insert(0, (level_mm, frame))
+        return out
+
+    def _confirm(self, box):
+        """Keep as part, inside `box`, only pixels the next lower frames show part-like too."""
+        self._cut = None
+        if not self._below or self.split is None:
+            return
+        x0, y0, x1, y1 = box
+        binary = self._binary[y0:y1, x0:x1]
+        before = binary.copy()
+        for level, frame in self._below:
+            cv2.bitwise_and(binary, self._support(level, frame)[y0:y1, x0:x1], binary)
+        cut = cv2.subtract(before, binary)
+        if cv2.countNonZero(cut):
+            # the contour along a cut follows the lower frames' part, not an edge of this
+            # one: its pixels (and their neighbours) give no waterline points
+            self._cut = (box, cv2.dilate(cut, np.ones((3, 3), np.uint8)))
+
+    def _uncut(self, pixels):
+        """True for contour pixels that are not on a cut made by _confirm."""
+        if self._cut is None:
+            return np.ones(len(pixels), bool)
+        (x0, y0, x1, y1), cut = self._cut
+        u, v = pixels[:, 0] - x0, pixels[:, 1] - y0
+        inside = (u >= 0) & (u < x1 - x0) & (v >= 0) & (v < y1 - y0)
+        keep = np.ones(len(pixels), bool)
+        keep[inside] = cut[v[inside], u[inside]] == 0
+        return keep
+
+    def _support(self, level, frame):
+        """Where a lower frame may show part: at or above this scan's threshold and not the ink's
+        blue (the glare cut is left out: a face may be brighter there), grown by one pixel.
+        Full frame, 0/255, computed once per frame with the threshold known when it is first asked."""
+        mask = self._support_masks.get(level)
+        if mask is None:
+            x0, y0, x1, y1 = self.roi
+            mask = np.zeros((self.height, self.width), np.uint8)
+            main = self._plane(frame, y0, y1, x0, x1, name="support")
+            part = cv2.threshold(cv2.medianBlur(main, 3), self.split.threshold - 1, 255, cv2.THRESH_BINARY)[1]
+            if self.hue is not None:
+                other = self._plane(frame, y0, y1, x0, x1, self.hue.other, "support-other")
+                blue = cv2.subtract(other, main, dst=self._buf("support-diff", main.shape))
+                cv2.threshold(blue, self.hue.cut, 255, cv2.THRESH_BINARY_INV, blue)
+                cv2.bitwise_and(part, blue, part)
+            cv2.dilate(part, np.ones((3, 3), np.uint8), mask[y0:y1, x0:x1])
+            self._support_masks[level] = mask
+        return mask
 
     @staticmethod
     def _channel_view(frame, c):
@@ -388,6 +500,13 @@ class WaterlineExtractor:
         if self.glare_cut < 256 and np.count_nonzero(part & (now >= self.glare_cut)) >= 2:
             self._learn(frame, where)
         part &= now < self.glare_cut
+        if self._below and self.split is not None:
+            # where the lower frames show part, it is about to come out: a thin ridge shows
+            # here first, between the lattice's rows, so read there now
+            coming = np.ones(part.shape, bool)
+            for level, lower in self._below:
+                coming &= self._support(level, lower)[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0
+            part |= coming
         changed = part != (self._binary[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0)
         changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
         changed[:, 0] = changed[:, -1] = False
@@ -409,7 +528,7 @@ class WaterlineExtractor:
         refined = []
         half = self.options["half_width"]
         for lp in loops:
-            pts, grey = self._refine(frame, lp.pixels)
+            pts, grey = self._refine(frame, lp.pixels, self._uncut(lp.pixels))
             for _ in range(2):              # a bump's tip shows once its flanks are gone
                 pts = pts[~bumps(pts)]
             refined.append(pts)
@@ -442,18 +561,23 @@ class WaterlineExtractor:
         keep = [i for i, lp in enumerate(loops) if i not in bad and not (lp.hole and lp.parent in bad)]
         return [loops[i] for i in keep], [refined[i] for i in keep]
 
-    def _refine(self, frame, pixels):
+    def _refine(self, frame, pixels, keep):
         """Sub-pixel points of one contour in contour order (see subpixel.py), and the
-        fraction of its pixels the grey-level step placed (the rest: colour, or none)."""
+        fraction of its pixels the grey-level step placed (the rest: colour, or none).
+        Only pixels where `keep` holds give points."""
         half, mc = self.options["half_width"], self.options["min_contrast"] / 2
         pts, idx = refine(self._smooth, pixels, self.split.threshold, half, mc)
+        grey = len(idx) / max(1, len(pixels))
         if self.hue is not None and frame.ndim == 3 and len(idx) < len(pixels):
             missing = np.setdiff1d(np.arange(len(pixels)), idx)
             more, midx = refine_colour(frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc)
             if len(midx):
-                order = np.argsort(np.concatenate([idx, midx]), kind="stable")
-                pts = np.vstack([pts, more])[order]
-        return pts, len(idx) / max(1, len(pixels))
+                idx = np.concatenate([idx, midx])
+                order = np.argsort(idx, kind="stable")
+                pts, idx = np.vstack([pts, more])[order], idx[order]
+        if not keep.all():
+            pts = pts[keep[idx]]
+        return pts, grey
 
     def _filter(self, contours, hierarchy, level_mm):
         """Outer boundaries and their holes, without specks, glare and impossible islands."""
@@ -487,7 +611,9 @@ class WaterlineExtractor:
             self.events.append(Event(level_mm, "rejected-island",
                                      f"{area:.0f} px island appeared while the liquid rose"))
             return False
-        if area < self.options["min_new_island_px"]:
+        # with lower frames beside it, what is left of the island is in them too (_confirm):
+        # not flotsam but a peak or ridge coming out, kept from the size of a hole
+        if area < self.options["min_new_island_px"] and not self._below:
             return False
         return True
 
