@@ -24,3 +24,11 @@ class SettingError(InkSliceError):
 
 class DeviceError(InkSliceError):
     """A device (stage, camera, light, display) failed or is missing."""
+
+
+class Cancelled(Exception):
+    """A running job (a scan, its processing, a reference fit) was asked to stop.
+
+    Not an InkSliceError: nothing is wrong, and whoever stopped it already knows why.
+    It lives here, beside the errors, because the runner, the processing and the
+    commissioning all raise or catch it and none of them should import another for it."""

@@ -272,9 +272,8 @@ def test_processing_options_are_what_process_scan_takes():
     assert set(opts) <= accepted and opts["grid_n"] == 50 and "method" not in opts   # "" = its default
     methods = [m for m in S.surface_methods() if m]
     opts = options_for(S.validate(S.DEFAULTS, {"method": methods[-1], "cutter_diameter_mm": 3.0}))
-    assert opts["method"] == methods[-1]
-    if "cam_options" in accepted:
-        assert opts["cam_options"]["cutter"] == "ball3" and opts["cam_options"]["dialect"] == "linuxcnc"
+    assert opts["method"] == methods[-1] and opts["keep"] == ["scan"]
+    assert opts["cam_options"]["cutter"] == "ball3" and opts["cam_options"]["dialect"] == "linuxcnc"
     with pytest.raises(SettingError) as e:
         S.validate(S.DEFAULTS, {"method": "bicubic-magic"})
     assert e.value.where == "method"

@@ -103,6 +103,7 @@ def run(args):
 
 def run_reference(args):
     from ..outputs import meniscus_json
+    from ..process import extract_waterlines
     from ..scanfile import load_scan
     from ..surface.reference import Ball, fit_meniscus
     if not args.scan:
@@ -114,7 +115,8 @@ def run_reference(args):
     else:
         from ..sim import surfaces                  # the virtual bench's own reference parts
         part = surfaces.get(args.reference)
-    model, part = fit_meniscus(load_scan(args.scan), part)
+    scan = load_scan(args.scan)
+    model, part = fit_meniscus(scan, part, extract_waterlines(scan))
     out = Path(args.out) if args.out else default_out(reference=True)
     if out.is_file():
         atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())

@@ -36,6 +36,7 @@ import numpy as np
 from ..errors import SettingError
 from ..hw.base import Placement
 from ..vision.calibration import Board, BoardPose, camera_json, find_corners, plane_homography
+from ..vision.printboard import PRINTED
 
 STEPS = (
     ("home", "Empty the base, then home the stage"),
@@ -44,7 +45,7 @@ STEPS = (
     ("detect", "Capture a frame and find the board's corners"),
     ("accept", "Check the preview and accept the camera model"),
 )
-BOARD = Board(9, 6, 10.0)               # 9 x 6 inner corners, 10 mm squares (docs: print at 100 %)
+BOARD = PRINTED                         # 9 x 6 inner corners, 10 mm squares (vision/printboard.py)
 # the printed board lies centred on the base, its rows along x: its first inner corner
 # (nearest the image's top-left) at (10, 75) mm, the squares' centre at the base's centre (50, 50)
 JIG = BoardPose(10.0, 75.0, 0.0)

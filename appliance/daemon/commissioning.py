@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..errors import InkSliceError, SettingError
+from ..errors import Cancelled, InkSliceError, SettingError
 from ..hw.base import Placement
 from ..vision.calibration import Board, camera_json, find_corners, intrinsics, plane_homography
 from ..vision.printboard import describe as print_instructions, printed_size_mm
@@ -566,10 +566,10 @@ class Commissioning:
         self._store("meniscus", result, "measured")
 
 
-def reference_processor(reference: dict, options: dict):
+def reference_processor(reference: dict):
     """The processor of a reference scan (the meniscus step): fit the meniscus, process the scan
     with it and measure the ball; writes reference.json, meniscus.json and heightmap.csv."""
-    def run(scan_folder, out_folder, _options, stop=None):
+    def run(scan_folder, out_folder, options, stop=None):
         from pathlib import Path
 
         from .. import atomicio
@@ -577,7 +577,6 @@ def reference_processor(reference: dict, options: dict):
         from ..process import extract_waterlines, process
         from ..scanfile import load_scan
         from ..surface.reference import Ball, fit_meniscus, reference_error
-        from .runner import Cancelled
 
         def check_stop():                   # it runs in the scan's thread: a cancel must not wait for it
             if stop is not None and stop.is_set():

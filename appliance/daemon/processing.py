@@ -8,7 +8,10 @@ stops at once on cancel. Its result comes back as JSON on stdout; an
 InkSliceError in it comes back as its one-line text on stderr, exit code 2.
 
 A processor is any callable (scan_folder, out_folder, options, stop_event)
--> {"outputs": [file names], ...}; tests pass `in_process` or a fake.
+-> {"outputs": [file names], ...}; tests pass `in_process` or a fake. `run` is
+the one way a job's scan is processed, for a captured scan (runner.py) and an
+imported one (service.py) alike: the job's settings become the processor's
+options (`options_for`), the outputs are checked, the peak memory noted.
 
 The job folder is the output folder: process_scan replaces it whole, keeping
 only what the daemon itself put there (JOB_OWN: the scan; a processor may add to
@@ -18,15 +21,18 @@ only with its finishing program (`checked_outputs`); otherwise `failed`.
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
+from typing import Callable
 
-from ..errors import InkSliceError
-from .runner import Cancelled
+from ..errors import Cancelled, InkSliceError
 
 
 JOB_OWN = ("scan",)                       # what a job folder holds besides the outputs
@@ -36,7 +42,6 @@ PROGRAM = "toolpath.gcode"
 def checked_outputs(result: dict, job_dir) -> list[str]:
     """The outputs a processor reported, if they include the finishing program on disk
     (a processor that measures, not mills, says so with "makes_program": False)."""
-    from pathlib import Path
     outputs = sorted(result.get("outputs", []))
     if result.get("makes_program", True) is False:
         return outputs
@@ -47,25 +52,32 @@ def checked_outputs(result: dict, job_dir) -> list[str]:
 
 
 def options_for(settings: dict) -> dict:
-    """The job's settings as process_scan's options, offering only what this
-    version of process_scan takes (its signature is asked, not assumed)."""
-    import inspect
-
-    from .. import process as P
-    accepted = set(inspect.signature(P.process).parameters) | set(inspect.signature(P.process_scan).parameters)
-    options = {"grid_n": int(settings["grid"])}
-    for key in ("pipeline", "method"):
+    """The job's settings (settings.full) as process_scan's keyword arguments."""
+    options = {"grid_n": int(settings["grid"]),
+               "cam_options": {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
+                               "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])},
+               "keep": list(JOB_OWN)}
+    for key in ("pipeline", "method"):          # "" leaves process_scan's own default
         if settings.get(key):
             options[key] = settings[key]
-    if "cam_options" in accepted:
-        options["cam_options"] = {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
-                                  "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])}
-    if "keep" in accepted:
-        options["keep"] = list(JOB_OWN)
-    return {k: v for k, v in options.items() if k in accepted}
+    return options
+
+
+def run(processor: Callable, store, job_id: str, settings: dict, stop) -> list[str]:
+    """Process job `job_id`'s scan (its folder's scan/) into the job folder with `settings`;
+    returns the checked outputs. Raises Cancelled when `stop` was set meanwhile."""
+    job_dir = Path(store.job_dir(job_id))
+    result = processor(job_dir / "scan", job_dir, options_for(settings), stop)
+    if stop is not None and stop.is_set():
+        raise Cancelled()
+    if "peak_rss_mb" in result:
+        store.event(job_id, "processed", f"processing peak memory {result['peak_rss_mb']} MB")
+    return checked_outputs(result, job_dir)
 
 
 def in_process(scan_folder, out_folder, options, stop=None) -> dict:
+    # imported here, not above: the processing code (scipy, the CAM) costs the daemon
+    # some 40 MB it does not need when it processes in a child
     from ..process import process_scan
     return process_scan(scan_folder, out_folder, **options)
 
@@ -74,8 +86,6 @@ def _die_with_parent():
     """In the child, before exec: ask the kernel to SIGKILL it when the daemon dies,
     so a kill -9 of the daemon cannot leave an orphan writing into the job folder."""
     try:
-        import ctypes
-        import signal
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
     except OSError:
         pass

@@ -29,19 +29,16 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..errors import DeviceError, InkSliceError
+from ..errors import Cancelled, DeviceError, InkSliceError
 from ..hw.devices import Devices
 from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
-from . import settings as S
 from ..vision.part import find_part
+from . import processing
+from . import settings as S
 from .commissioning import scan_extra, stored_camera
 from .levels import LevelPlan, waterline_change
 
 log = logging.getLogger("inkslice.runner")
-
-
-class Cancelled(Exception):
-    pass
 
 
 def free_mb(path) -> float:
@@ -272,10 +269,4 @@ class ScanRunner:
         self._check_stop()
         self.store.update_job(self.job_id, status="processing")
         self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
-        from .processing import checked_outputs, options_for   # (processing imports Cancelled from here)
-        options = options_for(S.full(self.settings))
-        result = self.processor(self.scan_dir, self.job_dir, options, self.stop)
-        self._check_stop()
-        if "peak_rss_mb" in result:
-            self.store.event(self.job_id, "processed", f"processing peak memory {result['peak_rss_mb']} MB")
-        return checked_outputs(result, self.job_dir)
+        return processing.run(self.processor, self.store, self.job_id, S.full(self.settings), self.stop)

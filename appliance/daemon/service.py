@@ -30,6 +30,7 @@ import copy
 import logging
 import queue
 import secrets
+import shutil
 import socket
 import threading
 import time
@@ -39,7 +40,11 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..errors import DeviceError, InkSliceError, SettingError
+from ..errors import Cancelled, DeviceError, InkSliceError, SettingError
+from ..hw.base import HumanOperator
+from ..hw.devices import Devices
+from ..scanfile import load_scan
+from . import importing, processing
 from . import settings as S
 from .calibration import GuidedCalibration
 from .commissioning import Commissioning, reference_processor
@@ -49,7 +54,6 @@ from .notices import usb_notice
 from .levels import LevelPlan
 from .processing import child_process
 from .recovery import recover
-from ..hw.devices import Devices
 from .runner import ScanRunner, free_mb
 from .store import ACTIVE, DiskFull, Store
 
@@ -121,8 +125,7 @@ class BenchService:
             self._refuse_if_busy()
             settings = S.validate(self.settings(), {k: v for k, v in params.items() if k in S.DEFAULTS})
             extras = {k: v for k, v in params.items() if k not in S.DEFAULTS}
-            if hasattr(self.factory, "check"):
-                extras = self.factory.check(extras) or extras     # may fill in defaults (the surface)
+            extras = self.factory.check(extras) or extras     # may fill in defaults (the surface)
             extras["name"] = str(params.get("name", ""))[:80]
             job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
             total = LevelPlan(settings).estimate_total([])
@@ -239,10 +242,7 @@ class BenchService:
             return self._calibration
 
     def _calibration_params(self) -> dict:
-        params = {}
-        if hasattr(self.factory, "check"):
-            params = self.factory.check({}) or {}    # the simulated bench fills in its part
-        return params
+        return self.factory.check({}) or {}         # the simulated bench fills in its part
 
     def calibration(self) -> dict:
         return self._guided().describe()
@@ -325,7 +325,6 @@ class BenchService:
         return self._commissioning.ink_changed()
 
     def _commissioning_hooks(self):
-        from ..hw.base import HumanOperator
         service = self
 
         class Hooks:
@@ -372,9 +371,6 @@ class BenchService:
         Checked and copied first (importing.py): a refused folder leaves no job and no files.
         Returns the job id at once; processing runs like a scan's (state processing -> done).
         """
-        import shutil
-
-        from . import importing
         scan = importing.check(folder)
         with self._lock:
             self._refuse_if_busy()                  # say so before copying a big folder
@@ -404,16 +400,11 @@ class BenchService:
         self._thread.start()
 
     def _run_import(self, job_id):
-        from .processing import checked_outputs, options_for
-        from .runner import Cancelled
         job = self.store.get_job(job_id)
-        folder = self.store.job_dir(job_id)
         try:
             self.store.update_job(job_id, status="processing")
-            result = self.processor(folder / "scan", folder, options_for(S.full(job["settings"])), self._stop)
-            if self._stop.is_set():
-                raise Cancelled()
-            status, reason, outputs = "done", "", checked_outputs(result, folder)
+            outputs = processing.run(self.processor, self.store, job_id, S.full(job["settings"]), self._stop)
+            status, reason = "done", ""
         except Cancelled:
             status, reason, outputs = "cancelled", getattr(self._stop, "reason", "cancelled by the operator"), None
         except InkSliceError as e:
@@ -548,8 +539,7 @@ class BenchService:
                 self._set(**changes)
         processor = self.processor
         if job["params"].get("reference"):             # the meniscus step's scan of the reference ball
-            from .processing import options_for
-            processor = reference_processor(job["params"]["reference"], options_for(S.full(job["settings"])))
+            processor = reference_processor(job["params"]["reference"])
         try:
             runner = ScanRunner(self.store, job_id, devices, processor, report, self._stop,
                                 on_frame=self._keep_frame, disk_free_mb=self.disk_free_mb)
@@ -590,7 +580,6 @@ class BenchService:
         try:
             live = self._live
             if live is None or live[0] != job_id:
-                from ..scanfile import load_scan
                 live = (job_id, LiveMap(load_scan(self.store.job_dir(job_id) / "scan").camera))
             if level_mm is not None:
                 live[1].add(part, float(level_mm))
@@ -602,7 +591,7 @@ class BenchService:
     # -- the front panel: button, LED, display ---------------------------------------
     def _open_panel(self) -> Devices:
         try:
-            panel = self.factory.open_panel() if hasattr(self.factory, "open_panel") else Devices(None, None)
+            panel = self.factory.open_panel()
         except InkSliceError as e:
             log.warning("front panel unavailable: %s", e)
             panel = Devices(None, None, hardware={"panel": f"fault: {e}"})

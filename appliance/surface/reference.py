@@ -8,9 +8,10 @@ hemisphere standing on its equator's outline, so as a height map it is
 and where it lies on the base is found from the scan itself (locate_ball): the user
 puts it down by hand.
 
-fit_meniscus(scan, part) is the whole calibration from a scan folder: waterlines,
-the tank's displacement when scan.json has the tank, the camera's perspective, and
-surface.meniscus.calibrate_meniscus. reference_error compares a height map of the
+fit_meniscus(scan, part, waterlines) is the whole calibration from a scan and its
+waterlines (the caller extracts them, process.extract_waterlines: this room reads no
+frames): the tank's displacement when scan.json has the tank, the camera's
+perspective, and surface.meniscus.calibrate_meniscus. reference_error compares a height map of the
 part with its true shape.
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InkSliceError
+from .meniscus import calibrate_meniscus, camera_centre_xy
 
 BALL_DIAMETER_MM = 25.4          # the default reference: a one-inch precision ball
 
@@ -86,14 +88,12 @@ def _tank(scan):
     return (scan.extra.get("tank") or {}).get("inner_area_mm2")
 
 
-def fit_meniscus(scan, part, waterlines=None):
-    """(MeniscusModel, the part where it was found) from a scan folder of a reference part.
+def fit_meniscus(scan, part, waterlines):
+    """(MeniscusModel, the part where it was found) from a scan of a reference part and
+    its waterlines.
 
     `part` is a Ball (located in the scan) or any known surface with bounds/inside/height
     at its true place."""
-    from ..process import extract_waterlines
-    from .meniscus import calibrate_meniscus, camera_centre_xy
-    waterlines = waterlines if waterlines is not None else extract_waterlines(scan)
     if isinstance(part, Ball):
         part = locate_ball(waterlines, part)
     cam = scan.camera

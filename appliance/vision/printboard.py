@@ -21,8 +21,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..atomicio import write_bytes
 from .calibration import Board
 
+# The board the box's calibration looks for and the one printed for it: 9 x 6 inner
+# corners, 10 mm squares (print at 100 %). Defined here, with its print, so the print
+# and the detector cannot disagree; daemon/calibration.py takes it from here.
+PRINTED = Board(9, 6, 10.0)
 PT_PER_MM = 72 / 25.4
 A4_MM = (210.0, 297.0)
 PNG_DPI = 300
@@ -116,8 +121,7 @@ def board_png(board: Board, dpi: int = PNG_DPI) -> bytes:
     return png[:ihdr_end] + phys + png[ihdr_end:]
 
 
-def write_files(folder, board: Board) -> list[Path]:
-    from ..atomicio import write_bytes
+def write_files(folder, board: Board = PRINTED) -> list[Path]:
     folder = Path(folder)
     out = [folder / "chessboard.pdf", folder / "chessboard.png"]
     write_bytes(out[0], board_pdf(board))
@@ -126,6 +130,5 @@ def write_files(folder, board: Board) -> list[Path]:
 
 
 if __name__ == "__main__":
-    from ..daemon.calibration import BOARD
-    for p in write_files(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).parents[1] / "web" / "static", BOARD):
+    for p in write_files(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).parents[1] / "web" / "static"):
         print(p)

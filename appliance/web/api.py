@@ -616,8 +616,7 @@ def change_password():
         return err("change the password from a logged-in browser session", 403)
     body = _json_body()
     creds = ext()["creds"]
-    from .app import client_address
-    ok, wait = auth.checked_password(ext()["limiter"], creds, "password:" + client_address(), body.get("current", ""))
+    ok, wait = auth.checked_password(ext()["limiter"], creds, "password:" + auth.client_address(), body.get("current", ""))
     if ok is None:
         resp = jsonify(error=f"too many wrong passwords; try again in {int(wait) + 1} s", where="current")
         return resp, 429, {"Retry-After": str(int(wait) + 1)}

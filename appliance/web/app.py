@@ -40,6 +40,7 @@ from datetime import timedelta
 from pathlib import Path
 
 from flask import Flask, g, jsonify, redirect, request, session, url_for
+from werkzeug.http import parse_cookie
 
 from ..daemon import firstrun
 from . import api, auth, pages
@@ -197,7 +198,6 @@ def _logged_in(app, cookie_header: str, authorization: str) -> bool:
     before waitress reads a big body, outside any Flask request)."""
     if authorization.startswith("Bearer "):
         return app.extensions["inkslice"]["creds"].token_valid(authorization[7:].strip()) is not None
-    from werkzeug.http import parse_cookie
     value = parse_cookie(cookie_header).get(app.config["SESSION_COOKIE_NAME"])
     if not value:
         return False
@@ -208,19 +208,3 @@ def _logged_in(app, cookie_header: str, authorization: str) -> bool:
         return False
     return isinstance(sess, dict) and _session_valid(app, sess)
 
-
-def client_address() -> str:
-    cfg = current_config()
-    if cfg.get("trusted_proxy"):
-        # The proxy appends the address it saw to whatever the client sent: only the
-        # right-most entry is the proxy's word, everything left of it is the client's.
-        fwd = request.headers.get("X-Forwarded-For", "")
-        last = fwd.rsplit(",", 1)[-1].strip()
-        if last:
-            return last
-    return request.remote_addr or "?"
-
-
-def current_config() -> dict:
-    from flask import current_app
-    return current_app.extensions["inkslice"]["config"]

@@ -46,9 +46,11 @@ import time
 from collections import defaultdict, deque
 from pathlib import Path
 
+from flask import current_app, request
 from werkzeug.security import check_password_hash, generate_password_hash
 
 from ..atomicio import write_bytes, write_json
+from ..daemon import firstrun
 
 MIN_PASSWORD = 8
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
@@ -273,11 +275,27 @@ def checked_password(limiter: LoginLimiter, creds: Credentials, who: str, passwo
 
 def first_login_done(cfg: dict) -> None:
     """Somebody logged in: the bench's display stops showing the first-run password."""
-    from ..daemon import firstrun
     try:
         firstrun.done(cfg.get("bench_data_dir") or cfg["data_dir"])
     except OSError:
         pass                        # a read-only folder must not break the login
+
+
+def current_config() -> dict:
+    """The app's configuration (app.py's DEFAULTS with what create_app was given)."""
+    return current_app.extensions["inkslice"]["config"]
+
+
+def client_address() -> str:
+    """Who is asking, for the login limiter: the peer, or behind a trusted proxy the address it saw."""
+    if current_config().get("trusted_proxy"):
+        # The proxy appends the address it saw to whatever the client sent: only the
+        # right-most entry is the proxy's word, everything left of it is the client's.
+        fwd = request.headers.get("X-Forwarded-For", "")
+        last = fwd.rsplit(",", 1)[-1].strip()
+        if last:
+            return last
+    return request.remote_addr or "?"
 
 
 def new_csrf() -> str:

@@ -2,12 +2,15 @@
 so a page and a script see the same thing."""
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 from urllib.parse import urlparse
 
 from flask import Blueprint, current_app, g, redirect, render_template, request, session, url_for
 
 from ..errors import InkSliceError
+from ..vision.printboard import PRINTED, describe
 from . import auth
 from .api import FILE_NAME, JOB_ID
 
@@ -30,11 +33,10 @@ def _safe_next(target):
 
 @bp.route("/login", methods=["GET", "POST"])
 def login():
-    from .app import client_address
     error = None
     code = 200
     if request.method == "POST":
-        who = client_address()
+        who = auth.client_address()
         ext = _ext()
         ok, wait = auth.checked_password(ext["limiter"], ext["creds"], who, request.form.get("password", ""))
         if ok is None:
@@ -79,7 +81,6 @@ def job(job_id):
     outputs = [n for n in info.get("outputs", []) if FILE_NAME.match(n)]
     report = None
     if "report.json" in outputs:
-        import json
         try:
             report = json.loads(svc.job_file(job_id, "report.json").read_text())
         except (OSError, ValueError):
@@ -99,24 +100,19 @@ def settings():
 @bp.get("/calibration")
 def calibration():
     svc = _ext()["service"]
-    from ..daemon.calibration import BOARD
-    from ..vision.printboard import describe
     return render_template("calibration.html", page="calibration", offered=svc.offers("calibration"),
-                           board_text=describe(BOARD))
+                           board_text=describe(PRINTED))
 
 
 @bp.get("/commission")
 def commission():
     svc = _ext()["service"]
-    from ..daemon.calibration import BOARD
-    from ..vision.printboard import describe
     return render_template("commission.html", page="commission", offered=svc.offers("commissioning"),
-                           chessboard=_chessboard_files(), board_text=describe(BOARD))
+                           chessboard=_chessboard_files(), board_text=describe(PRINTED))
 
 
 def _chessboard_files() -> dict:
     """Links to the printable calibration board shipped in static/ (appliance/vision/printboard.py)."""
-    from pathlib import Path
     static = Path(current_app.static_folder)
     return {kind: url_for("static", filename=f"chessboard.{kind}")
             for kind in ("pdf", "png") if (static / f"chessboard.{kind}").is_file()}
