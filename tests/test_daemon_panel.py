@@ -112,6 +112,22 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     svc.cancel()
 
 
+def test_the_long_press_takes_the_newest_finished_job_with_gcode(bench):
+    """Job picking is the daemon's: it knows its own job rows (hw/usb.py only copies)."""
+    svc, *_ = bench
+    assert svc.latest_gcode() is None
+    for job_id, status, outputs in (("1-old", "done", ["toolpath.gcode", "report.md"]),
+                                    ("2-grbl", "done", ["report.md", "toolpath-grbl.nc"]),
+                                    ("3-ball", "done", ["reference.json", "heightmap.csv"]),
+                                    ("4-now", "scanning", [])):
+        svc.store.create_job(job_id, job_id, svc.settings(), {}, 1)
+        svc.store.update_job(job_id, status=status, outputs=outputs)
+        time.sleep(0.01)
+    assert svc.latest_gcode() == ("2-grbl", "toolpath-grbl.nc")
+    svc.store.update_job("2-grbl", outputs=["toolpath.gcode", "toolpath-grbl.nc"])
+    assert svc.latest_gcode() == ("2-grbl", "toolpath.gcode")       # the finishing program first
+
+
 def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
     svc, panel, stick, mounts = bench
     first = svc.start_scan(SCAN)

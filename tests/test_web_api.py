@@ -141,29 +141,17 @@ def test_calibration_steps(client):
     assert c.get("/api/frame.jpg").status_code == 200                  # the preview
 
 
-def test_usb_export_through_the_api(client, tmp_path):
-    c, svc, app = client
-    from appliance.hw.usb import UsbExporter
-    stick = tmp_path / "media" / "pi" / "STICK"
-    stick.mkdir(parents=True)
-    mounts = tmp_path / "mounts"
-    mounts.write_text("")
-    app.extensions["inkslice"]["usb"] = UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),),
-                                                     sys_root=tmp_path / "nosys", unmount=lambda s: mounts.write_text(""))
+def test_usb_export_switched_off_in_the_web_hides_the_sticks_and_refuses_a_copy(tmp_path):
+    """serve --no-usb; the copy itself is the daemon's (test_web_real_service.py)."""
+    app, svc = make_app(tmp_path, usb=False)
+    c = app.test_client()
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
     c.post("/api/scan", json={})
     job_id = wait_state(c, {"done"})["job_id"]
     assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}
-    assert c.post(f"/api/jobs/{job_id}/usb", json={}).status_code == 409
-    mounts.write_text(f"/dev/sdb1 {stick} vfat rw,nosuid,nodev 0 0\n")
-    u = c.get("/api/usb").get_json()
-    assert u["available"] and u["sticks"][0]["id"] == "sdb1"
-    r = c.post(f"/api/jobs/{job_id}/usb", json={"file": "toolpath-grbl.nc", "stick": "sdb1"})
-    assert r.status_code == 200, r.get_json()
-    res = r.get_json()
-    assert res["safe_to_remove"] and res["verified"] and res["unmounted"]
-    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}     # unmounted after the copy
-    copied = stick / "inkslice" / res["name"]
-    assert copied.read_bytes() == svc.job_file(job_id, "toolpath-grbl.nc").read_bytes()
+    r = c.post(f"/api/jobs/{job_id}/usb", json={})
+    assert r.status_code == 501 and r.get_json()["where"] == "usb"
+    svc.close()
 
 
 # -- the ETA -----------------------------------------------------------------------------

@@ -39,10 +39,10 @@ def box(tmp_path_factory):
     stick.mkdir(parents=True)
     mounts = tmp / "mounts"
     mounts.write_text("")
-    svc = FakeBenchService(tmp / "bench", level_s=0.08, home_s=0.3, process_s=0.3, frame_px=240)
     usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp / "nosys",
                       unmount=lambda s: mounts.write_text(""))           # what the box's stick unit does
-    run = start(svc, tmp / "data", config={"usb": usb})
+    svc = FakeBenchService(tmp / "bench", level_s=0.08, home_s=0.3, process_s=0.3, frame_px=240, usb=usb)
+    run = start(svc, tmp / "data")
     ART.mkdir(parents=True, exist_ok=True)
     yield {"url": run.url, "password": run.password, "svc": svc, "mounts": mounts, "stick": stick, "tmp": tmp}
     run.stop()

@@ -10,7 +10,8 @@ from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
-from web_helpers import NoUsb, login, wait_state
+from appliance.hw.usb import UsbExporter
+from web_helpers import login, wait_state
 
 SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
         "level_step_mm": 2.0, "settle_s": 0.0}
@@ -73,7 +74,11 @@ def on_bench(cls):
 @pytest.fixture(params=["in-process", "socket"])
 def web(tmp_path, request):
     factory = getattr(request.function, "bench", FakeBench)("cone")
-    svc = BenchService(tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.05)
+    mounts = tmp_path / "mounts"                # no stick plugged in until a test writes one here
+    mounts.write_text("")
+    usb = UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys",
+                      unmount=lambda s: mounts.write_text(""))     # what the box's stick unit does
+    svc = BenchService(tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.05, usb=usb)
     server = client = None
     target = svc
     if request.param == "socket":
@@ -83,7 +88,7 @@ def web(tmp_path, request):
         server = rpc.serve(svc, sock)
         client = rpc.BenchClient(sock)
         target = client
-    app = create_app(target, {"data_dir": str(tmp_path / "web"), "usb": NoUsb()})
+    app = create_app(target, {"data_dir": str(tmp_path / "web")})
     c = app.test_client()
     c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
     yield c, svc
@@ -93,6 +98,28 @@ def web(tmp_path, request):
         server.shutdown()
         server.server_close()
     svc.close()
+
+
+def test_the_daemon_copies_a_jobs_file_to_the_usb_stick_the_web_asks_for(web, tmp_path):
+    """The web has no device access: it asks the daemon (in-process or over its socket)."""
+    c, svc = web
+    job_id = c.post("/api/scan", json=SCAN).get_json()["job_id"]
+    assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
+    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}
+    r = c.post(f"/api/jobs/{job_id}/usb", json={})
+    assert r.status_code == 409 and r.get_json() == {"error": "no USB stick is plugged in", "where": "usb"}
+    stick = tmp_path / "media" / "pi" / "STICK"
+    stick.mkdir(parents=True)
+    (tmp_path / "mounts").write_text(f"/dev/sdb1 {stick} vfat rw,nosuid,nodev 0 0\n")
+    u = c.get("/api/usb").get_json()
+    assert u["available"] and u["sticks"][0]["id"] == "sdb1"
+    r = c.post(f"/api/jobs/{job_id}/usb", json={"file": "report.md", "stick": "sdb1"})
+    assert r.status_code == 200, r.get_json()
+    res = r.get_json()
+    assert res["safe_to_remove"] and res["verified"] and res["unmounted"] and res["name"] == f"{job_id}-report.md"
+    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}     # unmounted after the copy
+    assert (stick / "inkslice" / res["name"]).read_bytes() == svc.job_file(job_id, "report.md").read_bytes()
+    assert c.post(f"/api/jobs/{job_id}/usb", json={"file": "../daemon.sock"}).status_code in (400, 404)
 
 
 def test_a_scan_through_the_web_on_the_real_service(web):
@@ -338,10 +365,11 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
 def test_the_bench_buttons_news_reach_the_dashboard(web):
     c, svc = web
     assert c.get("/api/state").get_json()["notice"] is None
-    svc.export_latest_gcode()                   # what the long press runs (no USB exporter here)
+    svc.export_latest_gcode()                   # what the long press runs (no job finished yet)
     import time
     time.sleep(0.2)                             # the web caches the state for 0.1 s
     n = c.get("/api/state").get_json()["notice"]
-    assert n["code"] == "off" and n["text"] == "USB export is switched off on this bench" and not n["ok"]
+    assert n["code"] == "no_gcode" and n["text"] == "USB export: no finished job with G-code to copy" \
+        and not n["ok"]
     assert 0 <= n["age_s"] < 5 and "lines" not in n
     assert 'id="notice"' in c.get("/").get_data(as_text=True)

@@ -93,43 +93,6 @@ def test_copy_reports_a_failed_verification(tmp_path, monkeypatch):
         usb.copy_verified(src, dest)
 
 
-class FakeJobs:
-    def __init__(self, folder, jobs):
-        self.folder, self._jobs = folder, jobs
-
-    def jobs(self):
-        return self._jobs
-
-    def job_file(self, job_id, name):
-        return self.folder / job_id / name
-
-
-def test_long_press_copies_the_newest_finished_jobs_gcode(tmp_path):
-    for jid, text in (("new", "NEW"), ("old", "OLD")):
-        (tmp_path / "jobs" / jid).mkdir(parents=True)
-        (tmp_path / "jobs" / jid / "toolpath.gcode").write_text(text)
-    svc = FakeJobs(tmp_path / "jobs", [
-        {"id": "running", "status": "scanning", "outputs": []},
-        {"id": "new", "status": "done", "outputs": ["toolpath.gcode"]},
-        {"id": "old", "status": "done", "outputs": ["toolpath.gcode"]},
-    ])
-    stick = tmp_path / "media" / "STICK"
-    stick.mkdir(parents=True)
-    mounts = tmp_path / "mounts"
-    mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
-    released = []
-    ex = usb.UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys",
-                         unmount=lambda s: (released.append(s.id), mounts.write_text("")))
-    r = usb.copy_latest_gcode(svc, ex)
-    assert r.name == "new-toolpath.gcode" and (stick / "inkslice" / r.name).read_text() == "NEW"
-    assert released == ["sdb1"] and r.unmounted and r.safe_to_remove       # the long press releases the stick
-    mounts.write_text("")
-    with pytest.raises(DeviceError, match="no USB stick"):
-        usb.copy_latest_gcode(svc, ex)
-    with pytest.raises(DeviceError, match="no finished job"):
-        usb.copy_latest_gcode(FakeJobs(tmp_path, []), ex)
-
-
 @pytest.fixture
 def one_stick(tmp_path):
     stick = tmp_path / "media" / "STICK"

@@ -8,15 +8,10 @@ from appliance.web.fake import FakeBenchService
 CSRF_RE = re.compile(r'name="csrf-token" content="([^"]+)"')
 
 
-class NoUsb:
-    def sticks(self):
-        return []
-
-
 def make_app(tmp_path, fast=True, **config):
     svc = FakeBenchService(tmp_path / "bench", level_s=0.01 if fast else 0.15, home_s=0.01, process_s=0.01,
                            frame_px=96)
-    cfg = {"data_dir": str(tmp_path / "data"), "usb": NoUsb()}
+    cfg = {"data_dir": str(tmp_path / "data")}
     cfg.update(config)
     app = create_app(svc, cfg)
     app.config["TESTING"] = True

@@ -46,7 +46,7 @@ def run(args):
         service = BenchClient(sock)
     config = {"https": args.https, "reset_password": args.new_password}
     if args.no_usb:
-        config["usb"] = None
+        config["usb"] = False
     try:
         serve(service, data, host=args.host, port=args.port, config=config)
     finally:

@@ -37,11 +37,13 @@ log = logging.getLogger("inkslice.rpc")
 METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
            "settings", "update_settings", "events",
            "live_heightmap", "calibration", "calibrate", "import_scan",
-           "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed")
+           "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
+           "usb_sticks", "export_to_usb")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
-              "commission": 600.0}                                          # the search for level zero
+              "commission": 600.0,                                          # the search for level zero,
+              "export_to_usb": 180.0}                                       # a copy, read back, unmount
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -85,7 +87,8 @@ class _Handler(socketserver.StreamRequestHandler):
                 result = getattr(service, method)(*args, **kwargs)
                 self._send({"ok": True, "result": _encode(method, result)})
             except errors.InkSliceError as e:
-                self._send({"ok": False, "error": {"type": type(e).__name__, "where": e.where,
+                kind = next(c.__name__ for c in type(e).__mro__ if c.__name__ in _ERRORS)   # NoStick: DeviceError
+                self._send({"ok": False, "error": {"type": kind, "where": e.where,
                                                    "problem": e.problem}})
             except Exception as e:
                 log.exception("rpc %s", method)
@@ -136,7 +139,8 @@ class BenchClient:
     method only reads.
     """
     READ_ONLY = frozenset({"state", "jobs", "job", "job_file", "latest_frame", "settings", "events",
-                           "live_heightmap", "calibration", "commissioning", "export_commissioning"})
+                           "live_heightmap", "calibration", "commissioning", "export_commissioning",
+                           "usb_sticks"})
 
     def __init__(self, path, timeout: float = 30.0, max_connections: int = MAX_CONNECTIONS):
         self.path, self.timeout = str(path), timeout
@@ -227,6 +231,10 @@ class BenchClient:
     def export_commissioning(self): return self._call("export_commissioning")
     def import_commissioning(self, doc): return self._call("import_commissioning", doc)
     def ink_changed(self): return self._call("ink_changed")
+    def usb_sticks(self): return self._call("usb_sticks")
+
+    def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):
+        return self._call("export_to_usb", job_id, name, stick, release)
 
     def latest_frame(self):
         r = self._call("latest_frame")

@@ -43,6 +43,7 @@ import numpy as np
 from ..errors import Cancelled, DeviceError, InkSliceError, SettingError
 from ..hw.base import HumanOperator
 from ..hw.devices import Devices
+from ..hw.usb import NoStick
 from ..scanfile import load_scan
 from . import importing, processing
 from . import settings as S
@@ -52,7 +53,7 @@ from .firstrun import Pending
 from .livemap import LiveMap
 from .notices import usb_notice
 from .levels import LevelPlan
-from .processing import child_process
+from .processing import PROGRAM, child_process
 from .recovery import recover
 from .runner import ScanRunner, free_mb
 from .store import ACTIVE, DiskFull, Store
@@ -60,6 +61,7 @@ from .store import ACTIVE, DiskFull, Store
 log = logging.getLogger("inkslice.service")
 STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
 NOTICE_S = 30.0         # how long a front-panel notice (USB copy) holds the display
+GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap")
 
 
 def lan_address() -> str:
@@ -422,6 +424,30 @@ class BenchService:
             log.warning("job %s: %s", job_id, e)
         self._set(state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None)
 
+    # -- USB sticks: the daemon holds the exporter (hw/usb.py); the web asks it to copy --------
+    def usb_sticks(self) -> list[dict]:
+        """The USB sticks plugged in (hw.usb.Stick as JSON); none when USB export is off."""
+        return [s.to_json() for s in self.usb.sticks()] if self.usb is not None else []
+
+    def export_to_usb(self, job_id: str, name: str = PROGRAM, stick: str | None = None,
+                      release: bool = True) -> dict:
+        """Copy a file of a job onto a USB stick (`stick`: its id; None: the first), read back and
+        verified; with `release` synced and unmounted after. Returns hw.usb.CopyResult as JSON."""
+        if self.usb is None:
+            raise DeviceError("usb", "USB export is switched off on this box")
+        path = self.job_file(job_id, name)
+        return self.usb.export(path, stick, f"{job_id}-{name}", release=release).to_json()
+
+    def latest_gcode(self) -> tuple[str, str] | None:
+        """(job id, file name) of the newest finished job's finishing program (or, for a job
+        without one, its first G-code file); None when no finished job has G-code."""
+        for job in self.store.list_jobs(("done",)):              # newest first
+            outputs = job["outputs"]
+            name = PROGRAM if PROGRAM in outputs else next((n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
+            if name:
+                return job["id"], name
+        return None
+
     def export_latest_gcode(self) -> dict:
         """What the long press does: the newest finished job's G-code onto the USB stick.
 
@@ -429,16 +455,16 @@ class BenchService:
         which is also put on the display, in state()["notice"] and in the event log.
         Never raises for a missing stick or job: those are outcomes the operator reads.
         """
-        from ..hw.usb import NoStick, NothingToCopy, copy_latest_gcode
         if self.usb is None:
             return self._notify(usb_notice("off"))
+        latest = self.latest_gcode()
+        if latest is None:
+            return self._notify(usb_notice("no_gcode"))
         self._notify(usb_notice("copying"), log_it=False)
         try:
-            result = copy_latest_gcode(self, self.usb)
+            result = self.usb.export(self.job_file(*latest), None, "-".join(latest), release=True)
         except NoStick:
             return self._notify(usb_notice("no_stick"))
-        except NothingToCopy:
-            return self._notify(usb_notice("no_gcode"))
         except InkSliceError as e:
             return self._notify(usb_notice("failed", problem=e.problem))
         except Exception as e:                      # an unexpected bug must still reach the operator

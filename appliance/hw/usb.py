@@ -27,8 +27,9 @@ unmount` for one a desktop mounted. Only when the mount is gone from the mount
 table is the stick reported safe to remove: FAT's dirty flag and the stick's
 own write cache are then settled too.
 
-copy_latest_gcode() is what the bench's physical button (long press) calls:
-it takes any object with the BenchService's jobs() / job_file() methods.
+Which file goes onto the stick is the daemon's business (BenchService.export_to_usb
+for the web, export_latest_gcode for the button's long press): this module copies
+a file it is given and knows nothing of jobs.
 """
 from __future__ import annotations
 
@@ -52,10 +53,6 @@ FAT_BAD = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
 
 class NoStick(DeviceError):
     """No USB stick is plugged in (or not the one asked for)."""
-
-
-class NothingToCopy(DeviceError):
-    """No finished job has G-code (the long press has nothing to copy)."""
 
 
 @dataclass
@@ -273,21 +270,3 @@ class UsbExporter:
         except DeviceError as e:
             gone, problem = False, e.problem
         result.unmounted, result.unmount_problem, result.safe_to_remove = gone, problem, gone
-
-
-GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap")
-
-
-def copy_latest_gcode(service, exporter: UsbExporter) -> CopyResult:
-    """The long-press action: the newest finished job's toolpath.gcode onto the stick, which is
-    then synced and unmounted (result.safe_to_remove says whether that worked)."""
-    for job in service.jobs():          # newest first (the facade's order)
-        if job.get("status") != "done":
-            continue
-        outputs = job.get("outputs", [])
-        name = "toolpath.gcode" if "toolpath.gcode" in outputs else next(
-            (n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
-        if name:
-            job_id = job.get("id") or job.get("job_id")
-            return exporter.export(service.job_file(job_id, name), None, f"{job_id}-{name}", release=True)
-    raise NothingToCopy("usb", "no finished job with G-code to copy")

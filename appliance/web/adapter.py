@@ -10,6 +10,7 @@ when a service lacks them, so the UI can hide a feature instead of failing:
   commissioning(), commission(step, action, values), export_commissioning(),
   import_commissioning(doc), ink_changed()   commissioning (daemon/commissioning.py)
   import_scan(folder)    an uploaded scan folder becomes a job
+  usb_sticks(), export_to_usb(job_id, name, stick)   the daemon copies a job's file to a stick
 
 If the daemon's real API drifts from the facade, the translation goes here
 and nowhere else.
@@ -178,6 +179,12 @@ class WebService:
             return self._optional("import_scan", folder)
         finally:
             self._drop_cache()          # the import starts processing: show it at once
+
+    def usb_sticks(self) -> list[dict]:
+        return list(self._optional("usb_sticks"))
+
+    def export_to_usb(self, job_id: str, name: str, stick: str | None) -> dict:
+        return self._optional("export_to_usb", job_id, name, stick)
 
     @staticmethod
     def _job(j: dict) -> dict:

@@ -399,17 +399,15 @@ def commission(step, action):
 
 # -- USB stick -----------------------------------------------------------------------------------
 
-def _usb():
-    u = ext()["usb"]
-    if u is None:
-        raise NotOffered("usb", "USB export is switched off on this box")
-    return u
+# The daemon holds the sticks and does the copy (the web service has no device access).
+
+def _usb_offered() -> bool:
+    return bool(ext()["config"].get("usb")) and svc().offers("export_to_usb")
 
 
 @bp.get("/usb")
 def usb_sticks():
-    u = ext()["usb"]
-    sticks = [s.to_json() for s in u.sticks()] if u is not None else []
+    sticks = svc().usb_sticks() if _usb_offered() else []
     return jsonify(available=bool(sticks), sticks=sticks)
 
 
@@ -417,14 +415,12 @@ def usb_sticks():
 def usb_export(job_id):
     body = _json_body()
     name = str(body.get("file") or "toolpath.gcode")
-    path = _job_path(job_id, name)
-    u = _usb()
-    sticks = u.sticks()
-    if not sticks:
-        return err("no USB stick is plugged in", 409, "usb")
-    stick_id = body.get("stick") or sticks[0].id
-    result = u.export(path, stick_id, f"{job_id}-{name}", release=True)     # synced and unmounted after
-    return jsonify(result.to_json())
+    _job_path(job_id, name)                     # a known job and a file name the API serves
+    if not _usb_offered():
+        raise NotOffered("usb", "USB export is switched off on this box")
+    stick = body.get("stick")
+    result = svc().export_to_usb(job_id, name, str(stick) if stick else None)   # synced and unmounted after
+    return jsonify(result)
 
 
 # -- uploads ---------------------------------------------------------------------------------------

@@ -14,8 +14,8 @@ calls nothing else (docs/architecture.md). `config` is a plain dict:
   max_unzipped_bytes largest total size an uploaded zip may expand to (default 1 GiB)
   max_frame_pixels  largest frame (width x height) an uploaded scan may hold (default 16 Mpx;
                     the camera makes 2048 x 1536)
-  usb               an object with sticks() and export(src, stick_id, name, release) (appliance.hw.usb);
-                    default: UsbExporter() on the real /proc/mounts; None disables USB
+  usb               offer USB stick export on the job page (default True; the daemon finds the
+                    sticks and does the copy, see BenchService.export_to_usb); False hides it
   sse_max_s         how long one Server-Sent-Events connection stays open (default 50 s;
                     the browser reconnects by itself, and a bounded stream keeps waitress's
                     threads from being held forever by phones that went to sleep)
@@ -61,6 +61,7 @@ DEFAULTS = {
     "sse_max_s": 50.0,
     "max_streams": 8,
     "trusted_proxy": False,
+    "usb": True,
 }
 
 # Paths anyone may fetch: the login page itself, the static assets it needs, a
@@ -94,10 +95,6 @@ def create_app(service, config: dict | None = None) -> Flask:
         except OSError as e:
             logging.getLogger("inkslice.web").warning(
                 "cannot leave the first-run password for the bench display in %s: %s", cfg["bench_data_dir"], e)
-    if "usb" not in cfg:
-        from ..hw.usb import UsbExporter      # the stick is a device: its code lives in hw
-        cfg["usb"] = UsbExporter()
-
     app.config.update(
         SECRET_KEY=auth.secret_key(web_dir),
         SESSION_COOKIE_NAME="inkslice_session",
@@ -120,7 +117,6 @@ def create_app(service, config: dict | None = None) -> Flask:
         "may_send_body": lambda cookie, authorization: _logged_in(app, cookie, authorization),
         "eta": EtaSmoother(),
         "streams": threading.BoundedSemaphore(int(cfg["max_streams"])),
-        "usb": cfg["usb"],
         "config": cfg,
     }
     app.register_blueprint(pages.bp)

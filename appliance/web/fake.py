@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from ..atomicio import write_bytes, write_json, write_text
-from ..errors import InkSliceError, SettingError
+from ..errors import DeviceError, InkSliceError, SettingError
 
 DEFAULT_SETTINGS = {
     "level_step_mm": 0.5,
@@ -83,8 +83,11 @@ def validate_settings(current: dict, changes: dict) -> dict:
 class FakeBenchService:
     """Thread-safe; one scan at a time. `level_s` is the simulated time per level."""
 
-    def __init__(self, data_dir, level_s=0.15, home_s=0.3, process_s=0.3, frame_px=320, settings=None):
+    def __init__(self, data_dir, level_s=0.15, home_s=0.3, process_s=0.3, frame_px=320, settings=None,
+                 usb=None):
+        """`usb`: what finds sticks and copies to them (hw.usb.UsbExporter, or a test's own), or None."""
         self.data_dir = Path(data_dir)
+        self.usb = usb
         self.jobs_dir = self.data_dir / "jobs"
         self.jobs_dir.mkdir(parents=True, exist_ok=True)
         self.level_s, self.home_s, self.process_s, self.frame_px = level_s, home_s, process_s, frame_px
@@ -161,6 +164,14 @@ class FakeBenchService:
     def latest_frame(self):
         with self._lock:
             return self._frame
+
+    def usb_sticks(self) -> list[dict]:
+        return [s.to_json() for s in self.usb.sticks()] if self.usb is not None else []
+
+    def export_to_usb(self, job_id: str, name: str = "toolpath.gcode", stick=None, release=True) -> dict:
+        if self.usb is None:
+            raise DeviceError("usb", "USB export is switched off on this box")
+        return self.usb.export(self.job_file(job_id, name), stick, f"{job_id}-{name}", release=release).to_json()
 
     def settings(self) -> dict:
         with self._lock:
