@@ -1,7 +1,8 @@
 """The simulated bench is a set of devices and nothing more: production code
-(everything under appliance/ except sim/ and commands/) never imports it, and
-never asks a device or a factory whether it happens to have a simulator-only
-method. What a bench offers is in hw/base.py's interfaces."""
+(everything under appliance/ except sim/ and commands/) never imports it
+(tests/test_import_graph.py checks that with the other room rules), and never
+asks a device or a factory whether it happens to have a simulator-only method.
+What a bench offers is in hw/base.py's interfaces."""
 import ast
 from pathlib import Path
 
@@ -15,32 +16,6 @@ def production_modules():
         rel = path.relative_to(PACKAGE)
         if rel.parts[0] not in ALLOWED:
             yield rel, ast.parse(path.read_text(), str(path))
-
-
-def imported_modules(rel, tree):
-    """Absolute names of what a module imports (relative imports resolved against its package)."""
-    package = ["appliance", *rel.parts[:-1]]
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            yield from (alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = package[:len(package) - node.level + 1] if node.level else []
-            module = ".".join(base + ([node.module] if node.module else []))
-            yield module
-            yield from (f"{module}.{alias.name}" for alias in node.names)
-
-
-def test_no_production_module_imports_the_simulator():
-    offenders = [f"{rel}: {name}" for rel, tree in production_modules() for name in imported_modules(rel, tree)
-                 if name == "appliance.sim" or name.startswith("appliance.sim.")]
-    assert offenders == []
-
-
-def test_the_import_check_sees_relative_and_absolute_imports():
-    rel = Path("daemon/runner.py")
-    found = set(imported_modules(rel, ast.parse("from ..sim import fakes\nimport appliance.sim.hil\n"
-                                                "from . import levels\nfrom ..sim.surfaces import get\n")))
-    assert {"appliance.sim.fakes", "appliance.sim.hil", "appliance.daemon.levels", "appliance.sim.surfaces"} <= found
 
 
 def test_no_production_module_probes_for_simulator_only_methods():
