@@ -20,7 +20,6 @@ from appliance.daemon.service import BenchService               # noqa: E402
 from appliance.web.demo import start                            # noqa: E402
 from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait   # noqa: E402
 from test_web_real_service import light_processor               # noqa: E402
-from web_helpers import NoUsb                                   # noqa: E402
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
@@ -41,7 +40,7 @@ def factory():
 def box(factory, tmp_path):
     svc = BenchService(tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.1)
     svc.update_settings(SHORT_SCAN)
-    run = start(svc, tmp_path / "web", config={"usb": NoUsb()})
+    run = start(svc, tmp_path / "web")
     ART.mkdir(parents=True, exist_ok=True)
     yield {"url": run.url, "password": run.password, "svc": svc, "tmp": tmp_path}
     run.stop()

@@ -9,7 +9,7 @@ from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
 from test_daemon_panel import light_processor
 from daemon_helpers import SCAN, wait_final
-from web_helpers import NoUsb, csrf_of, login
+from web_helpers import csrf_of, login
 
 
 def wait_lines(display, pred, timeout=5.0):
@@ -30,7 +30,7 @@ def test_first_run_password_is_shown_on_the_bench_until_the_first_login(tmp_path
         # idle daemon, no web yet: the usual status lines
         wait_lines(display, lambda l: l[0] == "IDLE")
         # the web server (its own unit; the daemon's data folder is shared) makes the password
-        cfg = {"data_dir": str(tmp_path / "web-data"), "bench_data_dir": str(daemon_data), "usb": NoUsb()}
+        cfg = {"data_dir": str(tmp_path / "web-data"), "bench_data_dir": str(daemon_data)}
         app = create_app(svc, cfg)
         password = app.config["FIRST_RUN_PASSWORD"]
         assert password

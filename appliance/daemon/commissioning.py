@@ -30,6 +30,7 @@ real box a message to the person, on the simulated bench the object placed.
 """
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
@@ -40,6 +41,7 @@ import numpy as np
 
 from ..errors import Cancelled, InkSliceError, SettingError
 from ..hw.base import Placement
+from ..scanfile import _camera
 from ..vision.calibration import Board, camera_json, find_corners, intrinsics, plane_homography
 from ..vision.printboard import describe as print_instructions, printed_size_mm
 from .calibration import BOARD, JIG, board_details as _board_details
@@ -552,7 +554,6 @@ class Commissioning:
         if job["status"] in ("homing", "scanning", "processing"):
             return
         if job["status"] == "done":
-            import json
             path = self.store.job_dir(s.job_id) / "reference.json"
             s.pending = json.loads(path.read_text())
             s.detected = {"diameter_mm": s.detected["diameter_mm"], **_public(s.pending)}
@@ -661,7 +662,6 @@ def _check_export(doc) -> dict:
             if key not in r:
                 raise SettingError(where, f"{kind}: {key} is missing")
         if kind == "camera":
-            from ..scanfile import _camera
             try:
                 _camera(where, r["camera"])
             except InkSliceError as e:

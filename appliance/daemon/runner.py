@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import Cancelled, DeviceError, InkSliceError
 from ..hw.devices import Devices
-from ..scanfile import CameraModel, FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
+from ..scanfile import CameraModel, FrameRef, Scan, _camera, load_scan, read_frame, write_frame, write_scan_json
 from ..vision.part import find_part
 from . import processing
 from . import settings as S
@@ -158,7 +158,6 @@ class ScanRunner:
 
     def _calibrated_camera(self) -> CameraModel:
         """The commissioned camera; without one, the model the devices bring (if any)."""
-        from ..scanfile import _camera
         stored = stored_camera(self.store)
         if stored is not None:
             return _camera("calibration", stored)

@@ -20,7 +20,11 @@ Beyond the facade, what the web UI offers when a service has it:
     commissioning(), commission(step, action, values), export_commissioning(),
     import_commissioning(doc), ink_changed()   the box's commissioning (commissioning.py)
     import_scan(folder)     a scan folder from elsewhere becomes a job that is
-                            processed (importing.py checks and copies it) Device factories are injected so the same service drives
+                            processed (importing.py checks and copies it)
+    usb_sticks(), export_to_usb(job_id, name, stick)   the sticks plugged in, and a verified
+                            copy of a job's file onto one (the web has no device access)
+
+Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
 or the in-memory fakes: a device factory is a hw.base.BenchFactory.
 """
