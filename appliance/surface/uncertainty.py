@@ -20,11 +20,12 @@ from what limits each:
 - extrapolation above the top frame: the part's top lies between the highest
   level that showed it and the one above that did not; the further in from the
   top waterline, the more of that step is unknown;
-- disagreement: the fit's residual at the waterline points near the cell, and
-  frames that contradict each other (exposure is monotone: a point out of the
-  ink at one level is out at every lower one; a cell seen out, then under, then
-  out again came from a transient bright thing or a misread frame, and its height
-  is only known to within the span of the levels that disagree);
+- disagreement: the fit's residual at the waterline points near the cell (and
+  against the cell's own first exposure, up to a step), and frames that
+  contradict each other (exposure is monotone: a point out of the ink at one
+  level is out at every lower one; a cell seen out, then under, then out again
+  came from a transient bright thing or a misread frame; when the fit stands
+  above the level where the cell was still under, it is off by that much);
 - the meniscus: its correction models a contact line on an open face; near the
   outline the ink also meets the part's edge, within about a capillary length,
   so the correction there is unsure by its size times exp(-distance / length).
@@ -82,31 +83,37 @@ def _levels_and_steps(slices):
 
 
 def _frames_disagree(ev: CellEvidence, lv):
-    """Per node, the span of levels over which the frames contradict themselves (mm):
-    out of the ink at `first`, under again at a lower level. 0 where they agree. A node
-    within a lattice spacing of the lower frame's waterline is on its edge, where the
-    raster's side is not sure: that is no contradiction."""
+    """Per node, how far the fitted height stands above a level at which the node was
+    still under the ink although an earlier frame had it out (mm; 0 where the frames
+    agree, or where the fit sides with the later frames, as monotone exposure says it
+    should: the earlier exposure was a transient bright thing). A node within a lattice
+    spacing of the lower frame's waterline is on its edge, where the raster's side is not
+    sure: that is no contradiction, nor is a node that never comes out again (the lowest
+    frames can lose the part's edge from their view)."""
     from .slices import polyline_distance
     K = len(ev.slices)
     lat = ev.lat
-    span = np.zeros(lat.shape)
     first = np.where(ev.footprint, ev.first, K)
     last_under = np.full(lat.shape, -1)
     X, Y = np.meshgrid(lat.x, lat.y)
     tol = max(lat.hx, lat.hy)
+    # out again further down: only an out-under-out pattern is a contradiction (a node
+    # under in the lowest frames alone has left their view, its loop cuts a chord)
+    out_below = np.zeros((K,) + lat.shape, bool)
+    for k in range(K - 2, -1, -1):
+        out_below[k] = out_below[k + 1] | ev.exposed[k + 1]
     for k in range(K):
-        cand = ~ev.exposed[k] & (first < k)
+        cand = ~ev.exposed[k] & (first < k) & out_below[k]
         if not cand.any() or ev.slices[k].empty:
             continue
         jj, ii = np.nonzero(cand)
         d, _ = polyline_distance(ev.slices[k], np.column_stack([X[jj, ii], Y[jj, ii]]))
         far = d > tol
         last_under[jj[far], ii[far]] = k
-    bad = last_under >= 0
-    if bad.any():
-        fk = np.clip(first[bad], 0, K - 1)
-        span[bad] = lv[fk] - lv[last_under[bad]]
-    return span
+    above = np.zeros(lat.shape)
+    bad = (last_under >= 0) & np.isfinite(ev.z)
+    above[bad] = np.maximum(ev.z[bad] - lv[last_under[bad]], 0.0)
+    return above
 
 
 def _nearest_distance(points, lat):
@@ -200,9 +207,11 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     # the fit against the data: residuals at the waterline points near the node, and the
     # node's own first-exposure height where it has one
     pts_res = _fit_residual(ev, curve_pts, curve_z)
-    own = np.where(np.isfinite(ev.z_fe), np.abs(ev.z - ev.z_fe), 0.0)
+    # (a node's first exposure is only known within its bracket: beyond a step off, the
+    # fit has overruled it - a transient exposure - and the frames' term says whether rightly)
+    own = np.where(np.isfinite(ev.z_fe), np.minimum(np.abs(ev.z - ev.z_fe), local_step), 0.0)
     u_fit = np.hypot(pts_res, own)
-    u_frames = 0.5 * _frames_disagree(ev, lv)
+    u_frames = _frames_disagree(ev, lv)
     # the meniscus correction models a contact line on an open face; within a capillary
     # length of the outline the ink also meets the part's edge, which the model does not
     # know: the correction there is unsure by as much of it as the edge's reach leaves
