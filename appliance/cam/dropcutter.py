@@ -42,7 +42,8 @@ from .sampling import Sampler
 from .segments import min_over_segment
 
 DEFAULT_RESOLUTION = 0.1          # mm, spacing of the offset lattice and of toolpath points
-_SLAB_BUDGET = 3_000_000          # slab elements per chunk (memory ~ 8 bytes x a few)
+_SLAB_BUDGET = 750_000            # slab elements per chunk: reading the map there takes ~15 arrays
+                                  # of its size (3 M elements were 370 MB of a finishing plan)
 
 
 def _offsets(cutter: Cutter, d: float):

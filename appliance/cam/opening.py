@@ -33,28 +33,64 @@ def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
     # faces (0.02-0.03 mm for a 1 mm ball on sample 4's 80-degree faces) and, for a
     # flat end, by slope x its shortfall from the rim everywhere, and would call a
     # strip reachable that no tool position reaches
-    X, Y = np.meshgrid(x0 + d * np.arange(nx), y0 + d * np.arange(ny))
-    tip = polish(sampler, cutter, X, Y, drop_grid(sampler, cutter, x0, y0, nx, ny, d), d)
-    groups, m = _offsets(cutter, d)
-    pad = np.pad(tip, m, constant_values=np.inf)
-    out = np.full(tip.shape, np.inf)
-    for b, avals, hvals in groups:
-        for sb in ((b, -b) if b else (0,)):
-            rows = pad[m + sb:m + sb + ny]
-            for a, h in zip(avals.tolist(), hvals.tolist()):
-                np.minimum(out, rows[:, m + a:m + a + nx] + h, out=out)
+    # in bands of rows: the drop's and the polish's temporaries over a whole map
+    # at 0.1 mm were 220 MB, half of a finishing plan's peak
+    tip = np.empty((ny, nx))
+    xs = x0 + d * np.arange(nx)
+    for j0, j1 in _bands(ny, nx):
+        X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
+        tip[j0:j1] = polish(sampler, cutter, X, Y, drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d), d)
+    out = _erode(tip, cutter, d)
     if cutter.kind == "flat":
         np.minimum(out, _rim_minimum(tip, cutter.radius / d), out=out)
         np.minimum(out, _side_ends(tip, cutter.radius / d), out=out)
     else:
-        _polish_minimum(sampler, cutter, tip, out, X, Y, d)
+        for j0, j1 in _bands(ny, nx):
+            X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
+            _polish_minimum(sampler, cutter, tip, out, X, Y, d, rows=slice(j0, j1))
     return out
+
+
+def _bands(ny, nx, cells=150_000):
+    rows = max(1, cells // max(nx, 1))
+    return [(j0, min(j0 + rows, ny)) for j0 in range(0, ny, rows)]
+
+
+def _erode(tip, cutter, d):
+    """min over the disc's lattice offsets u of tip(p + u) + h(|u|); inf off the lattice.
+
+    h is symmetric in both offsets, so rows b and -b are folded first, then
+    columns a and -a: three operations per quarter-disc offset instead of
+    eight per four offsets. Single precision relative to the lowest tip halves
+    the memory traffic (the whole cost: 25 s -> 2.5 s on a 100 x 100 mm map
+    at 0.1 mm); a part 100 mm tall still resolves 1e-5 mm.
+    """
+    groups, m = _offsets(cutter, d)
+    ny, nx = tip.shape
+    finite = np.isfinite(tip)
+    ref = float(np.min(tip[finite])) if finite.any() else 0.0
+    pad = np.full((ny + 2 * m, nx + 2 * m), np.inf, np.float32)
+    pad[m:m + ny, m:m + nx] = tip - ref
+    out = np.full(tip.shape, np.inf, np.float32)
+    tmp = np.empty(tip.shape, np.float32)
+    for b, avals, hvals in groups:
+        rows = pad[m:m + ny] if b == 0 else np.minimum(pad[m + b:m + b + ny], pad[m - b:m - b + ny])
+        for a, h in zip(avals.tolist(), hvals.tolist()):
+            if a < 0:
+                continue
+            if a == 0:
+                np.add(rows[:, m:m + nx], np.float32(h), out=tmp)
+            else:
+                np.minimum(rows[:, m + a:m + a + nx], rows[:, m - a:m - a + nx], out=tmp)
+                np.add(tmp, np.float32(h), out=tmp)
+            np.minimum(out, tmp, out=out)
+    return out.astype(np.float64) + ref
 
 
 _PATTERN = np.stack([a.ravel() for a in np.meshgrid(np.arange(-2, 3), np.arange(-2, 3))])
 
 
-def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000):
+def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000, rows=None):
     """Lower `out` (in place) on steep faces to nearer the continuous minimum.
 
     The erosion takes the min of tip(p + u) + h(|u|) over lattice offsets u;
@@ -69,9 +105,12 @@ def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000):
     bilinearly between nodes (they are smooth there: an offset surface).
     """
     ny, nx = tip.shape
+    rows = slice(0, ny) if rows is None else rows
+    # (X, Y) are the lattice's rows `rows`; tip and out are the whole lattice's
+    lx0, ly0 = X[0, 0], Y[0, 0] - d * rows.start
     gx, gy = surface_gradient(sampler, X.ravel(), Y.ravel(), d / 2)
-    idx = np.flatnonzero((np.hypot(gx, gy) > STEEP) & np.isfinite(out.ravel()))
-    flat_out = out.reshape(-1)
+    flat_out = out[rows].reshape(-1)
+    idx = np.flatnonzero((np.hypot(gx, gy) > STEEP) & np.isfinite(flat_out))
     R = cutter.radius
     for s in range(0, idx.size, chunk):
         k = idx[s:s + chunk]
@@ -84,8 +123,8 @@ def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000):
             ox = cx[:, None] + sp * _PATTERN[0][None, :]
             oy = cy[:, None] + sp * _PATTERN[1][None, :]
             r = np.hypot(ox, oy)
-            fi = (px[:, None] + ox - X[0, 0]) / d
-            fj = (py[:, None] + oy - Y[0, 0]) / d
+            fi = (px[:, None] + ox - lx0) / d
+            fj = (py[:, None] + oy - ly0) / d
             inside = (r <= R) & (fi >= 0) & (fi <= nx - 1) & (fj >= 0) & (fj <= ny - 1)
             t = ndimage.map_coordinates(tip, [fj.ravel(), fi.ravel()], order=1, mode="nearest").reshape(fi.shape)
             f = np.where(inside, t + cutter.profile(np.minimum(r, R)), np.inf)

@@ -175,13 +175,19 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     n = int(np.ceil((t1 - t0) / d - 1e-9)) + 1
     origin = lambda s: t0 * e1 + s * e2
     drop_cutter = st.cutter.offset(st.leave) if st.leave > 0 else st.cutter
+    planned = None
     if st.stepover is not None:
         k = int(np.ceil((s1 - s0) / st.stepover - 1e-9))
         passes = np.linspace(s0, s1, k + 1) if k > 0 else np.array([s0])
     else:
-        passes = _plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
+        passes, planned = _plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
     origins = np.array([origin(s) for s in passes])
-    tips = drop_lines(sampler, drop_cutter, origins, e1, n, d) + st.leave
+    if planned is not None and st.leave == 0:
+        # the planner dropped the cutter along every pass it placed (inf off the part,
+        # where no position is kept): the same tips, not a second drop
+        tips = planned
+    else:
+        tips = drop_lines(sampler, drop_cutter, origins, e1, n, d) + st.leave
     # tips half-way between points, to catch where the tip height is concave
     # (the cutter rolling over an edge) and a straight move would cut in
     mids = drop_lines(sampler, drop_cutter, origins + 0.5 * d * e1[None, :], e1, n - 1, d) + st.leave
@@ -346,6 +352,7 @@ class _PassProbe:
         spacing = PLAN_SPACING if st.cutter.kind != "flat" else min(PLAN_SPACING, st.cutter.radius / 10)
         self.stride = max(1, int(round(spacing / st.resolution)))
         self._grids = {}
+        self._measured = {}      # (across, row step) -> (first row, envelope) of candidates measured
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
         self.row = min(_ROW, flat_stepover(st.cutter, st.scallop) / 8)
         idx = np.arange(0, n, self.stride)
@@ -453,13 +460,25 @@ class _PassProbe:
         ring = (kk > w_flat[None]) & (kk <= w_all[None]) & (dy <= R)[None]
         H = cut.profile(np.minimum(np.hypot(kk * d, dy[None]), R))
         if dy.shape[1] == 1:
-            for i, k in enumerate(ks):
-                r = np.flatnonzero(ring[i, :, 0])
-                if r.size:
-                    cand = pad[pid, at + m + k][None, :] + H[i, r]
-                    low = cand < env[r]
-                    env[r] = np.where(low, cand, env[r])
-                    best[r] = np.where(low, k, best[r])
+            # one min-plus product: rows x positions (H) against positions x columns
+            # (the tips), in row chunks of `budget` elements, single precision
+            # relative to the lowest tip (the loop over positions it replaces was
+            # half of a finishing plan's time)
+            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]]                    # (k, cols)
+            fin = np.isfinite(tips)
+            ref = float(tips[fin].min()) if fin.any() else 0.0
+            t32 = (tips - ref).astype(np.float32)
+            h32 = np.where(ring[:, :, 0], H[:, :, 0], np.inf).T.astype(np.float32)    # (rows, k)
+            t32 = np.ascontiguousarray(t32.T)                                        # (cols, k)
+            live = np.flatnonzero(np.isfinite(h32).any(axis=1))
+            step = max(1, budget // max(t32.size, 1))
+            for r0 in range(0, live.size, step):
+                r = live[r0:r0 + step]
+                cand = h32[r][:, None, :] + t32[None, :, :]         # positions innermost: fast argmin
+                j = np.argmin(cand, axis=2)
+                low = np.take_along_axis(cand, j[:, :, None], axis=2)[:, :, 0]
+                env[r] = np.where(np.isfinite(low), low.astype(np.float64) + ref, np.inf)
+                best[r] = ks[j]
         else:
             tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]          # (k, 1, cols)
             step = max(1, budget // max(env.size, 1))
@@ -548,6 +567,8 @@ class _PassProbe:
         grid = self._placed(step, done)
         Z, on, op, placed, owner, env_a = grid.rows(k0, k1)
         env_b = self.envelope(b, (ys - b[0])[:, None], cols_all)
+        # the pass placed next is one of these candidates: its rows are merged from here
+        self._measured[(b[0], step)] = (k0, env_b)
         stock = np.minimum(placed, env_b)
         who = np.where(env_b < placed, len(done), owner)      # which pass leaves the stock there
         # a pass touches where it comes nearest the opened design, the surface the
@@ -597,7 +618,10 @@ class _PassProbe:
         # the cusp is a sharp V between two cutter profiles: sampled `step` apart
         # its top is missed by up to slope x step / 2 (~20 % of the scallop for a
         # ball), so look again on a fine grid around each column's highest row
-        cols_ok = np.flatnonzero(np.isfinite(val).any(axis=0))
+        # only columns whose coarse cusp could still beat the highest one: the top is
+        # missed by ~20 % of the scallop, so columns 40 % of the request below it cannot
+        col_max = np.max(val, axis=0)
+        cols_ok = np.flatnonzero(np.isfinite(col_max) & (col_max >= coarse - 0.4 * self.st.scallop))
         r = np.argmax(val[:, cols_ok], axis=0)
         S = ys[r][None, :] + step * np.linspace(-1.0, 1.0, 17)[:, None]
         a1 = self.along[cols_ok][None, :]
@@ -688,13 +712,18 @@ class _PlacedRows:
             j1 = int(np.floor((p[0] + R) / self.step)) + 1
             self._hold(first, j1)
             ys = self.step * np.arange(j0, j1)
-            env = self.probe.envelope(p, (ys - p[0])[:, None], np.arange(self.probe.along.size))
+            known = self.probe._measured.get((p[0], self.step))
+            if known is not None and known[0] <= j0 and known[0] + known[1].shape[0] >= j1:
+                env = known[1][j0 - known[0]:j1 - known[0]]
+            else:
+                env = self.probe.envelope(p, (ys - p[0])[:, None], np.arange(self.probe.along.size))
             sl = slice(j0 - self.k0, j1 - self.k0)
             lower = env < self.stock[sl]
             self.stock[sl] = np.where(lower, env, self.stock[sl])
             self.owner[sl] = np.where(lower, self.merged, self.owner[sl])
             self.last = (j0, env)
             self.merged += 1
+        self.probe._measured.clear()
 
     def rows(self, k0, k1):
         """(design, on part, opening, placed stock, owner, last pass's envelope) on rows k0..k1-1."""
@@ -759,9 +788,9 @@ def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
             nxt = s1
             best_p = probe.pass_at(s1)
         passes.append(nxt)
-        done.append(best_p)
+        done.append(best_p if best_p[0] == nxt else probe.pass_at(nxt))
         guess = best_ok
-    return np.array(passes)
+    return np.array(passes), np.stack([p[1] for p in done])
 
 
 # -- point reduction ----------------------------------------------------------------
