@@ -4,7 +4,11 @@ dissertation's format).
 
     .venv/bin/python benches/cam.py            # everything (~10-20 min on 2 busy cores)
     .venv/bin/python benches/cam.py --quick    # a slice of each (~2 min)
-    .venv/bin/python benches/cam.py --only dropcutter|acceptance|fullmap|dialects
+    .venv/bin/python benches/cam.py --only dropcutter|acceptance|fullmap|dialects|finishing
+
+`--only finishing` times issue 20's case (sample 1 from a 0.5 mm map, 6 mm ball,
+scallop 0.05 and 0.01) in child processes and runs the same in a `git worktree`
+of the commit before issue 20 (--old-ref, default 30fd316) for the ratio.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
@@ -214,10 +218,86 @@ def bench_acceptance(quick, only_sample=None, only_cutter=None):
                   flush=True)
 
 
+# The finishing run the bench times, as a child process: CPU seconds and peak RSS are
+# the child's own (ru_maxrss), imports included, so the figures are what a user's
+# `inkslice toolpath` costs. The same code runs against an older checkout for the ratio.
+FINISH_CHILD = r"""
+import json, resource, sys, time
+import numpy as np
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.jobs import finishing_gcode
+from appliance.cam.zigzag import FinishSettings
+from appliance.sim import surfaces
+from appliance.surface.heightmap import HeightMap
+name, step, cutter, scallop = sys.argv[1], float(sys.argv[2]), sys.argv[3], float(sys.argv[4])
+s = surfaces.get(name)
+x0, x1, y0, y1 = s.bounds
+x = np.linspace(x0, x1, int(round((x1 - x0) / step)) + 1)
+y = np.linspace(y0, y1, int(round((y1 - y0) / step)) + 1)
+X, Y = np.meshgrid(x, y)
+hm = HeightMap(x, y, s.height(X, Y))
+t = time.process_time()
+job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=scallop))
+cpu = time.process_time() - t
+print(json.dumps({"cpu": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "passes": job.summary["passes"], "lines": job.summary["lines"]}))
+"""
+
+OLD_REF = "30fd316"      # the planner before issue 20 (issue 20 measured it)
+
+
+def run_finishing(checkout, name, step, cutter, scallop):
+    import json
+    import os
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    r = subprocess.run([sys.executable, "-c", FINISH_CHILD, name, str(step), cutter, str(scallop)],
+                       cwd=str(checkout), env=env, capture_output=True, text=True, timeout=3600)
+    if r.returncode:
+        raise RuntimeError(f"finishing in {checkout} failed: {r.stderr.strip().splitlines()[-1:]}")
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def old_checkout(ref, folder):
+    """A detached `git worktree` of `ref` in `folder`, or None (no git, unknown ref)."""
+    repo = Path(__file__).resolve().parent.parent
+    r = subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(folder), ref],
+                       capture_output=True, text=True)
+    return Path(folder) if r.returncode == 0 else None
+
+
+def bench_finishing(quick, old_ref=OLD_REF):
+    """Issue 20's speed case: sample 1 (a Gaussian dome, 100 x 100 mm) from a 0.5 mm map, 6 mm ball."""
+    print(f"== finishing: sample1 (100 x 100 mm dome) from a 0.5 mm map, ball6; each run a child process, "
+          f"CPU = its process_time, peak = its ru_maxrss; 'old' = a git worktree of {old_ref} run the same way ==")
+    print("scallop  new CPU s  new peak MB  passes |  old CPU s  old peak MB  passes | CPU ratio  peak ratio  target")
+    repo = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        old = None if old_ref in ("", "none") else old_checkout(old_ref, Path(tmp) / "old")
+        if old_ref not in ("", "none") and old is None:
+            print(f"(could not make a git worktree of {old_ref}: no comparison)")
+        try:
+            for h, cpu_max in ((0.05, 5.0), (0.01, 20.0))[:1 if quick else 2]:
+                new = run_finishing(repo, "sample1", 0.5, "ball6", h)
+                row = f"{h:<8g} {new['cpu']:9.1f}  {new['peak_mb']:11.0f}  {new['passes']:6d} |"
+                if old is not None:
+                    o = run_finishing(old, "sample1", 0.5, "ball6", h)
+                    row += (f" {o['cpu']:9.1f}  {o['peak_mb']:11.0f}  {o['passes']:6d} | "
+                            f"{o['cpu'] / new['cpu']:8.1f}x  {o['peak_mb'] / new['peak_mb']:9.1f}x")
+                else:
+                    row += "         -            -       - |        -          -"
+                ok = new["cpu"] <= cpu_max and new["peak_mb"] <= 250
+                print(f"{row}  <= {cpu_max:g} s, <= 250 MB: {'OK' if ok else 'MISS'}", flush=True)
+        finally:
+            if old is not None:
+                subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(old)],
+                               capture_output=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=("dropcutter", "fullmap", "acceptance", "dialects"))
+    ap.add_argument("--only", choices=("dropcutter", "fullmap", "acceptance", "dialects", "finishing"))
+    ap.add_argument("--old-ref", default=OLD_REF, help="finishing: the commit to compare with ('none': skip)")
     ap.add_argument("--sample", help="acceptance: only this sample (sample1..sample4)")
     ap.add_argument("--cutter", help="acceptance: only this cutter (as named in the table)")
     a = ap.parse_args(argv)
@@ -229,6 +309,8 @@ def main(argv=None):
         bench_dialects(a.quick)
     if a.only in (None, "acceptance"):
         bench_acceptance(a.quick, a.sample, a.cutter)
+    if a.only in (None, "finishing"):
+        bench_finishing(a.quick, a.old_ref)
 
 
 if __name__ == "__main__":
