@@ -17,6 +17,23 @@ processed as `inkslice process` does (displacement, a meniscus model, the base p
 The meniscus model is the one the renderer used (its parameters, from the scan's truth):
 this bench measures the map, not the commissioning (benches/meniscus.py does that).
 
+Measured (2 December 2026, harsh preset as robust landed it, 1 mm steps, 50 x 50 grid, seed 1;
+the renderer's meniscus parameters): part / Ea / interior p99 / max / cells > 0.1 mm / honest / marked
+    sample1    0.0125  0.037  0.266    20   90.0 %   18.7 %
+    sample2    0.0217  0.066  0.147    48   83.3 %   42.8 %
+    sample3    0.0284  0.200  0.402   156   92.3 %   40.9 %
+    sample4    0.5204  0.428  0.429  1754  100.0 %  100.0 %   (10 x 10 mm, 40 mm tall: all within a
+                                                               capillary length of its walls)
+    twin-peaks 0.3060  1.419  1.673   852   97.7 %   53.1 %
+    crater     0.1405  1.088  1.365   566   97.0 %   91.8 %
+    all parts: 98.3 % of 3396 cells off by more than 0.1 mm marked uncertain, 56.0 % of all cells marked.
+The map is honest but cautious: on the smooth samples 19-43 % of the cells are marked, most of
+them for the distance to the nearest waterline on gentle faces and the meniscus near the outline.
+Milled (verify at 0.2 mm, ball 6 mm, scallop 0.05 mm) against the true part: gouge / excess mm
+    sample1 0.060 at (42.0, 60.2) / 0.269     sample2 1.908 at the y = 100 edge / 0.199
+    sample3 2.304 at the (100, 100) corner / 0.443    sample4 1.115 / 4.869 (77 % uncut: a 6 mm
+    ball on a 10 mm part); the edge gouges are where the map says wall, its rims read low.
+
     nice -n 10 .venv/bin/python benches/uncertainty.py --keep /tmp/scans            # all parts
     nice -n 10 .venv/bin/python benches/uncertainty.py --parts sample1 --mill --keep /tmp/scans
 """
