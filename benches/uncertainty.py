@@ -32,7 +32,10 @@ them for the distance to the nearest waterline on gentle faces and the meniscus 
 Milled (verify at 0.2 mm, ball 6 mm, scallop 0.05 mm) against the true part: gouge / excess mm
     sample1 0.060 at (42.0, 60.2) / 0.269     sample2 1.908 at the y = 100 edge / 0.199
     sample3 2.304 at the (100, 100) corner / 0.443    sample4 1.115 / 4.869 (77 % uncut: a 6 mm
-    ball on a 10 mm part); the edge gouges are where the map says wall, its rims read low.
+    ball on a 10 mm part)    twin-peaks 0.128 at (67.2, 36.8) / 2.361 (39 % uncut)
+    crater 2.960 at (15.9, 25.8) / 1.066 (27 % uncut). The edge gouges are where the map says
+    wall (sample 3: +-36 mm before the frames' term was fixed; crater: +-2.59); twin-peaks' 0.128 mm
+    gouge sits on a cell the map called seen, +-0.09 mm: just under the threshold, a miss.
 
     nice -n 10 .venv/bin/python benches/uncertainty.py --keep /tmp/scans            # all parts
     nice -n 10 .venv/bin/python benches/uncertainty.py --parts sample1 --mill --keep /tmp/scans
