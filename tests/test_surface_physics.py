@@ -254,3 +254,36 @@ def test_the_correction_takes_out_the_second_inks_bent_meniscus():
         print(f"{name}: straight-line correction {straight:.4f} mm, bent {bent:.4f} mm")
         assert straight > 0.03
         assert bent < 0.015
+
+
+def _hill_on_a_flat_face():
+    """A hill (10 mm, sigma 6 mm) on a flat face 6 mm high, a disc of radius 30 mm."""
+    top = lambda x, y: 6.0 + 10.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / (2 * 6.0 ** 2))   # noqa: E731
+    return Surface("hill", "a hill on a flat face", (20.0, 80.0, 20.0, 80.0), (Tier(disc_sdf(50, 50, 30), top),))
+
+
+@pytest.mark.parametrize("phase,placed", [(0.0, 0.017), (0.4, 0.417)])
+def test_a_flat_face_under_a_depression_is_placed_in_the_middle_of_its_bracket(phase, placed):
+    """The second ink stands d = 2 l_c sin(35 deg / 2) = 1.383 mm above a flat face it has just
+    left: the 6 mm face comes out all at once when the ink passes 7.383, with no contact line
+    ever crossing it. With frames at 7.9 and 6.9 (+ phase) all the frames say is that its
+    apparent height lies in that bracket: it is placed in the middle, 7.4 (+ phase) - 1.383 =
+    6.017 (6.417) mm. Before, the face followed the hill's last contact line and the disc's
+    rim: 0.37 mm low on average, 0.54 at worst (phase 0), anywhere in the bracket."""
+    part = _hill_on_a_flat_face()
+    lines = meniscus_waterlines(part, np.arange(17.9, 3.0, -1.0) + phase, resolution_mm=0.3, **SECOND)
+    g = GridSpec((20.0, 80.0, 20.0, 80.0), n=(31, 31))
+    X, Y = np.meshgrid(*g.axes())
+    face = (np.hypot(X - 50, Y - 50) > 22) & (np.hypot(X - 50, Y - 50) < 28)
+    z = reconstruct(lines, g, ReconstructOptions(meniscus=MeniscusModel(**SECOND))).heightmap.z
+    err = (z - part.height(X, Y))[face]
+    assert np.all(np.isfinite(err))
+    assert abs(err.mean() - placed) < 0.03
+    assert np.abs(err - placed).max() < 0.05
+
+
+def test_the_first_ink_wets_flat_faces_and_keeps_its_correction():
+    """The first ink commissions to ~0 deg: no depression, nothing placed or re-marked."""
+    from appliance.surface.meniscus import depression_depth
+    assert depression_depth(MeniscusModel(2.704, np.radians(0.04))) == 0.0
+    assert abs(depression_depth(MeniscusModel(**SECOND)) - 1.383) < 0.001

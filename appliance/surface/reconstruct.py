@@ -33,7 +33,8 @@ from . import seed as seed_methods
 from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
                       first_exposure, point_data)
 from .heightmap import HeightMap
-from .meniscus import contact_points, top_from_apparent
+from .meniscus import (bracket_dewetted_faces, contact_points, pinned_rims_as_walls, place_dewetted_faces,
+                       top_from_apparent)
 from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
 from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
 
@@ -293,21 +294,27 @@ def _fit_pass(lat, slices, opt, ftol, length, rise):
     meniscus the fit is of the contact lines - where the last pass's rise field says they
     really are - and the top is solved from it (meniscus.top_from_apparent)
     -> (z, z_fe, first, footprint, slices at their heights, length, curve or None, rise)."""
+    if opt.meniscus is not None:
+        slices = pinned_rims_as_walls(slices, opt.meniscus, opt.wall_tol_mm)
     observed = slices
     if opt.meniscus is not None and rise is not None:
         slices, _ = contact_points(observed, lat, rise, opt.meniscus)
     z_fe, first, footprint = first_exposure(lat, slices, ftol)
+    placed = z_fe
+    if opt.meniscus is not None:
+        placed = place_dewetted_faces(lat, z_fe, first, footprint, slices, opt.meniscus)
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
     problem = FitProblem(lat, footprint)
     pts, zp = point_data(slices, 0.5 * min(lat.hx, lat.hy))
     curve = None
     if length is None:
-        length, curve = _cross_validate(problem, z_fe, pts, zp, opt.point_weight)
+        length, curve = _cross_validate(problem, placed, pts, zp, opt.point_weight)
         if length is None:
             length = min(lat.hx, lat.hy)
-    z = _fit_nodes(problem, z_fe, pts, zp, length, opt.point_weight)
+    z = _fit_nodes(problem, placed, pts, zp, length, opt.point_weight)
     if opt.meniscus is not None:
+        z = bracket_dewetted_faces(lat, z, z_fe, first, footprint, slices, opt.meniscus)
         top = top_from_apparent(lat, z, footprint, opt.meniscus)
         rise = top - z
         z = top
