@@ -216,7 +216,8 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
         out[f"inkslice:{m}"], fix = stand_on_base(rec.heightmap)
         diag[m] = {"smoothing_mm": rec.smoothing, **{k: v for k, v in rec.diagnostics.items()
                                                      if k in ("wall_points", "points", "seconds", "notes",
-                                                              "smoothing_mm", "displacement")}}
+                                                              "smoothing_mm", "displacement",
+                                                              "silhouette_points", "occluded_nodes")}}
         at_base = len(scan.frames) - len(waterlines)
         if at_base:
             diag[m]["notes"] = list(diag[m].get("notes", [])) + [

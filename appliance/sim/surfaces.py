@@ -278,8 +278,59 @@ CONE = Surface(
     tags=("reference",))
 
 
+# -- parts whose steep faces hide their own waterlines from the camera ------------------
+
+
+def _soft_min(a, b, r):
+    """min(a, b) with the crease rounded over ~r mm of height: a rim the camera sees as a
+    smooth silhouette, as a machined edge with a small radius would be."""
+    return np.minimum(a, b) - r * np.log1p(np.exp(-np.abs(a - b) / r))
+
+
+def _battered(footprint, top, angle_deg, foot_mm=0.2, r=0.3):
+    """A tier whose walls lean in at `angle_deg` from the base (a batter): the top
+    `top(x, y)`, cut by a face rising from `foot_mm` at the footprint's edge."""
+    rise = np.tan(np.radians(angle_deg))
+    return lambda x, y: _soft_min(top(x, y), foot_mm + rise * footprint(x, y), r)
+
+
+_STEP_LOW = rect_sdf(8, 92, 10, 86)
+_STEP_HIGH = rect_sdf(44, 87, 20, 64)
+
+STEPPED_BLOCK = Surface(
+    "stepped-block", "a stepped block with 85 deg outer walls: a 12 mm tier and on it a nearly flat "
+    "plateau at ~30 mm, set off the camera's axis so that the walls facing away from it are hidden "
+    "by their own rims",
+    (8.0, 92.0, 10.0, 86.0),
+    (Tier(_STEP_LOW, _battered(_STEP_LOW, _tilted(12, 0.01, 0.005), 85.0)),
+     Tier(_STEP_HIGH, _battered(_STEP_HIGH, _tilted(30, 0.015, -0.01), 85.0))),
+    tags=("occluding",))
+
+
+def _blade_top(x, y):
+    # a blade along y on a 3.6 mm slab: its crest sweeps from x = 70 to 86 and rises along the
+    # span, its gentle flank steepens (a twist), its other flank falls at 84 deg towards +x,
+    # away from the camera; the ends taper over 10 mm
+    t = np.clip((y - 50) / 35, -1, 1)
+    xc = 78 + 8 * t
+    u = x - xc
+    h = 20 + 3 * t
+    gentle = h + (0.45 - 0.15 * t) * u
+    steep = h - np.tan(np.radians(84.0)) * u
+    ends = np.clip(np.minimum(y - 12, 88 - y) / 10, 0, 1)
+    ends = ends * ends * (3 - 2 * ends)
+    return 3.6 + ends * np.maximum(_soft_min(gentle, steep, 0.3), 0.0)
+
+
+BLADE = Surface(
+    "blade", "a twisted blade on a 3.6 mm slab: a swept crest 17-23 mm high, one gentle flank and one "
+    "at 84 deg facing away from the camera, which its crest hides",
+    (10.0, 95.0, 8.0, 92.0), (Tier(rect_sdf(10, 95, 8, 92), _blade_top),), tags=("occluding",))
+
+
 SURFACES = {s.name: s for s in (SAMPLE1, SAMPLE2, SAMPLE3, SAMPLE4,
-                                TWIN_PEAKS, RING, CRATER, STEEP_FRONT, STEPS, PLATEAU, SPHERE, CONE)}
+                                TWIN_PEAKS, RING, CRATER, STEEP_FRONT, STEPS, PLATEAU, STEPPED_BLOCK, BLADE,
+                                SPHERE, CONE)}
 DISSERTATION_SAMPLES = ("sample1", "sample2", "sample3", "sample4")
 
 

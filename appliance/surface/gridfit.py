@@ -259,6 +259,68 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
     return z, first, footprint
 
 
+def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, edge_mm: float = 0.0):
+    """Heights for the nodes of faces that came out of the ink all at once.
+
+    A face flatter than a level step per its width (a plateau, the top of a tier)
+    is under the ink at one frame and wholly out at the next: no waterline crosses
+    it, so first exposure has nothing to interpolate and the fit would extrapolate
+    into it from whatever lies around - rims, walls - by millimetres of thin plate.
+    What is sure is that it lies between the two levels. A node with no height yet
+    farther than far_mm from the frame above's waterline (that frame did not show
+    it, and not by a hair) and edge_mm inside its own (a node on the outline is on a
+    rim, whose first exposure is not sure) gets that bracket;
+    if it is also farther than far_mm from its own frame's level curve, the middle
+    of it as its height. A cap above the highest frame gets neither unless a frame
+    above showed nothing (its level then bounds the cap).
+    -> (z_fe with the middle filled in, mask of those nodes, (lo, hi) per node: the
+    bracket, NaN where none is sure)."""
+    K = len(slices)
+    z = z_fe.copy()
+    mask = np.zeros(lat.shape, bool)
+    lo = np.full(lat.shape, np.nan)
+    hi = np.full(lat.shape, np.nan)
+    # not the lowest frame's nodes: with no frame below it, a level curve there that
+    # stays put from the frame above (a sculptured top flattening out towards the rim)
+    # cannot be told from a wall, and the nodes beside it would look like a flat face
+    lowest = max(k for k, s in enumerate(slices) if not s.empty)
+    todo = ~np.isfinite(z_fe) & (first < lowest) & (first > 0)
+    if not todo.any():
+        return z, mask, (lo, hi)
+    X, Y = np.meshgrid(lat.x, lat.y)
+    for k in np.unique(first[todo]):
+        sel = todo & (first == k)
+        q = np.column_stack([X[sel], Y[sel]])
+        d_curve, _ = polyline_distance(slices[k].level_curve(), q)
+        d_above, _ = polyline_distance(slices[k - 1], q)
+        d_own, _ = polyline_distance(slices[k], q)
+        sure = (d_above > far_mm) & (d_own > edge_mm)
+        idx = np.flatnonzero(sel.ravel())
+        lo.ravel()[idx[sure]] = slices[k].level
+        hi.ravel()[idx[sure]] = slices[k - 1].level
+        mid = idx[sure & (d_curve > far_mm)]
+        z.ravel()[mid] = 0.5 * (slices[k].level + slices[k - 1].level)
+        mask.ravel()[mid] = True
+    return z, mask, (lo, hi)
+
+
+def occluded_nodes(lat: Lattice, seen: list[Slice], corrected: list[Slice]) -> np.ndarray:
+    """Nodes that some frame showed covered by a face standing above the ink.
+
+    Where a frame's waterline was a silhouette (slices.silhouettes), the camera saw
+    the face's rim and the ink or part behind it was hidden; with the rims put back,
+    the nodes between the rim as seen and the rim where it is are those it hid.
+    Their heights come from the frames that saw them, or from the fit. `seen` are
+    the slices as observed, `corrected` the same with their wall edges put back."""
+    out = np.zeros(lat.shape, bool)
+    for raw, cor in zip(seen, corrected):
+        hidden = cor.hidden
+        if raw.empty or hidden is None or not hidden.any():
+            continue
+        out |= exposed_mask(lat, raw) & ~exposed_mask(lat, cor)
+    return out
+
+
 def point_data(slices: list[Slice], spacing_mm: float):
     """Non-wall waterline points thinned to about `spacing_mm` along each loop."""
     xs, zs = [], []

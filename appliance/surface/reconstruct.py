@@ -31,12 +31,13 @@ from scipy import ndimage
 from ..errors import SettingError
 from . import seed as seed_methods
 from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
-                      first_exposure, point_data)
+                      first_exposure, flat_faces, occluded_nodes, point_data)
 from .heightmap import HeightMap
 from .meniscus import (bracket_dewetted_faces, contact_points, pinned_rims_as_walls, place_dewetted_faces,
                        top_from_apparent)
 from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
-from .slices import Perspective, check_waterlines, mark_walls, outline_bounds, unproject_rims
+from .slices import (Perspective, check_waterlines, mark_silhouettes, mark_walls, outline_bounds,
+                     unproject_rims)
 
 METHODS = ("fit",) + seed_methods.METHODS
 PASSES = 3   # with walls seen in perspective or a tank given: each later fit takes the true
@@ -163,13 +164,19 @@ def _bracket(z, first, slices, rise_max=0.0):
     return np.clip(z, lo_s[first], hi_s[first])
 
 
-def _fit_nodes(problem, z_nodes, pts, zp, length_mm, point_weight):
+def _fit_nodes(problem, z_nodes, pts, zp, length_mm, point_weight, prior=None):
+    """The regularised fit; `prior` (NaN where none): node heights for the faces nothing
+    else places (faces that came out at once: _flat_prior)."""
     lat = problem.lat
     lam = length_mm ** 4 / (lat.hx * lat.hy)     # data are one per node: density 1 / cell area
     blocks = [problem.node_rows(z_nodes, 1.0)]
     if point_weight > 0 and len(pts):
         blocks.append(problem.data_rows(pts, zp, point_weight))
-    return problem.solve(blocks, lam, x0=problem.gap_fill(z_nodes))
+    start = z_nodes
+    if prior is not None:
+        blocks.append(problem.node_rows(prior, FLAT_PRIOR_WEIGHT))
+        start = np.where(np.isfinite(z_nodes), z_nodes, prior)
+    return problem.solve(blocks, lam, x0=problem.gap_fill(start))
 
 
 def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
@@ -217,6 +224,10 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         rng = (1.0, 2.5) if levels is None else (0.75, 1.33)
         rng = rng if opt.tank_area_mm2 else (1.0, 1.0)
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm, opt.perspective, rng)
+        if levels is not None or not opt.tank_area_mm2:
+            # a ray's height above the ink is the level difference: with the ink still to be
+            # corrected for what the part displaces (first pass) it is not known well enough
+            diag["silhouette_points"] = mark_silhouettes(slices, opt.perspective)
         rise = float(opt.meniscus.rise(np.pi / 2)) if opt.meniscus is not None else 0.0
         rim_height = _rim_height(lat, z) if z is not None else None
         slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height, max(rise, 0.0), rng)
@@ -257,6 +268,11 @@ def _resample(old: Lattice, z, new: Lattice):
     return np.where(on & np.isfinite(v), v, np.nan).reshape(X.shape)
 
 
+FLAT_FAR_NODES = 3   # lattice spacings from any waterline: a node on a face that came out at once,
+FLAT_FAR_MM = 2.0    # and at least this far (a small part's fine lattice: sample 4's waterlines
+                     # a node or two apart on its 20 mm rims would take its faces for flat)
+FLAT_EDGE_MM = 0.5   # nor on the outline: sample 4's rim nodes first come out levels late
+FLAT_PRIOR_WEIGHT = 1.0    # such a node's mid-bracket height, as a first-exposure height weighs
 RIM_INSET = 2   # lattice nodes: nearer its outline than this the fit is extrapolating
 
 
@@ -289,6 +305,25 @@ def _rim_height(lat, z):
     return at
 
 
+def _flat_prior(z, z_mid, mid, flat):
+    """Mid-bracket heights for the faces that came out at once where the fit cannot place
+    them: a face (a connected patch of such nodes) on which the fit leaves the bracket
+    anywhere by more than a quarter of it has nothing to hold it (a plateau ringed by
+    walls: the thin plate took it 20 mm up). Where the fit stays inside, a slope it
+    continues from the waterlines around (a dome's corner between the last level
+    curve and the rim) knows better than the middle. None when no face needs it."""
+    if not mid.any():
+        return None
+    lo, hi = flat
+    slack = 0.25 * (hi - lo)
+    out = mid & ((z < lo - slack) | (z > hi + slack))
+    if not out.any():
+        return None
+    labels, _ = ndimage.label(mid)
+    bad = np.isin(labels, np.unique(labels[out]))
+    return np.where(bad, z_mid, np.nan)
+
+
 def _fit_pass(lat, slices, opt, ftol, length, rise):
     """First exposure and the fit (smoothing cross-validated on the first pass). With a
     meniscus the fit is of the contact lines - where the last pass's rise field says they
@@ -303,6 +338,9 @@ def _fit_pass(lat, slices, opt, ftol, length, rise):
     placed = z_fe
     if opt.meniscus is not None:
         placed = place_dewetted_faces(lat, z_fe, first, footprint, slices, opt.meniscus)
+    h = max(lat.hx, lat.hy)
+    z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, max(FLAT_FAR_NODES * h, FLAT_FAR_MM),
+                                  max(2 * h, FLAT_EDGE_MM))
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
     problem = FitProblem(lat, footprint)
@@ -313,13 +351,16 @@ def _fit_pass(lat, slices, opt, ftol, length, rise):
         if length is None:
             length = min(lat.hx, lat.hy)
     z = _fit_nodes(problem, placed, pts, zp, length, opt.point_weight)
+    prior = _flat_prior(z, z_mid, mid & ~np.isfinite(placed), flat)
+    if prior is not None:
+        z = _fit_nodes(problem, placed, pts, zp, length, opt.point_weight, prior)
     if opt.meniscus is not None:
         z = bracket_dewetted_faces(lat, z, z_fe, first, footprint, slices, opt.meniscus)
         top = top_from_apparent(lat, z, footprint, opt.meniscus)
         rise = top - z
         z = top
         _, slices = contact_points(observed, lat, rise, opt.meniscus)
-    return z, z_fe, first, footprint, slices, length, curve, rise
+    return z, z_fe, first, footprint, slices, length, curve, rise, flat
 
 
 def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None = None) -> Reconstruction:
@@ -355,23 +396,28 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     walls = camera is not None and any(s.wall.any() for s in slices if not s.empty)
     passes = PASSES if walls or opt.tank_area_mm2 or opt.meniscus is not None else 1
     z = rise = None
+    corrected = slices
     for _ in range(passes):
         if z is not None:
             # second pass: each wall edge's height and the emerged volume from the first fit
             true = diag["displacement"]["true_mm"] if "displacement" in diag else None
             slices = _corrected_levels(seen, opt, diag, lat, np.where(footprint, z, np.nan), true)
+            corrected = slices
             if auto_bounds:          # the outline is surer now: the grid follows it
                 grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
                 xo, yo = grid.axes()
                 diag["bounds"] = grid.bounds
                 old, (lat, r) = lat, _lattice_for(xo, yo, opt.lattice_max)
                 rise = None if rise is None else _resample(old, rise, lat)
-        z, z_fe, first, footprint, slices, length, cv, rise = _fit_pass(lat, slices, opt, ftol, length, rise)
+        z, z_fe, first, footprint, slices, length, cv, rise, flat = _fit_pass(lat, slices, opt, ftol, length, rise)
         curve = cv if cv is not None else curve
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
     rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
+    # a face that came out at once lies between its two levels, whatever the fit says
+    sure = np.isfinite(flat[0])
+    z[sure] = np.clip(z[sure], flat[0][sure], flat[1][sure] + rise_max)
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
@@ -388,6 +434,10 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     zo = np.where(fo, zo, np.nan)
     so = np.where(fo, so, np.nan)
     srco = np.where(fo, srco, -1).astype(np.int8)
+    # cells a face above the ink hid in some frame (their heights are from other frames)
+    occluded = occluded_nodes(lat, seen, corrected) & footprint
+    diag["occluded_nodes"] = int(occluded.sum())
+    diag["occluded_cells"] = (_to_output(lat, occluded.astype(float), r, xo, yo) > 0.5) & fo
     diag.update({"cross_validation": curve, "smoothing_mm": length,
                  "first_exposure_nodes": int(np.isfinite(z_fe).sum()),
                  "cap_nodes": int((footprint & (first == next(k for k, s in enumerate(slices)

@@ -1,0 +1,102 @@
+"""Occluded walls: parts whose steep faces hide their own waterlines from the camera.
+
+A wall steeper than the camera's ray (85 deg at 40 mm from the camera's foot, 300 mm
+up: the ray leans 7.6 deg) is seen from above by its rim, not by its waterline. Read as
+a waterline, the rim's silhouette claims the part stands where it only hides the ink.
+This bench renders the two parts built for it (appliance/sim/surfaces.py) and prints,
+per part and effects preset, our fit's Ea, the 99th percentile and the maximum of the
+error over the interior cells (those whose neighbours are all on the part too), and the
+share of cells the reconstruction marked as under an occluding face.
+
+    nice -n 10 .venv/bin/python benches/occlusion.py --keep /tmp/occl-cache
+    nice -n 10 .venv/bin/python benches/occlusion.py --effects clean --parts blade
+
+physics: the camera block in each scan.json is our calibration from rendered
+chessboards and the meniscus model comes from a rendered sphere scan (as in
+benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np                                          # noqa: E402
+from scipy import ndimage                                   # noqa: E402
+
+from appliance import process as proc                      # noqa: E402
+from appliance.sim import surfaces                          # noqa: E402
+from appliance.sim.scanrender import render_scan, scan_levels   # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from seed_table import calibrated_camera, calibrated_meniscus, use_camera   # noqa: E402
+
+PARTS = ("stepped-block", "blade")
+
+
+def tail(surface, hm):
+    """Ea over all cells, p99 and max over the interior cells, mm."""
+    X, Y = hm.grid()
+    on = surface.inside(X, Y)
+    err = np.abs(surface.height(X, Y) - hm.z)
+    ok = on & np.isfinite(err)
+    interior = ndimage.binary_erosion(on, np.ones((3, 3)), border_value=0) & ok
+    e = err[interior] if interior.any() else err[ok]
+    return float(err[ok].mean()), float(np.percentile(e, 99)), float(e.max()), int((on & ~np.isfinite(hm.z)).sum())
+
+
+def calibration(keep: Path, effects):
+    cam_file, men_file = keep / "camera.json", keep / "meniscus.json"
+    if not cam_file.is_file():
+        cam_file.write_text(json.dumps(calibrated_camera(keep)))
+    camera = json.loads(cam_file.read_text())
+    if not men_file.is_file():
+        calibrated_meniscus(keep, effects, camera)
+    return camera, men_file
+
+
+def run(part, effects, keep: Path, grid_n, step):
+    surface = surfaces.get(part)
+    folder = keep / f"{part}-{effects}-{step:g}"
+    t0 = time.perf_counter()
+    camera = meniscus = None
+    if effects == "physics":
+        camera, meniscus = calibration(keep, effects)
+    if not (folder / "scan.json").is_file():
+        render_scan(surface, folder, levels=scan_levels(surface, step), effects=effects, seed=1, workers=2)
+        if camera:
+            use_camera(folder, camera)
+    t1 = time.perf_counter()
+    job = proc.process(folder, grid_n=grid_n, truth=surface, meniscus=meniscus if meniscus else False)
+    t2 = time.perf_counter()
+    ea, p99, mx, holes = tail(surface, job.heightmap)
+    occ = job.diagnostics.get("fit", {}).get("occluded_nodes", 0)
+    print(f"  {part:<14} {effects:<8} Ea {ea:7.4f}  p99 {p99:7.3f}  max {mx:7.3f} mm  holes {holes:3d}  "
+          f"occluded nodes {occ:5d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)", flush=True)
+    return ea
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--effects", default="clean,physics")
+    ap.add_argument("--parts", default=",".join(PARTS))
+    ap.add_argument("--grid", type=int, default=50, help="output grid cells a side")
+    ap.add_argument("--step", type=float, default=1.0, help="level step, mm")
+    ap.add_argument("--keep", help="folder to keep rendered scans and calibrations in (and reuse)")
+    a = ap.parse_args()
+    print(f"occluded walls, {a.step:g} mm steps, {a.grid} x {a.grid} grid: errors of our fit against the true part")
+    with tempfile.TemporaryDirectory(prefix="occlusion-") as tmp:
+        keep = Path(a.keep or tmp)
+        keep.mkdir(parents=True, exist_ok=True)
+        for effects in a.effects.split(","):
+            for part in a.parts.split(","):
+                run(part, effects, keep, a.grid, a.step)
+
+
+if __name__ == "__main__":
+    main()
