@@ -319,7 +319,10 @@ def silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = SILHOU
         j = next((j for j in range(k - 1, -1, -1) if not slices[j].empty), None)
         if j is None or j < k - frames:
             continue
-        P = s.P[out[k]]
+        # (from the points no wall test found: a wall's edge lands beside the level curve
+        # points next to its rim in the frame above, which would be taken along)
+        src = out[k] & ~(s.edge if s.edge is not None else False)
+        P = s.P[src]
         Q = P + (C - P) * ((slices[j].level - s.level) / H)
         d, i = polyline_distance(slices[j], Q)
         out[j][i[d <= BACK_TOL_FACTOR * tol_mm]] = True   # two outlines' noise, not one ray's
