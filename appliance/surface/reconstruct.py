@@ -33,8 +33,8 @@ from . import seed as seed_methods
 from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
                       first_exposure, flat_faces, occluded_nodes, point_data)
 from .heightmap import HeightMap
-from .meniscus import (bracket_dewetted_faces, contact_points, pinned_rims_as_walls, place_dewetted_faces,
-                       top_from_apparent)
+from .meniscus import (bracket_dewetted_faces, contact_points, depression_depth, pinned_rims_as_walls,
+                       place_dewetted_faces, top_from_apparent)
 from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
 from .slices import (Perspective, check_waterlines, mark_silhouettes, mark_walls, outline_bounds,
                      unproject_rims)
@@ -416,8 +416,11 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     # a face that came out at once lies between its two levels, whatever the fit says
+    # (an ink that dewets stands its depression above a flat face it has just left: the
+    # face is that much below its levels, meniscus.place_dewetted_faces)
     sure = np.isfinite(flat[0])
-    z[sure] = np.clip(z[sure], flat[0][sure], flat[1][sure] + rise_max)
+    sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
+    z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + rise_max)
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
