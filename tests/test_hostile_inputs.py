@@ -224,7 +224,10 @@ CASES = [
          "prog.gcode: cuts 50"),
     Case("levels that contradict the frames (17 and 7 mm swapped)",
          scan_json(lambda d: (d["frames"][1].update(level_mm=7.0), d["frames"][6].update(level_mm=17.0))), P, 2,
-         "level 15 mm: shows 79 mm² of the part, less than the 532 mm² at 17 mm above it"),
+         # each frame is read beside the two below it (monotone exposure), so the swapped frames
+         # leave no confirmed part at 11 mm: the first contradiction seen from the top
+         "level 11 mm: no part visible although higher levels showed it: the part left the view, "
+         "a frame failed, or the frames contradict their levels"),
     Case("a frame symlinked outside the scan folder", symlink_frame_outside, P, 2,
          "0003.png: is a link to a file outside the scan folder"),
     # -- more of our own: scan.json ------------------------------------------------------------

@@ -159,7 +159,8 @@ def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
     for s in slices[first:]:
         if s.empty:
             raise InkSliceError(f"level {s.level:g} mm", "no part visible although higher levels "
-                                "showed it (part out of view or a failed frame)")
+                                "showed it: the part left the view, a frame failed, or the frames "
+                                "contradict their levels")
     _check_emerging(slices[first:])
     return slices, notes
 
