@@ -34,17 +34,14 @@ flat does between two levels and above the first frame.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from meniscus import commission, scan_part                 # noqa: E402
-from seed_table import calibrated_camera                    # noqa: E402
+from meniscus import bench_folder, commission, described, scan_part  # noqa: E402
 from uncertainty import honesty                            # noqa: E402
 from appliance.sim import surfaces                          # noqa: E402
 
@@ -59,15 +56,11 @@ def main():
                     help="render into DIR and reuse what is there (renders take minutes a part)")
     args = ap.parse_args()
     rows = []
-    with tempfile.TemporaryDirectory(prefix="harsh-bench-") as tmp:
-        tmp = Path(args.keep) if args.keep else Path(tmp)
-        tmp.mkdir(parents=True, exist_ok=True)
-        saved = tmp / "calibration.json"
-        camera = json.loads(saved.read_text()) if saved.is_file() else calibrated_camera(tmp)
+    with bench_folder(args.keep, "harsh-bench-") as (tmp, camera):
         t0 = time.perf_counter()
         meniscus, doc = commission(tmp, "harsh", camera)
         print(f"harsh: meniscus commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
-              + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in doc.items()),
+              + described(doc),
               flush=True)
         for name in args.parts.split(","):
             t0 = time.perf_counter()

@@ -41,6 +41,7 @@ face placement applies, so its figures (benches/seed_table.py --effects physics,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -103,6 +104,21 @@ def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None):
     return errors(surface, job.heightmap)
 
 
+@contextlib.contextmanager
+def bench_folder(keep, prefix):
+    """-> (folder, camera): where the renders go (kept when `keep` names a folder) and the camera
+    calibrated there from rendered chessboards, once per folder."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        tmp = Path(keep) if keep else Path(tmp)
+        tmp.mkdir(parents=True, exist_ok=True)
+        saved = tmp / "calibration.json"
+        yield tmp, (json.loads(saved.read_text()) if saved.is_file() else calibrated_camera(tmp))
+
+
+def described(doc: dict) -> str:
+    return ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in doc.items())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", default="physics,physics2")
@@ -111,16 +127,12 @@ def main():
                     help="render into DIR and reuse what is there (to compare corrections on the same scans)")
     args = ap.parse_args()
     rows = []
-    with tempfile.TemporaryDirectory(prefix="meniscus-bench-") as tmp:
-        tmp = Path(args.keep) if args.keep else Path(tmp)
-        tmp.mkdir(parents=True, exist_ok=True)
-        saved = tmp / "calibration.json"
-        camera = json.loads(saved.read_text()) if saved.is_file() else calibrated_camera(tmp)
+    with bench_folder(args.keep, "meniscus-bench-") as (tmp, camera):
         for model in args.models.split(","):
             t0 = time.perf_counter()
             meniscus, doc = commission(tmp, model, camera)
             print(f"\n{model}: commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
-                  + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in doc.items()),
+                  + described(doc),
                   flush=True)
             for name in args.parts.split(","):
                 t0 = time.perf_counter()
