@@ -21,6 +21,8 @@ APT_RUN=(python3 python3-venv python3-dev build-essential pkg-config
 # Needed by the test suite and the benches on top of that.
 APT_TEST=(libcmocka-dev clang libclang-rt-14-dev chromium chromium-driver
           systemd linuxcnc-uspace)
+# npm (for axe-core, below) only where no node toolchain is installed already
+[ "$want_test" = 1 ] && ! command -v npm >/dev/null 2>&1 && APT_TEST+=(npm)
 
 pkgs=("${APT_RUN[@]}")
 [ "$want_test" = 1 ] && pkgs+=("${APT_TEST[@]}")
@@ -55,4 +57,15 @@ if [ "$have" != "$sig test" ] && [ "$have" != "$sig $mode" ]; then
   .venv/bin/python -m pip install -q --require-hashes -r "$lock"
   .venv/bin/python -m pip install -q --no-deps -e .
   echo "$sig $mode" > "$stamp"
+fi
+
+# axe-core, the accessibility checker the browser tests run inside chromium, at the version and
+# integrity hash of tests/a11y/package-lock.json (npm ci checks it); skipped when already there.
+if [ "$want_test" = 1 ]; then
+  want_axe=$(sed -n 's/.*"axe-core": "\(.*\)".*/\1/p' tests/a11y/package.json)
+  have_axe=$(sed -n 's/^  "version": "\(.*\)".*/\1/p' tests/a11y/node_modules/axe-core/package.json 2>/dev/null || true)
+  if [ "$have_axe" != "$want_axe" ]; then
+    echo "setup: installing axe-core $want_axe into tests/a11y (pinned by its package-lock.json)"
+    (cd tests/a11y && npm ci --no-audit --no-fund --silent)
+  fi
 fi

@@ -66,7 +66,7 @@ DEFAULTS = {
 
 # Paths anyone may fetch: the login page itself, the static assets it needs, a
 # liveness probe for systemd/monitoring, and the API's description (not secret).
-PUBLIC_ENDPOINTS = {"pages.login", "static", "api.health", "api.openapi", "pages.api_docs"}
+PUBLIC_ENDPOINTS = {"pages.login", "static", "pages.favicon", "api.health", "api.openapi", "pages.api_docs"}
 
 CSP = ("default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
        "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'")

@@ -118,6 +118,12 @@ def _chessboard_files() -> dict:
             for kind in ("pdf", "png") if (static / f"chessboard.{kind}").is_file()}
 
 
+@bp.get("/favicon.ico")
+def favicon():
+    # what a browser asks for on a page without <link rel="icon"> (the JSON API's, a file view)
+    return current_app.send_static_file("favicon.svg")
+
+
 @bp.get("/api/docs")
 def api_docs():
     return render_template("api_docs.html", page="api")

@@ -1,0 +1,228 @@
+"""Every screen, at both sizes: the web UI in headless Chromium on a phone (390 x 844 at 3x) and a
+desktop (1280 x 900), on the daemon's real BenchService driving the in-memory bench (sim.fakes).
+
+Each screen in SCREENS is opened, made ready (its data loaded), screenshotted in full to
+tests/artifacts/web/screen-<size>-<name>.png, and must have:
+  - no horizontal overflow (nothing wider than the window);
+  - every control at least 44 x 44 CSS px (a checkbox through its label; a link inside a sentence
+    is exempt, as WCAG 2.5.8 exempts inline targets);
+  - a label on every control (a <label>, aria-label(ledby) or title; a button's or link's text);
+  - no console error;
+  - no serious or critical violation found by axe-core (installed from npm into tests/a11y by
+    scripts/setup.sh --test, run inside the same page).
+All screens are checked before the test fails, so one run lists every fault of every screen.
+
+A new screen is one more Screen(...) in SCREENS: a name, its path, and what "ready" means.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+webdriver = pytest.importorskip("selenium.webdriver")
+from selenium.webdriver.chrome.service import Service          # noqa: E402
+from selenium.webdriver.common.by import By                    # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait        # noqa: E402
+
+from appliance.daemon.service import BenchService               # noqa: E402
+from appliance.sim.fakes import FakeBench                       # noqa: E402
+from appliance.web.demo import start                            # noqa: E402
+from test_web_real_service import light_processor               # noqa: E402
+
+HERE = Path(__file__).parent
+ART = HERE / "artifacts" / "web"
+AXE = HERE / "a11y" / "node_modules" / "axe-core" / "axe.min.js"
+CHECKS = (HERE / "screen_checks.js").read_text()
+CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+SIZES = {"phone": dict(width=390, height=844, ratio=3.0), "desktop": dict(width=1280, height=900, ratio=1.0)}
+# a scan slow enough to be seen scanning (settle_s per level), quick enough for a test
+SCAN = {"name": "cone on the bench", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
+        "level_step_mm": 2.0, "settle_s": 0.5}
+
+if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
+    pytest.skip("Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
+                allow_module_level=True)
+if not AXE.is_file():
+    pytest.skip("axe-core not installed in tests/a11y (scripts/setup.sh --test installs it)", allow_module_level=True)
+
+
+def wait(d, cond, timeout=20, what=""):
+    return WebDriverWait(d, timeout, poll_frequency=0.05).until(lambda _: cond(), message=what)
+
+
+def loaded_img(d, css):
+    return d.execute_script(f"const i=document.querySelector({json.dumps(css)});"
+                            "return !!i && i.complete && i.naturalWidth > 0")
+
+
+def state_of(box):
+    return box["svc"].state()["state"]
+
+
+# -- the screens -------------------------------------------------------------------------------
+
+@dataclass
+class Screen:
+    name: str
+    path: Callable[[dict], str] | str
+    ready: Callable = lambda d, box: True           # waits until the screen shows its data
+    before: Callable = lambda d, box: None          # puts the bench in the state the screen shows
+    after: Callable = lambda d, box: None
+    console_ok: tuple = ()                          # console messages this screen expects (a refusal)
+    logged_in: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+def _scanning(d, box):
+    box["svc"].start_scan(SCAN)
+    wait(d, lambda: state_of(box) == "scanning", what="the scan starts")
+
+
+def _scan_done(d, box):
+    wait(d, lambda: state_of(box) == "done", timeout=60, what="the scan ends")
+    box["job_id"] = box["svc"].state()["job_id"]
+
+
+def _bench_ready(d, box):
+    wait(d, lambda: d.find_element(By.ID, "state").text.strip() not in ("", "…"), what="bench state shown")
+
+
+SCREENS = [
+    Screen("login", "/login", logged_in=False,
+           ready=lambda d, box: d.find_element(By.ID, "password")),
+    Screen("bench-idle", "/", ready=_bench_ready),
+    Screen("bench-scanning", "/", before=_scanning, after=_scan_done,
+           ready=lambda d, box: (_bench_ready(d, box),
+                                 wait(d, lambda: loaded_img(d, "#frame"), what="a camera frame"))),
+    Screen("bench-done", "/", ready=lambda d, box: wait(d, lambda: d.find_element(By.ID, "state").text.lower()
+                                                        == "done", what="done shown")),
+    Screen("jobs", "/jobs", ready=lambda d, box: d.find_element(By.ID, "jobs")),
+    Screen("job", lambda box: f"/jobs/{box['job_id']}",
+           ready=lambda d, box: (wait(d, lambda: loaded_img(d, "img.errimg"), what="error picture"),
+                                 wait(d, lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready")
+                                      in ("1", "error"), what="3D view"))),
+    Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
+    Screen("commission", "/commission", ready=lambda d, box: wait(
+        d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning step")),
+    Screen("calibration", "/calibration", ready=lambda d, box: wait(
+        d, lambda: d.find_element(By.ID, "cal-do").text.startswith("Do step"), what="calibration steps")),
+    Screen("api-docs", "/api/docs", ready=lambda d, box: wait(
+        d, lambda: len(d.find_elements(By.CSS_SELECTOR, ".api-op")) > 15, what="API docs")),
+]
+
+
+# -- the box and the browsers --------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("screens")
+    svc = BenchService(tmp / "data", FakeBench("cone"), processor=light_processor, panel_interval_s=0.05)
+    run = start(svc, tmp / "data")
+    ART.mkdir(parents=True, exist_ok=True)
+    yield {"url": run.url, "password": run.password, "svc": svc, "tmp": tmp}
+    run.stop()
+    svc.close()
+
+
+def make_driver(kind, tmp):
+    os.environ["SE_AVOID_STATS"] = "true"
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu", "--no-first-run",
+              "--disable-background-networking", "--disable-component-update", "--disable-sync",
+              "--enable-unsafe-swiftshader", f"--user-data-dir={tmp / ('profile-' + kind)}"):
+        opts.add_argument(a)
+    size = SIZES[kind]
+    if kind == "phone":
+        opts.add_experimental_option("mobileEmulation", {
+            "deviceMetrics": {"width": size["width"], "height": size["height"], "pixelRatio": size["ratio"],
+                              "touch": True},
+            "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
+                         "Chrome/120.0 Mobile Safari/537.36"})
+    else:
+        opts.add_argument(f"--window-size={size['width']},{size['height']}")
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(DRIVER), options=opts)
+
+
+def full_shot(d, kind, name) -> Path:
+    """The whole page, not just the window: Chromium renders beyond the viewport for the capture."""
+    import base64
+    path = ART / f"screen-{kind}-{name}.png"
+    got = d.execute_cdp_cmd("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": True})
+    path.write_bytes(base64.b64decode(got["data"]))
+    assert path.stat().st_size > 3000, path
+    return path
+
+
+def axe_violations(d) -> list[str]:
+    """axe-core's serious and critical findings on the page as it is now."""
+    if not d.execute_script("return !!window.axe"):
+        d.execute_script(AXE.read_text())
+    res = d.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        axe.run(document, {resultTypes: ['violations']}).then(r => done(r.violations.map(v => ({
+            id: v.id, impact: v.impact, help: v.help,
+            nodes: v.nodes.slice(0, 4).map(n => n.target.join(' '))}))), e => done([{id: 'axe-error',
+            impact: 'critical', help: String(e), nodes: []}]));""")
+    return [f"{v['id']} ({v['impact']}): {v['help']} at {', '.join(v['nodes'])}"
+            for v in res if v["impact"] in ("serious", "critical")]
+
+
+def console_errors(d, allowed) -> list[str]:
+    return [e["message"] for e in d.get_log("browser")
+            if e["level"] == "SEVERE" and not any(a in e["message"] for a in allowed)]
+
+
+def log_in(d, box):
+    d.get(box["url"] + "/login")
+    d.find_element(By.ID, "password").send_keys(box["password"])
+    d.find_element(By.ID, "login-button").click()
+    wait(d, lambda: d.find_elements(By.ID, "startstop"), what="logged in")
+
+
+def check_screen(d, kind, screen: Screen, box) -> list[str]:
+    path = screen.path(box) if callable(screen.path) else screen.path
+    screen.before(d, box)
+    d.get(box["url"] + path)
+    screen.ready(d, box)
+    time.sleep(0.3)                                 # late layout (images, fonts) settles
+    full_shot(d, kind, screen.name)
+    found = d.execute_script(CHECKS)
+    faults = [f"overflow: {x}" for x in found["overflow"]]
+    faults += [f"target under 44 px: {x}" for x in found["small"]]
+    faults += [f"no label: {x}" for x in found["unlabelled"]]
+    faults += [f"axe: {x}" for x in axe_violations(d)]
+    faults += [f"console: {x}" for x in console_errors(d, screen.console_ok)]
+    screen.after(d, box)
+    return [f"{kind} {screen.name}: {f}" for f in faults]
+
+
+@pytest.mark.parametrize("kind", list(SIZES))
+def test_every_screen_fits_is_labelled_and_passes_axe(box, kind, tmp_path):
+    d = make_driver(kind, tmp_path)
+    try:
+        d.get(box["url"] + "/login")
+        if kind == "phone":         # the layout is the phone's width at its pixel ratio
+            assert d.execute_script("return [window.innerWidth, window.devicePixelRatio]") == [390, 3]
+        faults, seen, logged_in = [], [], False
+        for screen in SCREENS:
+            if screen.logged_in and not logged_in:
+                log_in(d, box)
+                logged_in = True
+            faults += check_screen(d, kind, screen, box)
+            seen.append(screen.name)
+        assert seen == [s.name for s in SCREENS]
+        assert not faults, "\n".join(faults)
+    finally:
+        d.quit()
+        shutil.rmtree(tmp_path / f"profile-{kind}", ignore_errors=True)
