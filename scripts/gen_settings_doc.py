@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Writes docs/settings.md from the settings' own definitions.
 
-The daemon's settings (appliance/daemon/settings.py: DEFAULTS, HELP, CHOICES, INTS,
-RANGES) and the bench's wiring file (appliance/hw/devices.py: WIRING) are the truth;
+The daemon's settings (appliance/daemon/settings.py: SCHEMA, which also drives the
+daemon's validation, the web form and `inkslice settings`) and the bench's wiring file (appliance/hw/devices.py: WIRING) are the truth;
 this page is generated from them so it cannot drift. tests/test_docs.py fails when the
 committed page differs from what this script writes.
 
@@ -49,10 +49,12 @@ HEADER = """\
 
 ## The daemon's settings
 
-The box keeps one set of settings in its store. Change them on the web UI's Settings page, or
-with `PATCH /api/settings` and a JSON object of the keys to change (see docs/api/README.md). A
-scan may override any of them for itself (`POST /api/scan` with the keys in its body); the job
-keeps the settings it started with, so a resumed scan goes on the way it began.
+The box keeps one set of settings in its store. Change them on the web UI's Settings page (one
+section per group below), with `inkslice settings set KEY=VALUE ...`, or with `PATCH /api/settings`
+and a JSON object of the keys to change (see docs/api/README.md). All three are checked by the same
+code and refuse a bad value with the same sentence. A scan may override any of them for itself
+(`POST /api/scan` with the keys in its body); the job keeps the settings it started with, so a
+resumed scan goes on the way it began.
 
 A change is checked key by key and as a whole; a bad one is refused with one sentence naming the
 key, and nothing is changed. Beyond each key's own range:
@@ -62,8 +64,6 @@ key, and nothing is changed. Beyond each key's own range:
 - `step_min_mm` must not exceed `step_max_mm`;
 - a fixed-step scan may have at most {max_levels} levels.
 
-| setting | default | allowed | what it does |
-|---|---|---|---|
 """
 
 WIRING_HEADER = """
@@ -78,21 +78,16 @@ overwrites it. Restart the daemon after a change.
 """
 
 
-def allowed(key: str) -> str:
-    """The values a setting may take, as the validation in settings.py checks them."""
-    if key == "pipeline":
-        return "empty, " + ", ".join(f"`{p}`" for p in S.pipelines() if p)
-    if key == "method":
-        return "empty, " + ", ".join(f"`{m}`" for m in S.surface_methods() if m)
-    if key in S.CHOICES:
-        return ", ".join(f"`{c}`" for c in S.CHOICES[key])
-    if key in S.BOOLS:
-        return "true, false"
-    if key in S.INTS:
-        lo, hi = S.INTS[key]
-        return f"whole number, {lo} to {hi}"
-    lo, hi, lo_ok = S.RANGES[key]
-    return f"{'≥' if lo_ok else '>'} {lo:g}, ≤ {hi:g}"
+def allowed(s) -> str:
+    """The values a setting may take, as settings.validate checks them."""
+    if s.kind in ("choice", "bool"):
+        return ", ".join("empty" if c == "" else f"`{json.dumps(c) if isinstance(c, bool) else c}`"
+                         for c in s.allowed())
+    if s.kind == "text":
+        return s.pattern_says
+    if s.kind == "int":
+        return f"whole number, {s.lo} to {s.hi}"
+    return f"{'≥' if s.lo_ok else '>'} {s.lo:g}, ≤ {s.hi:g}"
 
 
 def shown(value) -> str:
@@ -109,8 +104,14 @@ def render() -> str:
     if unexplained:
         raise SystemExit(f"gen_settings_doc: wiring keys without a sentence here (or stale ones): {unexplained}")
     lines = [HEADER.format(max_levels=S.MAX_LEVELS)]
-    for key, default in S.DEFAULTS.items():
-        lines.append(f"| `{key}` | {shown(default)} | {allowed(key)} | {S.HELP[key]} |\n")
+    for gid, title in S.GROUPS:
+        lines.append(f"\n### {title}\n\n| setting | default | unit | allowed | what it does |\n|---|---|---|---|---|\n")
+        for st in (st for st in S.SCHEMA if st.group == gid):
+            lines.append(f"| `{st.key}` | {shown(st.default)} | {st.unit or '-'} | {allowed(st)} | "
+                         f"**{st.label}.** {st.help} |\n")
+        if gid == "security":
+            lines.append("\nThe admin password and the API tokens are kept by the web service itself "
+                         "(Settings page, Security section; docs/api/README.md).\n")
     lines.append(WIRING_HEADER)
     for key, default in WIRING.items():
         lines.append(f"| `{key}` | {shown(default)} | {WIRING_HELP[key]} |\n")

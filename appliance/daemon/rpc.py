@@ -38,7 +38,7 @@ METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file",
            "settings", "update_settings", "events",
            "live_heightmap", "calibration", "calibrate", "import_scan",
            "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
-           "usb_sticks", "export_to_usb")
+           "usb_sticks", "export_to_usb", "backup", "restore", "system")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
@@ -232,6 +232,9 @@ class BenchClient:
     def import_commissioning(self, doc): return self._call("import_commissioning", doc)
     def ink_changed(self): return self._call("ink_changed")
     def usb_sticks(self): return self._call("usb_sticks")
+    def backup(self): return self._call("backup")
+    def restore(self, doc): return self._call("restore", doc)
+    def system(self): return self._call("system")
 
     def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):
         return self._call("export_to_usb", job_id, name, stick, release)

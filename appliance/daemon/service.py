@@ -23,6 +23,11 @@ Beyond the facade, what the web UI offers when a service has it:
                             processed (importing.py checks and copies it)
     usb_sticks(), export_to_usb(job_id, name, stick)   the sticks plugged in, and a verified
                             copy of a job's file onto one (the web has no device access)
+    backup(), restore(doc)  the settings and calibration history as one document (backup.py)
+    system()                version, uptime, the data disk, the last webhook delivery
+
+A job that ends done or failed, and an interrupted scan found at start, are also sent to the
+webhook setting's address (webhook.py).
 
 Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
@@ -49,6 +54,7 @@ from ..hw.base import HumanOperator
 from ..hw.devices import Devices
 from ..hw.usb import NoStick
 from ..scanfile import load_scan
+from . import backup as backups
 from . import importing, processing
 from . import settings as S
 from .calibration import GuidedCalibration
@@ -61,6 +67,7 @@ from .processing import PROGRAM, child_process
 from .recovery import recover
 from .runner import ScanRunner, free_mb
 from .store import ACTIVE, DiskFull, Store
+from .webhook import Webhook
 
 log = logging.getLogger("inkslice.service")
 STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
@@ -76,6 +83,13 @@ def lan_address() -> str:
             return s.getsockname()[0]
     except OSError:
         return "no network"
+
+
+def _box_uptime() -> float | None:
+    try:
+        return float(Path("/proc/uptime").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class BenchService:
@@ -103,11 +117,16 @@ class BenchService:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._closing = threading.Event()
+        self._started = time.time()
+        self.webhook = Webhook(self.settings)
         self.interrupted = recover(self.store)
         if self.interrupted:
             last = self.store.get_job(self.interrupted[0])
             self._state.update(state="failed", job_id=last["id"], message=last["reason"],
                                levels_done=last["levels_done"], levels_total=last["levels_total"])
+            if not self.settings()["auto_resume"]:
+                self.webhook.send("needs_attention", last, f"the scan was interrupted ({last['reason']}); "
+                                                           "resume it or start again")
         self._panel = self._open_panel()
         self._commissioning = Commissioning(self.store, self._commissioning_hooks())
         self._panel_thread = threading.Thread(target=self._panel_loop, args=(panel_interval_s,),
@@ -478,6 +497,29 @@ class BenchService:
             return self._notify(usb_notice("still_mounted", name=result.name, problem=result.unmount_problem))
         return self._notify(usb_notice("copied", name=result.name))
 
+    # -- the system page: backup and restore, the box's figures ------------------------------
+    def backup(self) -> dict:
+        """The settings and the calibration history as one document (backup.py)."""
+        return backups.backup(self.store)
+
+    def restore(self, doc: dict) -> dict:
+        """Replace the settings and calibration history by a backup's; refused while the bench works."""
+        with self._lock:
+            self._refuse_if_busy()
+            if self._commissioning.session is not None:
+                raise SettingError("restore", "a commissioning step is in progress; finish or cancel it first")
+            out = backups.restore(self.store, doc)
+        self._set(message="settings and calibration restored from a backup")
+        return out
+
+    def system(self) -> dict:
+        usage = shutil.disk_usage(self.data_dir)
+        from .. import __version__
+        return {"version": __version__, "daemon_started": self._started,
+                "daemon_uptime_s": round(time.time() - self._started, 1), "box_uptime_s": _box_uptime(),
+                "disk": {"path": str(self.data_dir), "total_bytes": usage.total, "free_bytes": usage.free},
+                "jobs": len(self.store.list_jobs()), "webhook": self.webhook.last()}
+
     def close(self) -> None:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
         if self._calibration is not None:
@@ -523,9 +565,12 @@ class BenchService:
 
     def _set(self, **changes):
         with self._lock:
+            before = self._state["state"]
             self._state.update(changes)
             snap = copy.deepcopy(self._state)
             subs = list(self._subscribers)
+        if before in ACTIVE and snap["state"] in ("done", "failed"):
+            self._job_ended(snap)
         for q in subs:
             try:
                 q.put_nowait(snap)
@@ -581,6 +626,19 @@ class BenchService:
                 self._devices = None
             devices.close()
             self._set(**final)
+
+    def _job_ended(self, st):
+        """A job just finished or failed: the webhook hears of it (a cancel was someone's choice)."""
+        try:
+            job = self.store.get_job(st["job_id"]) if st["job_id"] else None
+        except InkSliceError:
+            job = None
+        if job is not None and job["params"].get("reference"):
+            return                                  # commissioning's own scan: the page follows it
+        event = "finished" if st["state"] == "done" else "failed"
+        text = (f"{(job or {}).get('name') or 'the job'} is done" if event == "finished"
+                else (job or {}).get("reason") or st.get("message") or "the job failed")
+        self.webhook.send(event, job, text)
 
     def _note_fault(self, reason):
         for name in ("stage", "camera", "disk", "light"):

@@ -231,6 +231,17 @@ class Store:
             rows = self._db.execute("SELECT time, data FROM calibration ORDER BY id DESC").fetchall()
         return [{"time": r["time"], **json.loads(r["data"])} for r in rows]
 
+    def replace_calibrations(self, records: list[dict]):
+        """The whole calibration history replaced at once (a restored backup): `records` as
+        calibrations() returns them, newest first. One transaction: all or nothing."""
+        rows = [(float(r["time"]), json.dumps({k: v for k, v in r.items() if k != "time"}))
+                for r in reversed(records)]             # oldest first, so the newest gets the highest id
+        with self._lock:
+            if self._unwritten or self._unwritten_events:
+                self.flush_unwritten()
+            self._write([("DELETE FROM calibration", ())] +
+                        [("INSERT INTO calibration (time, data) VALUES (?, ?)", row) for row in rows])
+
     # -- events -------------------------------------------------------------------
     def event(self, job_id, kind, message):
         """Logged now, or (the disk full) kept in memory and written with the next write that fits."""

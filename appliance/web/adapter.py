@@ -11,6 +11,7 @@ when a service lacks them, so the UI can hide a feature instead of failing:
   import_commissioning(doc), ink_changed()   commissioning (daemon/commissioning.py)
   import_scan(folder)    an uploaded scan folder becomes a job
   usb_sticks(), export_to_usb(job_id, name, stick)   the daemon copies a job's file to a stick
+  backup(), restore(doc), system()   the system page (daemon/backup.py, BenchService.system)
 
 If the daemon's real API drifts from the facade, the translation goes here
 and nowhere else.
@@ -185,6 +186,18 @@ class WebService:
 
     def export_to_usb(self, job_id: str, name: str, stick: str | None) -> dict:
         return self._optional("export_to_usb", job_id, name, stick)
+
+    def backup(self) -> dict:
+        return self._optional("backup")
+
+    def restore(self, doc: dict) -> dict:
+        try:
+            return self._optional("restore", doc)
+        finally:
+            self._drop_cache()
+
+    def system(self) -> dict:
+        return self._optional("system")
 
     @staticmethod
     def _job(j: dict) -> dict:

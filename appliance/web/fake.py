@@ -30,22 +30,11 @@ import cv2
 import numpy as np
 
 from ..atomicio import write_bytes, write_json, write_text
+from ..daemon import settings as S
 from ..errors import DeviceError, InkSliceError, SettingError
 
-DEFAULT_SETTINGS = {
-    "level_step_mm": 0.5,
-    "levels_from_mm": 0.0,
-    "levels_to_mm": 20.0,
-    "cutter_type": "ball",
-    "cutter_diameter_mm": 6.0,
-    "stepover_mm": 1.0,
-    "feed_mm_min": 800.0,
-    "dialect": "linuxcnc",
-    "envelope_x_mm": 200.0,
-    "envelope_y_mm": 150.0,
-    "envelope_z_mm": 60.0,
-}
-CHOICES = {"cutter_type": ("ball", "flat"), "dialect": ("linuxcnc", "grbl", "fanuc")}
+# The daemon's own settings schema: the fake refuses and accepts exactly what the daemon does.
+DEFAULT_SETTINGS = dict(S.DEFAULTS)
 DIALECT_FILES = {"linuxcnc": "toolpath-linuxcnc.ngc", "grbl": "toolpath-grbl.nc", "fanuc": "toolpath-fanuc.nc"}
 TANK_MM = 60.0          # the simulated camera sees a 60 x 60 mm patch
 DOME_H = 20.0           # dome height, mm
@@ -58,26 +47,7 @@ def dome(x, y):
 
 
 def validate_settings(current: dict, changes: dict) -> dict:
-    if not isinstance(changes, dict):
-        raise SettingError("settings", "changes must be an object of key: value")
-    new = dict(current)
-    for key, value in changes.items():
-        if key not in DEFAULT_SETTINGS:
-            raise SettingError(key, "unknown setting")
-        if key in CHOICES:
-            if value not in CHOICES[key]:
-                raise SettingError(key, f"must be one of {', '.join(CHOICES[key])}, got {value!r}")
-        else:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise SettingError(key, f"must be a number, got {value!r}")
-            if value < 0 or (value == 0 and key != "levels_from_mm"):
-                raise SettingError(key, f"must be positive, got {value!r}")
-        new[key] = value
-    if new["levels_to_mm"] <= new["levels_from_mm"]:
-        raise SettingError("levels_to_mm", "must be above levels_from_mm")
-    if new["levels_to_mm"] > new["envelope_z_mm"]:
-        raise SettingError("levels_to_mm", "above the machine envelope's Z travel")
-    return new
+    return S.validate(current, changes)
 
 
 class FakeBenchService:
