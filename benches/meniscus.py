@@ -88,15 +88,16 @@ def errors(surface, hm, inset_mm=3.0):
     return float(e_all.mean()), float(np.percentile(e_in, 99)), float(e_all.max())
 
 
-def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None):
-    """-> (Ea, interior p99, max) in mm; the height map is appended to `maps` when given."""
+def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_above=False, seed=1):
+    """-> (Ea, interior p99, max) in mm; the height map is appended to `maps` when given.
+    `from_above`: the scan starts at an empty frame above the top, as the daemon's does."""
     surface = surfaces.get(name)
-    folder = tmp / f"{name}-{model}"
+    folder = tmp / (f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else ""))
     e = effects_preset(model)
     below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
     if not (folder / "scan.json").is_file():
-        render_scan(surface, folder, levels=sculpture_levels(surface, step, max(below, 0.0)), effects=model,
-                    seed=1, workers=2)
+        render_scan(surface, folder, levels=sculpture_levels(surface, step, max(below, 0.0), from_above),
+                    effects=model, seed=seed, workers=2)
         use_camera(folder, camera)
     job = proc.process(folder, meniscus=meniscus)
     if maps is not None:

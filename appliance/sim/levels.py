@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 
-def sculpture_levels(surface, step, below_mm=0.0):
+def sculpture_levels(surface, step, below_mm=0.0, from_above=False):
     """The dissertation's practice: one picture per step from the first in which the top
     shows, down to the first in which the whole sculptured top stands above the ink.
 
@@ -11,7 +11,12 @@ def sculpture_levels(surface, step, below_mm=0.0):
     only the block's walls again. With a meniscus the ink clings to the top until
     it is the rise below it: `below_mm` more (the rise on a wall, ~3.8 mm for
     water) keeps the scan going until the whole top is really out.
+
+    `from_above` starts as the daemon does instead: from the first level above the top,
+    a frame that shows no part (the daemon descends from the first level that shows none).
+    A top that lies on a level then has a frame above it that bounds it.
     """
     from .scanrender import scan_levels
     lowest = surface.z_min_top - step - below_mm
-    return [lv for lv in scan_levels(surface, step) if lowest <= lv < surface.z_max]
+    highest = float("inf") if from_above else surface.z_max
+    return [lv for lv in scan_levels(surface, step) if lowest <= lv < highest]
