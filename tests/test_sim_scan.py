@@ -12,6 +12,7 @@ from appliance.sim import surfaces as S
 from appliance.sim.camera import VirtualCamera
 from appliance.sim.render import Effects, render_frame
 from appliance.sim.rig import Rig
+from appliance.sim.levels import sculpture_levels
 from appliance.sim.scanrender import render_scan, scan_levels, truth_path
 
 
@@ -21,6 +22,14 @@ def test_levels_run_from_above_the_top_down_to_the_base():
     assert lv[-1] == 1.0 and all(a - b == 1.0 for a, b in zip(lv, lv[1:]))
     lv = scan_levels(S.get("cone"), 2.5)
     assert lv[0] == 25.0 and min(lv) >= 0.5 and min(lv) < 3.0
+
+
+def test_a_bench_scan_from_above_starts_with_a_frame_that_shows_no_part():
+    plateau = S.get("plateau")                   # its flat top lies on a level (25 mm)
+    dissertation = sculpture_levels(plateau, 1.0)
+    daemon_like = sculpture_levels(plateau, 1.0, from_above=True)
+    assert dissertation[0] < plateau.z_max == 25.0           # the top is above the first frame
+    assert daemon_like[:2] == [26.0, 25.0] and daemon_like[2:] == dissertation
 
 
 def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
