@@ -103,13 +103,15 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         d.find_element(By.ID, "login-button").click()
         wait(d, lambda: d.find_elements(By.ID, "startstop"), what="dashboard")
         btn = d.find_element(By.ID, "startstop")
-        wait(d, lambda: btn.is_enabled() and btn.text == "Start scan", what="start button ready")
+        wait(d, lambda: btn.is_enabled() and btn.text == "Start scan…", what="start button ready")
         if kind == "phone":
             # the big button fills the phone's width and is a comfortable thumb target
             assert btn.size["width"] >= 330 and btn.size["height"] >= 50
 
-        # -- start, and watch progress advance through the live stream (SSE)
+        # -- start (confirmed), and watch progress advance through the live stream (SSE)
         btn.click()
+        wait(d, lambda: d.find_element(By.ID, "confirm").is_displayed(), what="start confirmation")
+        d.find_element(By.ID, "confirm-start").click()
         wait(d, lambda: btn.text == "Stop scan", what="scan started")
         prog = d.find_element(By.ID, "progress")
         seen = []
@@ -173,7 +175,8 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         a = d.find_element(By.CSS_SELECTOR, 'a[data-file="toolpath.gcode"]')
         d.execute_script("arguments[0].scrollIntoView()", a)
         a.click()
-        target = downloads / "toolpath.gcode"
+        target = downloads / a.get_attribute("download")            # named for the job
+        assert target.name.endswith(f"-{job_id.split('-')[1]}-toolpath.gcode"), target.name
         wait(d, lambda: target.exists() and not list(downloads.glob("*.crdownload")), what="download finished")
         assert target.read_bytes() == box["svc"].job_file(job_id, "toolpath.gcode").read_bytes()
 

@@ -96,20 +96,40 @@ def _bench_ready(d, box):
     wait(d, lambda: d.find_element(By.ID, "state").text.strip() not in ("", "…"), what="bench state shown")
 
 
+def _previewing(d, box):
+    _bench_ready(d, box)
+    wait(d, lambda: loaded_img(d, "#frame"), what="the live preview")
+    wait(d, lambda: "Light on" in d.find_element(By.ID, "machine-status").text, what="the light on")
+
+
+def _confirming(d, box):
+    _bench_ready(d, box)
+    d.find_element(By.ID, "startstop").click()
+    wait(d, lambda: d.find_element(By.ID, "confirm").is_displayed(), what="the start confirmation")
+
+
+def _deleting(d, box):
+    d.find_element(By.ID, "delete").click()
+    wait(d, lambda: d.find_element(By.ID, "delete-confirm").is_displayed(), what="the delete confirmation")
+
+
 SCREENS = [
     Screen("login", "/login", logged_in=False,
            ready=lambda d, box: d.find_element(By.ID, "password")),
-    Screen("bench-idle", "/", ready=_bench_ready),
+    Screen("bench-idle", "/", ready=_previewing),
+    Screen("bench-confirm-start", "/", ready=_confirming,
+           after=lambda d, box: d.find_element(By.ID, "confirm-back").click()),
     Screen("bench-scanning", "/", before=_scanning, after=_scan_done,
            ready=lambda d, box: (_bench_ready(d, box),
                                  wait(d, lambda: loaded_img(d, "#frame"), what="a camera frame"))),
     Screen("bench-done", "/", ready=lambda d, box: wait(d, lambda: d.find_element(By.ID, "state").text.lower()
                                                         == "done", what="done shown")),
-    Screen("jobs", "/jobs", ready=lambda d, box: d.find_element(By.ID, "jobs")),
+    Screen("jobs", "/jobs", ready=lambda d, box: wait(d, lambda: loaded_img(d, "img.thumb"), what="thumbnails")),
     Screen("job", lambda box: f"/jobs/{box['job_id']}",
            ready=lambda d, box: (wait(d, lambda: loaded_img(d, "img.errimg"), what="error picture"),
                                  wait(d, lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready")
                                       in ("1", "error"), what="3D view"))),
+    Screen("job-delete", lambda box: f"/jobs/{box['job_id']}", ready=_deleting),
     Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
     Screen("commission", "/commission", ready=lambda d, box: wait(
         d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning step")),

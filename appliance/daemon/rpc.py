@@ -38,12 +38,14 @@ METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file",
            "settings", "update_settings", "events",
            "live_heightmap", "calibration", "calibrate", "import_scan",
            "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
-           "usb_sticks", "export_to_usb", "backup", "restore", "system")
+           "usb_sticks", "export_to_usb", "backup", "restore", "system",
+           "preview", "home_stage", "jog", "goto_level", "rename_job", "delete_job", "reprocess", "job_sizes")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
               "commission": 600.0,                                          # the search for level zero,
-              "export_to_usb": 180.0}                                       # a copy, read back, unmount
+              "export_to_usb": 180.0,                                       # a copy, read back, unmount
+              "home_stage": 90.0, "goto_level": 90.0, "jog": 60.0}          # the panel's moves
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -235,6 +237,14 @@ class BenchClient:
     def backup(self): return self._call("backup")
     def restore(self, doc): return self._call("restore", doc)
     def system(self): return self._call("system")
+    def preview(self): return self._call("preview")
+    def home_stage(self): return self._call("home_stage")
+    def jog(self, mm): return self._call("jog", mm)
+    def goto_level(self, level_mm): return self._call("goto_level", level_mm)
+    def rename_job(self, job_id, name): return self._call("rename_job", job_id, name)
+    def delete_job(self, job_id): return self._call("delete_job", job_id)
+    def reprocess(self, job_id, changes=None): return self._call("reprocess", job_id, changes)
+    def job_sizes(self): return self._call("job_sizes")
 
     def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):
         return self._call("export_to_usb", job_id, name, stick, release)

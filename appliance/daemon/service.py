@@ -25,6 +25,9 @@ Beyond the facade, what the web UI offers when a service has it:
                             copy of a job's file onto one (the web has no device access)
     backup(), restore(doc)  the settings and calibration history as one document (backup.py)
     system()                version, uptime, the data disk, the last webhook delivery
+    preview(), home_stage(), jog(mm), goto_level(level_mm)   the bench page's machine panel between
+                            scans (manual.py); refused while a scan, calibration or commissioning runs
+    rename_job(job_id, name), delete_job(job_id), reprocess(job_id, changes)   the job manager
 
 A job that ends done or failed, and an interrupted scan found at start, are also sent to the
 webhook setting's address (webhook.py).
@@ -59,8 +62,10 @@ from . import importing, processing
 from . import settings as S
 from .calibration import GuidedCalibration
 from .commissioning import Commissioning, reference_processor
+from .eta import JobTimes
 from .firstrun import Pending
 from .livemap import LiveMap
+from .manual import ManualSession
 from .notices import usb_notice
 from .levels import LevelPlan
 from .processing import PROGRAM, child_process
@@ -108,8 +113,9 @@ class BenchService:
         self._calibration: GuidedCalibration | None = None
         self._lock = threading.RLock()
         self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
-                       "levels_total": 0, "eta_s": None, "message": "ready", "hardware": {},
-                       "notice": None}
+                       "levels_total": 0, "eta_s": None, "eta_processing_s": None, "message": "ready",
+                       "hardware": {}, "notice": None,
+                       "manual": {"open": False, "light": False, "homed": False, "level_mm": None}}
         self._subscribers: list[queue.Queue] = []
         self._frame = None
         self._job_settings = {}
@@ -129,6 +135,9 @@ class BenchService:
                                                            "resume it or start again")
         self._panel = self._open_panel()
         self._commissioning = Commissioning(self.store, self._commissioning_hooks())
+        self._times = JobTimes(self.data_dir)
+        self._sizes: dict[str, tuple] = {}          # job id -> ((status, finished), bytes on disk)
+        self._manual = ManualSession(self._open_for_panel, self.settings, self._show_frame, self._manual_report)
         self._panel_thread = threading.Thread(target=self._panel_loop, args=(panel_interval_s,),
                                               name="inkslice-panel", daemon=True)
         self._panel_thread.start()
@@ -260,6 +269,7 @@ class BenchService:
         with self._lock:
             if self._calibration is None:
                 def open_devices():
+                    self._manual.close()            # the panel's session gives the devices back
                     return self.factory.open(self.settings(), self._calibration_params())
                 self._calibration = GuidedCalibration(open_devices, self.store, self.settings(),
                                                       show_frame=self._show_frame, operator=self._panel.operator,
@@ -324,6 +334,121 @@ class BenchService:
             self.store.event(None, "calibration", "guided calibration cancelled; the bench is free")
         return cal.describe()
 
+    # -- the machine panel (manual.py) ------------------------------------------------------
+    def preview(self) -> dict:
+        """Keep the panel's session and its light on; a fresh frame in latest_frame(). Returns
+        the panel's status ({"open", "light", "homed", "level_mm"}), also in state()["manual"].
+        While a scan (or calibration, commissioning) holds the bench its own frames are the
+        preview: the status then says why the panel is closed ("busy") instead of refusing."""
+        try:
+            return self._machine(self._manual.preview)
+        except DeviceError as e:
+            if self._manual.active or not self._bench_taken():
+                raise
+            return {**self._manual.status(), "busy": e.problem}
+
+    def home_stage(self) -> dict:
+        return self._machine(self._manual.home)
+
+    def jog(self, mm: float) -> dict:
+        """Lift the base by mm (negative: lower it), mm one of manual.JOG_STEPS_MM."""
+        return self._machine(self._manual.jog, mm)
+
+    def goto_level(self, level_mm: float) -> dict:
+        return self._machine(self._manual.goto, level_mm)
+
+    def _bench_taken(self) -> bool:
+        return bool((self._thread is not None and self._thread.is_alive())
+                    or (self._calibration is not None and self._calibration.active)
+                    or self._commissioning.holds_bench)
+
+    def _machine(self, action, *args) -> dict:
+        with self._lock:
+            if self._thread is not None and self._thread.is_alive():
+                raise DeviceError("stage", f"a scan is running ({self._state['job_id']}); the panel's "
+                                           "controls wait until it has finished")
+            if self._calibration is not None and self._calibration.active:
+                raise DeviceError("stage", "a guided calibration holds the bench; finish or cancel it first")
+            if self._commissioning.holds_bench:
+                raise DeviceError("stage", f"the commissioning step {self._commissioning.session.step!r} "
+                                           "holds the bench; finish or cancel it first")
+        try:
+            return action(*args)
+        except DeviceError as e:
+            self._note_fault(f"{e.where}: {e.problem}")
+            raise
+
+    def _open_for_panel(self):
+        return self.factory.open(self.settings(), self._calibration_params())
+
+    def _manual_report(self, status, hardware):
+        with self._lock:
+            changes = {}
+            if status is not None:
+                changes["manual"] = status
+            if hardware:
+                changes["hardware"] = {**self._state["hardware"], **hardware}
+            if changes:
+                self._set(**changes)
+
+    # -- the job manager -----------------------------------------------------------------
+    def rename_job(self, job_id: str, name: str) -> dict:
+        name = " ".join(str(name or "").split())[:80]
+        if not name:
+            raise SettingError("name", "a job needs a name (1 to 80 characters)")
+        self.store.get_job(job_id)
+        self.store.update_job(job_id, name=name)
+        self.store.event(job_id, "renamed", f"renamed {name!r}")
+        return self.job(job_id)
+
+    def delete_job(self, job_id: str) -> None:
+        """The job's record and its whole folder (scan, outputs). Not while it runs."""
+        with self._lock:
+            job = self.store.get_job(job_id)
+            running = self._thread is not None and self._thread.is_alive() and self._state["job_id"] == job_id
+            if running or job["status"] in ACTIVE and self._state["job_id"] == job_id:
+                raise DeviceError("job", f"job {job_id} is {job['status']}; stop it first")
+            self.store.delete_job(job_id)
+            shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
+            self._sizes.pop(job_id, None)
+            if self._state["job_id"] == job_id:
+                self._set(job_id=None, state="idle", message="ready", levels_done=0, levels_total=0, eta_s=None)
+        log.info("job %s deleted", job_id)
+
+    def reprocess(self, job_id: str, changes: dict | None = None) -> str:
+        """Process a kept scan again with other settings (the job's own, changed by `changes`);
+        the job's outputs are replaced. Returns the job id at once, like import_scan."""
+        changes = dict(changes or {})
+        for key in changes:
+            if key not in S.DEFAULTS:
+                raise SettingError(key, "unknown setting")
+        with self._lock:
+            self._refuse_if_busy()
+            job = self.store.get_job(job_id)
+            if job["status"] in ACTIVE:
+                raise DeviceError("job", f"job {job_id} is {job['status']}; stop it first")
+            if not (self.store.job_dir(job_id) / "scan" / "scan.json").is_file():
+                raise SettingError("job", f"job {job_id} kept no scan to process")
+            settings = S.validate(S.full(job["settings"]), changes)
+            self.store.update_job(job_id, status="processing", settings=settings, reason="", finished=None,
+                                  interrupted=0)
+            self.store.event(job_id, "reprocess", "processed again" + (f" with {changes}" if changes else ""))
+            self._sizes.pop(job_id, None)
+            self._launch_import(job_id)
+            return job_id
+
+    def job_sizes(self) -> dict[str, int]:
+        """Bytes on disk per job (its folder), counted once per finished job."""
+        out = {}
+        for job in self.store.list_jobs():
+            key = (job["status"], job["finished"])
+            hit = self._sizes.get(job["id"])
+            if hit is None or hit[0] != key or job["status"] in ACTIVE:
+                hit = (key, _folder_bytes(self.store.job_dir(job["id"])))
+                self._sizes[job["id"]] = hit
+            out[job["id"]] = hit[1]
+        return out
+
     # -- commissioning (commissioning.py) ------------------------------------------------
     def commissioning(self) -> dict:
         """Every step's result in force with its date, the step in progress, the last ink change."""
@@ -357,6 +482,7 @@ class BenchService:
 
             @staticmethod
             def open_devices():
+                service._manual.close()             # the panel's session gives the devices back
                 return service.factory.open(service.settings(), {})
 
             settings = staticmethod(self.settings)
@@ -418,13 +544,17 @@ class BenchService:
     def _launch_import(self, job_id):
         job = self.store.get_job(job_id)
         self._stop.clear()
+        expected = self._times.processing_s(job["levels_total"])
         self._set(state="processing", job_id=job_id, level_mm=None, levels_done=job["levels_total"],
-                  levels_total=job["levels_total"], eta_s=None, message="processing the imported scan")
+                  levels_total=job["levels_total"], eta_s=None if expected is None else round(expected, 1),
+                  eta_processing_s=expected, message="processing the scan again" if not job["params"].get(
+                      "imported") else "processing the imported scan")
         self._thread = threading.Thread(target=self._run_import, args=(job_id,), name=f"import-{job_id}",
                                         daemon=True)
         self._thread.start()
 
     def _run_import(self, job_id):
+        self._manual.close()
         job = self.store.get_job(job_id)
         try:
             self.store.update_job(job_id, status="processing")
@@ -522,6 +652,7 @@ class BenchService:
 
     def close(self) -> None:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
+        self._manual.close()
         if self._calibration is not None:
             self._calibration.close()
         self._commissioning.close()
@@ -587,6 +718,7 @@ class BenchService:
         self._thread.start()
 
     def _run_job(self, job_id):
+        self._manual.close()                        # a panel session gives the stage and camera back
         job = self.store.get_job(job_id)
         self._job_settings = job["settings"]
         try:
@@ -604,14 +736,18 @@ class BenchService:
         self._set(hardware={**self._state["hardware"], **devices.hardware})
         self._devices = devices
         final = {}
+        clock = _JobClock(self._times, fresh=job["levels_done"] == 0)
 
         def report(**changes):
             # the final state is published once the devices are closed, so a client that
             # sees "done" can start the next scan at once
             if changes.get("state") in ("done", "failed", "cancelled"):
                 final.update(changes)
+                if changes["state"] == "done":
+                    clock.finished(job_id, self._state["levels_done"])
             else:
-                self._set(**changes)
+                with self._lock:
+                    self._set(**clock.eta({**self._state, **changes}, changes))
         processor = self.processor
         if job["params"].get("reference"):             # the meniscus step's scan of the reference ball
             processor = reference_processor(job["params"]["reference"])
@@ -641,9 +777,12 @@ class BenchService:
         self.webhook.send(event, job, text)
 
     def _note_fault(self, reason):
-        for name in ("stage", "camera", "disk", "light"):
+        """A device's fault on its chip: "stage fake: no reply" -> stage: "fault: no reply"."""
+        reason = reason.removeprefix("cannot start: ")
+        for name in ("stage", "camera", "disk", "light", "bench"):
             if reason.startswith(name):
-                self._set(hardware={**self._state["hardware"], name: f"fault: {reason[len(name) + 2:]}"})
+                problem = reason.partition(": ")[2] or reason
+                self._set(hardware={**self._state["hardware"], name: f"fault: {problem}"})
 
     def _keep_frame(self, image: np.ndarray, info: dict):
         """The preview for latest_frame(): downscaled, the waterline drawn in red."""
@@ -784,3 +923,48 @@ class BenchService:
         if st["eta_s"]:
             progress += f"  {int(st['eta_s']) // 60}:{int(st['eta_s']) % 60:02d} left"
         return [st["state"].upper(), level, progress, lan_address()]
+
+
+class _JobClock:
+    """A scan's ETA, scanning plus processing (eta.py), and its times once it ends done."""
+
+    def __init__(self, times: JobTimes, fresh: bool, clock=time.monotonic):
+        self.times, self.fresh, self.clock = times, fresh, clock
+        self.t0 = clock()
+        self.t_proc = None
+        self.per_level = times.per_level_s()
+
+    def eta(self, state: dict, changes: dict) -> dict:
+        """`changes` with eta_s (and eta_processing_s) made to cover what is left of the whole job."""
+        out = dict(changes)
+        total, done = int(state.get("levels_total") or 0), int(state.get("levels_done") or 0)
+        proc = self.times.processing_s(total)
+        if state.get("state") == "processing":
+            if self.t_proc is None:
+                self.t_proc = self.clock()
+                out["eta_s"] = None if proc is None else round(proc, 1)
+                out["eta_processing_s"] = out["eta_s"]
+            return out
+        if "eta_s" in changes or "levels_done" in changes or "state" in changes:
+            scan = changes.get("eta_s")             # the runner's: levels left x its recent level time
+            if scan is None and self.per_level is not None:
+                scan = self.per_level * max(total - done, 0)
+            out["eta_s"] = None if scan is None else round(scan + (proc or 0.0), 1)
+            out["eta_processing_s"] = None if proc is None else round(proc, 1)
+        return out
+
+    def finished(self, job_id: str, levels: int):
+        if self.fresh and self.t_proc is not None:  # a resumed scan's times are only part of one
+            now = self.clock()
+            self.times.record(job_id, levels, self.t_proc - self.t0, now - self.t_proc)
+
+
+def _folder_bytes(folder: Path) -> int:
+    total = 0
+    for p in Path(folder).rglob("*"):
+        try:
+            if p.is_file() and not p.is_symlink():
+                total += p.stat().st_size
+        except OSError:
+            pass
+    return total

@@ -182,6 +182,12 @@ class Store:
                     self._unwritten[job_id] = {**self._unwritten.get(job_id, {}), **fields}
             raise
 
+    def delete_job(self, job_id) -> None:
+        """The job's row and its events (its folder is the caller's to remove)."""
+        self._write([("DELETE FROM events WHERE job_id = ?", (job_id,)), ("DELETE FROM jobs WHERE id = ?", (job_id,))])
+        with self._lock:
+            self._unwritten.pop(job_id, None)
+
     def get_job(self, job_id) -> dict:
         with self._lock:
             row = self._db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()

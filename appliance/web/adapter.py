@@ -12,6 +12,8 @@ when a service lacks them, so the UI can hide a feature instead of failing:
   import_scan(folder)    an uploaded scan folder becomes a job
   usb_sticks(), export_to_usb(job_id, name, stick)   the daemon copies a job's file to a stick
   backup(), restore(doc), system()   the system page (daemon/backup.py, BenchService.system)
+  preview(), home_stage(), jog(mm), goto_level(level_mm)   the bench page's machine panel
+  rename_job(job_id, name), delete_job(job_id), reprocess(job_id, changes), job_sizes()   the job manager
 
 If the daemon's real API drifts from the facade, the translation goes here
 and nowhere else.
@@ -198,6 +200,36 @@ class WebService:
 
     def system(self) -> dict:
         return self._optional("system")
+
+    def _command(self, name, *args):
+        try:
+            return self._optional(name, *args)
+        finally:
+            self._drop_cache()          # its effect (a move, a new frame, a job gone) shows at once
+
+    def preview(self):
+        return self._command("preview")
+
+    def home_stage(self):
+        return self._command("home_stage")
+
+    def jog(self, mm: float):
+        return self._command("jog", mm)
+
+    def goto_level(self, level_mm: float):
+        return self._command("goto_level", level_mm)
+
+    def rename_job(self, job_id: str, name: str) -> dict:
+        return self._job(self._command("rename_job", job_id, name))
+
+    def delete_job(self, job_id: str):
+        return self._command("delete_job", job_id)
+
+    def reprocess(self, job_id: str, changes: dict) -> str:
+        return self._command("reprocess", job_id, changes)
+
+    def job_sizes(self) -> dict:
+        return dict(self._optional("job_sizes")) if self.offers("job_sizes") else {}
 
     @staticmethod
     def _job(j: dict) -> dict:

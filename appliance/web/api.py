@@ -259,7 +259,76 @@ def resume(job_id):
 
 @bp.get("/jobs")
 def jobs():
-    return jsonify(jobs=svc().jobs())
+    sizes = svc().job_sizes()
+    return jsonify(jobs=[{**j, "size_bytes": sizes.get(j["id"])} for j in svc().jobs()])
+
+
+# -- the machine panel: refused (409) while a scan, calibration or commissioning holds the bench --
+
+@bp.post("/machine/preview")
+def machine_preview():
+    return jsonify(svc().preview())
+
+
+@bp.post("/machine/home")
+def machine_home():
+    return jsonify(svc().home_stage())
+
+
+@bp.post("/machine/jog")
+def machine_jog():
+    return jsonify(svc().jog(_json_body().get("mm")))
+
+
+@bp.post("/machine/goto")
+def machine_goto():
+    return jsonify(svc().goto_level(_json_body().get("level_mm")))
+
+
+# -- the job manager --------------------------------------------------------------------------
+
+@bp.patch("/jobs/<job_id>")
+def rename_job(job_id):
+    _check_job_id(job_id)
+    return jsonify(svc().rename_job(job_id, _json_body().get("name", "")))
+
+
+@bp.delete("/jobs/<job_id>")
+def delete_job(job_id):
+    _check_job_id(job_id)
+    svc().delete_job(job_id)
+    return jsonify(ok=True)
+
+
+@bp.post("/jobs/<job_id>/reprocess")
+def reprocess_job(job_id):
+    _check_job_id(job_id)
+    if svc().state().get("state") in ACTIVE:
+        return err("a scan is running; stop it first", 409, "scan")
+    changes = _json_body().get("settings") or {}
+    if not isinstance(changes, dict):
+        raise _Refused("settings must be a JSON object", 400)
+    return jsonify(job_id=svc().reprocess(job_id, changes)), 202
+
+
+@bp.get("/jobs/<job_id>/thumb.png")
+def job_thumb(job_id):
+    """A small picture of the height map (thumbs.py), for the job list."""
+    from .thumbs import thumbnail
+    path = _job_path(job_id, "heightmap.csv")
+    png = thumbnail(path, Path(ext()["config"]["data_dir"]) / "web" / "thumbs", job_id)
+    if png is None:
+        return Response(status=204)
+    resp = send_file(png, mimetype="image/png", max_age=0)
+    resp.headers["Cache-Control"] = "private, no-cache"
+    return resp
+
+
+def download_name(job: dict, name: str) -> str:
+    """A download named for its job: "cone-on-the-bench-20261202-1553-toolpath.gcode"."""
+    label = re.sub(r"[^A-Za-z0-9]+", "-", str(job.get("name") or "")).strip("-")[:40]
+    stamp = "-".join(str(job.get("id", "")).split("-")[:2])
+    return "-".join(p for p in (label, stamp, name) if p)
 
 
 @bp.get("/jobs/<job_id>")
@@ -288,7 +357,8 @@ def job_file(job_id, name):
     inline = request.args.get("inline") == "1" and path.suffix.lower() in (".png", ".jpg", ".jpeg", ".json", ".md",
                                                                           ".csv", ".gcode", ".nc", ".ngc")
     mimetype = "text/plain; charset=utf-8" if path.suffix.lower() in TEXT_TYPES - {".json"} else None
-    resp = send_file(path, as_attachment=not inline, download_name=name, mimetype=mimetype, max_age=0)
+    resp = send_file(path, as_attachment=not inline, download_name=download_name(svc().job(job_id), name),
+                     mimetype=mimetype, max_age=0)
     resp.headers["Cache-Control"] = "private, no-cache"
     return resp
 
@@ -335,7 +405,8 @@ def job_zip(job_id):
             z.write(path, f"{job_id}/{arc}", compress_type=zipfile.ZIP_STORED if arc.endswith(".png") else None)
         z.writestr(f"{job_id}/job.json", json.dumps(info, indent=2, default=str))
     tmp.seek(0)
-    return send_file(tmp, mimetype="application/zip", as_attachment=True, download_name=f"inkslice-{job_id}.zip")
+    return send_file(tmp, mimetype="application/zip", as_attachment=True,
+                     download_name=download_name(info, "inkslice.zip"))
 
 
 # -- settings -------------------------------------------------------------------------------

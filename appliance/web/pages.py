@@ -12,7 +12,7 @@ from flask import Blueprint, current_app, g, redirect, render_template, request,
 from ..errors import InkSliceError
 from ..vision.printboard import PRINTED, describe
 from . import auth
-from .api import FILE_NAME, JOB_ID
+from .api import FILE_NAME, JOB_ID, download_name
 
 bp = Blueprint("pages", __name__)
 
@@ -64,12 +64,37 @@ def logout():
 
 @bp.get("/")
 def dashboard():
-    return render_template("dashboard.html", page="dashboard")
+    svc = _ext()["service"]
+    return render_template("dashboard.html", page="dashboard", defaults=svc.settings(), machine=svc.offers("preview"))
 
 
 @bp.get("/jobs")
 def jobs():
-    return render_template("jobs.html", page="jobs", jobs=_ext()["service"].jobs())
+    svc = _ext()["service"]
+    sizes = svc.job_sizes()
+    return render_template("jobs.html", page="jobs", jobs=[_listed(j, sizes.get(j["id"])) for j in svc.jobs()])
+
+
+def _listed(job: dict, size) -> dict:
+    """A job as the list shows it: its date, how long it took, its size on disk."""
+    out = dict(job)
+    created, started, finished = job.get("created"), job.get("started"), job.get("finished")
+    out["when"] = time.strftime("%d %b %Y, %H:%M", time.localtime(created)) if created else ""
+    out["took"] = _duration(finished - started) if started and finished and finished >= started else ""
+    out["size"] = _bytes(size) if size is not None else ""
+    return out
+
+
+def _duration(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600} h {s % 3600 // 60:02d} min" if s >= 3600 else (f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s")
+
+
+def _bytes(n: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
 
 
 @bp.get("/jobs/<job_id>")
@@ -87,8 +112,17 @@ def job(job_id):
             report = None
     gcode = [n for n in outputs if n.rsplit(".", 1)[-1] in ("gcode", "nc", "ngc", "tap")]
     images = [n for n in outputs if n.endswith(".png")]
-    return render_template("job.html", page="job", job=info, outputs=outputs, report=report,
-                           gcode=gcode, images=images)
+    sizes = svc.job_sizes()
+    return render_template("job.html", page="job", job=_listed(info, sizes.get(job_id)), outputs=outputs,
+                           report=report, gcode=gcode, images=images,
+                           names={n: download_name(info, n) for n in outputs},
+                           manage=svc.offers("reprocess"), choices=_choices())
+
+
+def _choices() -> dict:
+    """The settings' fixed choices, for the re-process form's selects."""
+    from ..daemon import settings as S
+    return dict(getattr(S, "CHOICES", {}))
 
 
 @bp.get("/settings")

@@ -48,13 +48,19 @@
       }
       const active = ACTIVE.includes(s);
       btn.disabled = false;
-      btn.textContent = active ? "Stop scan" : "Start scan";
-      btn.className = "big " + (active ? "stop" : "start");
+      if (!armed) {
+        // processing cannot be "stopped" into a scan: say what a tap really does then
+        btn.textContent = !active ? "Start scan…" : (s === "processing" ? "Cancel processing" : "Stop scan");
+        btn.className = "big " + (active ? "stop" : "start");
+      }
+      if (active) show($("#confirm"), false);
+      show($("#scan-setup"), !active);
+      machine(st, active);
       const total = st.levels_total || 0, done = st.levels_done || 0;
       const p = $("#progress"); p.max = Math.max(1, total); p.value = done;
       text("#levels", done + " / " + total + " levels");
       text("#level", st.level_mm !== null && st.level_mm !== undefined ? "level " + Number(st.level_mm).toFixed(2) + " mm" : "");
-      text("#eta", active ? fmtEta(st.eta_display_s) : (s === "done" ? "finished" : ""));
+      text("#eta", active ? etaText(s, st.eta_display_s) : (s === "done" ? "finished" : ""));
       const link = $("#job-link");
       if (st.job_id) { link.querySelector("a").href = "/jobs/" + encodeURIComponent(st.job_id); link.querySelector("a").textContent = (s === "done" ? "Open the report of " : "Job ") + st.job_id; }
       show(link, !!st.job_id);
@@ -104,11 +110,52 @@
         text("#livemap-note", "Heights " + lo.toFixed(1) + " to " + hi.toFixed(1) + " mm (blue low, yellow high).");
       } finally { mapBusy = false; }
     }
-    btn.addEventListener("click", async () => {
-      btn.disabled = true; show($("#action-error"), false); show($("#action-fix"), false);
+    // Start is confirmed (a dialog naming the scan); Stop needs a second tap within 3 s. So a
+    // double tap can neither start and cancel a scan, nor cancel one by accident.
+    let armed = null;
+    function etaText(s, eta) {
+      if (eta === null || eta === undefined) return s === "processing" ? "processing" : "";
+      if (s === "processing") return eta < 1 ? "finishing the program…" : "processing, " + fmtEta(eta);
+      return fmtEta(eta) + " (scan and processing)";
+    }
+    function scanParams() {
+      const p = {}, name = $("#scan-name").value.trim();
+      if (name) p.name = name;
+      const step = Number($("#scan-step").value);
+      if (step > 0) p.level_step_mm = step;
+      if (!$("#range-auto").checked) { p.levels_to_mm = Number($("#range-to").value); p.levels_from_mm = Number($("#range-from").value); }
+      return p;
+    }
+    function describeScan(p) {
+      const range = p.levels_to_mm !== undefined ? "levels " + p.levels_to_mm + " down to " + p.levels_from_mm + " mm"
+                                                 : "automatic range";
+      return "Start scanning " + (p.name ? "“" + p.name + "”" : "an unnamed part") + ": " + range + ", step " +
+        (p.level_step_mm || "as set") + " mm? The stage homes first.";
+    }
+    $("#range-auto").addEventListener("change", () => {
+      show($("#range-manual"), !$("#range-auto").checked); show($("#range-auto-text"), $("#range-auto").checked);
+    });
+    $("#scan-setup").addEventListener("submit", (ev) => { ev.preventDefault(); btn.click(); });
+    $("#confirm-back").addEventListener("click", () => { show($("#confirm"), false); btn.focus(); });
+    $("#confirm-start").addEventListener("click", () => act(() => api("POST", "/api/scan", scanParams())));
+    btn.addEventListener("click", () => {
+      const active = current && ACTIVE.includes(current.state);
+      if (!active) {
+        text("#confirm-text", describeScan(scanParams())); show($("#confirm"), true);
+        $("#confirm-start").focus(); return;
+      }
+      if (!armed) {
+        btn.textContent = "Tap again to " + (current.state === "processing" ? "cancel processing" : "stop the scan");
+        armed = setTimeout(() => { armed = null; if (current) render(current); }, 3000);
+        return;
+      }
+      clearTimeout(armed); armed = null;
+      act(() => api("POST", "/api/scan/cancel"));
+    });
+    async function act(call) {
+      btn.disabled = true; show($("#action-error"), false); show($("#action-fix"), false); show($("#confirm"), false);
       try {
-        if (current && ACTIVE.includes(current.state)) await api("POST", "/api/scan/cancel");
-        else await api("POST", "/api/scan", {});
+        await call();
       } catch (e) {
         text("#action-error", e.message); show($("#action-error"), true);
         // a commissioning step or the guided calibration holds the bench: the way out is one tap away
@@ -116,8 +163,44 @@
         if (held) { $("#action-fix a").href = held; show($("#action-fix"), true); }
       }
       poll();
-    });
+    }
     async function poll() { try { render(await api("GET", "/api/state")); } catch (e) {} }
+
+    // -- the machine panel: a live preview (the light on) while the page is open and the bench is idle
+    let previewBusy = false, panelRefused = false;
+    const hasMachine = !!$("#home");
+    function machine(st, active) {
+      if (!hasMachine) return;
+      const m = st.manual || {};
+      document.querySelectorAll("#machine button, #goto-level").forEach((b) => { b.disabled = active; });
+      text("#machine-status", active ? "The stage is the scan's until it ends." :
+        (m.open ? "Light on, live preview. " + (m.homed ? "Ink level " + Number(m.level_mm).toFixed(2) + " mm above the base."
+                                                          : "Home the stage to move it.")
+                : "Light off."));
+      if (!active) panelRefused = false;
+    }
+    async function preview() {
+      if (!hasMachine || previewBusy || panelRefused || document.hidden || (current && ACTIVE.includes(current.state))) return;
+      previewBusy = true;
+      try { await api("POST", "/api/machine/preview"); refreshFrame(); }
+      catch (e) { panelRefused = true; }
+      finally { previewBusy = false; }
+    }
+    async function move(call) {
+      show($("#machine-error"), false);
+      document.querySelectorAll("#machine button").forEach((b) => { b.disabled = true; });
+      try { await call(); refreshFrame(); }
+      catch (e) { text("#machine-error", e.message); show($("#machine-error"), true); }
+      poll();
+    }
+    if (hasMachine) $("#home").addEventListener("click", () => move(() => api("POST", "/api/machine/home")));
+    document.querySelectorAll(".jogb").forEach((b) => b.addEventListener("click",
+      () => move(() => api("POST", "/api/machine/jog", { mm: Number(b.dataset.mm) }))));
+    if (hasMachine) $("#goto-form").addEventListener("submit", (ev) => {
+      ev.preventDefault(); move(() => api("POST", "/api/machine/goto", { level_mm: Number($("#goto-level").value) }));
+    });
+    setInterval(preview, 3000);
+    document.addEventListener("visibilitychange", preview);
 
     // Live updates: Server-Sent Events; if the stream breaks, poll every 2 s until it is back.
     let fallback = null;
@@ -129,7 +212,7 @@
       es.onopen = () => { if (fallback) { clearInterval(fallback); fallback = null; } };
       es.onerror = () => startPolling();
     } else startPolling();
-    poll(); refreshFrame();
+    poll().then(preview); refreshFrame();
   }
 
   // ---------------------------------------------------------------- jobs
@@ -147,6 +230,43 @@
   // ---------------------------------------------------------------- job
   function job() {
     const id = $("#job").dataset.job;
+    const jobUrl = "/api/jobs/" + encodeURIComponent(id);
+    // live until done: a running job's page reloads itself when the job ends
+    if (ACTIVE.includes($("#job").dataset.status)) {
+      const tick = setInterval(async () => {
+        try {
+          const j = await api("GET", jobUrl);
+          if (!ACTIVE.includes(j.status)) { clearInterval(tick); location.reload(); }
+          else { const b = $("#job-status"); b.textContent = j.status; b.className = "badge s-" + j.status; }
+        } catch (e) {}
+      }, 2000);
+    }
+    const say = (t) => text("#manage-result", t);
+    const rename = $("#rename-form");
+    if (rename) rename.addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      try { const j = await api("PATCH", jobUrl, { name: $("#rename-name").value }); text("#job-name", j.name); say("Renamed."); }
+      catch (e) { say("Not renamed: " + e.message); }
+    });
+    const rep = $("#reprocess-form");
+    if (rep) rep.addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      const settings = {};
+      rep.querySelectorAll("[name]").forEach((el) => {
+        settings[el.name] = el.dataset.kind === "int" ? parseInt(el.value, 10) : (el.dataset.kind === "number" ? Number(el.value) : el.value);
+      });
+      try { await api("POST", jobUrl + "/reprocess", { settings }); location.reload(); }
+      catch (e) { say("Not started: " + e.message); }
+    });
+    const del = $("#delete");
+    if (del) {
+      del.addEventListener("click", () => { show($("#delete-confirm"), true); show(del, false); $("#delete-no").focus(); });
+      $("#delete-no").addEventListener("click", () => { show($("#delete-confirm"), false); show(del, true); del.focus(); });
+      $("#delete-yes").addEventListener("click", async () => {
+        try { await api("DELETE", jobUrl); location.href = "/jobs"; }
+        catch (e) { say("Not deleted: " + e.message); }
+      });
+    }
     const resume = $("#resume");
     if (resume) resume.addEventListener("click", async () => {
       try { await api("POST", "/api/jobs/" + encodeURIComponent(id) + "/resume"); location.href = "/"; }

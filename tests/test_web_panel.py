@@ -1,0 +1,140 @@
+"""The bench page's machine panel and the job manager, on the daemon's real BenchService driving
+the in-memory bench (sim.fakes): preview with the light, home, jog, go to a level, refused while
+a scan runs; rename, delete, process again, sizes, thumbnails, downloads named for the job; the
+ETA that learns from past jobs and covers processing; the stage-fault chip's text."""
+import time
+
+import pytest
+
+from appliance.daemon.service import BenchService
+from appliance.sim.fakes import FakeBench
+from appliance.web import create_app
+from test_web_real_service import light_processor
+from web_helpers import login
+
+SCAN = {"name": "cone, left side", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
+        "level_step_mm": 2.0, "settle_s": 0.05}
+
+
+@pytest.fixture
+def web(tmp_path):
+    factory = FakeBench("cone")
+    svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.05)
+    app = create_app(svc, {"data_dir": str(tmp_path / "data")})
+    app.config["TESTING"] = True
+    c = app.test_client()
+    h = {"X-CSRF-Token": login(c, app.config["FIRST_RUN_PASSWORD"])}
+    yield c, h, svc, factory
+    svc.close()
+
+
+def finished_scan(c, h, svc, params=SCAN):
+    job_id = c.post("/api/scan", json=params, headers=h).get_json()["job_id"]
+    end = time.monotonic() + 30
+    while svc.state()["state"] != "done" and time.monotonic() < end:
+        time.sleep(0.05)
+    assert svc.state()["state"] == "done"
+    return job_id
+
+
+def test_the_panel_previews_homes_jogs_and_goes_to_a_level_and_the_light_goes_off_after(web):
+    c, h, svc, bench = web
+    svc._manual.idle_s = 0.6
+    st = c.post("/api/machine/preview", headers=h).get_json()
+    assert st["open"] and st["light"] and not st["homed"]
+    light = bench.last.light
+    assert light.on
+    assert c.get("/api/frame.jpg").status_code == 200                     # the idle bench is not blind
+    assert {"stage": "ok", "camera": "ok"}.items() <= c.get("/api/state").get_json()["hardware"].items()
+    r = c.post("/api/machine/jog", json={"mm": 1}, headers=h)
+    assert r.status_code == 400 and "home the stage first" in r.get_json()["error"]
+    assert c.post("/api/machine/home", headers=h).get_json()["level_mm"] == 60.0
+    for mm, level in ((10, 50.0), (1, 49.0), (0.1, 48.9), (-1, 49.9)):
+        assert c.post("/api/machine/jog", json={"mm": mm}, headers=h).get_json()["level_mm"] == pytest.approx(level)
+    assert c.post("/api/machine/jog", json={"mm": 3}, headers=h).status_code == 400      # not a jog step
+    assert c.post("/api/machine/goto", json={"level_mm": 12.5}, headers=h).get_json()["level_mm"] == 12.5
+    r = c.post("/api/machine/goto", json={"level_mm": -40}, headers=h)
+    assert r.status_code == 400 and "outside the travel" in r.get_json()["error"]
+    assert bench.last.stage.calls == ["home", "move 10.0000", "move 11.0000", "move 11.1000", "move 10.1000",
+                                      "move 47.5000"]
+    assert c.get("/api/state").get_json()["manual"]["level_mm"] == 12.5
+    time.sleep(1.2)                                   # nobody watching: light off, devices closed
+    assert not light.on and c.get("/api/state").get_json()["manual"]["open"] is False
+
+
+def test_the_panel_is_refused_while_a_scan_runs_and_a_scan_takes_the_devices_back(web):
+    c, h, svc, bench = web
+    c.post("/api/machine/preview", headers=h)
+    panel_light = bench.last.light
+    c.post("/api/scan", json={**SCAN, "settle_s": 0.3}, headers=h)
+    end = time.monotonic() + 10
+    while svc.state()["state"] != "scanning" and time.monotonic() < end:
+        time.sleep(0.02)
+    assert not panel_light.on                                  # the panel's session was closed first
+    for path, body in (("/api/machine/home", None), ("/api/machine/jog", {"mm": 1}),
+                       ("/api/machine/goto", {"level_mm": 10})):
+        r = c.post(path, json=body, headers=h)
+        assert r.status_code == 409 and "a scan is running" in r.get_json()["error"], path
+    busy = c.post("/api/machine/preview", headers=h).get_json()   # the scan's frames are the preview
+    assert busy["open"] is False and "a scan is running" in busy["busy"]
+    svc.cancel()
+
+
+def test_the_job_manager_renames_sizes_thumbnails_names_downloads_reprocesses_and_deletes(web):
+    c, h, svc, _ = web
+    job_id = finished_scan(c, h, svc)
+    listed = c.get("/api/jobs").get_json()["jobs"][0]
+    assert listed["id"] == job_id and listed["name"] == "cone, left side" and listed["size_bytes"] > 1000
+    page = c.get("/jobs").get_data(as_text=True)
+    assert "cone, left side" in page and "took" in page and " kB" in page and "thumb.png" in page
+    thumb = c.get(f"/api/jobs/{job_id}/thumb.png")
+    assert thumb.status_code == 200 and thumb.data[:8] == b"\x89PNG\r\n\x1a\n"
+    r = c.get(f"/api/jobs/{job_id}/files/toolpath.gcode")
+    stamp = "-".join(job_id.split("-")[:2])
+    assert f'filename=cone-left-side-{stamp}-toolpath.gcode' in r.headers["Content-Disposition"]
+
+    assert c.patch(f"/api/jobs/{job_id}", json={"name": "  "}, headers=h).status_code == 400
+    assert c.patch(f"/api/jobs/{job_id}", json={"name": "mouse"}, headers=h).get_json()["name"] == "mouse"
+    r = c.post(f"/api/jobs/{job_id}/reprocess", json={"settings": {"grid": -3}}, headers=h)
+    assert r.status_code == 400 and r.get_json()["where"] == "grid"
+    assert c.post(f"/api/jobs/{job_id}/reprocess", json={"settings": {"grid": 30}}, headers=h).status_code == 202
+    end = time.monotonic() + 10
+    while svc.job(job_id)["status"] != "done" and time.monotonic() < end:
+        time.sleep(0.05)
+    assert svc.job(job_id)["settings"]["grid"] == 30 and "toolpath.gcode" in svc.job(job_id)["outputs"]
+
+    folder = svc.store.job_dir(job_id)
+    assert c.delete(f"/api/jobs/{job_id}", headers=h).get_json() == {"ok": True}
+    assert not folder.exists() and c.get(f"/api/jobs/{job_id}").status_code == 404
+    assert c.get("/api/jobs").get_json()["jobs"] == []
+
+
+def test_the_eta_learns_scanning_and_processing_from_past_jobs(web):
+    c, h, svc, _ = web
+    assert svc.state()["eta_processing_s"] is None             # a new box knows no processing time
+    finished_scan(c, h, svc)
+    learned = svc._times
+    assert learned.count() == 1 and learned.per_level_s() > 0
+    c.post("/api/scan", json={**SCAN, "settle_s": 0.2}, headers=h)
+    seen = []
+    end = time.monotonic() + 30
+    while svc.state()["state"] != "done" and time.monotonic() < end:
+        st = svc.state()
+        seen.append((st["state"], st["eta_s"], st["eta_processing_s"]))
+        time.sleep(0.02)
+    scanning = [s for s in seen if s[0] == "scanning" and s[1] is not None]
+    assert scanning and all(p is not None and eta >= p for _, eta, p in scanning)   # processing included
+    assert scanning[0][1] > scanning[-1][1]                                      # and it counts down
+    assert learned.count() == 2
+
+
+def test_a_stage_fault_chip_reads_the_problem_not_a_cut_word(tmp_path):
+    bench = FakeBench("cone", faults={"stage": {"unplug_after_moves": 0}})
+    svc = BenchService(tmp_path / "data", bench, processor=light_processor, panel_interval_s=0.05)
+    try:
+        with pytest.raises(Exception):
+            svc.home_stage()
+        chip = svc.state()["hardware"]["stage"]
+        assert chip == "fault: no reply from the controller (unplugged?)", chip
+    finally:
+        svc.close()
