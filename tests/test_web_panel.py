@@ -87,6 +87,8 @@ def test_the_job_manager_renames_sizes_thumbnails_names_downloads_reprocesses_an
     assert listed["id"] == job_id and listed["name"] == "cone, left side" and listed["size_bytes"] > 1000
     page = c.get("/jobs").get_data(as_text=True)
     assert "cone, left side" in page and "took" in page and " kB" in page and "thumb.png" in page
+    job_page = c.get(f"/jobs/{job_id}").get_data(as_text=True)
+    assert 'id="reprocess-form"' in job_page and '<option value="mach3"' in job_page and "Delete this job" in job_page
     thumb = c.get(f"/api/jobs/{job_id}/thumb.png")
     assert thumb.status_code == 200 and thumb.data[:8] == b"\x89PNG\r\n\x1a\n"
     r = c.get(f"/api/jobs/{job_id}/files/toolpath.gcode")

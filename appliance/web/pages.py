@@ -122,7 +122,11 @@ def job(job_id):
 def _choices() -> dict:
     """The settings' fixed choices, for the re-process form's selects."""
     from ..daemon import settings as S
-    return dict(getattr(S, "CHOICES", {}))
+    out = {}
+    for key in ("cutter_type", "dialect"):
+        choices = getattr(S.BY_KEY.get(key), "choices", None) if hasattr(S, "BY_KEY") else S.CHOICES.get(key)
+        out[key] = tuple(choices() if callable(choices) else choices or ())
+    return out
 
 
 @bp.get("/settings")
