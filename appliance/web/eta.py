@@ -8,14 +8,15 @@ does:
 1. per-level time: an exponentially weighted average (alpha = 0.3) of the time
    between successive level completions; a completion that covers several
    levels at once (a missed poll) counts as that many levels of equal time.
-2. raw estimate = levels left x per-level time + the daemon's remaining time
-   after the last level (processing), when the daemon gives one.
+2. raw estimate = levels left x per-level time + the processing time the daemon
+   expects (eta_processing_s, learned from this box's past jobs: daemon/eta.py).
 3. shown estimate: between updates it counts down with the clock; at an update
    it moves only 30 % of the way towards the raw estimate, and never by more
    than max(3 s, 10 %) of the shown value in one update. So a single slow
    level does not push the estimate up by minutes, and a good run converges
    within a few levels. Before the first level completes the daemon's figure
-   (if any) is shown as is.
+   (if any) is shown as is, and so is its processing figure when processing
+   starts (a new phase is news, not jitter).
 """
 from __future__ import annotations
 
@@ -59,7 +60,7 @@ class EtaSmoother:
             done = int(state.get("levels_done") or 0)
             total = int(state.get("levels_total") or 0)
             daemon_eta = state.get("eta_s")
-            changed = st != self.phase
+            changed = phase_changed = st != self.phase
             if changed and st == "scanning":
                 self.last_t = now           # homing time is not a level's time
             self.phase = st
@@ -87,9 +88,12 @@ class EtaSmoother:
                 # between level completions the estimate just counts down, however often it is asked
                 return round(counted, 1)
             left = max(0, total - done)
-            raw = left * self.per_level
+            raw = left * self.per_level + float(state.get("eta_processing_s") or 0.0)
             if st == "processing":
                 raw = float(daemon_eta) if daemon_eta is not None else 0.0
+                if phase_changed:
+                    self.shown, self.shown_t = raw, now
+                    return round(raw, 1)
             if counted is None:
                 counted = raw
             step = BLEND * (raw - counted)
