@@ -405,8 +405,10 @@ class BenchService:
         """The job's record and its whole folder (scan, outputs). Not while it runs."""
         with self._lock:
             job = self.store.get_job(job_id)
-            running = self._thread is not None and self._thread.is_alive() and self._state["job_id"] == job_id
-            if running or job["status"] in ACTIVE and self._state["job_id"] == job_id:
+            ours = self._thread is not None and self._thread.is_alive() and self._state["job_id"] == job_id
+            if ours and job["status"] not in ACTIVE:
+                self._thread.join(timeout=5)        # the job is over; its thread is closing up
+            if ours and self._thread.is_alive() or job["status"] in ACTIVE and self._state["job_id"] == job_id:
                 raise DeviceError("job", f"job {job_id} is {job['status']}; stop it first")
             self.store.delete_job(job_id)
             shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
