@@ -61,7 +61,8 @@ from appliance.sim import surfaces                          # noqa: E402
 from appliance.sim.levels import sculpture_levels           # noqa: E402
 from appliance.sim.physics import meniscus_rise             # noqa: E402
 from appliance.sim.render import effects_preset             # noqa: E402
-from appliance.sim.scanrender import render_scan            # noqa: E402
+from appliance.sim.scanrender import refine_scan, render_scan  # noqa: E402
+from appliance.vision.refine import RESOLUTION_MM           # noqa: E402
 from seed_table import calibrated_camera, use_camera        # noqa: E402
 
 PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
@@ -88,9 +89,11 @@ def errors(surface, hm, inset_mm=3.0):
     return float(e_all.mean()), float(np.percentile(e_in, 99)), float(e_all.max())
 
 
-def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_above=False, seed=1):
+def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_above=False, seed=1, refine_mm=0.0):
     """-> (Ea, interior p99, max) in mm; the height map is appended to `maps` when given.
-    `from_above`: the scan starts at an empty frame above the top, as the daemon's does."""
+    `from_above`: the scan starts at an empty frame above the top, as the daemon's does.
+    `refine_mm` > 0: the steps in which a face came out at once are bisected to that, as the
+    daemon's runner does (sim/scanrender.py refine_scan; refinement_frames counts them)."""
     surface = surfaces.get(name)
     folder = tmp / (f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else ""))
     e = effects_preset(model)
@@ -99,10 +102,17 @@ def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_abov
         render_scan(surface, folder, levels=sculpture_levels(surface, step, max(below, 0.0), from_above),
                     effects=model, seed=seed, workers=2)
         use_camera(folder, camera)
+    if refine_mm > 0:
+        refine_scan(surface, folder, refine_mm, effects=model, seed=seed, workers=2)
     job = proc.process(folder, meniscus=meniscus)
     if maps is not None:
         maps.append(job.heightmap)
     return errors(surface, job.heightmap)
+
+
+def refinement_frames(tmp, name, model, seed=1) -> int:
+    folder = tmp / (f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else ""))
+    return sum(1 for f in json.loads((folder / "scan.json").read_text())["frames"] if "refines" in f)
 
 
 @contextlib.contextmanager
@@ -126,6 +136,9 @@ def main():
     ap.add_argument("--parts", default=PARTS)
     ap.add_argument("--keep", default=None, metavar="DIR",
                     help="render into DIR and reuse what is there (to compare corrections on the same scans)")
+    ap.add_argument("--refine-mm", type=float, default=RESOLUTION_MM,
+                    help="bisect the steps in which a face came out at once to this, as the runner does "
+                         "(0: only the plan's levels; a kept folder keeps the frames it has)")
     args = ap.parse_args()
     rows = []
     with bench_folder(args.keep, "meniscus-bench-") as (tmp, camera):
@@ -137,15 +150,16 @@ def main():
                   flush=True)
             for name in args.parts.split(","):
                 t0 = time.perf_counter()
-                ea, p99, mx = scan_part(name, model, tmp, camera, meniscus)
-                rows.append((model, name, ea, p99, mx))
-                print(f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm "
-                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
+                ea, p99, mx = scan_part(name, model, tmp, camera, meniscus, refine_mm=args.refine_mm)
+                extra = refinement_frames(tmp, name, model)
+                rows.append((model, name, ea, p99, mx, extra))
+                print(f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
+                      f"{extra} refinement frames ({time.perf_counter() - t0:.0f} s)", flush=True)
     print("\nsummary (mm)")
-    print(f"  {'model':<9} {'part':<12} {'Ea':>7} {'p99 in':>7} {'max':>7}")
-    for model, name, ea, p99, mx in rows:
+    print(f"  {'model':<9} {'part':<12} {'Ea':>7} {'p99 in':>7} {'max':>7} {'refined':>7}")
+    for model, name, ea, p99, mx, extra in rows:
         flag = "" if ea <= 0.05 else "  > 0.05"
-        print(f"  {model:<9} {name:<12} {ea:7.4f} {p99:7.3f} {mx:7.3f}{flag}")
+        print(f"  {model:<9} {name:<12} {ea:7.4f} {p99:7.3f} {mx:7.3f} {extra:7d}{flag}")
 
 
 if __name__ == "__main__":

@@ -304,3 +304,41 @@ def test_cancel_interrupts_a_long_move_at_once(tmp_path):
         assert "stop" in bench.last.stage.calls and bench.last.light.on is False
     finally:
         svc.close()
+
+
+PLATEAU = {**SCAN, "name": "plateau", "surface": "plateau", "levels_to_mm": 26.0, "levels_from_mm": 20.0}
+
+
+def _levels(svc, job_id):
+    import json
+    frames = json.loads(svc.job_file(job_id, "scan/scan.json").read_text())["frames"]
+    return [(f["level_mm"], f.get("refines")) for f in frames]
+
+
+def test_a_scan_cut_while_refining_a_step_finishes_the_bisection_when_resumed(tmp_path):
+    """The plateau's flat top comes out at once between 26 and 24 mm: the runner bisects that
+    step (vision/refine.py). Cancelled in the middle of it, the resumed scan first takes the
+    refinement frames an uninterrupted scan takes, then carries on down."""
+    ref_svc, _ = service(tmp_path / "ref")
+    try:
+        ref = wait_final(ref_svc, ref_svc.start_scan(PLATEAU), timeout=400)
+        want = _levels(ref_svc, ref["id"])
+    finally:
+        ref_svc.close()
+    assert [lv for lv, r in want if r] and all(r == [26.0, 24.0] for lv, r in want if r)
+    svc, bench = service(tmp_path, faults={"stage": {"seconds_per_mm": 0.05}})
+    try:
+        job_id = svc.start_scan(PLATEAU)
+        for st in svc.subscribe(timeout=30):
+            if st["levels_done"] >= 4:            # 26, 24 and two of the step's bisection
+                break
+        svc.cancel()
+        assert svc.job(job_id)["status"] == "cancelled"
+        assert 4 <= svc.job(job_id)["levels_done"] < len(want)
+        svc.resume(job_id)
+        job = wait_final(svc, job_id, timeout=400)
+        assert job["status"] == "done", job["reason"]
+        assert _levels(svc, job_id) == want
+        assert audit(svc.store) == []
+    finally:
+        svc.close()

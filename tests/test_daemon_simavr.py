@@ -82,3 +82,37 @@ def test_an_mcu_reset_mid_scan_stops_the_job_and_resume_finishes_it(reference, f
     finally:
         svc.close()
 
+
+
+# the plateau: flat at 25 mm inside r < 22 mm. Its top comes out of the ink all at once
+# between the levels 26 and 24; the runner goes back into that step and bisects it.
+PLATEAU = {"name": "plateau on simavr", "surface": "plateau", "levels_to_mm": 26.0, "levels_from_mm": 20.0,
+           "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
+
+
+def test_a_face_out_at_once_is_bisected_by_going_back_into_its_step(factory, tmp_path):
+    from appliance.scanfile import load_scan, read_frame
+    from appliance.vision.part import find_part
+    from appliance.vision.refine import face_bracket, mask_pixel_mm, surfaced_faces
+    svc = BenchService(tmp_path / "data", factory, processor=factory.processor(in_process))
+    try:
+        job = wait_final(svc, svc.start_scan(PLATEAU), timeout=180)
+        assert job["status"] == "done", job["reason"]
+        scan = load_scan(svc.store.job_dir(job["id"]) / "scan")
+    finally:
+        svc.close()
+    plan = [f for f in scan.frames if "refines" not in f.extra]
+    extra = [f for f in scan.frames if "refines" in f.extra]
+    assert [f.level_mm for f in plan] == [26.0, 24.0, 22.0, 20.0]
+    # right after the frame that showed the face, marked with the step, at the levels the stage
+    # reached (exact 1/1600 mm steps): a bisection of the 2 mm step down to 0.0625 mm
+    assert scan.frames[2:2 + len(extra)] == extra and len(extra) == 5
+    assert all(f.extra["refines"] == [26.0, 24.0] and 24.0 < f.level_mm < 26.0 for f in extra)
+    assert extra[0].level_mm == 25.0
+    # read back from the frames alone, the face is now known to within 0.1 mm
+    part = {f.file: find_part(read_frame(scan, f), scan.camera, f.level_mm) for f in scan.frames}
+    faces = surfaced_faces(part[plan[0].file], part[plan[1].file], mask_pixel_mm(scan.camera, part[plan[1].file].shape))
+    assert len(faces) == 1
+    lo, hi = face_bracket(faces[0], 26.0, 24.0, [(f.level_mm, part[f.file]) for f in extra])
+    assert hi - lo <= 0.1 and 24.5 < lo < 25.5
+    assert job["levels_done"] == len(scan.frames) == 9

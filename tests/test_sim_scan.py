@@ -112,3 +112,27 @@ def test_tank_is_written_only_when_the_bench_displaces_ink(tmp_path):
     """Processing corrects levels for displaced ink whenever scan.json names the tank."""
     render_scan("cone", tmp_path / "dry", levels=[10.0], effects=Effects(), seed=1)
     assert "tank" not in load_scan(tmp_path / "dry").extra
+
+
+def test_the_render_loop_refines_a_step_in_which_a_face_came_out_at_once_as_the_runner_does(tmp_path):
+    """Two passes: the plan's levels, then what vision/refine.py asks for from the part masks
+    of those frames (the runner's rule, daemon/runner.py), rendered and asked again."""
+    from appliance.sim.fakes import small_rig
+    from appliance.sim.scanrender import refine_scan
+    from appliance.vision.part import find_part
+    from appliance.vision.refine import face_bracket, mask_pixel_mm, surfaced_faces
+    folder = tmp_path / "plateau"
+    scan = render_scan("plateau", folder, levels=[26.0, 24.0, 22.0], rig=small_rig(320, 240), seed=2,
+                       refine_mm=0.1)
+    extra = [f for f in scan.frames if "refines" in f.extra]
+    # the flat top (25 mm) came out between 26 and 24; the shoulders below it did not come out at once
+    assert len(extra) == 5 and all(f.extra["refines"] == [26.0, 24.0] for f in extra)
+    assert extra[0].level_mm == 25.0
+    part = {f.file: find_part(read_frame(scan, f), scan.camera, f.level_mm) for f in scan.frames}
+    above, below = scan.frames[0], scan.frames[1]
+    faces = surfaced_faces(part[above.file], part[below.file], mask_pixel_mm(scan.camera, part[below.file].shape))
+    lo, hi = face_bracket(faces[0], 26.0, 24.0, [(f.level_mm, part[f.file]) for f in extra])
+    assert hi - lo <= 0.1 and 24.9 <= lo < hi <= 25.1          # a clean ink: the face is at 25 mm
+    truth = json.loads(truth_path(folder).read_text())
+    assert [f["file"] for f in truth["frames"]] == [f.file for f in scan.frames]
+    assert refine_scan("plateau", folder, 0.1, rig=small_rig(320, 240), seed=2) == 0   # done is done

@@ -19,6 +19,9 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=1, metavar="N",
                    help="render frames in N processes (default 1)")
+    p.add_argument("--refine-mm", type=float, default=0.0, metavar="MM",
+                   help="bisect the steps in which a face came out at once to MM, as the daemon's "
+                        "runner does (default 0: only the steps)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -30,7 +33,8 @@ def run(args) -> int:
             print(f"\rframe {i}/{n}", end="", file=sys.stderr, flush=True)
 
     scan = render_scan(args.surface, args.output, step_mm=args.step, effects=args.effects,
-                       seed=args.seed, progress=progress, workers=args.workers)
+                       seed=args.seed, progress=progress, workers=args.workers,
+                       refine_mm=args.refine_mm)
     if not args.quiet:
         print(file=sys.stderr)
     print(f"{len(scan.frames)} frames of {args.surface} in {scan.folder} "

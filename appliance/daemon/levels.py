@@ -12,6 +12,10 @@ The descent then starts from the first level that shows no part and skips
 the levels already captured on the way up. A part still standing out at the
 ceiling stops the scan: PartTooTall.
 
+Frames that refine a step (marked `refines`: the runner went back into a step
+in which a face came out at once, vision/refine.py) are not the plan's: it
+carries on below them as if they were not there.
+
 The plan is a pure function of the frames already in the scan (their target
 levels, whether each showed the part, and the `change` measured when each
 was taken, all kept in scan.json), so a resumed scan asks for exactly the
@@ -70,6 +74,7 @@ class LevelPlan:
         """(target level, step that led to it) after `frames`, or None when the scan is complete.
 
         Raises PartTooTall when the part stands out of the ink at the ceiling."""
+        frames = [f for f in frames if "refines" not in f.extra]   # a refined step's extra frames
         if not frames:
             return self.top, 0.0
         targets = [_target(f) for f in frames]

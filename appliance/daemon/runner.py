@@ -4,7 +4,10 @@
     light off, find the part (vision/part.py), write the frame -> processing -> done
 
 The levels come from levels.py's plan: it starts higher when the first frame
-shows the part, and ends when the base is fully exposed.
+shows the part, and ends when the base is fully exposed. When a flat face came
+out of the ink all at once between two levels (vision/refine.py), the runner
+goes back up into that step and bisects it before it carries on down; those
+frames are ordinary level frames, marked with the step they refine.
 
 The frame PNG is written atomically first, then scan.json (atomically) with
 the new frame listed, then the job row: scan.json never lists a frame that is
@@ -19,7 +22,6 @@ from __future__ import annotations
 
 import errno
 import logging
-import math
 import shutil
 import threading
 import time
@@ -33,12 +35,22 @@ from ..errors import Cancelled, DeviceError, InkSliceError
 from ..hw.devices import Devices
 from ..scanfile import CameraModel, FrameRef, Scan, _camera, load_scan, read_frame, write_frame, write_scan_json
 from ..vision.part import find_part
+from ..vision.refine import mask_pixel_mm, next_refinement, surfaced_faces
 from . import processing
 from . import settings as S
 from .commissioning import scan_extra, stored_camera
 from .levels import LevelPlan, waterline_change
 
 log = logging.getLogger("inkslice.runner")
+
+
+def _target_of(frame) -> float:
+    return float(frame.extra.get("target_mm", frame.level_mm))
+
+
+def _descent(frames) -> list:
+    """The frames of the plan (levels.py), without those that refined a step."""
+    return [f for f in frames if "refines" not in f.extra]
 
 
 def free_mb(path) -> float:
@@ -60,7 +72,7 @@ class ScanRunner:
         self.job_dir = store.job_dir(job_id)
         self.scan_dir = self.job_dir / "scan"
         self.plan: LevelPlan | None = None         # made in run(), once the stage's travel is known
-        self._mask = None
+        self._mask = None                          # the part in the last frame of the descent
         self._scan: Scan | None = None
         self._level_times: list[float] = []
 
@@ -70,8 +82,11 @@ class ScanRunner:
         try:
             scan = self._scan = self._open_scan()
             self.plan = LevelPlan(self.settings, self._ceiling())
-            if self.plan.next_target(scan.frames) is not None:
+            pending = self._pending_refinement(scan)
+            if pending or self.plan.next_target(scan.frames) is not None:
                 self._home()
+                if pending:
+                    self._refine(scan, *pending)
                 self._capture_all(scan)
             self._light(False)
             outputs = self._process()
@@ -145,8 +160,8 @@ class ScanRunner:
         if (self.scan_dir / "scan.json").is_file():
             scan = load_scan(self.scan_dir)         # a resume: continue from its frames
             if scan.frames:
-                last = scan.frames[-1]
-                self._mask = find_part(read_frame(scan, last), scan.camera, last.level_mm)
+                last = _descent(scan.frames)[-1]
+                self._mask = self._part_in(scan, last)
             return scan
         camera = self._calibrated_camera()
         self.scan_dir.mkdir(parents=True, exist_ok=True)
@@ -164,6 +179,27 @@ class ScanRunner:
         if self.dev.camera_model is not None:
             return self.dev.camera_model
         raise DeviceError("camera", "no camera calibration stored: commission the camera before scanning")
+
+    def _part_in(self, scan: Scan, ref: FrameRef) -> np.ndarray:
+        return find_part(read_frame(scan, ref), scan.camera, ref.level_mm)
+
+    def _pending_refinement(self, scan: Scan):
+        """A resumed scan first finishes the refinement of its last step, if the cut came
+        during one: (upper, lower, faces, seen) read back from the frames, or None. The same
+        masks give the same decisions, so it takes the frames an uninterrupted scan would."""
+        descent = _descent(scan.frames)
+        if float(S.full(self.settings)["refine_mm"]) <= 0 or len(descent) < 2:
+            return None
+        upper, lower = _target_of(descent[-2]), _target_of(descent[-1])
+        if upper <= lower:
+            return None
+        below = self._mask if self._mask is not None else self._part_in(scan, descent[-1])
+        faces = surfaced_faces(self._part_in(scan, descent[-2]), below, mask_pixel_mm(scan.camera, below.shape))
+        if not faces:
+            return None
+        seen = [(_target_of(f), self._part_in(scan, f)) for f in scan.frames
+                if f.extra.get("refines") == [upper, lower]]
+        return upper, lower, faces, seen
 
     # -- motion and capture -----------------------------------------------------
     def _home(self):
@@ -190,20 +226,55 @@ class ScanRunner:
                 raise Cancelled()
             frame = self._capture()
             mask = find_part(frame, scan.camera, level)
-            rising = bool(scan.frames) and target > float(scan.frames[-1].extra.get("target_mm", -math.inf))
-            change = waterline_change(None if rising else self._mask, mask)
+            previous = _descent(scan.frames)[-1:]
+            rising = bool(previous) and target > _target_of(previous[0])
+            before = None if rising or not previous else self._mask
+            change = waterline_change(before, mask)
             self._mask = mask
             extra = {"target_mm": target, "step_mm": step, "change": round(change, 6),
                      "shows_part": bool(mask.any())}
-            extra.update(self._sensor_reading(level))
-            self._save_frame(scan, frame, FrameRef(f"frames/{len(scan.frames) + 1:04d}.png", level, extra))
-            self.on_frame(frame, {"level_mm": level, "time": time.time(), "part": mask})
-            del frame
-            self._level_times.append(time.monotonic() - t0)
-            total = self.plan.estimate_total(scan.frames)
-            self.store.update_job(self.job_id, levels_done=len(scan.frames), levels_total=total, level_mm=level)
-            self.report(levels_done=len(scan.frames), levels_total=total,
-                        eta_s=self._eta(len(scan.frames), total))
+            self._keep(scan, frame, level, mask, extra, t0)
+            if before is not None:
+                self._refine(scan, _target_of(previous[0]), target, surfaced_faces(
+                    before, mask, mask_pixel_mm(scan.camera, mask.shape)), [])
+
+    def _keep(self, scan: Scan, frame, level, mask, extra, t0):
+        """Save one frame with its extra keys, publish it and the progress."""
+        extra.update(self._sensor_reading(level))
+        self._save_frame(scan, frame, FrameRef(f"frames/{len(scan.frames) + 1:04d}.png", level, extra))
+        self.on_frame(frame, {"level_mm": level, "time": time.time(), "part": mask})
+        self._level_times.append(time.monotonic() - t0)
+        total = self.plan.estimate_total(scan.frames)
+        self.store.update_job(self.job_id, levels_done=len(scan.frames), levels_total=total, level_mm=level)
+        self.report(levels_done=len(scan.frames), levels_total=total,
+                    eta_s=self._eta(len(scan.frames), total))
+
+    def _refine(self, scan: Scan, upper: float, lower: float, faces, seen):
+        """Faces came out at once between the levels `upper` and `lower`: go back into that
+        step and bisect it (vision/refine.py) until each face's level is known to refine_mm.
+        Raising the ink over a face it has just left needs twice the settle time (it must
+        close over the face and calm down); `seen` holds [(level, mask)] already taken."""
+        resolution = float(S.full(self.settings)["refine_mm"])
+        if resolution <= 0 or not faces:
+            return
+        here = lower
+        while True:
+            self._check_stop()
+            target = next_refinement(upper, lower, faces, seen, resolution)
+            if target is None:
+                return
+            t0 = time.monotonic()
+            self.report(state="scanning", level_mm=target, message=f"level {target:.3f} mm (a face came out "
+                        f"at once between {upper:g} and {lower:g} mm: refining)")
+            level = self._move_to_level(target)
+            if self.stop.wait(self.settings["settle_s"] * (2 if target > here else 1)):
+                raise Cancelled()
+            here = target
+            frame = self._capture()
+            mask = find_part(frame, scan.camera, level)
+            seen.append((target, mask))
+            self._keep(scan, frame, level, mask, {"target_mm": target, "refines": [upper, lower],
+                                                  "shows_part": bool(mask.any())}, t0)
 
     def _ceiling(self) -> float:
         """The highest level the stage reaches: the ink's level with the stage at the home end of its travel."""

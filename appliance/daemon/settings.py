@@ -91,6 +91,10 @@ SCHEMA = (
             lo_ok=False, step=0.005,
             help="What an adaptive scan aims at: the fraction of the part's outline that moves from "
                  "one frame to the next."),
+    Setting("refine_mm", 0.1, "number", "scanning", "Refine faces to", unit="mm", lo=0.0, hi=100.0, step=0.05,
+            help="When a flat face comes out of the ink all at once between two levels, the scan goes back "
+                 "into that step and bisects it until the face's level is known to this (a few extra frames "
+                 "per face). 0 turns it off: such a face is then known only to within the level step."),
     Setting("min_free_mb", 200.0, "number", "scanning", "Keep free on disk", unit="MB", lo=50.0, hi=1e6, step=50,
             help="A scan stops (keeping its frames) before the data disk has less than this free."),
     Setting("auto_resume", False, "bool", "scanning", "Resume after a power cut",
