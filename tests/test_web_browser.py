@@ -113,6 +113,8 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         wait(d, lambda: d.find_element(By.ID, "confirm").is_displayed(), what="start confirmation")
         d.find_element(By.ID, "confirm-start").click()
         wait(d, lambda: btn.text == "Stop scan", what="scan started")
+        # the tab's title follows the scan (static/notify.js), so a phone in another tab sees it
+        wait(d, lambda: " % · " in d.title or d.title.startswith("processing"), what="progress in the title")
         prog = d.find_element(By.ID, "progress")
         seen = []
         end = time.monotonic() + 30
@@ -203,16 +205,20 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         assert usb.is_displayed() and "safe to remove" in d.find_element(By.ID, "usb-result").text
 
         # -- settings: a bad value is refused naming the key, a good one saved
-        d.get(box["url"] + "/settings")
+        d.get(box["url"] + "/settings#group-cam")          # the group chip's link opens the CAM group
         field = d.find_element(By.NAME, "cutter_diameter_mm")
         field.clear()
         field.send_keys("-1")
         d.find_element(By.CSS_SELECTOR, "#settings-form button[type=submit]").click()
-        wait(d, lambda: "cutter_diameter_mm" in d.find_element(By.ID, "settings-result").text, what="refusal")
+        wait(d, lambda: "must be at least 0.1" in d.find_element(By.ID, "err-cutter_diameter_mm").text,
+             what="refusal beside the field")
+        assert "Cutter diameter" in d.find_element(By.ID, "settings-result").text
+        good = 3.175 if box["svc"].settings()["cutter_diameter_mm"] != 3.175 else 4.0   # phone, then desktop
         field.clear()
-        field.send_keys("6")
+        field.send_keys(str(good))
         d.find_element(By.CSS_SELECTOR, "#settings-form button[type=submit]").click()
-        wait(d, lambda: d.find_element(By.ID, "settings-result").text == "Saved.", what="saved")
+        wait(d, lambda: d.find_element(By.ID, "settings-result").text.startswith("Saved at"), what="saved")
+        assert box["svc"].settings()["cutter_diameter_mm"] == good
         shot(d, kind, "settings")
 
         # -- calibration: guided steps and the preview of what was detected

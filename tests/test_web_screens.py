@@ -113,6 +113,26 @@ def _deleting(d, box):
     wait(d, lambda: d.find_element(By.ID, "delete-confirm").is_displayed(), what="the delete confirmation")
 
 
+def _refused_setting(d, box):
+    """A bad value typed and saved: the refusal shows beside its field, the save bar says so."""
+    d.find_element(By.ID, "settings-form")
+    box_ = d.find_element(By.ID, "set-level_step_mm")
+    box_.clear()
+    box_.send_keys("-1")
+    d.find_element(By.ID, "settings-save").click()
+    wait(d, lambda: d.find_element(By.ID, "err-level_step_mm").text == "must be positive, got -1",
+         what="the refusal beside its field")
+    assert "Not saved" in d.find_element(By.ID, "settings-result").text
+    good = 1.0 if box["svc"].settings()["level_step_mm"] != 1.0 else 0.75    # the phone's run, then the desktop's
+    box_.clear()
+    box_.send_keys(str(good))                           # a good value: the bar says it is stored
+    d.find_element(By.ID, "settings-save").click()
+    wait(d, lambda: d.find_element(By.ID, "settings-result").text.startswith("Saved at"), what="saved state")
+    assert "saved" in d.find_element(By.ID, "savebar").get_attribute("class")
+    assert d.find_element(By.ID, "err-level_step_mm").text == ""
+    assert box["svc"].settings()["level_step_mm"] == good
+
+
 SCREENS = [
     Screen("login", "/login", logged_in=False,
            ready=lambda d, box: d.find_element(By.ID, "password")),
@@ -131,6 +151,10 @@ SCREENS = [
                                       in ("1", "error"), what="3D view"))),
     Screen("job-delete", lambda box: f"/jobs/{box['job_id']}", ready=_deleting),
     Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
+    Screen("settings-refused", "/settings", ready=lambda d, box: _refused_setting(d, box),
+           console_ok=("api/settings - Failed to load resource: the server responded with a status of 400",)),
+    Screen("system", "/system", ready=lambda d, box: wait(
+        d, lambda: d.find_element(By.ID, "log-text").text not in ("", "…"), what="the log shown")),
     Screen("commission", "/commission", ready=lambda d, box: wait(
         d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning step")),
     Screen("calibration", "/calibration", ready=lambda d, box: wait(

@@ -65,6 +65,9 @@ def run(args):
     from ..daemon.main import run as run_daemon, setup_logging
     from ..daemon.processing import child_process, in_process
     setup_logging(args.log_level)
+    from ..daemon.main import data_dir
+    from ..logfiles import log_to_file
+    log_to_file(data_dir(args.data), "daemon")       # the system page shows the last lines
     factory = make_factory(args)
     processor = child_process if args.processor == "child" else in_process
     if args.sim is not None:

@@ -34,6 +34,10 @@ def run(args):
     from ..daemon.main import data_dir
     from ..web.demo import serve
     data = data_dir(args.data)
+    import logging
+    from ..logfiles import log_to_file
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    log_to_file(data, "web")                         # the system page shows the last lines
     if args.fake:
         from ..web.fake import FakeBenchService
         service = FakeBenchService(Path(data) / "fake-bench", level_s=0.5)

@@ -231,6 +231,9 @@ class WebService:
     def job_sizes(self) -> dict:
         return dict(self._optional("job_sizes")) if self.offers("job_sizes") else {}
 
+    def events(self, job_id=None, limit=200) -> list[dict]:
+        return self._optional("events", job_id, limit)
+
     @staticmethod
     def _job(j: dict) -> dict:
         j = dict(j)

@@ -43,7 +43,7 @@ from flask import Flask, g, jsonify, redirect, request, session, url_for
 from werkzeug.http import parse_cookie
 
 from ..daemon import firstrun
-from . import api, auth, pages
+from . import api, auth, pages, system
 from .adapter import WebService
 from .sessions import SessionStore
 from .eta import EtaSmoother
@@ -118,9 +118,11 @@ def create_app(service, config: dict | None = None) -> Flask:
         "eta": EtaSmoother(),
         "streams": threading.BoundedSemaphore(int(cfg["max_streams"])),
         "config": cfg,
+        "started": time.time(),
     }
     app.register_blueprint(pages.bp)
     app.register_blueprint(api.bp, url_prefix="/api")
+    app.register_blueprint(system.bp, url_prefix="/api")
 
     @app.before_request
     def _gate():

@@ -9,10 +9,12 @@ from urllib.parse import urlparse
 
 from flask import Blueprint, current_app, g, redirect, render_template, request, session, url_for
 
+from ..daemon.settings import schema_json
 from ..errors import InkSliceError
 from ..vision.printboard import PRINTED, describe
 from . import auth
 from .api import FILE_NAME, JOB_ID, download_name
+from .system import system_info
 
 bp = Blueprint("pages", __name__)
 
@@ -132,7 +134,12 @@ def _choices() -> dict:
 @bp.get("/settings")
 def settings():
     return render_template("settings.html", page="settings", settings=_ext()["service"].settings(),
-                           tokens=_ext()["creds"].list_tokens())
+                           schema=schema_json(), tokens=_ext()["creds"].list_tokens())
+
+
+@bp.get("/system")
+def system():
+    return render_template("system.html", page="system", info=system_info())
 
 
 @bp.get("/calibration")

@@ -35,6 +35,7 @@
 
     function render(st) {
       current = st;
+      document.dispatchEvent(new CustomEvent("inkslice:state", { detail: st }));   // static/notify.js
       const s = st.state || "unknown";
       const badge = $("#state");
       badge.textContent = s; badge.className = "badge s-" + s;
@@ -301,21 +302,7 @@
 
   // ---------------------------------------------------------------- settings
   function settings() {
-    const f = $("#settings-form");
-    f.addEventListener("submit", async (ev) => {
-      ev.preventDefault();
-      const changes = {};
-      f.querySelectorAll("input[name]").forEach((inp) => {
-        let v = inp.value;
-        if (inp.dataset.kind === "number") v = Number(v);
-        else if (inp.dataset.kind === "bool") v = v === "true" || v === "True";
-        const path = inp.name.split(".");
-        if (path.length === 2) { changes[path[0]] = changes[path[0]] || {}; changes[path[0]][path[1]] = v; }
-        else changes[inp.name] = v;
-      });
-      try { await api("PATCH", "/api/settings", changes); text("#settings-result", "Saved."); }
-      catch (e) { text("#settings-result", "Not saved: " + e.message); }
-    });
+    // the settings themselves: static/settings.js
     $("#password-form").addEventListener("submit", async (ev) => {
       ev.preventDefault();
       const fd = new FormData(ev.target);

@@ -1,0 +1,147 @@
+"""The system page's API: the box's figures, its logs, a support bundle, backup and restore, and
+the settings schema the settings form is drawn from.
+
+    GET  /api/settings/schema   groups of settings with type, unit, range or choices, help (settings.py)
+    GET  /api/system            version, uptimes, the data disk, the last webhook delivery
+    GET  /api/logs/<daemon|web> the last 1,000 lines as text (?download=1: as a file)
+    GET  /api/support.zip       logs, settings, calibration, system figures, events; no secrets
+    GET  /api/backup            settings and calibration history as one JSON file (daemon/backup.py)
+    POST /api/restore           that file back (JSON body); refused while the bench works
+
+Behind the login gate like the rest of /api/ (app.py).
+"""
+from __future__ import annotations
+
+import io
+import json
+import logging
+import time
+import zipfile
+from urllib.parse import urlsplit
+
+from flask import Blueprint, Response, current_app, jsonify, request
+
+from .. import __version__, logfiles
+from ..daemon import settings as S
+from ..errors import DeviceError, InkSliceError, SettingError
+from .adapter import NotOffered
+
+bp = Blueprint("system", __name__)
+log = logging.getLogger("inkslice.web")
+
+
+def _ext():
+    return current_app.extensions["inkslice"]
+
+
+def _svc():
+    return _ext()["service"]
+
+
+def _bench_data():
+    return _ext()["config"].get("bench_data_dir") or _ext()["config"]["data_dir"]
+
+
+def _err(e: InkSliceError, code):
+    return jsonify(error=e.problem, where=e.where), code
+
+
+@bp.errorhandler(NotOffered)
+def _not_offered(e):
+    return _err(e, 501)
+
+
+@bp.errorhandler(SettingError)
+def _setting(e):
+    return _err(e, 400)
+
+
+@bp.errorhandler(DeviceError)
+def _device(e):
+    return _err(e, 409)
+
+
+@bp.get("/settings/schema")
+def schema():
+    return jsonify(S.schema_json())
+
+
+def system_info() -> dict:
+    info = {"version": __version__, "web_started": _ext()["started"],
+            "web_uptime_s": round(time.time() - _ext()["started"], 1)}
+    if _svc().offers("system"):
+        info.update(_svc().system())
+    return info
+
+
+@bp.get("/system")
+def system():
+    return jsonify(system_info())
+
+
+@bp.get("/logs/<name>")
+def logs(name):
+    if name not in logfiles.NAMES:
+        return jsonify(error=f"no log named {name!r}; there are {', '.join(logfiles.NAMES)}"), 404
+    text = logfiles.tail(_bench_data(), name)
+    resp = Response(text, mimetype="text/plain; charset=utf-8")
+    if request.args.get("download") == "1":
+        resp.headers["Content-Disposition"] = f'attachment; filename="inkslice-{name}-{_stamp()}.log"'
+    return resp
+
+
+def without_secrets(settings: dict) -> dict:
+    """Settings fit for a support bundle: secret ones blanked, an address cut to its host (an
+    ntfy topic or a Home Assistant webhook id in the path is as good as a password)."""
+    out = {}
+    for key, value in settings.items():
+        if key in S.SECRETS:
+            out[key] = "(set)" if value else ""
+        elif key == "webhook_url" and value:
+            u = urlsplit(value)
+            out[key] = f"{u.scheme}://{u.hostname}/..."
+        else:
+            out[key] = value
+    return out
+
+
+@bp.get("/support.zip")
+def support_bundle():
+    svc = _svc()
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for name in logfiles.NAMES:
+            z.writestr(f"logs/{name}.log", logfiles.tail(_bench_data(), name))
+        z.writestr("settings.json", json.dumps(without_secrets(svc.settings()), indent=2))
+        z.writestr("system.json", json.dumps(system_info(), indent=2, default=str))
+        if svc.offers("backup"):
+            z.writestr("calibration.json", json.dumps(svc.backup()["calibration"], indent=2))
+        if svc.offers("events"):
+            z.writestr("events.json", json.dumps(svc.events(None, 500), indent=2, default=str))
+        z.writestr("README.txt", "InkSlice support bundle: the daemon's and web's last log lines, the settings "
+                                 "(secrets left out), the calibration history, the box's figures and its recent "
+                                 "events. No passwords, tokens, scans or jobs.\n")
+    return Response(buf.getvalue(), mimetype="application/zip", headers={
+        "Content-Disposition": f'attachment; filename="inkslice-support-{_stamp()}.zip"'})
+
+
+@bp.get("/backup")
+def backup():
+    doc = _svc().backup()
+    log.info("backup of settings and calibration downloaded")
+    return Response(json.dumps(doc, indent=2) + "\n", mimetype="application/json", headers={
+        "Content-Disposition": f'attachment; filename="inkslice-backup-{_stamp()}.json"'})
+
+
+@bp.post("/restore")
+def restore():
+    doc = request.get_json(silent=True)
+    if not isinstance(doc, dict):
+        return jsonify(error="send the backup file's JSON as the body", where="restore"), 400
+    out = _svc().restore(doc)
+    log.info("settings and calibration restored from a backup: %s", out)
+    return jsonify(out)
+
+
+def _stamp():
+    return time.strftime("%Y%m%d-%H%M", time.localtime())
