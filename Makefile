@@ -5,8 +5,10 @@ PY := $(VENV)/bin/python
 
 .PHONY: demo test setup setup-test bench clean install lock docs
 
+# HOST=0.0.0.0 lets a phone on the same network reach the demo's web UI
+HOST ?= 127.0.0.1
 demo: setup
-	$(VENV)/bin/inkslice demo --serve
+	$(VENV)/bin/inkslice demo --serve --host $(HOST)
 
 test: setup-test
 	$(PY) -m pytest -q

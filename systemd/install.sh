@@ -10,7 +10,8 @@
 # inkslice-stick@DEV.service, which mounts FAT/exFAT sticks under
 # /media/inkslice for the inkslice user, and a polkit rule that lets that user
 # unmount them after a copy); I2C switched on; udev reloaded; the services
-# enabled and started.
+# enabled and started; Avahi advertising the web UI (_http._tcp), the host named
+# `inkslice` when it still has the image's default name, so the box answers as inkslice.local.
 set -euo pipefail
 SRC=$(cd "$(dirname "$0")/.." && pwd)
 ROOT=""
@@ -18,12 +19,13 @@ if [ "${1:-}" = "--root" ]; then ROOT=${2:?--root needs a folder}; fi
 PREFIX=/opt/inkslice
 
 install -d "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d" "$ROOT/etc/inkslice" "$ROOT$PREFIX" \
-           "$ROOT/usr/local/lib/inkslice" "$ROOT/etc/polkit-1/rules.d"
+           "$ROOT/usr/local/lib/inkslice" "$ROOT/etc/polkit-1/rules.d" "$ROOT/etc/avahi/services"
 install -m 0644 "$SRC/systemd/inkslice-daemon.service" "$SRC/systemd/inkslice-web.service" \
                 "$SRC/systemd/inkslice-stick@.service" "$ROOT/etc/systemd/system/"
 install -m 0644 "$SRC/systemd/99-inkslice.rules" "$SRC/systemd/99-inkslice-usb.rules" "$ROOT/etc/udev/rules.d/"
 install -m 0755 "$SRC/systemd/inkslice-stick" "$ROOT/usr/local/lib/inkslice/"
 install -m 0644 "$SRC/systemd/50-inkslice-stick.rules" "$ROOT/etc/polkit-1/rules.d/"
+install -m 0644 "$SRC/systemd/avahi/inkslice.service" "$ROOT/etc/avahi/services/inkslice.service"
 [ -e "$ROOT/etc/inkslice/bench.json" ] || install -m 0644 "$SRC/systemd/bench.json" "$ROOT/etc/inkslice/bench.json"
 
 # the code: a copy (not the checkout itself: a `git pull` must not change a running box)
@@ -45,7 +47,11 @@ if ! id inkslice >/dev/null 2>&1; then
           --groups dialout,video,gpio,i2c inkslice
 fi
 # polkitd: the rule that lets the daemon unmount a stick; avrdude and gcc-avr: `inkslice firmware flash`
-apt-get install -y -qq --no-install-recommends python3-venv python3-dev polkitd avrdude gcc-avr avr-libc make >/dev/null
+# avahi-daemon: the box on the LAN as inkslice.local, the web UI advertised as _http._tcp
+apt-get install -y -qq --no-install-recommends python3-venv python3-dev polkitd avrdude gcc-avr avr-libc make \
+    avahi-daemon >/dev/null
+case "$(hostname)" in raspberrypi|localhost|debian) hostnamectl set-hostname inkslice
+  sed -i 's/^127\.0\.1\.1.*/127.0.1.1\tinkslice/' /etc/hosts ;; esac
 [ -x "$PREFIX/.venv/bin/python" ] || python3 -m venv "$PREFIX/.venv"
 # the dependencies exactly as the tests ran them (versions and hashes), then the package alone
 "$PREFIX/.venv/bin/python" -m pip install -q --require-hashes -r "$PREFIX/requirements.lock"
@@ -56,4 +62,6 @@ udevadm trigger --subsystem-match=tty --subsystem-match=video4linux --subsystem-
 systemctl daemon-reload
 udevadm trigger --action=add --subsystem-match=block       # a stick already plugged in gets mounted
 systemctl enable --now inkslice-daemon.service inkslice-web.service
-echo "install: done. Logs: journalctl -u inkslice-daemon -u inkslice-web -f"
+systemctl enable avahi-daemon.service && systemctl restart avahi-daemon.service   # the name and the service file
+echo "install: done. Open http://$(hostname).local:8080/ from a phone on the same network."
+echo "Logs: journalctl -u inkslice-daemon -u inkslice-web -f"

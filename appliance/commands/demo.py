@@ -25,6 +25,9 @@ def add_arguments(p):
                         "virtual camera, daemon, web UI) until Ctrl-C")
     p.add_argument("--serve-only", action="store_true", help="skip the table; only run the appliance")
     p.add_argument("--port", type=int, default=8080, help="web UI port for --serve (default 8080)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address the web UI listens on for --serve (default 127.0.0.1, this machine only; "
+                        "0.0.0.0 lets a phone on the same network open it: `make demo HOST=0.0.0.0`)")
     p.add_argument("--part", default="sphere", help="the part on the simulated bench for --serve")
 
 
@@ -59,7 +62,7 @@ def check_gcode(path):
     return f"REJECTED by rs274 (exit {r.returncode}): {r.stderr.strip()[:200]}"
 
 
-def serve_appliance(out: Path, part: str, port: int):
+def serve_appliance(out: Path, part: str, port: int, host: str = "127.0.0.1"):
     """The whole appliance on this machine: the AVR firmware under simavr driven by the real
     stage driver, the virtual camera watching where the simulated stage really is, the
     daemon, and the web UI on loopback. Runs until interrupted."""
@@ -76,7 +79,7 @@ def serve_appliance(out: Path, part: str, port: int):
     factory = SimulatedBenchFactory(part, small_rig(640, 480))
     service = BenchService(data, factory, processor=factory.processor(child_process))
     try:
-        serve(service, data, host="127.0.0.1", port=port, config={"reset_password": True})
+        serve(service, data, host=host, port=port, config={"reset_password": True})
     except KeyboardInterrupt:
         pass
     finally:
@@ -87,7 +90,7 @@ def serve_appliance(out: Path, part: str, port: int):
 
 def run(args):
     if args.serve_only:
-        return serve_appliance(Path(args.out), args.part, args.port)
+        return serve_appliance(Path(args.out), args.part, args.port, args.host)
     from .. import process as proc
     from ..sim import surfaces
     from ..sim.levels import sculpture_levels
@@ -119,5 +122,5 @@ def run(args):
             print(f"G-code {result_dir / name}: {check_gcode(result_dir / name)}")
     print(f"Report: {result_dir / 'report.md'}")
     if args.serve:
-        return serve_appliance(out, args.part, args.port)
+        return serve_appliance(out, args.part, args.port, args.host)
     return 0

@@ -50,6 +50,12 @@ def _server(service, data_dir, host, port, threads, config):
 
 def banner(run: Running) -> str:
     lines = [f"InkSlice web UI: {run.url}/"]
+    if run.server.effective_host in ("0.0.0.0", "::"):        # on every address: say which a phone uses
+        import socket
+        from ..daemon.service import lan_address
+        port = run.server.effective_port
+        lines.append(f"From a phone on the same network: http://{lan_address()}:{port}/ "
+                     f"(or http://{socket.gethostname()}.local:{port}/ where mDNS works)")
     if run.password:
         lines.append(f"First-run admin password: {run.password}   (change it under Settings)")
     else:
