@@ -2,6 +2,7 @@
 the in-memory bench (sim.fakes): preview with the light, home, jog, go to a level, refused while
 a scan runs; rename, delete, process again, sizes, thumbnails, downloads named for the job; the
 ETA that learns from past jobs and covers processing; the stage-fault chip's text."""
+import shutil
 import time
 
 import pytest
@@ -100,8 +101,8 @@ def test_the_job_manager_renames_sizes_thumbnails_names_downloads_reprocesses_an
     r = c.post(f"/api/jobs/{job_id}/reprocess", json={"settings": {"grid": -3}}, headers=h)
     assert r.status_code == 400 and r.get_json()["where"] == "grid"
     assert c.post(f"/api/jobs/{job_id}/reprocess", json={"settings": {"grid": 30}}, headers=h).status_code == 202
-    end = time.monotonic() + 10
-    while svc.job(job_id)["status"] != "done" and time.monotonic() < end:
+    end = time.monotonic() + 30
+    while (svc.job(job_id)["status"], svc.state()["state"]) != ("done", "done") and time.monotonic() < end:
         time.sleep(0.05)
     assert svc.job(job_id)["settings"]["grid"] == 30 and "toolpath.gcode" in svc.job(job_id)["outputs"]
 
@@ -140,3 +141,34 @@ def test_a_stage_fault_chip_reads_the_problem_not_a_cut_word(tmp_path):
         assert chip == "fault: no reply from the controller (unplugged?)", chip
     finally:
         svc.close()
+
+
+@pytest.mark.simavr
+@pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
+                    reason="needs gcc-avr and simavr (scripts/setup.sh)")
+def test_the_panel_jogs_the_simulated_stage_firmware_under_simavr(tmp_path):
+    """Through the web API to the real SerialStage and the stepper firmware under simavr: the
+    position the firmware's STEP edges add up to is where the panel said it put the base."""
+    from appliance.sim.fakes import SimulatedBenchFactory, small_rig
+    factory = SimulatedBenchFactory("cone", small_rig(320, 240))
+    svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.05)
+    try:
+        app = create_app(svc, {"data_dir": str(tmp_path / "data")})
+        app.config["TESTING"] = True
+        c = app.test_client()
+        h = {"X-CSRF-Token": login(c, app.config["FIRST_RUN_PASSWORD"])}
+        at_home = svc.settings()["level_at_home_mm"]
+        assert c.post("/api/machine/preview", headers=h).get_json()["light"] is True
+        homed = c.post("/api/machine/home", headers=h).get_json()
+        start = factory.bench.stage_position_mm()          # the firmware's home end of travel
+        assert homed["homed"] and homed["level_mm"] == pytest.approx(at_home - start)
+        for mm in (10, 1, 0.1, -1):
+            c.post("/api/machine/jog", json={"mm": mm}, headers=h)
+        assert factory.bench.stage_position_mm() == pytest.approx(start + 10.1, abs=1e-9)
+        assert c.get("/api/state").get_json()["manual"]["level_mm"] == pytest.approx(at_home - start - 10.1)
+        st = c.post("/api/machine/goto", json={"level_mm": at_home - 20.5}, headers=h).get_json()
+        assert st["level_mm"] == pytest.approx(at_home - 20.5)
+        assert factory.bench.stage_position_mm() == pytest.approx(20.5, abs=1e-9)
+    finally:
+        svc.close()
+        factory.close()

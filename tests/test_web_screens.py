@@ -102,6 +102,21 @@ def _previewing(d, box):
     wait(d, lambda: "Light on" in d.find_element(By.ID, "machine-status").text, what="the light on")
 
 
+def _jogging(d, box):
+    """The panel's buttons move the stage: home, lift the base 1 mm, then go to a level."""
+    _previewing(d, box)
+    status = lambda: d.find_element(By.ID, "machine-status").text       # noqa: E731
+    d.find_element(By.ID, "home").click()
+    wait(d, lambda: "Ink level 60.00 mm" in status(), what="homed")
+    d.find_element(By.CSS_SELECTOR, '.jogb[data-mm="1"]').click()
+    wait(d, lambda: "Ink level 59.00 mm" in status(), what="jogged up 1 mm")
+    d.find_element(By.ID, "goto-level").send_keys("30")
+    d.find_element(By.ID, "goto").click()
+    wait(d, lambda: "Ink level 30.00 mm" in status(), what="at level 30 mm")
+    stage = box["svc"].factory.last.stage
+    assert stage.calls[-3:] == ["home", "move 1.0000", "move 30.0000"], stage.calls
+
+
 def _confirming(d, box):
     _bench_ready(d, box)
     d.find_element(By.ID, "startstop").click()
@@ -137,6 +152,7 @@ SCREENS = [
     Screen("login", "/login", logged_in=False,
            ready=lambda d, box: d.find_element(By.ID, "password")),
     Screen("bench-idle", "/", ready=_previewing),
+    Screen("bench-panel-moved", "/", ready=_jogging),
     Screen("bench-confirm-start", "/", ready=_confirming,
            after=lambda d, box: d.find_element(By.ID, "confirm-back").click()),
     Screen("bench-scanning", "/", before=_scanning, after=_scan_done,
