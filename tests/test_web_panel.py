@@ -2,6 +2,7 @@
 the in-memory bench (sim.fakes): preview with the light, home, jog, go to a level, refused while
 a scan runs; rename, delete, process again, sizes, thumbnails, downloads named for the job; the
 ETA that learns from past jobs and covers processing; the stage-fault chip's text."""
+import re
 import shutil
 import time
 
@@ -87,7 +88,8 @@ def test_the_job_manager_renames_sizes_thumbnails_names_downloads_reprocesses_an
     listed = c.get("/api/jobs").get_json()["jobs"][0]
     assert listed["id"] == job_id and listed["name"] == "cone, left side" and listed["size_bytes"] > 1000
     page = c.get("/jobs").get_data(as_text=True)
-    assert "cone, left side" in page and "took" in page and " kB" in page and "thumb.png" in page
+    assert "cone, left side" in page and "took" in page and "thumb.png" in page
+    assert re.search(r"· \d+(\.\d)? (kB|MB)</span>", page)                      # its size on disk
     job_page = c.get(f"/jobs/{job_id}").get_data(as_text=True)
     assert 'id="reprocess-form"' in job_page and '<option value="mach3"' in job_page and "Delete this job" in job_page
     thumb = c.get(f"/api/jobs/{job_id}/thumb.png")
