@@ -174,3 +174,24 @@ def test_the_panel_jogs_the_simulated_stage_firmware_under_simavr(tmp_path):
     finally:
         svc.close()
         factory.close()
+
+
+def test_the_shown_eta_covers_processing_and_takes_the_processing_figure_when_it_starts():
+    from appliance.web.eta import EtaSmoother
+    now = [0.0]
+    e = EtaSmoother(clock=lambda: now[0])
+
+    def state(done, phase="scanning", eta=None):
+        return {"state": phase, "job_id": "j", "levels_done": done, "levels_total": 20, "eta_s": eta,
+                "eta_processing_s": 60.0}
+    e.update(state(0, eta=100.0))
+    for i in range(1, 21):                          # a level every 2 s: 40 s of scanning
+        now[0] += 2.0
+        shown = e.update(state(i))
+        if i == 5:                                  # a quarter through the scan: 15 levels + processing left
+            assert shown == pytest.approx(15 * 2.0 + 60.0, rel=0.1)
+    now[0] += 1.0
+    assert e.update(state(20, "processing", eta=60.0)) == 60.0      # a new phase is news, not jitter
+    now[0] += 10.0
+    assert e.update(state(20, "processing", eta=60.0)) == pytest.approx(50.0)   # and it counts down
+    assert EtaSmoother().update({**state(20, "processing"), "eta_processing_s": None}) is None  # nothing learned yet

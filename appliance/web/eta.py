@@ -90,7 +90,9 @@ class EtaSmoother:
             left = max(0, total - done)
             raw = left * self.per_level + float(state.get("eta_processing_s") or 0.0)
             if st == "processing":
-                raw = float(daemon_eta) if daemon_eta is not None else 0.0
+                if daemon_eta is None:
+                    return None             # a box with no finished job yet: say "processing", not "0 s"
+                raw = float(daemon_eta)
                 if phase_changed:
                     self.shown, self.shown_t = raw, now
                     return round(raw, 1)
