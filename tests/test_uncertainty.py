@@ -18,7 +18,7 @@ from appliance.sim.surfaces import Surface, Tier, disc_sdf
 from appliance.surface.base import stand_on_base
 from appliance.surface.heightmap import HeightMap
 from appliance.surface.reconstruct import GridSpec, reconstruct
-from appliance.surface.uncertainty import (CLAMPED, EXTRAPOLATED, SOURCES, header_notes,
+from appliance.surface.uncertainty import (CLAMPED, EXTRAPOLATED, _inradius, SOURCES, header_notes,
                                            low_confidence_regions, source_code)
 from cam_helpers import grid_map
 
@@ -52,6 +52,18 @@ def test_the_top_above_the_highest_frame_is_extrapolated_and_less_sure(dome):
     j, i = 20, 20                                   # (50, 50): 0.5 mm above the top frame
     assert dome.source[j, i] == EXTRAPOLATED
     assert dome.sigma[j, i] > 3 * np.median(dome.sigma[dome.on_part])
+
+
+def test_a_top_region_reaches_in_as_far_as_its_middle_is_from_the_waterlines():
+    # the extrapolated top's uncertainty grows towards its middle: a disc's middle is its
+    # radius in, a thin ring's (a ridge's crest) only its half-width, whatever its area
+    y, x = np.mgrid[-50:51, -50:51] * 0.5
+    r = np.hypot(x, y)
+    disc, to_disc_edge = r < 10, 10 - r
+    ring, to_ring_edge = np.abs(r - 18) < 2, 2 - np.abs(r - 18)
+    for top, d, reach in ((disc, to_disc_edge, 10.0), (ring, to_ring_edge, 2.0)):
+        got = _inradius(top, np.where(top, d, 0.0), 0.5)
+        assert got[top].min() == got[top].max() == pytest.approx(reach, abs=0.5)
 
 
 def test_uncertainty_grows_with_the_level_step():

@@ -9,8 +9,8 @@ neighbours had no good height at all. The source says which, and the
 uncertainty (one number in mm per cell, about one standard deviation) is built
 from what limits each:
 
-- lateral: the waterline is placed to about half a pixel, and the fit's lattice
-  can place it to a fraction of its spacing; on a slope s a lateral error dx is
+- lateral: the waterline is placed to about half a pixel (how closely the fit's
+  lattice follows it is the fit's residual, below); on a slope s a lateral error dx is
   a height error s dx (a steep face or a wall is uncertain, a flat top is not);
 - gap: between waterlines the surface is continued from the curves around it;
   the further from the nearest seen waterline (d) and the more the surface bends
@@ -19,7 +19,8 @@ from what limits each:
   two levels, a step apart);
 - extrapolation above the top frame: the part's top lies between the highest
   level that showed it and the one above that did not; the further in from the
-  top waterline, the more of that step is unknown;
+  top waterline, the more of that step is unknown (in proportion to how far in
+  the top region reaches: a cap's radius, a ridge's half-width);
 - disagreement: the fit's residual at the waterline points near the cell (and
   against the cell's own first exposure, up to a step), and frames that
   contradict each other (exposure is monotone: a point out of the ink at one
@@ -50,7 +51,6 @@ NO_SOURCE = -1                     # off the part, or a map that does not say
 
 DEFAULT_UNCERTAIN_MM = 0.1         # cells above this are low confidence (G-code header, report)
 LATERAL_PX = 0.5                   # a waterline is placed to about half a pixel
-LATTICE_FRACTION = 0.1             # ... and the fit's lattice to about a tenth of its spacing
 FAR_GAPS = 4.0                     # this many times the part's typical distance to a waterline: unpinned
 STEEP_SLOPE = 3.0                  # |grad z| above this (72 deg) the cell is on a wall
 
@@ -124,6 +124,18 @@ def _nearest_distance(points, lat):
     return d.reshape(lat.shape)
 
 
+def _inradius(region, d, floor):
+    """Per node of `region`, how far in its connected piece reaches from the waterlines:
+    the largest distance `d` (to the nearest seen waterline) over that piece, at least
+    `floor`. A cap's middle is that far from every waterline; a ridge's crest (a long,
+    thin top, a ring's) is only its half-width in, however large its area."""
+    lab, n = ndimage.label(region, structure=np.ones((3, 3)))
+    if n == 0:
+        return np.full(region.shape, floor)
+    most = ndimage.maximum(d, lab, index=np.arange(1, n + 1))
+    return np.maximum(np.concatenate([[floor], np.asarray(most, float)])[lab], floor)
+
+
 def _fit_residual(ev: CellEvidence, pts, zp):
     """Local RMS of the fit's misfit at the waterline points around each node."""
     from .gridfit import bilinear
@@ -183,7 +195,8 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     local_step = np.where(fk > top, lv[above] - lv[fk], step)
     local_step = np.where(local_step > 0, local_step, step)
 
-    lateral = math.hypot(LATERAL_PX * ev.pixel_mm, LATTICE_FRACTION * h)
+    # (how well the fit's lattice follows the waterlines is the fit term's residual, not a guess)
+    lateral = LATERAL_PX * ev.pixel_mm
     u_lat = slope * lateral
     # between waterlines: the nearest seen one is d away; the bend over that distance,
     # bounded by the bracket (uniform over a step: step / sqrt(12)). Far from every
@@ -192,13 +205,13 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     d = np.where(np.isfinite(d_seen), d_seen, 0.0)
     bracket = local_step / math.sqrt(12.0)
     typical = max(float(np.median(d[ev.footprint])) if ev.footprint.any() else h, h)
-    u_gap = np.minimum(0.5 * bend * d ** 2, bracket)
-    u_gap = np.maximum(u_gap, bracket * np.clip(d / (FAR_GAPS * typical), 0.0, 1.0) ** 2)
+    u_bend = np.minimum(0.5 * bend * d ** 2, bracket)
+    u_far = bracket * np.clip(d / (FAR_GAPS * typical), 0.0, 1.0) ** 2
+    u_gap = np.maximum(u_bend, u_far)
     # above the top frame: the top lies somewhere in the step above the highest level
     # that showed the part; the waterline pins its edge, the middle is free
     cap = (ev.first == top) & ev.footprint
-    reach = math.sqrt(max(abs(ev.slices[top].area()), h * h) / math.pi)   # the top loop's radius
-    u_cap = np.where(cap, bracket * np.minimum(1.0, d / max(reach, h)), 0.0)
+    u_cap = np.where(cap, bracket * np.minimum(1.0, d / _inradius(cap, d, h)), 0.0)
     u_gap = np.maximum(u_gap, u_cap)
     # the outline: beyond it the part drops to the base; an outline placed dx off puts a
     # rim cell on the wall, up to its whole height off
@@ -222,7 +235,7 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
         u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
     u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2 + u_men ** 2)
     if explain is not None:
-        explain.update(lateral=u_lat, gap=u_gap, fit=u_fit, frames=u_frames, rim=u_rim, meniscus=u_men)
+        explain.update(lateral=u_lat, gap=u_gap, gap_bend=u_bend, gap_far=u_far, gap_cap=u_cap, fit=u_fit, frames=u_frames, rim=u_rim, meniscus=u_men)
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
