@@ -44,17 +44,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from meniscus import bench_folder, commission, described, scan_part  # noqa: E402
 from uncertainty import honesty                            # noqa: E402
 from appliance.sim import surfaces                          # noqa: E402
+from appliance.vision.refine import RESOLUTION_MM           # noqa: E402
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,plateau,ring"
 HELD_OUT = "crater,steep-front"    # shapes the uncertainty map was not tuned on
 TARGETS = {"Ea": 0.05, "p99": 0.2, "max": 1.0}
 
 
-def measure(name, seed, tmp, camera, meniscus):
+def measure(name, seed, tmp, camera, meniscus, refine_mm):
     """-> (label, Ea, p99, max, honest share, cells over 0.1 mm, share marked) of one scan."""
     t0 = time.perf_counter()
     maps = []
-    ea, p99, mx = scan_part(name, "harsh", tmp, camera, meniscus, maps=maps, from_above=True, seed=seed)
+    ea, p99, mx = scan_part(name, "harsh", tmp, camera, meniscus, maps=maps, from_above=True, seed=seed,
+                            refine_mm=refine_mm)
     share, big, marked = honesty(surfaces.get(name), maps[0])
     label = name if seed == 1 else f"{name}:{seed}"
     print(f"  {label:<14} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
@@ -94,6 +96,9 @@ def main():
                          "'' for none")
     ap.add_argument("--keep", default=None, metavar="DIR",
                     help="render into DIR and reuse what is there (renders take minutes a part)")
+    ap.add_argument("--refine-mm", type=float, default=RESOLUTION_MM,
+                    help="bisect the steps in which a face came out at once to this, as the daemon's runner does "
+                         "(0: only the plan's levels)")
     args = ap.parse_args()
     with bench_folder(args.keep, "harsh-bench-") as (tmp, camera):
         t0 = time.perf_counter()
@@ -101,8 +106,8 @@ def main():
         print(f"harsh: meniscus commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
               + described(doc),
               flush=True)
-        rows = [measure(name, seed, tmp, camera, meniscus) for name, seed in parsed(args.parts)]
-        held = [measure(name, seed, tmp, camera, meniscus) for name, seed in parsed(args.heldout)]
+        rows = [measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.parts)]
+        held = [measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.heldout)]
     summary("summary, harsh preset (mm); targets Ea <= 0.05, p99 <= 0.2, max <= 1", rows)
     if held:
         summary("held out (scans and shapes the uncertainty map was not tuned on)", held, targets=False)
