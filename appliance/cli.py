@@ -11,12 +11,13 @@ read-only): every file is written atomically, so what was there before is intact
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import importlib
 import pkgutil
 import sys
 
-from . import __version__, commands
+from . import __version__, commands, progress
 from .errors import InkSliceError
 
 WRITE_REFUSED = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
@@ -41,14 +42,16 @@ def build_parser():
     for mod in _command_modules():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
         mod.add_arguments(p)
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _progress=getattr(mod, "PROGRESS", False))
     return parser
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args._run(args) or 0)
+        # a long command (PROGRESS = True) shows its stages: progress.py
+        with progress.shown() if args._progress else contextlib.nullcontext():
+            return int(args._run(args) or 0)
     except InkSliceError as e:
         print(f"inkslice: error: {e}", file=sys.stderr)
         return 2

@@ -36,7 +36,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import atomicio, outputs, plots
+from . import atomicio, outputs, plots, progress
 from .cam.dissertation import dissertation_gcode
 from .errors import InkSliceError, ScanError, SettingError
 from .scanfile import check_frames, load_scan, read_frame
@@ -107,6 +107,7 @@ def _part_outline_mm(lowest, camera):
 
 def run_seed(scan, grid_n=50):
     """All dissertation methods on one scan -> {"seed:method": HeightMap}."""
+    progress.stage("the dissertation's pipeline")
     slices = [seed_vision.seed_slice(read_frame(scan, ref), ref.level_mm, scan.camera)
               for ref in _frames_top_down(scan)]
     pts = np.vstack([np.column_stack([s.edges_mm, np.full(len(s.edges_mm), s.level_mm)])
@@ -139,7 +140,9 @@ def extract_waterlines(scan):
     ahead = deque()
     out = []
     above = deque(maxlen=REREAD_ABOVE)     # the last frames, while none has shown the part
+    progress.stage("waterlines", total=len(frames))
     for i, ref in enumerate(frames):
+        progress.step(i)
         while len(ahead) < CONFIRMING_FRAMES + 1 and i + len(ahead) < len(frames):
             nxt = frames[i + len(ahead)]
             ahead.append((nxt.level_mm, read_frame(scan, nxt)))
@@ -210,6 +213,7 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
         if scan.camera.height_mm and scan.camera.K is not None else None
     out, diag = {}, {}
     for m in methods:
+        progress.stage(f"surface ({m})")
         rec = reconstruct(waterlines, grid, ReconstructOptions(method=m, tank_area_mm2=tank, meniscus=model,
                                                                 perspective=view, pixel_mm=pixel_mm(scan.camera)))
         bounds = rec.diagnostics.get("bounds", bounds)
@@ -409,7 +413,9 @@ def write_outputs(job: Job, out_folder, cam_options=None, keep=()) -> list[str]:
     out = Path(out_folder)
     hm = job.heightmap
     files = {"heightmap.csv": outputs.heightmap_csv_text(hm).encode()}
+    progress.stage("toolpath")
     files.update(toolpath_files(job, cam_options))
+    progress.stage("writing outputs")
     if job.pipeline == "inkslice":
         from .surface.stl import heightmap_to_stl
         files["surface.stl"] = heightmap_to_stl(hm)

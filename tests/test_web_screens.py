@@ -128,6 +128,18 @@ def _deleting(d, box):
     wait(d, lambda: d.find_element(By.ID, "delete-confirm").is_displayed(), what="the delete confirmation")
 
 
+def _playing(d):
+    """The 3D view tells rapids from cuts and plays the program back from its start."""
+    canvas = d.find_element(By.ID, "view3d")
+    wait(d, lambda: canvas.get_attribute("data-ready") == "1", what="3D view")
+    assert int(canvas.get_attribute("data-cuts")) > 0 and canvas.get_attribute("data-rapids") is not None
+    d.execute_script("arguments[0].scrollIntoView({block: 'center'})", d.find_element(By.ID, "play"))
+    d.find_element(By.ID, "play").click()                    # from the end it starts again at 0
+    wait(d, lambda: 0 < float(d.find_element(By.ID, "playback").get_attribute("value")) < 1000,
+         what="the program playing")
+    assert d.find_element(By.ID, "play").text == "Pause"
+
+
 def _refused_setting(d, box):
     """A bad value typed and saved: the refusal shows beside its field, the save bar says so."""
     d.find_element(By.ID, "settings-form")
@@ -166,6 +178,7 @@ SCREENS = [
                                  wait(d, lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready")
                                       in ("1", "error"), what="3D view"))),
     Screen("job-delete", lambda box: f"/jobs/{box['job_id']}", ready=_deleting),
+    Screen("job-playback", lambda box: f"/jobs/{box['job_id']}", ready=lambda d, box: _playing(d)),
     Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
     Screen("settings-refused", "/settings", ready=lambda d, box: _refused_setting(d, box),
            console_ok=("api/settings - Failed to load resource: the server responded with a status of 400",)),

@@ -138,3 +138,29 @@ def test_a_backup_downloaded_from_one_box_restores_the_same_settings_and_calibra
     finally:
         one.close()
         two.close()
+
+
+def test_the_report_shows_plain_names_with_units_and_an_explanation_on_tap():
+    from appliance.web.report import readable
+    groups = readable({"seed:lsq3": {"n": 2070, "Ea": 0.5, "matching": 98.4},
+                       "inkslice:fit": {"n": 2070, "Ea": 0.0722, "max_error": 0.9, "Ep_printed": 0.2,
+                                        "normaliser": 49.81}})
+    assert [g["title"] for g in groups] == ["InkSlice regularised fit", "Least squares, degree 3 (dissertation)"]
+    rows = {r["key"]: r for r in groups[0]["rows"]}
+    assert [r["name"] for r in groups[0]["rows"]][:2] == ["Mean error", "Largest error"]
+    assert rows["Ea"]["unit"] == "mm" and rows["n"]["unit"] == "cells" and rows["Ep_printed"]["unit"] == "%"
+    assert all(len(r["help"]) > 30 for r in groups[0]["rows"])
+    flat = readable({"rms_mm": 0.01, "levels": 41})
+    assert flat[0]["title"] == "Statistics" and [r["name"] for r in flat[0]["rows"]] == ["rms_mm", "levels"]
+
+
+def test_the_job_page_shows_the_report_in_plain_words(web):
+    from test_web_real_service import SCAN, light_processor
+    from daemon_helpers import wait_final
+    svc, c, _ = web
+    svc.processor = light_processor
+    job = wait_final(svc, svc.start_scan(SCAN))
+    page = c.get(f"/jobs/{job['id']}").get_data(as_text=True)
+    assert "<caption>InkSlice regularised fit</caption>" in page
+    assert "<summary>Mean error</summary>" in page and "0.0722 mm" in page
+    assert "<summary>Spread of the error</summary>" in page and "inkslice:fit" not in page.split("<caption>")[1][:40]

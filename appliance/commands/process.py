@@ -5,6 +5,7 @@ from ..surface.seed import METHODS
 NAME = "process"
 ORDER = 20
 HELP = "turn a scan folder into heightmap.csv, surface.stl, G-code and a report"
+PROGRESS = True         # cli.py shows the stages (waterlines, surface, toolpath, ...)
 
 
 def add_arguments(p):

@@ -1,7 +1,7 @@
 """`inkslice render`: a simulated scan of a known part (the virtual bench)."""
 from __future__ import annotations
 
-import sys
+import os
 
 NAME = "render"
 HELP = "render a simulated scan folder of a known part (virtual bench)"
@@ -28,15 +28,19 @@ def add_arguments(p):
 def run(args) -> int:
     from ..sim.scanrender import render_scan, truth_path
 
-    def progress(i, n):
-        if not args.quiet:
-            print(f"\rframe {i}/{n}", end="", file=sys.stderr, flush=True)
+    from .. import progress
 
-    scan = render_scan(args.surface, args.output, step_mm=args.step, effects=args.effects,
-                       seed=args.seed, progress=progress, workers=args.workers,
-                       refine_mm=args.refine_mm)
-    if not args.quiet:
-        print(file=sys.stderr)
+    def frames(i, n):
+        if i <= 1:
+            progress.stage("frames", total=n)
+        progress.step(i, n)
+
+    with progress.shown(open(os.devnull, "w") if args.quiet else None) as shown:
+        scan = render_scan(args.surface, args.output, step_mm=args.step, effects=args.effects,
+                           seed=args.seed, progress=frames, workers=args.workers,
+                           refine_mm=args.refine_mm)
+    if args.quiet:
+        shown.stream.close()
     print(f"{len(scan.frames)} frames of {args.surface} in {scan.folder} "
           f"(truth: {truth_path(scan.folder)})")
     return 0

@@ -1,12 +1,13 @@
 """inkslice toolpath HEIGHTMAP -o toolpath.gcode [--rough-out rough.gcode]"""
 from __future__ import annotations
 
-from .. import atomicio
+from .. import atomicio, progress
 from ..outputs import read_heightmap_csv
 
 NAME = "toolpath"
 ORDER = 30
 HELP = "turn heightmap.csv into a cutter-compensated finishing (and roughing) G-code program"
+PROGRESS = True         # cli.py shows the stages below
 
 
 def add_arguments(p):
@@ -90,10 +91,12 @@ def run(args):
         rc = parse_cutter(args.rough_cutter, args.flute_length, args.flutes)
         top = float(np.nanmax(hm.z)) + 2.0 if args.stock_top is None else args.stock_top
         rs = RoughSettings(rc, top, args.stepdown, args.rough_leave, args.rough_stepover)
+        progress.stage("roughing program")
         rough = roughing_gcode(hm, rs, **common)
         _write(args.rough_out, rough.text)
         print(f"{args.rough_out}: roughing, {rough.summary['runs']} runs, "
               f"estimated run time {rough.runtime_s / 60:.1f} min")
+    progress.stage("finishing program")
     job = finishing_gcode(hm, st, uncertain_mm=_uncertain_mm(args), **common)
     _write(args.out, job.text)
     if args.dialect == "dissertation":

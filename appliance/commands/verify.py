@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .. import atomicio
+from .. import atomicio, progress
 from ..errors import InkSliceError, SettingError
 from ..outputs import read_heightmap_csv
 
@@ -19,6 +19,7 @@ DEFAULT_MAX_GOUGE = 0.01
 NAME = "verify"
 ORDER = 31
 HELP = "simulate a G-code program on a block and report gouge, scallop and uncut area against a height map"
+PROGRESS = True         # cli.py shows the stages
 
 
 def add_arguments(p):
@@ -67,6 +68,7 @@ def run(args):
                 z_zero = float(z_zero)
             except ValueError:
                 raise SettingError("--z-zero", f"{args.z_zero!r} is not a number or 'top'") from None
+    progress.stage("simulated milling")
     rep, info = verify_gcode(text, hm, cutter=args.cutter, z_zero=z_zero, resolution=args.resolution,
                              reach_tol=args.reach_tol, edge_band=args.edge_band, uncut_tol=args.uncut_tol,
                              where=str(path))

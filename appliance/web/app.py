@@ -47,6 +47,7 @@ from . import api, auth, pages, system
 from .adapter import WebService
 from .sessions import SessionStore
 from .eta import EtaSmoother
+from .report import readable as readable_statistics
 
 DEFAULTS = {
     "https": False,
@@ -166,6 +167,8 @@ def create_app(service, config: dict | None = None) -> Flask:
     @app.errorhandler(413)
     def _too_big(e):
         return jsonify(error=f"upload larger than {cfg['max_upload_bytes']} bytes"), 413
+
+    app.add_template_global(readable_statistics, "readable_statistics")     # the job page's report
 
     @app.template_filter("num")
     def _num(v):

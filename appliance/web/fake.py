@@ -381,6 +381,9 @@ class FakeBenchService:
             if dialect == job["settings"]["dialect"]:
                 write_text(folder / "toolpath.gcode", text)
                 files.append("toolpath.gcode")
+        if "toolpath.gcode" not in files:           # a dialect the fake does not draw: linuxcnc's program
+            write_text(folder / "toolpath.gcode", self._gcode(X, Y, Z, "linuxcnc"))
+            files.append("toolpath.gcode")
         write_bytes(folder / "surface.stl", self._stl(X, Y, np.nan_to_num(Z)).encode())
         files.append("surface.stl")
         err = np.abs(np.sin(X / 5) * np.cos(Y / 7)) * 0.05

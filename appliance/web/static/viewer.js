@@ -80,21 +80,27 @@
     size = Math.max((h.nx - 1) * h.dx, (h.ny - 1) * h.dy, hi - lo, 1);
     return { count: P.length / 3, p: buffer(new Float32Array(P)), n: buffer(new Float32Array(N)), c: buffer(new Float32Array(C)), lo, hi };
   }
+  const RAPID = [0.35, 0.8, 1], CUT = [1, 0.42, 0.15];      // the legend under the view names them
   function parseGcode(text) {
-    const P = []; let x = 0, y = 0, z = 0, moves = 0;
+    const P = [], C = []; let x = 0, y = 0, z = 0, moves = 0, rapids = 0, mode = "1";
     text.split(/\r?\n/).forEach((line) => {
       line = line.replace(/\(.*?\)|;.*$/g, "").toUpperCase();
-      if (!/[XYZ]/.test(line)) return;
       const g = line.match(/G0*([0-3])(?!\d)/);
-      if (g && !["0", "1"].includes(g[1])) return;           // arcs are drawn as chords at their end point
+      if (g) mode = g[1];                                    // motion is modal: it holds until the next G0-G3
+      if (!/[XYZ]/.test(line)) return;
       const get = (k, d) => { const m = line.match(new RegExp(k + "\\s*(-?[0-9.]+)")); return m ? parseFloat(m[1]) : d; };
       const nx = get("X", x), ny = get("Y", y), nz = get("Z", z);
-      if (moves > 0) P.push(x, y, z, nx, ny, nz);
+      if (moves > 0) {                                       // arcs are drawn as chords to their end point
+        P.push(x, y, z, nx, ny, nz);
+        const c = mode === "0" ? RAPID : CUT;
+        C.push(...c, ...c);
+        if (mode === "0") rapids++;
+      }
       x = nx; y = ny; z = nz; moves++;
     });
     const n = P.length / 3;
-    const C = new Float32Array(n * 3); for (let i = 0; i < n; i++) { C[3 * i] = 1; C[3 * i + 1] = 0.25; C[3 * i + 2] = 0.2; }
-    return { count: n, p: buffer(new Float32Array(P)), n: buffer(new Float32Array(n * 3).fill(1)), c: buffer(C), moves };
+    return { count: n, p: buffer(new Float32Array(P)), n: buffer(new Float32Array(n * 3).fill(1)), c: buffer(new Float32Array(C)),
+             moves, rapids, segments: n / 2 };
   }
 
   function bind(obj) {
@@ -114,7 +120,29 @@
     gl.enable(gl.POLYGON_OFFSET_FILL); gl.polygonOffset(2, 2);
     if (mesh && document.getElementById("show-surface").checked) { gl.uniform1f(loc.lit, 1); bind(mesh); gl.drawArrays(gl.TRIANGLES, 0, mesh.count); }
     gl.disable(gl.POLYGON_OFFSET_FILL);
-    if (path && document.getElementById("show-path").checked) { gl.uniform1f(loc.lit, 0); bind(path); gl.drawArrays(gl.LINES, 0, path.count); }
+    if (path && document.getElementById("show-path").checked) {
+      gl.uniform1f(loc.lit, 0); bind(path); gl.drawArrays(gl.LINES, 0, 2 * Math.min(path.segments, shownSegments()));
+    }
+  }
+  // ---- program playback: the toolpath drawn up to a move, by hand (the slider) or played
+  const play = document.getElementById("playback"), playBtn = document.getElementById("play");
+  function shownSegments() { return play && path ? Math.round(path.segments * Number(play.value) / 1000) : Infinity; }
+  let playing = null;
+  function stopPlaying() { if (playing) { cancelAnimationFrame(playing); playing = null; } if (playBtn) playBtn.textContent = "Play the program"; }
+  if (play) {
+    play.addEventListener("input", () => { stopPlaying(); redraw(); });
+    playBtn.addEventListener("click", () => {
+      if (playing) { stopPlaying(); return; }
+      if (Number(play.value) >= 1000) play.value = 0;
+      playBtn.textContent = "Pause";
+      const t0 = performance.now(), v0 = Number(play.value);
+      const step = (t) => {                                  // the whole program in about 20 s
+        play.value = Math.min(1000, v0 + (t - t0) / 20);
+        draw();
+        if (Number(play.value) < 1000) playing = requestAnimationFrame(step); else stopPlaying();
+      };
+      playing = requestAnimationFrame(step);
+    });
   }
   let queued = false;
   function redraw() { if (!queued) { queued = true; requestAnimationFrame(() => { queued = false; draw(); }); } }
@@ -150,7 +178,11 @@
       if (byU) { byU.disabled = !hm.hasU; byU.parentElement.title = hm.hasU ? "" : "this height map carries no uncertainty"; }
       mesh = buildMesh(hm, byU && byU.checked && hm.hasU);
       let msg = hm.n + " height-map points, z " + mesh.lo.toFixed(2) + " to " + mesh.hi.toFixed(2) + " mm";
-      if (canvas.dataset.gcode) { path = parseGcode(await get(canvas.dataset.gcode)); msg += ", " + path.moves + " toolpath moves"; }
+      if (canvas.dataset.gcode) {
+        path = parseGcode(await get(canvas.dataset.gcode));
+        msg += ", " + path.moves + " toolpath moves (" + path.rapids + " rapid)";
+        canvas.dataset.rapids = path.rapids; canvas.dataset.cuts = path.segments - path.rapids;
+      }
       info.textContent = msg + ". Drag to turn, pinch or wheel to zoom.";
       canvas.dataset.ready = "1";
       redraw();

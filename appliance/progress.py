@@ -1,0 +1,156 @@
+"""Progress of long commands (process, toolpath, verify, render), as the person at the shell sees it.
+
+Library code says where it is with two calls that cost nothing when nobody listens:
+
+    progress.stage("waterlines", total=len(frames))     # a new stage (total: its count, if known)
+    progress.step(i + 1)                                 # so far in the current stage
+
+A command shows them inside `with progress.shown():`. On a terminal that is one line per stage,
+redrawn in place: a bar with the count for a counted stage, the seconds so far for the others
+(a ticker keeps it moving while a single step takes long). Anywhere else (a pipe, a log, a test)
+it is plain lines: the stage's start, every quarter of a counted stage, and how long it took.
+The daemon's processing child has no display: the calls do nothing there.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from contextlib import contextmanager
+
+BAR = 24
+TICK_S = 0.25
+_display = None
+
+
+def stage(name: str, total: int | None = None) -> None:
+    if _display is not None:
+        _display.stage(name, total)
+
+
+def step(done: int, total: int | None = None) -> None:
+    if _display is not None:
+        _display.step(done, total)
+
+
+@contextmanager
+def shown(stream=None, tty: bool | None = None):
+    """Show the stages reported inside the block on `stream` (default stdout)."""
+    global _display
+    stream = stream or sys.stdout
+    if tty is None:
+        tty = bool(getattr(stream, "isatty", lambda: False)())
+    previous, _display = _display, Display(stream, tty)
+    swapped = tty and stream is sys.stdout
+    if swapped:
+        sys.stdout = _AroundTheBar(stream, _display)    # a print() mid-stage goes above the bar
+    try:
+        yield _display
+    finally:
+        if swapped:
+            sys.stdout = stream
+        _display.close()
+        _display = previous
+
+
+class _AroundTheBar:
+    """stdout while a bar is drawn: the bar line is cleared before other text and drawn again after."""
+
+    def __init__(self, stream, display):
+        self._stream, self._display = stream, display
+
+    def write(self, text):
+        with self._display.lock:
+            self._stream.write("\r\x1b[K" + text)
+            if text.endswith("\n") and self._display.name is not None:
+                self._stream.write(self._display._line())
+        return len(text)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+class Display:
+    def __init__(self, stream, tty: bool):
+        self.stream, self.tty = stream, tty
+        self.lock = threading.Lock()
+        self.name = None
+        self.total = None
+        self.done = 0
+        self.t0 = 0.0
+        self.quarter = 0
+        self.stop = threading.Event()
+        self.ticker = None
+        if tty:
+            self.ticker = threading.Thread(target=self._tick, name="progress", daemon=True)
+            self.ticker.start()
+
+    def stage(self, name, total=None):
+        with self.lock:
+            self._finish()
+            self.name, self.total, self.done, self.t0, self.quarter = name, total, 0, time.monotonic(), 0
+            if self.tty:
+                self._draw()
+            else:
+                self._say(f"{name} ..." + (f" ({total})" if total else ""))
+
+    def step(self, done, total=None):
+        with self.lock:
+            if self.name is None:
+                return
+            self.done = done
+            if total is not None:
+                self.total = total
+            if self.tty:
+                self._draw()
+            elif self.total:
+                q = int(4 * self.done / self.total)
+                if q > self.quarter and q < 4:
+                    self.quarter = q
+                    self._say(f"{self.name}: {25 * q} % ({self.done}/{self.total}, {self._elapsed()})")
+
+    def close(self):
+        self.stop.set()
+        if self.ticker is not None:
+            self.ticker.join(timeout=1)
+        with self.lock:
+            self._finish()
+
+    # -- drawing ----------------------------------------------------------------------------
+    def _elapsed(self):
+        s = time.monotonic() - self.t0
+        return f"{s:.1f} s" if s < 60 else f"{int(s) // 60} min {int(s) % 60:02d} s"
+
+    def _line(self):
+        if self.total:
+            frac = min(1.0, self.done / self.total)
+            fill = int(round(BAR * frac))
+            return (f"{self.name} [{'#' * fill}{'-' * (BAR - fill)}] {100 * frac:3.0f} % "
+                    f"{self.done}/{self.total} · {self._elapsed()}")
+        return f"{self.name} ... {self._elapsed()}"
+
+    def _draw(self):
+        self.stream.write("\r\x1b[K" + self._line())
+        self.stream.flush()
+
+    def _say(self, text):
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def _finish(self):
+        if self.name is None:
+            return
+        if self.total:
+            self.done = self.total if self.done >= self.total else self.done
+        if self.tty:
+            self.stream.write("\r\x1b[K" + self._line() + " done\n")
+            self.stream.flush()
+        else:
+            self._say(f"{self.name}: done in {self._elapsed()}")
+        self.name = None
+
+    def _tick(self):
+        while not self.stop.wait(TICK_S):
+            with self.lock:
+                if self.name is not None:
+                    self._draw()
