@@ -29,6 +29,7 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
+from selenium.common.exceptions import WebDriverException      # noqa: E402
 from selenium.webdriver.chrome.service import Service          # noqa: E402
 from selenium.webdriver.common.by import By                    # noqa: E402
 from selenium.webdriver.support.ui import WebDriverWait        # noqa: E402
@@ -117,6 +118,18 @@ def _jogging(d, box):
     assert stage.calls[-3:] == ["home", "move 1.0000", "move 30.0000"], stage.calls
 
 
+def _live_job(d, box):
+    """A running job's page follows the job: it reloads itself, done, when the job ends."""
+    assert d.find_element(By.ID, "job-live").is_displayed()
+    def done_shown():
+        try:                        # the page reloads itself: an element may go stale under us
+            return d.find_element(By.ID, "job-status").text.lower() == "done"
+        except WebDriverException:
+            return False
+    wait(d, done_shown, timeout=60, what="the job page updates itself to done")
+    wait(d, lambda: d.find_elements(By.ID, "report"), what="the report after the reload")
+
+
 def _confirming(d, box):
     _bench_ready(d, box)
     d.find_element(By.ID, "startstop").click()
@@ -177,6 +190,8 @@ SCREENS = [
            ready=lambda d, box: (wait(d, lambda: loaded_img(d, "img.errimg"), what="error picture"),
                                  wait(d, lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready")
                                       in ("1", "error"), what="3D view"))),
+    Screen("job-live", lambda box: f"/jobs/{box['svc'].state()['job_id']}", before=_scanning,
+           ready=_live_job, after=_scan_done),
     Screen("job-delete", lambda box: f"/jobs/{box['job_id']}", ready=_deleting),
     Screen("job-playback", lambda box: f"/jobs/{box['job_id']}", ready=lambda d, box: _playing(d)),
     Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
@@ -264,8 +279,8 @@ def log_in(d, box):
 
 
 def check_screen(d, kind, screen: Screen, box) -> list[str]:
-    path = screen.path(box) if callable(screen.path) else screen.path
     screen.before(d, box)
+    path = screen.path(box) if callable(screen.path) else screen.path
     d.get(box["url"] + path)
     screen.ready(d, box)
     time.sleep(0.3)                                 # late layout (images, fonts) settles
