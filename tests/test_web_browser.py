@@ -143,8 +143,9 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         link.click()
         wait(d, lambda: d.find_elements(By.ID, "report"), what="job page")
         assert job_id in d.find_element(By.TAG_NAME, "h1").text
-        stats = d.find_element(By.CSS_SELECTOR, "table.stats").text
-        assert "rms_mm" in stats and "levels 41" in stats
+        rows = {r.find_element(By.TAG_NAME, "summary").text: r.find_element(By.TAG_NAME, "td").text
+                for r in d.find_elements(By.CSS_SELECTOR, "table.stats tr")}
+        assert "rms_mm" in rows and rows["levels"] == "41"
         wait(d, lambda: d.execute_script("const i=document.querySelector('img.errimg');return i.complete && i.naturalWidth > 0"),
              what="error picture")
         canvas = d.find_element(By.ID, "view3d")

@@ -314,3 +314,30 @@ def test_every_screen_fits_is_labelled_and_passes_axe(box, kind, tmp_path):
     finally:
         d.quit()
         shutil.rmtree(tmp_path / f"profile-{kind}", ignore_errors=True)
+
+
+def test_dark_mode_follows_the_phone_and_every_screen_still_passes_axe(box, tmp_path):
+    """With the phone set to dark, the pages turn dark by themselves (prefers-color-scheme) and
+    keep their contrast: axe finds nothing serious on any screen."""
+    d = make_driver("phone", tmp_path)
+    try:
+        d.execute_cdp_cmd("Emulation.setEmulatedMedia",
+                          {"features": [{"name": "prefers-color-scheme", "value": "dark"}]})
+        log_in(d, box)
+        faults = []
+        paths = ["/", "/jobs", "/settings", "/system", "/commission", "/calibration", "/api/docs"]
+        if box.get("job_id"):
+            paths.append(f"/jobs/{box['job_id']}")
+        for path in paths:
+            d.get(box["url"] + path)
+            time.sleep(0.5)
+            background = d.execute_script("return getComputedStyle(document.body).backgroundColor")
+            rgb = [int(v) for v in background[background.index("(") + 1:-1].split(",")[:3]]
+            if sum(rgb) > 3 * 60:
+                faults.append(f"{path}: the page stayed light ({background})")
+            faults += [f"{path}: axe: {v}" for v in axe_violations(d)]
+            full_shot(d, "phone-dark", path.strip("/").replace("/", "-") or "bench")
+        assert not faults, "\n".join(faults)
+    finally:
+        d.quit()
+        shutil.rmtree(tmp_path / "profile-phone", ignore_errors=True)
