@@ -70,12 +70,3 @@ def test_refinement_off_or_done_asks_for_nothing():
 def test_mask_pixels_are_the_frame_pixels_scaled_to_the_mask():
     camera = SimpleNamespace(width=2048, height=1536, homography=np.diag([0.08, 0.08, 1.0]))
     assert np.isclose(mask_pixel_mm(camera, (192, 256)), 0.08 * 2048 / 256)
-
-
-def test_a_gentle_slope_shown_partly_out_inside_its_step_gets_one_frame_not_a_bisection():
-    band = disc(100, 100, 40) & ~disc(100, 100, 20)        # a wide piece that the waterline crosses
-    inner = disc(100, 100, 30)
-    seen = []
-    while (level := next_refinement(8.0, 7.0, [band], seen)) is not None:
-        seen.append((level, inner if level == 7.5 else np.zeros_like(band)))
-    assert [lv for lv, _ in seen] == [7.5]                  # half of it out at the step's middle

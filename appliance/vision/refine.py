@@ -16,11 +16,7 @@ one would hold. The extra frames are ordinary level frames in scan.json.
 What counts as a face: a piece of the part newly out of the ink whose inscribed circle is at
 least FACE_MIN_WIDTH_MM across. A level step of s uncovers a band s / tan(slope) wide on a
 slope; 8 mm is a slope under 7 deg at 1 mm steps. Narrower pieces are the ordinary descent of
-a waterline, which the frames already follow. A wide piece may still be a gentle slope (the
-dissertation's saddles): the first frame inside its step then shows it partly out, and the
-bisection leaves it (is_slope). Bisecting those steps too made the second ink's sample 2
-worse (Ea 0.046 -> 0.058 mm with 16 extra frames): frames a few hundredths of a mm apart on a
-slope add no information to the fit, only crowded waterlines.
+a waterline, which the frames already follow.
 """
 from __future__ import annotations
 
@@ -30,7 +26,6 @@ from scipy import ndimage
 FACE_MIN_WIDTH_MM = 8.0     # inscribed diameter of a newly exposed piece that makes it a face
 RESOLUTION_MM = 0.1         # bisect until every face's bracket is at most this tall
 OUT_FRACTION = 0.5          # a face counts as out of the ink in a frame showing this much of it
-SLOPE_SHOWN = (0.2, 0.8)    # a piece shown partly, between these fractions, is a slope, not a face
 EPS = 1e-6
 
 
@@ -56,41 +51,24 @@ def face_bracket(face: np.ndarray, upper: float, lower: float, seen) -> tuple[fl
     """(lo, hi): the face's apparent height lies in (lo, hi], from the bracket's own frames
     (out at `lower`, under at `upper`) and the refinement frames `seen` [(level, mask)]."""
     lo, hi = lower, upper
-    for level, out in _shown(face, upper, lower, seen):
-        if out >= OUT_FRACTION:
+    area = max(np.count_nonzero(face), 1)
+    for level, mask in seen:
+        if not lower < level < upper:
+            continue
+        if np.count_nonzero(mask & face) >= OUT_FRACTION * area:
             lo = max(lo, level)
         else:
             hi = min(hi, level)
     return lo, max(hi, lo)
 
 
-def is_slope(face: np.ndarray, upper: float, lower: float, seen) -> bool:
-    """Whether the frame at the middle of the step (the first the bisection takes) showed the
-    piece partly out of the ink: then a waterline crossed it (a gentle slope, not a face) and
-    the frames follow it as they follow any slope. A face is under or out, all of it, but for
-    its relief: partly out nearer its level (twin-peaks' skirt, the steep front's apron) is
-    still a face."""
-    middle = 0.5 * (upper + lower)
-    return any(SLOPE_SHOWN[0] < out < SLOPE_SHOWN[1] for level, out in _shown(face, upper, lower, seen)
-               if abs(level - middle) < 1e-3)
-
-
-def _shown(face, upper, lower, seen):
-    """[(level, fraction of the face out of the ink)] for the frames inside the step."""
-    area = max(np.count_nonzero(face), 1)
-    return [(level, np.count_nonzero(mask & face) / area) for level, mask in seen if lower < level < upper]
-
-
 def next_refinement(upper: float, lower: float, faces, seen,
                     resolution_mm: float = RESOLUTION_MM) -> float | None:
     """The next level to capture between `upper` (faces under) and `lower` (faces out), or
     None when every face's bracket is at most `resolution_mm` tall. Bisects the widest
-    bracket first; one frame narrows every face whose bracket it falls in. A piece that a
-    frame showed partly out is a slope (is_slope): one frame in the step, no more."""
+    bracket first; one frame narrows every face whose bracket it falls in."""
     widest = None
     for face in faces:
-        if is_slope(face, upper, lower, seen):
-            continue
         lo, hi = face_bracket(face, upper, lower, seen)
         if hi - lo > resolution_mm + EPS and (widest is None or hi - lo > widest[1] - widest[0]):
             widest = (lo, hi)
