@@ -34,6 +34,23 @@ error is elsewhere (its steep walls and rims, unchanged). The first ink commissi
 face placement applies, so its figures (benches/seed_table.py --effects physics, sample 1
 0.0081 mm) do not change.
 
+Then (2 December 2026, same renders and meniscus file) with the runner's refinement
+(vision/refine.py, --refine-mm 0.1, the default): a step in which a piece over 8 mm wide came out
+at once is bisected by rendering the levels the runner would take (sim/scanrender.refine_scan),
+Ea mm, no refinement -> refined (extra frames / the plan's frames):
+    sample1 0.0171 -> 0.0105 (4/36)   sample2 0.0464 -> 0.0581 (16/38)   sample3 0.0652 -> 0.0530 (28/24)
+    sample4 0.0947 -> 0.0947 (0/38)   crater  0.0720 -> 0.0637 (4/20)    steep-front 0.236 -> 0.108 (4/21)
+    twin-peaks 0.124 -> 0.0478 (4/28)
+The faces are now known to 1/16 mm (twin-peaks' skirt: nominal (8.625, 8.6875] for (8, 9]).
+Not yet <= 0.05 mm: sample 2 (worse: its saddle's gentle slopes are bisected too, and the fit
+does not gain from waterlines 0.06 mm apart there), sample 3, sample 4 (its walls and rims),
+the crater and the steep front. The steep front's apron still comes out +0.18 mm high on
+average although its bracket is (5.365, 5.440] in processing's levels: what is left there is
+in turning the apparent height into the top (the depression the fit's curvature gives it),
+not in the levels. A rule that left gentle slopes with one mid-step frame (partly out there)
+measured worse (sample1 0.0241, sample2 0.0546, sample3 0.0577) and was reverted. The
+reference ball is commissioned from its plain levels (the runner would also refine its cap).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
