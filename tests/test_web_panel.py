@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
@@ -18,15 +19,24 @@ SCAN = {"name": "cone, left side", "surface": "cone", "levels_to_mm": 24.0, "lev
         "level_step_mm": 2.0, "settle_s": 0.05}
 
 
-@pytest.fixture
-def web(tmp_path):
+@pytest.fixture(params=["in-process", "socket"])
+def web(tmp_path, request):
+    """The web on the daemon in-process, or as on the box: over the daemon's socket (rpc.py)."""
     factory = FakeBench("cone")
     svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.05)
-    app = create_app(svc, {"data_dir": str(tmp_path / "data")})
+    server = client = None
+    if request.param == "socket":
+        server = rpc.serve(svc, tmp_path / "daemon.sock")
+        client = rpc.BenchClient(tmp_path / "daemon.sock")
+    app = create_app(client or svc, {"data_dir": str(tmp_path / "web")})
     app.config["TESTING"] = True
     c = app.test_client()
     h = {"X-CSRF-Token": login(c, app.config["FIRST_RUN_PASSWORD"])}
     yield c, h, svc, factory
+    if client:
+        client.close()
+        server.shutdown()
+        server.server_close()
     svc.close()
 
 
