@@ -9,7 +9,10 @@ would add a dependency for no gain. Arcs (G2/G3) are refused with that
 reason; we never write them.
 
 Returns the moves in order, in mm and absolute coordinates, plus the header
-comments (our programs state the cutter and the Z frame there).
+comments (our programs state the cutter and the Z frame there). A program of
+several tools changes them with `Tn M6` and applies the tool-length offset
+with `G43 Hn` (program Z is then the tool tip, as it is for one tool): each
+move carries the number of the tool in the spindle (0 before the first change).
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ class Parsed:
     feed: np.ndarray        # mm/min at each move (NaN for rapids)
     line: np.ndarray        # source line number of each move
     comments: list = field(default_factory=list)
+    tool: np.ndarray | None = None      # tool number in the spindle at each move (0: never changed)
 
     def meta(self, key):
         """Value of a header comment `key: value` (case-insensitive), or None."""
@@ -45,7 +49,8 @@ class Parsed:
 def parse_gcode(text: str, where="G-code") -> Parsed:
     mode, absolute, scale, feed = None, True, 1.0, None
     pos = [np.nan, np.nan, np.nan]
-    kinds, pts, feeds, lines, comments = [], [], [], [], []
+    kinds, pts, feeds, lines, comments, tools = [], [], [], [], [], []
+    selected, spindle = None, 0
     ended = False
     for no, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
@@ -71,11 +76,14 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
             raise InkSliceError(where, f"line {no}: cannot read {rest!r} in {raw.strip()!r}")
         axes = {}
         motion = None
+        for letter, val in words:           # T before M6 wherever it stands on the line
+            if letter.upper() == "T":
+                selected = int(float(val))
         for letter, val in words:
             L = letter.upper()
             v = float(val)
-            if L in "NOST":
-                continue
+            if L in "NOSTH":
+                continue        # H: the tool-length offset's number (G43 Hn)
             if L == "G":
                 g = int(round(v * 10)) / 10
                 if g in (0, 1):
@@ -90,7 +98,7 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
                     scale = 1.0
                 elif g in (2, 3):
                     raise InkSliceError(where, f"line {no}: arcs (G{int(g)}) are not supported by the verifier")
-                elif g in _IGNORED_G or g == 64:
+                elif g in _IGNORED_G or g in (43, 64):
                     pass
                 else:
                     raise InkSliceError(where, f"line {no}: unsupported G{val}")
@@ -98,6 +106,10 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
                 m = int(v)
                 if m in (2, 30):
                     ended = True
+                elif m == 6:
+                    if selected is None:
+                        raise InkSliceError(where, f"line {no}: tool change M6 with no tool selected (T)")
+                    spindle = selected
                 elif m not in _IGNORED_M:
                     raise InkSliceError(where, f"line {no}: unsupported M{val}")
             elif L == "F":
@@ -128,6 +140,8 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
             pts.append(tuple(pos))
             feeds.append(feed if mode == 1 else np.nan)
             lines.append(no)
+            tools.append(spindle)
     if not kinds:
         raise InkSliceError(where, "has no moves")
-    return Parsed(np.array(kinds), np.array(pts, float), np.array(feeds, float), np.array(lines), comments)
+    return Parsed(np.array(kinds), np.array(pts, float), np.array(feeds, float), np.array(lines), comments,
+                  np.array(tools, int))

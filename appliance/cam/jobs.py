@@ -159,7 +159,17 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
             raise InkSliceError(where, f"never sets {name}: there is no cutter position to simulate")
     if cutter is not None and not isinstance(cutter, Cutter):
         cutter = parse_cutter(cutter)
-    cut = cutter if cutter is not None else cutter_from_program(parsed)
+    from .operations import tool_cutters
+    tools = tool_cutters(parsed) if cutter is None else {}
+    if tools:
+        missing = sorted(set(parsed.tool.tolist()) - set(tools) - {0})
+        if missing or (parsed.tool == 0).all():
+            raise InkSliceError(where, f"changes to tool {missing[0] if missing else 0}, which its header "
+                                       "does not describe (inkslice tool n: ...)")
+        # the report's reach is the smallest tool's: what the whole job could cut
+        cut = min(tools.values(), key=lambda c: c.radius)
+    else:
+        cut = cutter if cutter is not None else cutter_from_program(parsed)
     if z_zero is None:
         m = parsed.meta("inkslice z_offset")
         z_zero = -float(m) if m else 0.0
@@ -171,6 +181,38 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
     sampler = Sampler(hm, edge_step=resolution / 2)
     top = sampler.z_max + 1.0
     stock = new_stock(sampler, resolution, top)
-    sim = simulate(parsed, cut, stock, z_zero)
+    if tools:
+        sim = simulate_tools(parsed, tools, stock, z_zero)
+    else:
+        sim = simulate(parsed, cut, stock, z_zero)
     rep = report(sampler, cut, sim, reach_tol, edge_band, uncut_tol)
-    return rep, {"cutter": cut.describe(), "moves": sim.moves, "z_zero": z_zero}
+    desc = (", ".join(f"T{n} {c.describe()}" for n, c in sorted(tools.items())) if tools else cut.describe())
+    return rep, {"cutter": desc, "moves": sim.moves, "z_zero": z_zero}
+
+
+def simulate_tools(parsed, tools: dict, stock, z_zero):
+    """A program of several tools on one stock: each stretch of moves with the tool that is in
+    the spindle (moves before the first change, the retract to the safe height, with the first)."""
+    from .gcodeparse import Parsed
+    from .millsim import SimResult
+    tool = parsed.tool.copy()
+    first = int(tool[tool > 0][0])
+    tool[tool == 0] = first
+    # positions known so far carry into each stretch (its first move may set only Z)
+    xyz = parsed.xyz.copy()
+    for ax in range(3):
+        col = xyz[:, ax]
+        known = np.flatnonzero(~np.isnan(col))
+        col[:known[0]] = col[known[0]]
+        idx = np.where(~np.isnan(col), np.arange(col.size), 0)
+        np.maximum.accumulate(idx, out=idx)
+        xyz[:, ax] = col[idx]
+    crashes, first_line, moves = 0, None, 0
+    edges = np.flatnonzero(np.diff(tool)) + 1
+    for a, b in zip(np.concatenate([[0], edges]), np.concatenate([edges, [tool.size]])):
+        part = Parsed(parsed.kind[a:b], xyz[a:b], parsed.feed[a:b], parsed.line[a:b], [], tool[a:b])
+        r = simulate(part, tools[int(tool[a])], stock, z_zero)
+        crashes += r.crashes
+        first_line = first_line or r.first_crash_line
+        moves += r.moves
+    return SimResult(stock, crashes, first_line, moves)

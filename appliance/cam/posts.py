@@ -94,20 +94,30 @@ def header_lines(prog: Program, runtime_s: float, extra=()):
 def render(prog: Program, dialect: str, runtime_s: float, chord: float = 0.002, extra_notes=()) -> str:
     d = get_dialect(dialect)
     out = []
-    dec = d.decimals
-
-    def comment(text):
-        t = text.replace("(", "[").replace(")", "]")
-        if d.upper_comments:
-            t = t.upper()
-        for piece in _wrap(t, d.comment_width):
-            out.append(f"({piece})")
-
     for h in header_lines(prog, runtime_s, extra_notes):
-        comment(h)
+        out.extend(comment_lines(d, h))
     for s in d.start:
-        out.append(s.format(chord=_num(chord, dec)))
+        out.append(s.format(chord=_num(chord, d.decimals)))
     out.append(f"M3 S{prog.rpm:.0f}")
+    out.extend(motion_lines(prog, d))
+    out.append("M5")
+    out.append("M30")
+    return finish_lines(d, out)
+
+
+def comment_lines(d: Dialect, text: str) -> list:
+    """One comment in the dialect's form: brackets for inner parentheses, wrapped, capitals for Fanuc."""
+    t = text.replace("(", "[").replace(")", "]")
+    if d.upper_comments:
+        t = t.upper()
+    return [f"({piece})" for piece in _wrap(t, d.comment_width)]
+
+
+def motion_lines(prog: Program, d: Dialect) -> list:
+    """The program's moves, modal: a word is written only when it changes. The first
+    move (straight up to the safe height) writes Z alone, whatever came before it."""
+    out = []
+    dec = d.decimals
     last = [None, None, None]
     last_g, last_f = None, None
     for k in range(len(prog.kind)):
@@ -132,8 +142,11 @@ def render(prog: Program, dialect: str, runtime_s: float, chord: float = 0.002, 
             continue
         last_g = g if words[0] in ("G0", "G1") else last_g
         out.append(" ".join(words))
-    out.append("M5")
-    out.append("M30")
+    return out
+
+
+def finish_lines(d: Dialect, out: list) -> str:
+    """N numbers, the program number and the percent signs the dialect wants; the text."""
     if d.numbers:
         out = [line if line.startswith("(") else f"N{10 * (i + 1)} {line}" for i, line in enumerate(out)]
     if d.program_number:

@@ -1,4 +1,10 @@
-"""inkslice toolpath HEIGHTMAP -o toolpath.gcode [--rough-out rough.gcode]"""
+"""inkslice toolpath HEIGHTMAP -o toolpath.gcode [--rough-out rough.gcode]
+inkslice toolpath JOB_FOLDER [--operations 'rough T1, finish T2 steep, rest T3'] [--dialect grbl] ...
+
+Given a job folder (one holding heightmap.csv), the program is posted again
+for it without rescanning, named for the job, operation, tool and dialect
+(`<job>-finish-ball6-grbl.nc`) and written into that folder (or into -o, a
+folder), with its preview JSON beside it (`.preview.json`)."""
 from __future__ import annotations
 
 from .. import atomicio, progress
@@ -14,7 +20,8 @@ def add_arguments(p):
     from ..cam.feeds import DEFAULT_MATERIAL, MATERIALS
     from ..cam.posts import DEFAULT_DIALECT, DIALECT_NAMES
     p.add_argument("heightmap", help="heightmap.csv (x,y,z in mm, z above the base top)")
-    p.add_argument("-o", "--out", required=True, help="finishing program to write")
+    p.add_argument("-o", "--out", default=None, help="finishing program to write (with a job folder or "
+                   "--operations: the folder to write the named programs into; default the job folder)")
     g = p.add_argument_group("cutter and material")
     g.add_argument("--cutter", default="ball6", help="ball6, flat3, bull6r1, ... (default ball6)")
     g.add_argument("--flute-length", type=float, default=None, help="usable length below the holder, mm "
@@ -36,6 +43,18 @@ def add_arguments(p):
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
     g.add_argument("--uncertain-mm", type=float, default=None, help="the header lists the height map's "
                    "regions whose uncertainty exceeds this, mm (default 0.1; needs a map with uncertainty_mm)")
+    g.add_argument("--steep", action="store_true", help="finish steep and shallow: waterlines on walls steeper "
+                   "than --steep-angle, zig-zag on the rest")
+    g.add_argument("--steep-angle", type=float, default=50.0, help="the slope above which walls get "
+                   "waterline passes, degrees (default 50)")
+    g = p.add_argument_group("several tools (programs named <job>-<operation>-<tool>-<dialect>.nc)")
+    g.add_argument("--operations", default=None, help="e.g. 'rough T1, finish T2 steep, rest T3' (tools from "
+                   "the tool table; LinuxCNC/Mach3/Fanuc get one program with tool changes, GRBL one per tool)")
+    g.add_argument("--tools", default=None, help="tool table, a JSON list of tools (default: the daemon's "
+                   "default table: T1 flat6, T2 ball6, T3 ball2)")
+    g.add_argument("--job", default=None, help="the job's name in the file names (default: the job folder's name)")
+    g.add_argument("--preview", action="store_true", help="also write each program's preview JSON (always, "
+                   "for a job folder)")
     g = p.add_argument_group("roughing (optional, written to its own program)")
     g.add_argument("--rough-out", default=None, help="also write a z-level roughing program here")
     g.add_argument("--rough-cutter", default="flat6")
@@ -66,6 +85,12 @@ def _machine(args):
 
 
 def run(args):
+    from pathlib import Path
+    if Path(args.heightmap).is_dir() or args.operations:
+        return run_job(args)
+    if args.out is None:
+        from ..errors import SettingError
+        raise SettingError("-o", "give the program to write (or a job folder instead of a height map)")
     from ..cam.cutters import parse_cutter
     from ..cam.jobs import finishing_gcode, roughing_gcode
     from ..cam.sampling import check_heightmap
@@ -96,6 +121,8 @@ def run(args):
         _write(args.rough_out, rough.text)
         print(f"{args.rough_out}: roughing, {rough.summary['runs']} runs, "
               f"estimated run time {rough.runtime_s / 60:.1f} min")
+    if args.steep:
+        return _post_named(args, hm, [_finish_op(args, cutter)], Path(args.out).parent, Path(args.out).name)
     progress.stage("finishing program")
     job = finishing_gcode(hm, st, uncertain_mm=_uncertain_mm(args), **common)
     _write(args.out, job.text)
@@ -125,3 +152,84 @@ def _uncertain_mm(args):
 def _write(path, text):
     atomicio.check_output_file(path, "-o")
     atomicio.write_text(path, text)
+
+
+def _tool_table(args):
+    import json
+    from ..cam.tools import default_tools, parse_tool_table
+    from ..errors import InkSliceError
+    if not args.tools:
+        return default_tools()
+    try:
+        with open(args.tools, encoding="utf-8") as f:
+            return parse_tool_table(json.load(f))
+    except OSError as e:
+        raise InkSliceError(args.tools, f"cannot read the tool table: {e.strerror}") from None
+    except ValueError as e:
+        raise InkSliceError(args.tools, f"not a JSON tool table: {e}") from None
+
+
+def _finish_op(args, cutter, tools=None):
+    """A finishing operation with `cutter`: the table's tool of that shape if there is one."""
+    from ..cam.operations import Operation
+    from ..cam.tools import Tool
+    tools = tools or {}
+    same = [t for t in tools.values() if t.cutter.name == cutter.name]
+    tool = same[0] if same else Tool(0, cutter)        # 0: not from the table, no tool change
+    return Operation("finish", tool, "steep" if args.steep else "zigzag")
+
+
+def run_job(args):
+    """A job folder or --operations: the named programs (and previews) for another
+    cutter, material, scallop or dialect, from the height map alone."""
+    from pathlib import Path
+    from ..cam.cutters import parse_cutter
+    from ..cam.operations import parse_operations
+    from ..cam.sampling import check_heightmap
+    from ..errors import InkSliceError
+    from ..surface.base import stand_on_base
+    src = Path(args.heightmap)
+    csv = src / "heightmap.csv" if src.is_dir() else src
+    if not csv.is_file():
+        raise InkSliceError(src, "holds no heightmap.csv: process the scan first")
+    out_dir = Path(args.out) if args.out else (src if src.is_dir() else None)
+    if out_dir is None:
+        raise InkSliceError("-o", "give the folder to write the programs into")
+    if not out_dir.is_dir():
+        raise InkSliceError(out_dir, "is not a folder (with a job folder or --operations, -o names a folder)")
+    hm, fix = stand_on_base(read_heightmap_csv(csv))
+    check_heightmap(hm, where=str(csv))
+    for sentence in fix.sentences():
+        print(f"note: {csv}: {sentence}")
+    tools = _tool_table(args)
+    if args.operations:
+        ops = parse_operations(args.operations, tools)
+    else:
+        ops = [_finish_op(args, parse_cutter(args.cutter, args.flute_length, args.flutes), tools)]
+    return _post_named(args, hm, ops, out_dir, None, job=args.job or (src.name if src.is_dir() else src.stem))
+
+
+def _post_named(args, hm, ops, out_dir, only_name, job="job"):
+    from pathlib import Path
+    from ..cam.operations import plan_operations, post_operations
+    from ..cam.preview import preview_json
+    planned, top = plan_operations(hm, ops, scallop=args.scallop, steep_deg=args.steep_angle,
+                                   stock_top=args.stock_top, resolution=args.resolution)
+    posted = post_operations(planned, top, args.dialect, job=job, material=args.material,
+                             clearance=args.clearance, z_offset=args.z_offset, machine=_machine(args), hm=hm)
+    if only_name is not None and len(posted) > 1:
+        from ..errors import SettingError
+        raise SettingError("-o", f"{args.dialect} needs one file per tool: give a folder")
+    for p in planned:
+        for n in p.notes:
+            print(f"note: {n}")
+    for p in posted:
+        path = Path(out_dir) / (only_name or p.name)
+        _write(path, p.text)
+        line = f"{path}: {p.text.count(chr(10))} lines"
+        if p.programs:
+            line += f", estimated run time {p.runtime_s / 60:.1f} min"
+            if args.preview or only_name is None:
+                atomicio.write_text(path.with_suffix(".preview.json"), preview_json(p.programs))
+        print(line)
+    return 0
