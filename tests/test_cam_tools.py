@@ -128,3 +128,20 @@ def test_verify_refuses_a_change_to_a_tool_the_header_does_not_describe(job):
     text = text.replace("(inkslice tool 3: ball D2.000 CR1.000 FL16.0)\n", "")
     with pytest.raises(Exception, match="changes to tool 3"):
         verify_gcode(text, hm)
+
+
+def test_the_settings_keep_the_tool_table_and_operations_checked_together():
+    from appliance.cam.tools import parse_tool_text
+    from appliance.daemon import settings as S
+    tools = parse_tool_text(S.DEFAULTS["tool_table"])
+    assert [t.name for t in tools.values()] == ["flat6", "ball6", "ball2"]
+    assert len(parse_operations(S.DEFAULTS["operations"], tools)) == 3
+    own = parse_tool_text("T5 bull D6 CR1 FL30 wax:F900/P300/S12000")[5]
+    assert own.cutter.name == "bull6r1" and own.conditions("wax").feed == 900
+    with pytest.raises(SettingError, match="operations: 'finish T9': tool 9 is not in the tool table"):
+        S.validate(S.DEFAULTS, {"operations": "finish T9"})
+    with pytest.raises(SettingError, match="tool_table: 'T2 drill D3'"):
+        S.validate(S.DEFAULTS, {"tool_table": "T2 drill D3"})
+    with pytest.raises(SettingError, match="steep_angle_deg"):
+        S.validate(S.DEFAULTS, {"steep_angle_deg": 90})
+    assert S.validate(S.DEFAULTS, {"tool_table": "T1 flat D8; T2 ball D6; T3 ball D3"})["tool_table"].startswith("T1 flat D8")

@@ -11,12 +11,20 @@ flutes) plus optional feeds per material: {"wax": {"feed_mm_min": 900,
 "plunge_mm_min": 300, "rpm": 12000}}. A material the tool has no entry for,
 or a missing figure, falls back to the feeds table (feeds.py).
 
-The table is kept in the daemon's settings as a list of plain dicts (JSON);
-`parse_tool_table` checks it and names the bad entry and field.
+The table is a list of plain dicts (JSON, `inkslice toolpath --tools`);
+`parse_tool_table` checks it and names the bad entry and field. The daemon's
+settings keep it as one line of text a phone can edit (`tool_table`):
+
+    T1 flat D6 FL48; T2 ball D6 FL48 wax:F900/P300/S12000; T3 ball D2 FL16; T4 bull D6 CR1
+
+(D diameter, CR corner radius, FL flute length, all mm; per material F feed
+and P plunge in mm/min, S spindle rpm), read by `parse_tool_text`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
+import re
 
 import numpy as np
 
@@ -103,7 +111,7 @@ def parse_tool(entry: dict, where="tool_table") -> Tool:
     try:
         cutter = Cutter(d, rc, fl, flutes)
     except SettingError as e:
-        raise SettingError(where, e.problem if hasattr(e, "problem") else str(e)) from None
+        raise SettingError(where, e.problem) from None
     feeds = entry.get("feeds", {}) or {}
     if not isinstance(feeds, dict):
         raise SettingError(where, f"feeds must be an object of material: figures, got {feeds!r}")
@@ -128,6 +136,36 @@ def parse_tool_table(entries) -> dict:
             raise SettingError("tool_table", f"tool number {t.number} is listed twice")
         table[t.number] = t
     return table
+
+
+DEFAULT_TOOL_TEXT = "T1 flat D6 FL48; T2 ball D6 FL48; T3 ball D2 FL16"
+_TEXT_TOOL = re.compile(r"T(\d+)\s+(flat|ball|bull)\s+D(\d+(?:\.\d*)?)(?:\s+CR(\d+(?:\.\d*)?))?"
+                        r"(?:\s+FL(\d+(?:\.\d*)?))?((?:\s+[a-z]+:[^\s;]+)*)", re.I)
+_TEXT_FEED = re.compile(r"([a-z]+):((?:[FPS]\d+(?:\.\d*)?/?)+)", re.I)
+
+
+def parse_tool_text(text: str) -> dict:
+    """The settings' one-line table ('T1 flat D6 FL48; T2 ball D6 ...') -> {number: Tool}."""
+    entries = []
+    for part in [p.strip() for p in str(text).split(";") if p.strip()]:
+        m = _TEXT_TOOL.fullmatch(part)
+        if not m:
+            raise SettingError("tool_table", f"{part!r}: write a tool as 'T2 ball D6 FL48' (T number, type flat, "
+                                             "ball or bull, D diameter, CR corner radius for a bull nose, FL flute "
+                                             "length, mm), then material:F900/P300/S12000 if it has its own feeds")
+        e = {"number": int(m.group(1)), "type": m.group(2).lower(), "diameter_mm": float(m.group(3))}
+        if m.group(4):
+            e["corner_radius_mm"] = float(m.group(4))
+        if m.group(5):
+            e["flute_length_mm"] = float(m.group(5))
+        feeds = {}
+        for fm in _TEXT_FEED.finditer(m.group(6) or ""):
+            names = {"F": "feed_mm_min", "P": "plunge_mm_min", "S": "rpm"}
+            feeds[fm.group(1).lower()] = {names[w[0].upper()]: float(w[1:]) for w in fm.group(2).split("/") if w}
+        if feeds:
+            e["feeds"] = feeds
+        entries.append(e)
+    return parse_tool_table(entries)
 
 
 def tool_entry(tool: Tool) -> dict:

@@ -50,8 +50,8 @@ def add_arguments(p):
     g = p.add_argument_group("several tools (programs named <job>-<operation>-<tool>-<dialect>.nc)")
     g.add_argument("--operations", default=None, help="e.g. 'rough T1, finish T2 steep, rest T3' (tools from "
                    "the tool table; LinuxCNC/Mach3/Fanuc get one program with tool changes, GRBL one per tool)")
-    g.add_argument("--tools", default=None, help="tool table, a JSON list of tools (default: the daemon's "
-                   "default table: T1 flat6, T2 ball6, T3 ball2)")
+    g.add_argument("--tools", default=None, help="tool table: a JSON file (a list of tools) or the settings' "
+                   "one-line form 'T1 flat D6 FL48; T2 ball D6; T3 ball D2' (default: that table)")
     g.add_argument("--job", default=None, help="the job's name in the file names (default: the job folder's name)")
     g.add_argument("--preview", action="store_true", help="also write each program's preview JSON (always, "
                    "for a job folder)")
@@ -158,8 +158,12 @@ def _tool_table(args):
     import json
     from ..cam.tools import default_tools, parse_tool_table
     from ..errors import InkSliceError
+    from pathlib import Path
     if not args.tools:
         return default_tools()
+    if not Path(args.tools).is_file() and args.tools.lstrip()[:1] in ("T", "t"):
+        from ..cam.tools import parse_tool_text
+        return parse_tool_text(args.tools)          # the settings' one-line form
     try:
         with open(args.tools, encoding="utf-8") as f:
             return parse_tool_table(json.load(f))

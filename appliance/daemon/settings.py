@@ -133,6 +133,22 @@ SCHEMA = (
             help="The controller the G-code is written for (the same ones `inkslice toolpath --dialect` "
                  "knows): `linuxcnc`, `grbl`, `mach3`, `fanuc`, or `dissertation` (the dissertation's own "
                  "format, without cutter compensation)."),
+    Setting("steep_angle_deg", 50.0, "number", "cam", "Steep wall angle", unit="deg", lo=5.0, hi=85.0, step=1,
+            help="Steep and shallow finishing runs waterline (constant-height) passes around walls steeper than "
+                 "this and zig-zag passes on the rest; the two overlap a little at the seam."),
+    Setting("tool_table", "T1 flat D6 FL48; T2 ball D6 FL48; T3 ball D2 FL16", "text", "cam", "Tool table",
+            pattern=r"[A-Za-z0-9 .:;/]{1,2000}",
+            pattern_says="tools like 'T1 flat D6 FL48; T2 ball D6 FL48 wax:F900/P300/S12000' (letters, digits, "
+                         "spaces and . : ; / only)",
+            help="The machine's tools, by the number its controller uses (Tn M6, G43 Hn): type flat, ball or bull, "
+                 "D diameter, CR corner radius (bull nose), FL flute length, all in mm; after them, per material, "
+                 "F feed and P plunge in mm/min and S spindle rpm, else the feeds table's figures."),
+    Setting("operations", "rough T1, finish T2 steep, rest T3", "text", "cam", "Job operations",
+            pattern=r"[A-Za-z0-9 ,]{1,500}",
+            pattern_says="operations like 'rough T1, finish T2 steep, rest T3' (letters, digits, spaces, commas)",
+            help="What a job's full program does, in order, with tools from the tool table: `rough` (z-level "
+                 "roughing), `finish` (add `steep` for waterlines on steep walls), `rest` (a smaller tool only where "
+                 "the one before could not reach). Used when a job is posted again with its operations."),
     Setting("envelope_x_mm", 200.0, "number", "cam", "Machine X travel", unit="mm", lo=1.0, hi=10000.0, step=1,
             help="Accepted and checked, not used yet (the machine's X travel)."),
     Setting("envelope_y_mm", 150.0, "number", "cam", "Machine Y travel", unit="mm", lo=1.0, hi=10000.0, step=1,
@@ -250,6 +266,11 @@ def validate(current: dict, changes: dict) -> dict:
                                            f"home ({new['level_at_home_mm']} mm): the stage cannot go below home")
     if new["levels_to_mm"] > new["envelope_z_mm"]:
         raise SettingError("levels_to_mm", "above the machine envelope's Z travel")
+    if "tool_table" in changes or "operations" in changes:
+        # the tools and the operations naming them, checked together (numbers, types, order)
+        from ..cam.operations import parse_operations
+        from ..cam.tools import parse_tool_text
+        parse_operations(new["operations"], parse_tool_text(new["tool_table"]))
     if new["step_min_mm"] > new["step_max_mm"]:
         raise SettingError("step_min_mm", "must not exceed step_max_mm")
     smallest = new["level_step_mm"] if new["step_mode"] == "fixed" else new["step_min_mm"]
