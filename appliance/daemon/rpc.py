@@ -39,13 +39,15 @@ METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file",
            "live_heightmap", "calibration", "calibrate", "import_scan",
            "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
            "usb_sticks", "export_to_usb", "backup", "restore", "system",
-           "preview", "home_stage", "jog", "goto_level", "rename_job", "delete_job", "reprocess", "job_sizes")
+           "preview", "home_stage", "jog", "goto_level", "rename_job", "delete_job", "reprocess", "job_sizes",
+           "repost")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
               "commission": 600.0,                                          # the search for level zero,
               "export_to_usb": 180.0,                                       # a copy, read back, unmount
-              "home_stage": 90.0, "goto_level": 90.0, "jog": 60.0}          # the panel's moves
+              "home_stage": 90.0, "goto_level": 90.0, "jog": 60.0,          # the panel's moves
+              "repost": 900.0}                                              # a new program from a height map
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
                                    errors.ScanError)}
 
@@ -244,6 +246,7 @@ class BenchClient:
     def rename_job(self, job_id, name): return self._call("rename_job", job_id, name)
     def delete_job(self, job_id): return self._call("delete_job", job_id)
     def reprocess(self, job_id, changes=None): return self._call("reprocess", job_id, changes)
+    def repost(self, job_id, options=None): return self._call("repost", job_id, options)
     def job_sizes(self): return self._call("job_sizes")
 
     def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):

@@ -439,6 +439,22 @@ class BenchService:
             self._launch_import(job_id)
             return job_id
 
+    def repost(self, job_id: str, options: dict | None = None) -> list[str]:
+        """Post the job again from its height map for another cutter, material, scallop or dialect
+        (repost.py; no rescan). Returns the new files' names, which join the job's outputs."""
+        from . import repost as R
+        with self._lock:
+            job = self.store.get_job(job_id)
+            if job["status"] in ACTIVE:
+                raise DeviceError("job", f"job {job_id} is {job['status']}; wait for it to finish")
+        names = R.repost(self.store.job_dir(job_id), job_id, S.full(job["settings"]), options or {})
+        with self._lock:
+            job = self.store.get_job(job_id)
+            self.store.update_job(job_id, outputs=sorted(set(job.get("outputs") or []) | set(names)))
+            self.store.event(job_id, "reposted", "posted again: " + ", ".join(n for n in names if n.endswith(".nc")))
+            self._sizes.pop(job_id, None)
+        return names
+
     def job_sizes(self) -> dict[str, int]:
         """Bytes on disk per job (its folder), counted once per finished job."""
         out = {}

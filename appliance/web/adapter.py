@@ -228,6 +228,9 @@ class WebService:
     def reprocess(self, job_id: str, changes: dict) -> str:
         return self._command("reprocess", job_id, changes)
 
+    def repost(self, job_id: str, options: dict) -> list:
+        return self._command("repost", job_id, options)
+
     def job_sizes(self) -> dict:
         return dict(self._optional("job_sizes")) if self.offers("job_sizes") else {}
 

@@ -311,6 +311,17 @@ def reprocess_job(job_id):
     return jsonify(job_id=svc().reprocess(job_id, changes)), 202
 
 
+@bp.post("/jobs/<job_id>/post")
+def repost_job(job_id):
+    """A new program from the job's height map for another cutter, material, scallop or dialect
+    (daemon/repost.py): {dialect, cutter, material, scallop_mm, steep, operations} -> {files}."""
+    _check_job_id(job_id)
+    options = _json_body()
+    if not isinstance(options, dict):
+        raise _Refused("the options must be a JSON object", 400)
+    return jsonify(files=svc().repost(job_id, options))
+
+
 @bp.get("/jobs/<job_id>/thumb.png")
 def job_thumb(job_id):
     """A small picture of the height map (thumbs.py), for the job list."""

@@ -122,6 +122,20 @@ class FakeBenchService:
         with self._lock:
             return self._public(self._get(job_id))
 
+    def repost(self, job_id: str, options: dict | None = None) -> list:
+        """As the daemon does (daemon/repost.py): a new program from the job's height map."""
+        from ..daemon import settings as S
+        from ..daemon.repost import repost
+        with self._lock:
+            job = self._get(job_id)
+            if job["status"] != "done":
+                raise InkSliceError("job", f"job {job_id} is {job['status']}; wait for it to finish")
+            settings = S.full(job["settings"])
+        names = repost(self.jobs_dir / job["id"], job["id"], settings, options or {})
+        with self._lock:
+            job["outputs"] = sorted(set(job["outputs"]) | set(names))
+        return names
+
     def job_file(self, job_id: str, name: str) -> Path:
         with self._lock:
             job = self._get(job_id)

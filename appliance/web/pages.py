@@ -118,7 +118,14 @@ def job(job_id):
     return render_template("job.html", page="job", job=_listed(info, sizes.get(job_id)), outputs=outputs,
                            report=report, gcode=gcode, images=images,
                            names={n: download_name(info, n) for n in outputs},
-                           manage=svc.offers("reprocess"), choices=_choices())
+                           manage=svc.offers("reprocess"), choices=_choices(),
+                           repost=svc.offers("repost") and "heightmap.csv" in outputs
+                           and info.get("status") == "done", materials=_materials())
+
+
+def _materials() -> tuple:
+    from ..cam.feeds import MATERIALS
+    return tuple(MATERIALS)
 
 
 def _choices() -> dict:

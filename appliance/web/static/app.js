@@ -259,6 +259,17 @@
       try { await api("POST", jobUrl + "/reprocess", { settings }); location.reload(); }
       catch (e) { say("Not started: " + e.message); }
     });
+    const post = $("#repost-form");
+    if (post) post.addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      const options = {};
+      post.querySelectorAll("[name]").forEach((el) => {
+        options[el.name] = el.dataset.kind === "bool" ? el.checked : (el.dataset.kind === "number" ? Number(el.value) : el.value);
+      });
+      const go = $("#repost-go"); go.disabled = true; text("#repost-result", "Making the program…");
+      try { const r = await api("POST", jobUrl + "/post", options); text("#repost-result", "Written: " + r.files.filter((f) => f.endsWith(".nc")).join(", ")); location.reload(); }
+      catch (e) { text("#repost-result", "Not made: " + e.message); go.disabled = false; }
+    });
     const del = $("#delete");
     if (del) {
       del.addEventListener("click", () => { show($("#delete-confirm"), true); show(del, false); $("#delete-no").focus(); });
