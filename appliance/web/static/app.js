@@ -174,6 +174,7 @@
       if (!hasMachine) return;
       const m = st.manual || {};
       document.querySelectorAll("#machine button, #goto-level").forEach((b) => { b.disabled = active; });
+      show($("#machine .jog"), !active); show($("#goto-form"), !active);   // the scan has the stage: no dead buttons
       text("#machine-status", active ? "The stage is the scan's until it ends." :
         (m.open ? "Light on, live preview. " + (m.homed ? "Ink level " + Number(m.level_mm).toFixed(2) + " mm above the base."
                                                           : "Home the stage to move it.")
