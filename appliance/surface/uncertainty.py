@@ -23,10 +23,13 @@ from what limits each:
   the top region reaches: a cap's radius, a ridge's half-width);
 - disagreement: the fit's residual at the waterline points near the cell (and
   against the cell's own first exposure, up to a step), and frames that
-  contradict each other (exposure is monotone: a point out of the ink at one
+  contradict each other or the fit (exposure is monotone: a point out of the ink at one
   level is out at every lower one; a cell seen out, then under, then out again
   came from a transient bright thing or a misread frame; when the fit stands
-  above the level where the cell was still under, it is off by that much);
+  above the level where the cell was still under, it is off by that much; and
+  the frame just before a cell's first exposure still covered it, so a fit
+  standing above that level by more than the meniscus rise applied there rests
+  on nothing the frames showed, and is unsure by the excess);
 - the meniscus: its correction models a contact line on an open face; near the
   outline the ink also meets the part's edge, within about a capillary length,
   so the correction there is unsure by its size times exp(-distance / length).
@@ -114,6 +117,16 @@ def _frames_disagree(ev: CellEvidence, lv):
     bad = (last_under >= 0) & np.isfinite(ev.z)
     above[bad] = np.maximum(ev.z[bad] - lv[last_under[bad]], 0.0)
     return above
+
+
+def _above_the_ink(ev: CellEvidence, lv):
+    """Per node, how far the fit stands above the level of the frame before its first
+    exposure (where the ink still covered it) plus the meniscus rise applied there (mm)."""
+    K = len(lv)
+    under = lv[np.clip(ev.first - 1, 0, K - 1)]
+    lift = np.abs(np.nan_to_num(ev.rise)) if ev.rise is not None else 0.0
+    above = np.where((ev.first > 0) & (ev.first < K) & np.isfinite(ev.z), ev.z - under - lift, 0.0)
+    return np.maximum(above, 0.0)
 
 
 def _nearest_distance(points, lat):
@@ -225,6 +238,11 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     own = np.where(np.isfinite(ev.z_fe), np.minimum(np.abs(ev.z - ev.z_fe), local_step), 0.0)
     u_fit = np.hypot(pts_res, own)
     u_frames = _frames_disagree(ev, lv)
+    # the frame before a node's first exposure had it under the ink: it stands no higher
+    # than that level plus what the meniscus lifts the ink there (the correction applied);
+    # a fit above that rests on nothing the frames showed (a face's rim lifted by a rise
+    # meant for a wall, a spike between refined levels)
+    u_bound = _above_the_ink(ev, lv)
     # the meniscus correction models a contact line on an open face; within a capillary
     # length of the outline the ink also meets the part's edge, which the model does not
     # know: the correction there is unsure by as much of it as the edge's reach leaves
@@ -233,9 +251,9 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
         # the lattice's border is the outline too (a part that fills its bounds)
         d_out = ndimage.distance_transform_edt(np.pad(ev.footprint, 1), sampling=(lat.hy, lat.hx))[1:-1, 1:-1]
         u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
-    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_rim ** 2 + u_men ** 2)
+    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_bound ** 2 + u_rim ** 2 + u_men ** 2)
     if explain is not None:
-        explain.update(lateral=u_lat, gap=u_gap, gap_bend=u_bend, gap_far=u_far, gap_cap=u_cap, fit=u_fit, frames=u_frames, rim=u_rim, meniscus=u_men)
+        explain.update(lateral=u_lat, gap=u_gap, gap_bend=u_bend, gap_far=u_far, gap_cap=u_cap, fit=u_fit, frames=u_frames, bound=u_bound, rim=u_rim, meniscus=u_men)
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
