@@ -164,3 +164,12 @@ def test_the_job_page_shows_the_report_in_plain_words(web):
     assert "<caption>InkSlice regularised fit</caption>" in page
     assert "<summary>Mean error</summary>" in page and "0.0722 mm" in page
     assert "<summary>Spread of the error</summary>" in page and "inkslice:fit" not in page.split("<caption>")[1][:40]
+
+
+def test_the_job_pictures_say_what_they_show():
+    from appliance.web.report import picture_caption
+    assert picture_caption("error_inkslice_fit.png") == \
+        "Where InkSlice regularised fit differs from the true part (error in mm, scale on the right)"
+    assert "Least squares, degree 3 (dissertation)" in picture_caption("error_lsq3.png")
+    assert picture_caption("uncertainty.png").startswith("How sure each cell")
+    assert picture_caption("error.png") == "error.png"             # a picture we do not know keeps its name

@@ -146,3 +146,21 @@ def test_the_cli_backs_up_and_restores_a_data_folder(tmp_path, capsys):
     capsys.readouterr()
     assert cli_main(["settings", "show", "--data", str(two)]) == 0
     assert 'dialect = "grbl"' in capsys.readouterr().out
+
+
+def test_the_settings_page_test_button_reaches_the_receiver_through_the_web(tmp_path, receiver):
+    from appliance.web import create_app
+    from web_helpers import login
+    url, got = receiver
+    svc, _ = service(tmp_path)
+    try:
+        app = create_app(svc, {"data_dir": str(tmp_path / "web")})
+        app.config["TESTING"] = True
+        c = app.test_client()
+        h = {"X-CSRF-Token": login(c, app.config["FIRST_RUN_PASSWORD"])}
+        assert c.post("/api/webhook/test", headers=h).get_json() == {"ok": False, "problem": "no webhook address is set"}
+        c.patch("/api/settings", json={"webhook_url": url}, headers=h)
+        assert c.post("/api/webhook/test", headers=h).get_json() == {"ok": True, "problem": ""}
+        assert got[-1]["body"]["event"] == "test" and got[-1]["auth"] is None
+    finally:
+        svc.close()

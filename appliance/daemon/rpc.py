@@ -40,12 +40,12 @@ METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file",
            "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
            "usb_sticks", "export_to_usb", "backup", "restore", "system",
            "preview", "home_stage", "jog", "goto_level", "rename_job", "delete_job", "reprocess", "job_sizes",
-           "repost")
+           "repost", "test_webhook")
 BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
               "commission": 600.0,                                          # the search for level zero,
-              "export_to_usb": 180.0,                                       # a copy, read back, unmount
+              "export_to_usb": 180.0, "test_webhook": 30.0,                 # a copy, read back, unmount; a slow receiver
               "home_stage": 90.0, "goto_level": 90.0, "jog": 60.0,          # the panel's moves
               "repost": 900.0}                                              # a new program from a height map
 _ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
@@ -239,6 +239,7 @@ class BenchClient:
     def backup(self): return self._call("backup")
     def restore(self, doc): return self._call("restore", doc)
     def system(self): return self._call("system")
+    def test_webhook(self): return self._call("test_webhook")
     def preview(self): return self._call("preview")
     def home_stage(self): return self._call("home_stage")
     def jog(self, mm): return self._call("jog", mm)

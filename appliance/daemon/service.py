@@ -660,6 +660,10 @@ class BenchService:
         self._set(message="settings and calibration restored from a backup")
         return out
 
+    def test_webhook(self) -> dict:
+        """POST a test message to the webhook setting's address now; {"ok", "problem"}."""
+        return self.webhook.test()
+
     def system(self) -> dict:
         usage = shutil.disk_usage(self.data_dir)
         from .. import __version__

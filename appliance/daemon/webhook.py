@@ -76,6 +76,16 @@ class Webhook:
             self._thread.start()
         return True
 
+    def test(self) -> dict:
+        """Send a test message now, to the address set; {"ok", "problem"} (the settings page's button)."""
+        s = self._settings()
+        if not s.get("webhook_url"):
+            return {"ok": False, "problem": "no webhook address is set"}
+        body = message("needs_attention", None, "a test message from the settings page: the webhook works")
+        body["event"], body["title"] = "test", "InkSlice: webhook test"
+        problem = post(s["webhook_url"], body, s.get("webhook_token", ""))
+        return {"ok": not problem, "problem": problem}
+
     def last(self) -> dict | None:
         """The last delivery: {"event", "time", "ok", "problem"}."""
         return self._last

@@ -201,6 +201,9 @@ class WebService:
     def system(self) -> dict:
         return self._optional("system")
 
+    def test_webhook(self) -> dict:
+        return self._optional("test_webhook")
+
     def _command(self, name, *args):
         try:
             return self._optional(name, *args)

@@ -47,7 +47,7 @@ from . import api, auth, pages, system
 from .adapter import WebService
 from .sessions import SessionStore
 from .eta import EtaSmoother
-from .report import readable as readable_statistics
+from .report import picture_caption, readable as readable_statistics
 
 DEFAULTS = {
     "https": False,
@@ -169,6 +169,7 @@ def create_app(service, config: dict | None = None) -> Flask:
         return jsonify(error=f"upload larger than {cfg['max_upload_bytes']} bytes"), 413
 
     app.add_template_global(readable_statistics, "readable_statistics")     # the job page's report
+    app.add_template_global(picture_caption, "picture_caption")
 
     @app.template_filter("num")
     def _num(v):

@@ -6,7 +6,7 @@ away, and keeps the code names only as a small reference.
 """
 from __future__ import annotations
 
-from ..process import label
+from ..process import LABELS, UNCERTAINTY_PNG, label
 
 # key: (plain name, unit, what it means)
 STATISTICS = {
@@ -49,3 +49,18 @@ def readable(statistics: dict) -> list[dict]:
             rows.append({"key": k, "name": name, "value": stats[k], "unit": unit, "help": text})
         groups.append({"key": key, "title": title, "rows": rows})
     return sorted(groups, key=lambda g: not g["key"].startswith("inkslice:"))     # ours first
+
+
+def picture_caption(name: str) -> str:
+    """What a job's picture shows, in words (its alt text and caption)."""
+    if name == UNCERTAINTY_PNG:
+        return ("How sure each cell of the height map is (1-sigma, mm, scale on the right); "
+                "the numbered boxes are the low-confidence regions the report and the G-code list")
+    if name.startswith("error_") and name.endswith(".png"):
+        method = name[len("error_"):-len(".png")]
+        ours = method.startswith("inkslice_")
+        method = method[len("inkslice_"):] if ours else method
+        if method in LABELS:
+            who = label(("inkslice:" if ours else "seed:") + method)
+            return f"Where {who} differs from the true part (error in mm, scale on the right)"
+    return name

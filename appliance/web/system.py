@@ -7,6 +7,7 @@ the settings schema the settings form is drawn from.
     GET  /api/support.zip       logs, settings, calibration, system figures, events; no secrets
     GET  /api/backup            settings and calibration history as one JSON file (daemon/backup.py)
     POST /api/restore           that file back (JSON body); refused while the bench works
+    POST /api/webhook/test      a test message to the webhook address now: {"ok", "problem"}
 
 Behind the login gate like the rest of /api/ (app.py).
 """
@@ -141,6 +142,11 @@ def restore():
     out = _svc().restore(doc)
     log.info("settings and calibration restored from a backup: %s", out)
     return jsonify(out)
+
+
+@bp.post("/webhook/test")
+def webhook_test():
+    return jsonify(_svc().test_webhook())
 
 
 def _stamp():

@@ -7,7 +7,7 @@
   const { api } = window.InkSlice;
   const status = document.getElementById("settings-result");
   const bar = document.getElementById("savebar");
-  const fields = Array.from(form.querySelectorAll(".setting"));
+  const fields = Array.from(form.querySelectorAll(".setting[data-key]"));
   let saved = {};
 
   function valueOf(div) {
@@ -51,6 +51,16 @@
   }
   window.addEventListener("hashchange", openHash);
   openHash();
+  const hook = document.getElementById("webhook-test");
+  if (hook) hook.addEventListener("click", async () => {
+    const out = document.getElementById("webhook-result");
+    hook.disabled = true; out.textContent = "Sending…";
+    try {
+      const r = await api("POST", "/api/webhook/test");
+      out.textContent = r.ok ? "Delivered: the receiver took it." : "Not delivered: " + r.problem;
+    } catch (e) { out.textContent = "Not sent: " + e.message; }
+    hook.disabled = false;
+  });
   form.addEventListener("input", refresh);
   form.addEventListener("change", refresh);
   form.addEventListener("submit", async (ev) => {
