@@ -9,8 +9,8 @@ then, per level, the median over the last RECENT jobs (a median: one job slowed 
 does not move it), times the levels of this job.
 
 During a scan the daemon's eta_s = levels left x (this scan's own recent level time, or the
-learned one before a level is done) + the learned processing time; during processing, the
-learned processing time less what has passed. A box with no finished job yet knows no
+learned one before a level is done) + the learned processing time; when processing starts, the
+learned processing time (the web's smoother counts it down with the clock). A box with no finished job yet knows no
 processing time: eta_processing_s is None and the estimate covers the scan only.
 """
 from __future__ import annotations
