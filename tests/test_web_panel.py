@@ -204,4 +204,10 @@ def test_the_shown_eta_covers_processing_and_takes_the_processing_figure_when_it
     assert e.update(state(20, "processing", eta=60.0)) == 60.0      # a new phase is news, not jitter
     now[0] += 10.0
     assert e.update(state(20, "processing", eta=60.0)) == pytest.approx(50.0)   # and it counts down
-    assert EtaSmoother().update({**state(20, "processing"), "eta_processing_s": None}) is None  # nothing learned yet
+    fresh = EtaSmoother(clock=lambda: now[0])       # a box with nothing learned yet
+    fresh.update({**state(10), "eta_processing_s": None})
+    now[0] += 2.0
+    fresh.update({**state(11), "eta_processing_s": None})
+    for _ in range(3):                              # "processing", not a scan estimate counted down to 0 s
+        now[0] += 1.0
+        assert fresh.update({**state(20, "processing"), "eta_processing_s": None}) is None

@@ -76,6 +76,9 @@ class EtaSmoother:
                 self.last_done, self.last_t = done, now
                 changed = True
 
+            if st == "processing" and daemon_eta is None:
+                self.shown = None           # a box with no finished job yet: "processing", not "0 s"
+                return None
             if self.per_level is None:
                 raw = float(daemon_eta) if daemon_eta is not None else None
                 if raw is None:
@@ -90,8 +93,6 @@ class EtaSmoother:
             left = max(0, total - done)
             raw = left * self.per_level + float(state.get("eta_processing_s") or 0.0)
             if st == "processing":
-                if daemon_eta is None:
-                    return None             # a box with no finished job yet: say "processing", not "0 s"
                 raw = float(daemon_eta)
                 if phase_changed:
                     self.shown, self.shown_t = raw, now
