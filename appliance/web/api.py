@@ -336,7 +336,7 @@ def job_thumb(job_id):
 
 
 def download_name(job: dict, name: str) -> str:
-    """A download named for its job: "cone-on-the-bench-20261202-1553-toolpath.gcode"."""
+    """A download named for its job: "cone-on-the-bench-20261202-155332-toolpath.gcode"."""
     label = re.sub(r"[^A-Za-z0-9]+", "-", str(job.get("name") or "")).strip("-")[:40]
     stamp = "-".join(str(job.get("id", "")).split("-")[:2])
     return "-".join(p for p in (label, stamp, name) if p)
