@@ -10,7 +10,7 @@ from scipy.spatial import ConvexHull
 
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
-from appliance.surface.gridfit import Lattice, flat_faces, first_exposure
+from appliance.surface.gridfit import Lattice, flat_faces, first_exposure, tilt_crossed_faces
 from appliance.surface.slices import (Perspective, check_waterlines, make_slice, mark_silhouettes, mark_walls,
                                       silhouettes)
 from appliance.vision.types import Waterline
@@ -103,6 +103,45 @@ def test_a_face_that_came_out_at_once_lies_between_its_two_levels():
     assert lo[15, 15] == 12.0 and hi[15, 15] == 13.0
 
 
+def test_a_tilted_face_one_level_curve_crosses_is_one_plane():
+    """A 60 x 30 mm top tilted 1 in 80 along x, z = 12 + (x - 30) / 80, ringed by walls:
+    at level 12 the curve x = 30 crosses it, and no other. The piece beyond the curve
+    (12 .. 12.375) came out at 12, the piece before it (11.625 .. 12) at 11. Their middles
+    put them flat at 12.5 and 11.5, a step apart at the curve; as one plane through the
+    curve at half the largest slope the brackets allow they rise through it."""
+    out = np.array([[0, 0], [60, 0], [60, 30], [0, 30]], float)
+    beyond = np.array([[30, 0], [60, 0], [60, 30], [30, 30]], float)
+    slices = [make_slice(14.0, []), make_slice(13.0, []), make_slice(12.0, [beyond]), make_slice(11.0, [out]),
+              make_slice(10.0, [out])]
+    for s in slices:
+        s.wall = np.abs(s.P[:, 0] - 30.0) > 1e-9   # the outline is wall, the curve x = 30 is not
+    lat = Lattice(np.linspace(0, 60, 61), np.linspace(0, 30, 31))
+    z_fe, first, _ = first_exposure(lat, slices, 0.25)
+    z, mid, _ = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
+    assert z[15, 5] == pytest.approx(11.5) and z[15, 55] == pytest.approx(12.5)
+    tilted = tilt_crossed_faces(lat, slices, z, mid, first, far_mm=3.0)
+    assert tilted[15, 5] and tilted[15, 55]
+    slope = 0.5 / 29.0        # the farthest face node is 29 mm from the curve (x = 0 is on the rim)
+    assert z[15, 5] == pytest.approx(12.0 - 25 * slope)
+    assert z[15, 55] == pytest.approx(12.0 + 25 * slope)
+    truth = 12.0 + (lat.x - 30.0) / 80.0
+    row = mid[15]
+    assert np.abs(z[15, row] - truth[row]).mean() < 0.5 * np.abs(np.where(lat.x < 30, 11.5, 12.5) - truth)[row].mean()
+
+
+def test_a_flat_face_no_curve_crosses_keeps_its_middle():
+    """The 30 x 30 mm top of the test above it, under at 13 and out at 12: no curve, no tilt."""
+    square = [np.array([[0, 0], [30, 0], [30, 30], [0, 30]], float)]
+    slices = [make_slice(13.0, []), make_slice(12.0, square), make_slice(11.0, square)]
+    for s in slices:
+        s.wall = np.ones(len(s.P), bool)
+    lat = Lattice(np.linspace(0, 30, 31), np.linspace(0, 30, 31))
+    z_fe, first, _ = first_exposure(lat, slices, 0.25)
+    z, mid, _ = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
+    assert not tilt_crossed_faces(lat, slices, z, mid, first, far_mm=3.0).any()
+    assert z[15, 15] == pytest.approx(12.5)
+
+
 # Ea (mm) on this small camera: stepped block 0.56 (4.84 with silhouettes read as waterlines),
 # blade 0.15 (1.05); benches/occlusion.py has the full-size figures
 @pytest.mark.parametrize("name, ea_max", [("stepped-block", 1.0), ("blade", 0.3)])
@@ -119,3 +158,23 @@ def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
     diag = job.diagnostics["fit"]
     assert diag["silhouette_points"] > 0 and diag["occluded_nodes"] > 0
     assert job.stats["inkslice:fit"]["Ea"] < ea_max
+
+
+def test_the_outline_nodes_continue_the_surface_inside_them():
+    """Past the last waterline the thin plate has nothing to hold it: sample 2's rim bent
+    2.6 mm down over its last millimetre, and the finishing program cut into the part there.
+    The outline's nodes are read as the surface inside continued to them, whatever they
+    held (their first-exposure heights too: every wall passes through them)."""
+    from appliance.surface.reconstruct import _continue_to_outline
+    lat = Lattice(np.linspace(0, 20, 21), np.linspace(0, 20, 21))
+    X, Y = np.meshgrid(lat.x, lat.y)
+    plane = 30 + 0.45 * Y - 0.1 * X
+    z = plane.copy()
+    z[-1, :] -= 2.6                                 # the drooping rim
+    z[:, 0] += 1.0
+    z_fe = np.where(np.abs(X - 10) + np.abs(Y - 10) < 6, plane, np.nan)
+    z_fe[0, :] = plane[0, :] - 1.5                  # an outline node's unsure first exposure
+    out = _continue_to_outline(lat, z, z_fe, tol_mm=0.5)
+    assert np.abs(out - plane).max() < 1e-9
+    z[0, 5] += 0.3                                  # within half a step of the surface: its own
+    assert _continue_to_outline(lat, z, z_fe, tol_mm=0.5)[0, 5] == pytest.approx(plane[0, 5] + 0.3)

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy import ndimage
 from scipy.sparse.linalg import cg, spsolve
+from scipy.spatial import cKDTree
 
 from .slices import Slice, polyline_distance
 
@@ -302,6 +303,64 @@ def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, ed
         z.ravel()[mid] = 0.5 * (slices[k].level + slices[k - 1].level)
         mask.ravel()[mid] = True
     return z, mask, (lo, hi)
+
+
+def tilt_crossed_faces(lat: Lattice, slices: list[Slice], z, mask, first, far_mm):
+    """Faces that came out at once on both sides of one level curve are one tilted face.
+
+    A nearly flat tier tilted by less than a level step over its width comes out in two
+    pieces: the part above level L (under at the level above) and the part below it (under
+    at L), with the level curve at L between them and no other. Its middles would put it
+    flat at two heights a step apart, with a step at the curve. What the frames say: the
+    face crosses L along the curve, and it is a plane (to what two brackets can tell) whose
+    slope keeps each piece inside its bracket out to its farthest node - at most
+    step / distance. Half that slope, away from the curve on each side, is the middle of
+    what they allow (a plane at the largest slope and a flat face at L are both possible),
+    as the middle of the bracket is for a face no curve crosses. z (flat_faces' middles)
+    is changed in place; -> mask of the nodes so placed."""
+    K = len(slices)
+    tilted = np.zeros(lat.shape, bool)
+    X, Y = np.meshgrid(lat.x, lat.y)
+    touch = far_mm + 2.0 * max(lat.hx, lat.hy)        # a piece ends this near the curve it meets
+    for k in range(2, K):
+        below, above = mask & (first == k), mask & (first == k - 1)
+        curve = slices[k - 1].level_curve()
+        if not below.any() or not above.any() or curve.empty:
+            continue
+        # the stretch of curve between the two pieces (elsewhere the curve may run along a
+        # rim or a wall foot: it says nothing about this face's slope)
+        nodes = [np.column_stack([X[m], Y[m]]) for m in (below, above)]
+        near = [cKDTree(q).query(curve.P, distance_upper_bound=touch)[0] <= touch for q in nodes]
+        is_shared = near[0] & near[1]
+        shared = curve.P[is_shared]
+        if len(shared) == 0:
+            continue
+        tree = cKDTree(shared)
+
+        def to_stretch(q):
+            # along the polyline where its nearest vertex is on the stretch, else to the stretch's points
+            d, i = polyline_distance(curve, q)
+            return np.where(is_shared[i], d, tree.query(q)[0])
+        L = slices[k - 1].level
+        steps = (L - slices[k].level, slices[k - 2].level - L)
+        # the pieces on either side, and which piece of one side faces which of the other
+        # across the shared stretch (each shared point: the pieces nearest it)
+        sides = []
+        for side, q in zip((below, above), nodes):
+            labels, _ = ndimage.label(side)
+            d = to_stretch(q)
+            nearest = labels[side][cKDTree(q).query(shared)[1]]
+            sides.append((np.flatnonzero(side.ravel()), labels[side], d, nearest))
+        pairs = set(zip(sides[0][3].tolist(), sides[1][3].tolist()))
+        for a in {p[0] for p in pairs}:
+            partners = sorted({p[1] for p in pairs if p[0] == a})
+            lo_on = sides[0][1] == a
+            hi_on = np.isin(sides[1][1], partners)
+            slope = 0.5 * min(steps[0] / sides[0][2][lo_on].max(), steps[1] / sides[1][2][hi_on].max())
+            for sign, (idx, _, d, _), on in ((-1.0, sides[0], lo_on), (1.0, sides[1], hi_on)):
+                z.ravel()[idx[on]] = L + sign * slope * d[on]
+                tilted.ravel()[idx[on]] = True
+    return tilted
 
 
 def occluded_nodes(lat: Lattice, seen: list[Slice], corrected: list[Slice]) -> np.ndarray:
