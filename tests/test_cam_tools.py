@@ -145,3 +145,25 @@ def test_the_settings_keep_the_tool_table_and_operations_checked_together():
     with pytest.raises(SettingError, match="steep_angle_deg"):
         S.validate(S.DEFAULTS, {"steep_angle_deg": 90})
     assert S.validate(S.DEFAULTS, {"tool_table": "T1 flat D8; T2 ball D6; T3 ball D3"})["tool_table"].startswith("T1 flat D8")
+
+
+def test_steep_walls_get_constant_z_passes_and_the_two_regions_cover_the_part():
+    from appliance.cam import waterline as W
+    from appliance.cam.sampling import Sampler
+    hm = grid_map(lambda X, Y: 1 + 5 / (1 + np.exp((np.hypot(X - 10, Y - 10) - 5) / 0.4)), 0, 20, 0, 20, 0.25)
+    s = Sampler(hm, edge_step=0.05)
+    st = W.SteepSettings(parse_cutter("ball4"), scallop=0.05)
+    field = W.tip_field(s, st.cutter, st.grid)
+    steep, shallow = W.regions(field, st)
+    on = np.isfinite(field.tip)
+    assert (steep | shallow)[on].all()                     # no gap
+    assert (steep & shallow).sum() > 0.05 * steep.sum()    # and a seam cut by both
+    p = W.plan(s, st, field=field)
+    assert p.levels >= 5 and p.waterline_runs >= p.levels - 2 and p.zigzag_runs > 0
+    # a waterline holds its height: each run within half a level step (the drop, not the contour, sets Z)
+    for r in p.runs[p.zigzag_runs:]:
+        assert np.ptp(r[:, 2]) < p.level_step / 2
+    # the level step holds the vertical scallop on the steepest wall: (dz / sin t)^2 / (8 r cos t) = h
+    t = np.radians(80)
+    dz = W.level_step(st.cutter, 0.05, 80)
+    assert (dz / np.sin(t)) ** 2 / (8 * 2 * np.cos(t)) == pytest.approx(0.05)
