@@ -98,13 +98,18 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
     shape = out.shape
     x, y, out = x.ravel(), y.ravel(), out.reshape(-1)
     e = d / 2
+    # only points near something steep (the contact is within R of the axis)
+    near = np.flatnonzero(sampler.may_be_steep(x, y, cutter.radius + e, STEEP) & np.isfinite(out))
+    x, y = x[near], y[near]
     gx, gy = surface_gradient(sampler, x, y, e)
     ux, uy = plane_contact(cutter, gx, gy)
     gx2, gy2 = surface_gradient(sampler, x + ux, y + uy, e)
     steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP)
-    idx = np.flatnonzero(steep & np.isfinite(out))
-    for s in range(0, idx.size, chunk // 2):
-        k0 = idx[s:s + chunk // 2]
+    sel = np.flatnonzero(steep)
+    x, y, gx2, gy2, idx = x[sel], y[sel], gx2[sel], gy2[sel], near[sel]
+    half = chunk // 2
+    for s in range(0, idx.size, half):
+        k0 = np.arange(s, min(s + half, idx.size))
         # two starts per point: where a plane of the local slope would touch,
         # and the best of a scan of rings near the rim (beside a cliff or a
         # crease the plane's guess can be far from the contact: 0.02 mm low
@@ -114,7 +119,7 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
         k = np.concatenate([k0, k0])
         px, py = x[k], y[k]
         cx, cy = np.concatenate([gcx, rcx]), np.concatenate([gcy, rcy])
-        best = out[k]
+        best = out[idx[k]]
         f0 = _F(sampler, cutter, px, py, cx, cy)
         best = np.maximum(best, f0)
         sp = d
@@ -128,7 +133,7 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
             cx, cy = ox[r, j], oy[r, j]
             best = np.maximum(best, fb)
             sp /= 4
-        out[k0] = np.maximum(best[:k0.size], best[k0.size:])
+        out[idx[k0]] = np.maximum(best[:k0.size], best[k0.size:])
     return out.reshape(shape)
 
 

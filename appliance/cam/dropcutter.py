@@ -33,6 +33,8 @@ invariant, so nothing else changes.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -44,10 +46,12 @@ from .segments import min_over_segment
 DEFAULT_RESOLUTION = 0.1          # mm, spacing of the offset lattice and of toolpath points
 _SLAB_BUDGET = 750_000            # slab elements per chunk: reading the map there takes ~15 arrays
                                   # of its size (3 M elements were 370 MB of a finishing plan)
+_CACHE_ELEMENTS = 65_536          # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 
+@functools.lru_cache(maxsize=16)
 def _offsets(cutter: Cutter, d: float):
-    """Disc offsets grouped by |b|: [(b, a_values, h_values)], m."""
+    """Disc offsets grouped by |b|: [(b, a_values, h_values)], m (cached: read-only)."""
     M = cutter.radius / d
     m = int(np.floor(M + 1e-9))
     groups = []
@@ -76,12 +80,16 @@ def drop_lines(sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: 
     out = np.empty((L, len(range(0, n, stride))))
     per_line = (2 * m + 1) * (n + 2 * m)
     chunk = max(1, _SLAB_BUDGET // per_line)
+    axis = _axis_aligned(e1, origins)
+    if axis is not None and L > 1 and np.median(np.diff(np.sort(origins[:, 1 - axis]))) <= d * (1 + 1e-9):
+        # lines a lattice step apart (a grid) read one new row each: a chunk may hold
+        # as many as keep the ~1450 slice operations' arrays in cache
+        chunk = max(chunk, _CACHE_ELEMENTS // max(n, 1))
     c = np.arange(-m, n + m) * d
     b = np.arange(-m, m + 1) * d
     # lattice offsets relative to the line origin, shape (2m+1, n+2m)
     ox = c[None, :] * e1[0] + b[:, None] * e2[0]
     oy = c[None, :] * e1[1] + b[:, None] * e2[1]
-    axis = _axis_aligned(e1, origins)
     for s in range(0, L, chunk):
         o = origins[s:s + chunk]
         if axis is None:
@@ -301,6 +309,8 @@ def _dilate_slab(table, index, groups, m, n, stride=1):
     the slab's highest value first, so a part 100 mm tall still resolves
     8e-6 mm, far below the 0.002 mm we promise.
     """
+    if index.shape[0] <= 2 and stride == 1:
+        return _dilate_columns(table, index, groups, m, n)
     k = len(range(0, n, stride))
     ref = float(np.max(table))
     z = (table - ref).astype(np.float32)
@@ -318,3 +328,43 @@ def _dilate_slab(table, index, groups, m, n, stride=1):
                 np.subtract(tmp, np.float32(h), out=tmp)
             np.maximum(res, tmp, out=res)
     return res.astype(np.float64) + ref
+
+
+def _dilate_columns(table, index, groups, m, n):
+    """_dilate_slab for one or two lines: for each column offset a, the max over the
+    disc's rows first (one operation over the whole slab), then one slice per a.
+
+    A single line's ~1450 slice operations are 1000 elements each, all call
+    overhead; this order makes ~30 operations on the slab instead (a planner's
+    candidate pass: 10.8 -> 3.0 ms). For many lines at once the slice order is
+    faster: its arrays stay in cache.
+    """
+    ref = float(np.max(table))
+    z = (table - ref).astype(np.float32)
+    L, N = index.shape[0], z.shape[1]
+    # rows b and -b folded: F[:, b] = max(row m + b, row m - b)
+    F = np.empty((L, m + 1, N), np.float32)
+    F[:, 0] = z[index[:, m]]
+    np.maximum(z[index[:, m + 1:]], z[index[:, m - 1::-1][:, :m]], out=F[:, 1:])
+    H = _profile_table(groups, m)
+    res = np.full((L, n), -np.inf, np.float32)
+    for a in range(m + 1):
+        live = np.flatnonzero(np.isfinite(H[a]))
+        if live.size == 0:
+            continue
+        col = (F[:, live] - H[a, live][None, :, None]).max(axis=1)
+        if a == 0:
+            np.maximum(res, col[:, m:m + n], out=res)
+        else:
+            np.maximum(res, np.maximum(col[:, m + a:m + a + n], col[:, m - a:m - a + n]), out=res)
+    return res.astype(np.float64) + ref
+
+
+def _profile_table(groups, m):
+    """h at offset (a, b), a, b = 0..m, in float32; inf outside the disc."""
+    H = np.full((m + 1, m + 1), np.inf, np.float32)
+    for b, avals, hvals in groups:
+        for a, h in zip(avals.tolist(), hvals.tolist()):
+            if a >= 0:
+                H[a, b] = h
+    return H

@@ -21,7 +21,7 @@ from scipy import ndimage
 
 from .contact import STEEP, plane_contact, polish, surface_gradient
 from .cutters import Cutter
-from .dropcutter import _offsets, drop_grid
+from .dropcutter import _CACHE_ELEMENTS, _offsets, drop_grid
 from .sampling import Sampler
 
 REACH_TOL = 0.005       # mm: a cell is reachable when the opening is within this of the design
@@ -63,27 +63,38 @@ def _erode(tip, cutter, d):
     columns a and -a: three operations per quarter-disc offset instead of
     eight per four offsets. Single precision relative to the lowest tip halves
     the memory traffic (the whole cost: 25 s -> 2.5 s on a 100 x 100 mm map
-    at 0.1 mm); a part 100 mm tall still resolves 1e-5 mm.
+    at 0.1 mm); a part 100 mm tall still resolves 1e-5 mm. The lattice is
+    eroded in bands of rows whose arrays stay in cache through the ~1450
+    operations (the whole map at once streamed 4 MB arrays from memory each
+    time: 1.1 -> 0.5 s).
     """
     groups, m = _offsets(cutter, d)
+    quarter = [(b, [(a, np.float32(h)) for a, h in zip(av.tolist(), hv.tolist()) if a >= 0])
+               for b, av, hv in groups]
     ny, nx = tip.shape
     finite = np.isfinite(tip)
     ref = float(np.min(tip[finite])) if finite.any() else 0.0
     pad = np.full((ny + 2 * m, nx + 2 * m), np.inf, np.float32)
     pad[m:m + ny, m:m + nx] = tip - ref
     out = np.full(tip.shape, np.inf, np.float32)
-    tmp = np.empty(tip.shape, np.float32)
-    for b, avals, hvals in groups:
-        rows = pad[m:m + ny] if b == 0 else np.minimum(pad[m + b:m + b + ny], pad[m - b:m - b + ny])
-        for a, h in zip(avals.tolist(), hvals.tolist()):
-            if a < 0:
-                continue
-            if a == 0:
-                np.add(rows[:, m:m + nx], np.float32(h), out=tmp)
+    band = max(1, _CACHE_ELEMENTS // max(nx, 1))
+    tmp = np.empty((band, nx), np.float32)
+    rows = np.empty((band, nx + 2 * m), np.float32)
+    for j0 in range(0, ny, band):
+        j1 = min(j0 + band, ny)
+        o, t, rw = out[j0:j1], tmp[:j1 - j0], rows[:j1 - j0]
+        for b, offsets in quarter:
+            if b == 0:
+                rw[...] = pad[m + j0:m + j1]
             else:
-                np.minimum(rows[:, m + a:m + a + nx], rows[:, m - a:m - a + nx], out=tmp)
-                np.add(tmp, np.float32(h), out=tmp)
-            np.minimum(out, tmp, out=out)
+                np.minimum(pad[m + j0 + b:m + j1 + b], pad[m + j0 - b:m + j1 - b], out=rw)
+            for a, h in offsets:
+                if a == 0:
+                    np.add(rw[:, m:m + nx], h, out=t)
+                else:
+                    np.minimum(rw[:, m + a:m + a + nx], rw[:, m - a:m - a + nx], out=t)
+                    np.add(t, h, out=t)
+                np.minimum(o, t, out=o)
     return out.astype(np.float64) + ref
 
 
@@ -108,9 +119,11 @@ def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000, rows=None)
     rows = slice(0, ny) if rows is None else rows
     # (X, Y) are the lattice's rows `rows`; tip and out are the whole lattice's
     lx0, ly0 = X[0, 0], Y[0, 0] - d * rows.start
-    gx, gy = surface_gradient(sampler, X.ravel(), Y.ravel(), d / 2)
     flat_out = out[rows].reshape(-1)
-    idx = np.flatnonzero((np.hypot(gx, gy) > STEEP) & np.isfinite(flat_out))
+    near = np.flatnonzero(sampler.may_be_steep(X.ravel(), Y.ravel(), d / 2, STEEP) & np.isfinite(flat_out))
+    gx, gy = np.zeros(flat_out.size), np.zeros(flat_out.size)
+    gx[near], gy[near] = surface_gradient(sampler, X.ravel()[near], Y.ravel()[near], d / 2)
+    idx = near[np.hypot(gx[near], gy[near]) > STEEP]
     R = cutter.radius
     for s in range(0, idx.size, chunk):
         k = idx[s:s + chunk]

@@ -109,8 +109,10 @@ class Sampler:
         ys = np.asarray(ys, float)
         u, _, i, _, in_x = self._cell(xs, np.full(xs.shape, self.y0))
         _, v, _, j, in_y = self._cell(np.full(ys.shape, self.x0), ys)
-        J, I = j[:, None], i[None, :]
-        z00, z10, z01, z11 = self._g00[J, I], self._g10[J, I], self._g01[J, I], self._g11[J, I]
+        # rows first, then columns: two plain takes are ~8x faster than one
+        # broadcast fancy index (which was most of a planner's candidate pass)
+        z00, z10, z01, z11 = (g.take(j, axis=0).take(i, axis=1)
+                              for g in (self._g00, self._g10, self._g01, self._g11))
         U, V = u[None, :], v[:, None]
         out = np.where(U >= V, z00 + U * (z10 - z00) + V * (z11 - z10),
                        z00 + V * (z01 - z00) + U * (z11 - z01))
@@ -171,6 +173,37 @@ class Sampler:
             segs.append(np.column_stack([X[i], Y[j], z[j, i], X[i2], Y[j2], z[j2, i2]]))
         segs = np.vstack(segs)
         return None if segs.size == 0 else segs
+
+    def may_be_steep(self, x, y, reach, slope):
+        """False where no central difference of z within `reach` of (x, y) can exceed `slope`.
+
+        A bound from the triangles' own gradients (the larger |dz/dx| and
+        |dz/dy| of any cell within reach, and a cliff wherever the part meets
+        the floor or the lattice ends), so a caller can skip the points it
+        clears: on sample 1's dome the polish's eight reads of z per point over
+        a whole map (0.9 s) were all for points that are nowhere steep.
+        """
+        cells = int(np.ceil(reach / min(self.dx, self.dy))) + 2
+        key = (cells, float(slope))
+        cache = self.__dict__.setdefault("_steep_cache", {})
+        if key not in cache:
+            cache[key] = self._steep_cells(cells, slope)
+        u, v, i, j, inside = self._cell(x, y)
+        return cache[key][j, i] | ~inside
+
+    def _steep_cells(self, cells, slope):
+        g00, g10, g01, g11 = self._g00, self._g10, self._g01, self._g11
+        bx = np.maximum(np.abs(g10 - g00), np.abs(g11 - g01)) / self.dx
+        by = np.maximum(np.abs(g11 - g10), np.abs(g01 - g00)) / self.dy
+        on = self.cell_on
+        # the cliff where the part meets the floor, inside the lattice and at its border
+        cliff = on != ndimage.binary_erosion(on, np.ones((3, 3), bool), border_value=0)
+        cliff |= ndimage.binary_dilation(cliff, np.ones((3, 3), bool)) | (~on & ndimage.binary_dilation(on, np.ones((3, 3), bool)))
+        bx = np.where(cliff, np.inf, bx)
+        size = 2 * cells + 1
+        bx = ndimage.maximum_filter(bx, size=size, mode="nearest")
+        by = ndimage.maximum_filter(np.where(cliff, np.inf, by), size=size, mode="nearest")
+        return np.hypot(bx, by) > slope
 
     @property
     def bounds(self):
