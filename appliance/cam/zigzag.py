@@ -87,6 +87,8 @@ DEFAULT_SCALLOP = 0.01      # mm
 DEFAULT_CHORD = 0.002       # mm
 PLAN_SPACING = 0.3          # mm between the points the planner measures along a pass
 _ROW = 0.05                 # mm between the rows of the planner's cross-sections
+_BALL_ROW = 0.1             # for a ball: its envelope is a circle across the cusp, which the
+                            # quadratic through three rows 0.1 apart gives within 1e-5 mm
 _CROSS = 15                 # cross-sections measured between two passes
 
 
@@ -356,7 +358,8 @@ class _PassProbe:
         self._grids = {}
         self._measured = {}      # (across, row step) -> (first row, envelope) of candidates measured
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
-        self.row = min(_ROW, flat_stepover(st.cutter, st.scallop) / 8)
+        self.row = min(_BALL_ROW if st.cutter.kind == "ball" else _ROW,
+                       flat_stepover(st.cutter, st.scallop) / 8)
         idx = np.arange(0, n, self.stride)
         # every point within 1.5 R of the passes' ends: there the cutter reaches the
         # strip beside the part's edge only from positions to the side, and the cusps
