@@ -93,6 +93,10 @@ def walls():
         area, wmax, wp99, over = band_figures(rep, hm)
         print(f"{name:<20}{cpu:7.1f}{text.count(chr(10)):8d}{rep.gouge:8.4f}{rep.scallop_max:8.4f}"
               f"{100 * rep.uncut_fraction:8.2f}{area:9.0f}{wmax:9.4f}{wp99:9.4f}{100 * over:8.2f}")
+        for what, (x, y) in (("gouge", rep.gouge_at), ("max scallop", rep.scallop_at)):
+            ang = 72.5 + 12.5 * np.sin(np.arctan2(y - 20, x - 20))
+            print(f"{'':<20}{what} at x={x:.1f} y={y:.1f}: {np.hypot(x - 20, y - 20):.2f} mm from the axis, "
+                  f"where the wall is {ang:.0f} deg")
 
 
 def tools():

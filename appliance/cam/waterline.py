@@ -14,7 +14,8 @@ axis position on a lattice `grid` apart, 0.2 mm): its slope is the slope of
 the surface where the cutter touches. Steep is T's slope >= threshold
 (default 50 degrees, the `steep_angle_deg` setting); the two regions overlap
 by `overlap_deg` either side of it and by a band `blend` mm wide (half the
-cutter's radius), so every position belongs to one of them and the seam is
+cutter's radius; the zig-zag's band stops 15 degrees past its limit, it does
+not climb the walls), so every position belongs to one of them and the seam is
 cut by both: no gap, and no gouge, because every tool position of either is a
 drop-cutter height (the cutter touches the design and cannot cut into it).
 
@@ -52,7 +53,8 @@ from .zigzag import _frame, _true_runs, check_fits, drop_lines, drop_points, red
 
 DEFAULT_STEEP_DEG = 50.0
 DEFAULT_OVERLAP_DEG = 5.0
-MAX_WALL_DEG = 87.0          # walls steeper than this are held as if they were this steep
+MAX_WALL_DEG = 87.0
+SEAM_DEG = 15.0              # how far past its limit the zig-zag's overlap band may climb          # walls steeper than this are held as if they were this steep
 
 
 @dataclass
@@ -141,7 +143,11 @@ def regions(field: TipField, st: SteepSettings, within=None):
     grow = max(1, int(np.ceil(st.blend / field.g)))
     disc = _disc(grow)
     steep = on & ndimage.binary_dilation(field.slope_deg >= st.threshold_deg - st.overlap_deg, disc)
-    shallow = on & ndimage.binary_dilation(field.slope_deg < st.threshold_deg + st.overlap_deg, disc)
+    # the zig-zag's band reaches into the walls only up to 15 degrees past its own limit: a pass
+    # climbing an 84-degree wall stands on the drop-cutter's least accurate contacts (benches/steep.py
+    # measured 0.038 mm gouges there with the band unbounded)
+    shallow = on & ndimage.binary_dilation(field.slope_deg < st.threshold_deg + st.overlap_deg, disc) \
+        & (field.slope_deg < st.threshold_deg + st.overlap_deg + SEAM_DEG)
     return steep, shallow
 
 
