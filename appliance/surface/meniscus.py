@@ -211,9 +211,13 @@ FINE_ITERATIONS = 3       # Levenberg-Marquardt steps on the full solve lattice
 RIM_UNTRUSTED = 2         # nodes next to the outline whose apparent height the solve ignores
 
 
-def top_from_apparent(lat, apparent, footprint, model: MeniscusModel):
+def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None):
     """-> the top (NaN where `apparent` is) whose contact lines are the level curves of
-    `apparent` (the fit of the contact lines as they were seen, on lattice `lat`)."""
+    `apparent` (the fit of the contact lines as they were seen, on lattice `lat`).
+    `faces`: nodes of faces that came out at once (dewetted_nodes). No contact line crossed
+    them, so no line's bend changes their depression: there the curvature term is left out
+    (else the fit's ripples on a flat face, divided by CURVATURE_FLAT, read as bends: the
+    steep front's apron came out 0.18 mm high)."""
     k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
     sub = Lattice(lat.x[::k], lat.y[::k])
     A = fill_nearest(apparent)[::k, ::k]
@@ -221,17 +225,20 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel):
     if fp.sum() < 9:
         return apparent
     h = max(sub.hx, sub.hy)
+    straight = None if faces is None else faces[::k, ::k]
     kappa = contact_line_curvature(sub, A) if model.curvature else None
     if min(sub.shape) >= 20:
         coarse = Lattice(sub.x[::2], sub.y[::2])
         Ac = A[::2, ::2]
         kc = None if kappa is None else kappa[::2, ::2]
         tc = _solve_top(coarse, Ac, fp[::2, ::2], model, 3 * 2 * h, Ac, steps=(0.5, 1.0), iterations=5,
-                        kappa=kc)
+                        kappa=kc, straight=None if straight is None else straight[::2, ::2])
         start = A + _resample_rise(tc - Ac, coarse, sub)
-        top = _solve_top(sub, A, fp, model, h, start, steps=(1.0,), iterations=FINE_ITERATIONS, kappa=kappa)
+        top = _solve_top(sub, A, fp, model, h, start, steps=(1.0,), iterations=FINE_ITERATIONS, kappa=kappa,
+                         straight=straight)
     else:
-        top = _solve_top(sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa)
+        top = _solve_top(sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa,
+                         straight=straight)
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
 
@@ -260,7 +267,8 @@ def _resample_rise(phi, src, dst):
     return ndimage.map_coordinates(fill_nearest(phi), [FJ, FI], order=3, mode="nearest")
 
 
-def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None):
+def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None,
+               straight=None):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
     problem = FitProblem(lat, footprint)
@@ -279,13 +287,15 @@ def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, to
     t = start[act].astype(float)
     curved = kappa is not None
 
+    keep = 1.0 if straight is None else (~straight[act]).astype(float)
+
     def curvature_of(t):
         """The contact lines' curvature where the top is t: that of its level curves."""
         full = np.full(lat.shape, np.nan)
         full[act] = t
-        return contact_line_curvature(lat, fill_nearest(full))[act]
+        return contact_line_curvature(lat, fill_nearest(full))[act] * keep
 
-    kap = kappa[act] if curved else None
+    kap = kappa[act] * keep if curved else None
 
     def objective(t, m):
         r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
@@ -444,6 +454,18 @@ def _dewetted(lat, z_fe, first, footprint, slices, model):
             spacing = np.where(np.isfinite(d_up2), np.abs(d_up2 - d_up), d_up)
         out.append((int(k), np.flatnonzero(sel.ravel())[far], d_up > FACE_SPACINGS * spacing + 2 * reach))
     return out
+
+
+def dewetted_nodes(lat, z_fe, first, footprint, slices, model: MeniscusModel):
+    """-> mask of the nodes of faces that came out at once (those place_dewetted_faces and
+    bracket_dewetted_faces hold in their brackets), or None when there are none."""
+    found = _dewetted(lat, z_fe, first, footprint, slices, model)
+    if not found:
+        return None
+    mask = np.zeros(lat.shape, bool)
+    for _, idx, _ in found:
+        mask.ravel()[idx] = True
+    return mask
 
 
 def place_dewetted_faces(lat, z_fe, first, footprint, slices, model: MeniscusModel):

@@ -33,8 +33,8 @@ from . import seed as seed_methods
 from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
                       first_exposure, flat_faces, occluded_nodes, point_data, tilt_crossed_faces)
 from .heightmap import HeightMap
-from .meniscus import (bracket_dewetted_faces, contact_points, depression_depth, pinned_rims_as_walls,
-                       place_dewetted_faces, top_from_apparent)
+from .meniscus import (bracket_dewetted_faces, contact_points, depression_depth, dewetted_nodes,
+                       pinned_rims_as_walls, place_dewetted_faces, top_from_apparent)
 from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
 from .slices import (Perspective, check_waterlines, mark_silhouettes, mark_walls, outline_bounds,
                      unproject_rims)
@@ -406,7 +406,8 @@ def _fit_pass(lat, slices, opt, ftol, length, rise):
         z = _fit_nodes(problem, placed, pts, zp, length, opt.point_weight, prior)
     if opt.meniscus is not None:
         z = bracket_dewetted_faces(lat, z, z_fe, first, footprint, slices, opt.meniscus)
-        top = top_from_apparent(lat, z, footprint, opt.meniscus)
+        faces = dewetted_nodes(lat, z_fe, first, footprint, slices, opt.meniscus)
+        top = top_from_apparent(lat, z, footprint, opt.meniscus, faces)
         rise = top - z
         z = top
         _, slices = contact_points(observed, lat, rise, opt.meniscus)
