@@ -132,7 +132,8 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     job_id = r.get_json()["job_id"]
     st = wait_state(c, {"done", "failed"}, timeout=60)
     assert st["state"] == "done", st
-    assert st["levels_done"] == st["levels_total"] == 10
+    # 10 levels of 2 mm, and the frames the runner's refinement adds where a face came out at once
+    assert st["levels_done"] == st["levels_total"] >= 10
     info = c.get(f"/api/jobs/{job_id}").get_json()
     assert {"heightmap.csv", "toolpath.gcode", "report.json"} <= set(info["outputs"])
     for name in info["outputs"]:
@@ -145,7 +146,7 @@ def test_a_scan_through_the_web_on_the_real_service(web):
     z = zipfile.ZipFile(io.BytesIO(c.get(f"/api/jobs/{job_id}/archive.zip").data))
     names = set(z.namelist())
     doc = json.loads(z.read(f"{job_id}/scan/scan.json"))
-    assert len(doc["frames"]) == 10
+    assert len(doc["frames"]) == st["levels_total"]
     assert {f"{job_id}/scan/{f['file']}" for f in doc["frames"]} <= names
     assert {f"{job_id}/{n}" for n in info["outputs"]} <= names
     r = c.get("/api/frame.jpg")
@@ -345,7 +346,8 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     job_id = r.get_json()["job_id"]
     assert wait_state(c, {"done", "failed"}, timeout=60)["state"] == "done"
     info = c.get(f"/api/jobs/{job_id}").get_json()
-    assert info["status"] == "done" and info["params"]["imported"] and info["levels_done"] == 10
+    frames = len(json.loads((folder / "scan.json").read_text())["frames"])
+    assert info["status"] == "done" and info["params"]["imported"] and info["levels_done"] == frames >= 10
     assert "toolpath.gcode" in info["outputs"]
     copied = svc.store.job_dir(job_id) / "scan"
     assert sorted(p.name for p in (copied / "frames").iterdir()) == sorted(p.name for p in (folder / "frames").iterdir())
