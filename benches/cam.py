@@ -9,6 +9,11 @@ dissertation's format).
 `--only finishing` times issue 20's case (sample 1 from a 0.5 mm map, 6 mm ball,
 scallop 0.05 and 0.01) in child processes and runs the same in a `git worktree`
 of the commit before issue 20 (--old-ref, default 30fd316) for the ratio.
+Measured 2026-12-02 (shared 2-core box, load 15-20), new | 30fd316:
+scallop 0.05: 6.9 s CPU, 175 MB, 119 passes | 31.5 s, 426 MB, 120 (4.5x, 2.4x);
+scallop 0.01: 20.8 s, 186 MB, 266 passes | 62.8 s, 444 MB, 266 (3.0x, 2.4x).
+Targets 5 s and 20 s not yet met: the planner's envelopes of each candidate pass
+(~2 s at 0.05) and the opening over the whole map (~1.9 s) are most of what is left.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
