@@ -47,7 +47,8 @@ The steep front's apron still came out +0.18 mm high on average with its bracket
 contact-line bends. Leaving the bend term out on faces that came out at once (no contact line
 crossed them; surface/meniscus.py dewetted_nodes), same refined renders, Ea mm:
     steep-front 0.108 -> 0.0590   twin-peaks 0.0478 -> 0.0520   crater 0.0637 -> 0.0636
-    sample1 0.0105 -> 0.0105      sample3 0.0530 -> 0.0530
+    sample1 0.0105 -> 0.0105      sample2 0.0581 -> 0.0574      sample3 0.0530 -> 0.0530
+    sample4 0.0947 -> 0.0947
 Not yet <= 0.05 mm: sample 2 (worse with refinement: its saddle's gentle slopes are bisected
 too, and the fit does not gain from waterlines 0.06 mm apart there), sample 3, sample 4 (its
 walls and rims), the crater, the steep front and (by 0.002) twin-peaks. A rule that left gentle slopes with one mid-step frame (partly out there)
