@@ -158,23 +158,3 @@ def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
     diag = job.diagnostics["fit"]
     assert diag["silhouette_points"] > 0 and diag["occluded_nodes"] > 0
     assert job.stats["inkslice:fit"]["Ea"] < ea_max
-
-
-def test_the_outline_nodes_continue_the_surface_inside_them():
-    """Past the last waterline the thin plate has nothing to hold it: sample 2's rim bent
-    2.6 mm down over its last millimetre, and the finishing program cut into the part there.
-    The outline's nodes are read as the surface inside continued to them, whatever they
-    held (their first-exposure heights too: every wall passes through them)."""
-    from appliance.surface.reconstruct import _continue_to_outline
-    lat = Lattice(np.linspace(0, 20, 21), np.linspace(0, 20, 21))
-    X, Y = np.meshgrid(lat.x, lat.y)
-    plane = 30 + 0.45 * Y - 0.1 * X
-    z = plane.copy()
-    z[-1, :] -= 2.6                                 # the drooping rim
-    z[:, 0] += 1.0
-    z_fe = np.where(np.abs(X - 10) + np.abs(Y - 10) < 6, plane, np.nan)
-    z_fe[0, :] = plane[0, :] - 1.5                  # an outline node's unsure first exposure
-    out = _continue_to_outline(lat, z, z_fe, tol_mm=0.5)
-    assert np.abs(out - plane).max() < 1e-9
-    z[0, 5] += 0.3                                  # within half a step of the surface: its own
-    assert _continue_to_outline(lat, z, z_fe, tol_mm=0.5)[0, 5] == pytest.approx(plane[0, 5] + 0.3)

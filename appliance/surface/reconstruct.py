@@ -305,50 +305,6 @@ def _rim_height(lat, z):
     return at
 
 
-def _continue_to_outline(lat, z, z_fe, tol_mm):
-    """The fit's nodes on its outline with no first-exposure height of their own, read as
-    the surface continued linearly from RIM_INSET nodes inside (as _rim_height reads a
-    wall's edge). Past the last waterline the thin plate has nothing to hold it and the
-    contact lines crowd against the rim: it bent sample 2's y = 100 rim 2.6 mm down over
-    the last millimetre, and a finishing program following that cut 1.5 mm into the
-    true part there. Where a node agrees with the continuation to within tol_mm (half a
-    level step: what its first exposure could be off by) it keeps its own height: on a
-    curved top the straight continuation is the worse of the two (clean sample 2 went
-    0.0083 -> 0.0086 mm when every outline node took it)."""
-    on = np.isfinite(z)
-    edge = on & ~ndimage.binary_erosion(on, iterations=RIM_INSET, border_value=0)
-    # (the outermost ring's own first-exposure heights too: every wall passes through those
-    # nodes, and the side of the waterlines that placed them is not sure - sample 2's rim
-    # node at x = 56 took 36.0 mm for 39.6)
-    todo = (edge & ~np.isfinite(z_fe)) | (on & ~ndimage.binary_erosion(on, border_value=0))
-    if not todo.any():
-        return z
-    core = on & ~edge
-    if core.sum() < 9:
-        return z
-    # from the nearest core node c, on with the slope at c taken between core nodes only
-    # (one taken across c would take in the outline nodes it is to replace)
-    _, (cj, ci) = ndimage.distance_transform_edt(~core, sampling=(lat.hy, lat.hx), return_indices=True)
-    J, I = np.nonzero(todo)
-    c_j, c_i = cj[J, I], ci[J, I]
-    zc = z[c_j, c_i]
-
-    def slope(dj, di, h):
-        ahead = core[np.clip(c_j + dj, 0, z.shape[0] - 1), np.clip(c_i + di, 0, z.shape[1] - 1)]
-        behind = core[np.clip(c_j - dj, 0, z.shape[0] - 1), np.clip(c_i - di, 0, z.shape[1] - 1)]
-        za = z[np.clip(c_j + dj, 0, z.shape[0] - 1), np.clip(c_i + di, 0, z.shape[1] - 1)]
-        zb = z[np.clip(c_j - dj, 0, z.shape[0] - 1), np.clip(c_i - di, 0, z.shape[1] - 1)]
-        return np.where(ahead & behind, (za - zb) / (2 * h),
-                        np.where(ahead, (za - zc) / h, np.where(behind, (zc - zb) / h, 0.0)))
-    gx, gy = slope(0, 1, lat.hx), slope(1, 0, lat.hy)
-    cont = zc + gx * (I - c_i) * lat.hx + gy * (J - c_j) * lat.hy
-    # a node's own value stands where it agrees with the surface inside to within tol_mm
-    off = np.abs(z[J, I] - cont) > tol_mm
-    out = z.copy()
-    out[J[off], I[off]] = cont[off]
-    return out
-
-
 def _flat_prior(z, z_mid, mid, flat, tilted=None):
     """Mid-bracket heights for the faces that came out at once where the fit cannot place
     them: a face (a connected patch of such nodes) on which the fit leaves the bracket
@@ -465,9 +421,6 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
     rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
-    steps = -np.diff([s.level for s in slices if not s.empty])
-    half_step = 0.5 * float(np.median(steps)) if steps.size else 0.5
-    z = _continue_to_outline(lat, np.where(footprint, z, np.nan), z_fe, half_step)
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     # a face that came out at once lies between its two levels, whatever the fit says
     # (an ink that dewets stands its depression above a flat face it has just left: the
