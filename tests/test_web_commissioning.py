@@ -79,14 +79,18 @@ def readable_on_a_phone(d, what):
 
 
 def bench_takes_a_scan(d, url):
-    """From the dashboard: Start scan is taken (the button turns into Stop), then stopped."""
+    """From the dashboard: Start scan is confirmed and taken (the button turns into Stop), then
+    stopped with a second tap."""
     d.get(url + "/")
     btn = d.find_element(By.ID, "startstop")
-    wait(d, lambda: btn.is_enabled() and btn.text == "Start scan", what="start button ready")
+    wait(d, lambda: btn.is_enabled() and btn.text == "Start scan…", what="start button ready")
     btn.click()
+    wait(d, lambda: d.find_element(By.ID, "confirm").is_displayed(), what="start confirmation")
+    d.find_element(By.ID, "confirm-start").click()
     wait(d, lambda: btn.text == "Stop scan" or d.find_element(By.ID, "action-error").is_displayed(),
          timeout=30, what="scan started")
     assert btn.text == "Stop scan", d.find_element(By.ID, "action-error").text
+    btn.click()
     btn.click()
     wait(d, lambda: d.find_element(By.ID, "state").text.lower() in ("cancelled", "done"), timeout=60,
          what="scan stopped")
@@ -292,6 +296,7 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     wait(d, lambda: can_press(d, "Take a tilted view (1 taken)"), timeout=60, what="one view")
     d.get(box["url"] + "/")
     press(d, "Start scan")
+    press(d, "Start now")                                     # the confirmation
     wait(d, lambda: d.find_element(By.ID, "action-fix").is_displayed(), what="refusal with a link")
     assert "'camera' holds the bench" in d.find_element(By.ID, "action-error").text
     shot(d, "phone", "commission-held-dashboard")
