@@ -49,7 +49,11 @@ def box(tmp_path_factory):
     svc.close()
 
 
-def make_driver(kind, tmp):
+SIZES = {"phone": dict(width=390, height=844, ratio=3.0), "desktop": dict(width=1280, height=900, ratio=1.0)}
+
+
+def chromium_options(kind, tmp):
+    """Headless chromium as a phone (390 x 844 at 3x, touch) or a desktop window; one profile per kind."""
     os.environ["SE_AVOID_STATS"] = "true"
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
@@ -57,17 +61,24 @@ def make_driver(kind, tmp):
               "--disable-background-networking", "--disable-component-update", "--disable-sync",
               "--enable-unsafe-swiftshader", f"--user-data-dir={tmp / ('profile-' + kind)}"):
         opts.add_argument(a)
+    size = SIZES[kind]
+    if kind == "phone":
+        opts.add_experimental_option("mobileEmulation", {
+            "deviceMetrics": {"width": size["width"], "height": size["height"], "pixelRatio": size["ratio"],
+                              "touch": True},
+            "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
+                         "Chrome/120.0 Mobile Safari/537.36"})
+    else:
+        opts.add_argument(f"--window-size={size['width']},{size['height']}")
+    return opts
+
+
+def make_driver(kind, tmp):
+    opts = chromium_options(kind, tmp)
     downloads = tmp / f"downloads-{kind}"
     downloads.mkdir()
     opts.add_experimental_option("prefs", {"download.default_directory": str(downloads),
                                            "download.prompt_for_download": False})
-    if kind == "phone":
-        opts.add_experimental_option("mobileEmulation", {
-            "deviceMetrics": {"width": 390, "height": 844, "pixelRatio": 3.0, "touch": True},
-            "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
-                         "Chrome/120.0 Mobile Safari/537.36"})
-    else:
-        opts.add_argument("--window-size=1280,900")
     d = webdriver.Chrome(service=Service(DRIVER), options=opts)
     d.execute_cdp_cmd("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
     return d, downloads

@@ -37,6 +37,7 @@ from selenium.webdriver.support.ui import WebDriverWait        # noqa: E402
 from appliance.daemon.service import BenchService               # noqa: E402
 from appliance.sim.fakes import FakeBench                       # noqa: E402
 from appliance.web.demo import start                            # noqa: E402
+from test_web_browser import SIZES, chromium_options            # noqa: E402
 from test_web_real_service import light_processor               # noqa: E402
 
 HERE = Path(__file__).parent
@@ -44,7 +45,6 @@ ART = HERE / "artifacts" / "web"
 AXE = HERE / "a11y" / "node_modules" / "axe-core" / "axe.min.js"
 CHECKS = (HERE / "screen_checks.js").read_text()
 CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
-SIZES = {"phone": dict(width=390, height=844, ratio=3.0), "desktop": dict(width=1280, height=900, ratio=1.0)}
 # a scan slow enough to be seen scanning (settle_s per level), quick enough for a test
 SCAN = {"name": "cone on the bench", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
         "level_step_mm": 2.0, "settle_s": 0.5}
@@ -222,22 +222,7 @@ def box(tmp_path_factory):
 
 
 def make_driver(kind, tmp):
-    os.environ["SE_AVOID_STATS"] = "true"
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu", "--no-first-run",
-              "--disable-background-networking", "--disable-component-update", "--disable-sync",
-              "--enable-unsafe-swiftshader", f"--user-data-dir={tmp / ('profile-' + kind)}"):
-        opts.add_argument(a)
-    size = SIZES[kind]
-    if kind == "phone":
-        opts.add_experimental_option("mobileEmulation", {
-            "deviceMetrics": {"width": size["width"], "height": size["height"], "pixelRatio": size["ratio"],
-                              "touch": True},
-            "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
-                         "Chrome/120.0 Mobile Safari/537.36"})
-    else:
-        opts.add_argument(f"--window-size={size['width']},{size['height']}")
+    opts = chromium_options(kind, tmp)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(DRIVER), options=opts)
 
