@@ -5,6 +5,7 @@ write goes to a temporary name in the same folder, is fsynced, and is then
 renamed over the final name (rename is atomic on POSIX file systems); the
 folder is fsynced too so the rename itself survives a power cut.
 """
+
 import json
 import os
 import shutil
@@ -65,18 +66,23 @@ def check_output_folder(out, ours=None, keep=()):
     `ours(name)` says whether a file name is one a run writes: the folder is replaced whole,
     so one holding anything else (`-o .`, the scan itself) is refused, not emptied."""
     from .errors import InkSliceError
+
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InkSliceError(out, "exists and is not a folder; give a folder for the outputs")
     if ours is not None and out.is_dir():
-        foreign = sorted(p.name for p in out.iterdir() if p.name not in keep
-                         and not (p.is_file() and ours(p.name)))
+        foreign = sorted(
+            p.name for p in out.iterdir() if p.name not in keep and not (p.is_file() and ours(p.name))
+        )
         if foreign:
-            raise InkSliceError(out, f"holds {foreign[0]!r}, which no run wrote; the output folder is "
-                                     "replaced whole, so give a new or empty folder (or an earlier output folder)")
+            raise InkSliceError(
+                out,
+                f"holds {foreign[0]!r}, which no run wrote; the output folder is "
+                "replaced whole, so give a new or empty folder (or an earlier output folder)",
+            )
     parent = out.absolute().parent
     probe = parent
-    while not probe.exists():               # OUT and missing parents are created
+    while not probe.exists():  # OUT and missing parents are created
         probe = probe.parent
     if not probe.is_dir():
         raise InkSliceError(out, f"cannot be created: {probe} is not a folder")
@@ -90,6 +96,7 @@ def check_output_file(path, option="-o"):
     """Refuse a file we could not write at `path` (created or replaced), before the work:
     -> InkSliceError naming the problem (a folder, a missing or read-only parent)."""
     from .errors import InkSliceError
+
     path = Path(path)
     if path.is_dir():
         raise InkSliceError(path, f"is a folder; give {option} a file name")
@@ -122,7 +129,7 @@ def replace_folder(out, files: dict, keep=()):
         fsync_dir(new)
         if out.exists():
             os.chmod(new, os.stat(out).st_mode & 0o7777)
-            _swap(new, out)                   # `new` now names the old set
+            _swap(new, out)  # `new` now names the old set
         else:
             os.rename(new, out)
         fsync_dir(out.parent)
@@ -167,6 +174,7 @@ def _swap(a: Path, b: Path):
     file system cannot, two renames with the old set parked beside under a staging
     name (a crash between them leaves the old set there and `b` missing, never mixed)."""
     import ctypes
+
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         fn = libc.renameat2

@@ -8,6 +8,7 @@ Any InkSliceError becomes one line on stderr, `inkslice: error: WHERE: PROBLEM`,
 and exit code 2; so does a file system that refuses our writes (full, over quota,
 read-only): every file is written atomically, so what was there before is intact.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,7 +36,9 @@ def _command_modules():
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="inkslice", description="InkSlice: liquid-level 3D scanning to G-code.")
+    parser = argparse.ArgumentParser(
+        prog="inkslice", description="InkSlice: liquid-level 3D scanning to G-code."
+    )
     parser.add_argument("--version", action="version", version=f"inkslice {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -58,8 +61,11 @@ def main(argv=None) -> int:
     except OSError as e:
         if e.errno not in WRITE_REFUSED:
             raise
-        print(f"inkslice: error: {e.filename or 'writing the outputs'}: {e.strerror} "
-              "(the files already there are unchanged)", file=sys.stderr)
+        print(
+            f"inkslice: error: {e.filename or 'writing the outputs'}: {e.strerror} "
+            "(the files already there are unchanged)",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt:
         print("inkslice: interrupted", file=sys.stderr)

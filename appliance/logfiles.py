@@ -4,6 +4,7 @@ journald has them too on the box, but the web service may not read the journal, 
 bundle wants them as plain text. Each process appends to DATA/logs/NAME.log, rotated at
 MAX_BYTES (one older file kept), so the last LINES lines are always at hand.
 """
+
 from __future__ import annotations
 
 import logging

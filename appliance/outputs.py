@@ -8,6 +8,7 @@ interpolated, extrapolated, occluded, wall, clamped, filled) and
 All writes are atomic (see atomicio). Readers validate and raise
 InkSliceError naming the file and the problem.
 """
+
 from __future__ import annotations
 
 import io
@@ -23,6 +24,7 @@ from .surface.heightmap import HeightMap
 def heightmap_csv_text(hm: HeightMap) -> str:
     """Rows for every on-part cell, row by row; off-part cells are omitted."""
     from .surface.uncertainty import SOURCES
+
     X, Y = hm.grid()
     keep = hm.on_part
     pts = np.column_stack([X[keep], Y[keep], hm.z[keep]])
@@ -36,8 +38,11 @@ def heightmap_csv_text(hm: HeightMap) -> str:
     names = np.array(list(SOURCES) + ["unknown"])[np.where(codes >= 0, codes, len(SOURCES))]
     u = hm.sigma[keep]
     for (x, y, z), name, ui in zip(pts, names, u):
-        buf.write(f"{x:.4f},{y:.4f},{z:.4f},{name},{ui:.4f}\n" if np.isfinite(ui)
-                  else f"{x:.4f},{y:.4f},{z:.4f},{name},\n")
+        buf.write(
+            f"{x:.4f},{y:.4f},{z:.4f},{name},{ui:.4f}\n"
+            if np.isfinite(ui)
+            else f"{x:.4f},{y:.4f},{z:.4f},{name},\n"
+        )
     return buf.getvalue()
 
 
@@ -47,9 +52,9 @@ def write_heightmap_csv(path, hm: HeightMap):
 
 # A height map is of a part on a bench box: a lattice beyond these is a broken or hostile
 # file, refused with its reason before anything the size of the lattice is allocated.
-MAX_HEIGHTMAP_BYTES = 512 * 1024 ** 2
-MAX_EXTENT_MM = 2000.0            # x and y span; and |z|
-MAX_CELLS = 16_000_000            # a 4000 x 4000 lattice
+MAX_HEIGHTMAP_BYTES = 512 * 1024**2
+MAX_EXTENT_MM = 2000.0  # x and y span; and |z|
+MAX_CELLS = 16_000_000  # a 4000 x 4000 lattice
 
 
 def read_heightmap_csv(path) -> HeightMap:
@@ -58,7 +63,9 @@ def read_heightmap_csv(path) -> HeightMap:
     if not path.is_file():
         raise InkSliceError(path, "height map file does not exist")
     if path.stat().st_size > MAX_HEIGHTMAP_BYTES:
-        raise InkSliceError(path, f"is {path.stat().st_size} bytes; a height map is at most {MAX_HEIGHTMAP_BYTES}")
+        raise InkSliceError(
+            path, f"is {path.stat().st_size} bytes; a height map is at most {MAX_HEIGHTMAP_BYTES}"
+        )
     text = path.read_text(encoding="utf-8", errors="replace")
     lines = text.splitlines()
     header = [c.strip().lower() for c in lines[0].split(",")] if lines else []
@@ -73,11 +80,17 @@ def read_heightmap_csv(path) -> HeightMap:
     span = np.ptp(data, axis=0)
     for k, name in enumerate("xy"):
         if span[k] > MAX_EXTENT_MM:
-            raise InkSliceError(path, f"spans {span[k]:.6g} mm in {name}; a part on the bench is at most "
-                                      f"{MAX_EXTENT_MM:g} mm across")
+            raise InkSliceError(
+                path,
+                f"spans {span[k]:.6g} mm in {name}; a part on the bench is at most "
+                f"{MAX_EXTENT_MM:g} mm across",
+            )
     if np.max(np.abs(data)) > 1e6 or np.max(np.abs(data[:, 2])) > MAX_EXTENT_MM:
-        raise InkSliceError(path, f"has a coordinate of {np.max(np.abs(data)):.6g} mm, beyond any bench "
-                                  f"(heights at most {MAX_EXTENT_MM:g} mm, positions at most 1e6 mm)")
+        raise InkSliceError(
+            path,
+            f"has a coordinate of {np.max(np.abs(data)):.6g} mm, beyond any bench "
+            f"(heights at most {MAX_EXTENT_MM:g} mm, positions at most 1e6 mm)",
+        )
     xs = np.unique(np.round(data[:, 0], 4))
     ys = np.unique(np.round(data[:, 1], 4))
     for name, v in (("x", xs), ("y", ys)):
@@ -90,8 +103,11 @@ def read_heightmap_csv(path) -> HeightMap:
                 raise InkSliceError(path, f"{name} values are not on a regular grid")
     nx, ny = _axis_size(xs), _axis_size(ys)
     if nx * ny > MAX_CELLS:
-        raise InkSliceError(path, f"its rows span a lattice of {nx} x {ny} cells, more than {MAX_CELLS} "
-                                  "(is a row's x or y wrong, or the grid too fine?)")
+        raise InkSliceError(
+            path,
+            f"its rows span a lattice of {nx} x {ny} cells, more than {MAX_CELLS} "
+            "(is a row's x or y wrong, or the grid too fine?)",
+        )
     x = _regular_axis(xs)
     y = _regular_axis(ys)
     z = np.full((y.size, x.size), np.nan)
@@ -112,6 +128,7 @@ def _rows(path, rows, header):
     """-> (x,y,z array, {column: values} of the known extra columns: source, uncertainty_mm).
     Other extra columns are read past: another tool may have added its own."""
     from .surface.uncertainty import SOURCES
+
     if len(header) == 3:
         try:
             return np.loadtxt(io.StringIO("\n".join(rows)), delimiter=",", ndmin=2), {}
@@ -164,8 +181,11 @@ def _one_height_per_point(path, data, extra):
     if np.any(clash):
         i = int(np.argmax(clash))
         j = int(first[inverse[i]])
-        raise InkSliceError(path, f"rows {j + 2} and {i + 2} give x={data[i, 0]:g}, y={data[i, 1]:g} two heights "
-                                  f"({data[j, 2]:g} and {data[i, 2]:g} mm)")
+        raise InkSliceError(
+            path,
+            f"rows {j + 2} and {i + 2} give x={data[i, 0]:g}, y={data[i, 1]:g} two heights "
+            f"({data[j, 2]:g} and {data[i, 2]:g} mm)",
+        )
     keep = np.sort(first)
     return data[keep], {k: v[keep] for k, v in extra.items()}
 
@@ -189,23 +209,31 @@ def _regular_axis(v):
 
 def meniscus_json(model) -> dict:
     """Only the ink's own parameters: the camera's place comes from each scan's calibration."""
-    return {"format": "inkslice.meniscus/1", "capillary_length_mm": float(model.capillary_length_mm),
-            "contact_angle_deg": float(np.degrees(model.contact_angle_rad)),
-            "contact_line_curvature": float(model.curvature)}
+    return {
+        "format": "inkslice.meniscus/1",
+        "capillary_length_mm": float(model.capillary_length_mm),
+        "contact_angle_deg": float(np.degrees(model.contact_angle_rad)),
+        "contact_line_curvature": float(model.curvature),
+    }
 
 
 def meniscus_model(doc, camera, where="meniscus"):
     """A MeniscusModel for one scan from a meniscus.json document and the scan's camera."""
     from .surface.meniscus import MeniscusModel, camera_centre_xy
+
     try:
         lc = float(doc["capillary_length_mm"])
         theta = float(doc["contact_angle_deg"])
-        curvature = float(doc.get("contact_line_curvature", 0.0))      # older files: a straight line
+        curvature = float(doc.get("contact_line_curvature", 0.0))  # older files: a straight line
     except (KeyError, TypeError, ValueError) as e:
-        raise InkSliceError(where, f"not a meniscus model (needs capillary_length_mm and contact_angle_deg: {e})") \
-            from None
+        raise InkSliceError(
+            where, f"not a meniscus model (needs capillary_length_mm and contact_angle_deg: {e})"
+        ) from None
     if not (0 <= lc <= 20 and -90 <= theta <= 90 and -5 <= curvature <= 5):
-        raise InkSliceError(where, f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg, "
-                                   f"contact line curvature weight {curvature}")
+        raise InkSliceError(
+            where,
+            f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg, "
+            f"contact line curvature weight {curvature}",
+        )
     centre = camera_centre_xy(camera.K, camera.homography) if camera.K is not None else None
     return MeniscusModel(lc, float(np.radians(theta)), centre, camera.height_mm, curvature)

@@ -5,6 +5,7 @@ axis extents and a colour bar, like the dissertation's figures 5-1..5-16.
 uncertainty_map: the same for each cell's uncertainty, with the low-confidence
 regions boxed and numbered as the report and the G-code header list them.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -17,8 +18,15 @@ def _text(img, text, org, scale=0.5, color=(30, 30, 30), thickness=1):
     cv2.putText(img, text, org, _FONT, scale, color, thickness, cv2.LINE_AA)
 
 
-def error_map(err: np.ndarray, x: np.ndarray, y: np.ndarray, title: str,
-              vmax: float | None = None, units: str = "mm", size: int = 480) -> bytes:
+def error_map(
+    err: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    title: str,
+    vmax: float | None = None,
+    units: str = "mm",
+    size: int = 480,
+) -> bytes:
     """Render |error| per cell; NaN cells grey. Row 0 of err is the smallest y (drawn at the bottom)."""
     canvas, _, _ = _field_picture(err, x, y, title, vmax, f"error, {units}", size)
     ok, buf = cv2.imencode(".png", canvas)
@@ -29,9 +37,11 @@ def uncertainty_map(hm, threshold_mm: float, title: str, most: int = 8, size: in
     """Uncertainty per cell (the colour bar tops at 3 x the threshold, so everything above
     the threshold is in the upper two thirds), low-confidence regions boxed and numbered."""
     from .surface.uncertainty import low_confidence_regions
+
     u = np.where(hm.on_part, hm.sigma, np.nan)
-    canvas, to_px, _ = _field_picture(u, hm.x, hm.y, title + f" (boxes: over {threshold_mm:g} mm)",
-                                      3 * threshold_mm, "1-sigma, mm", size)
+    canvas, to_px, _ = _field_picture(
+        u, hm.x, hm.y, title + f" (boxes: over {threshold_mm:g} mm)", 3 * threshold_mm, "1-sigma, mm", size
+    )
     for i, r in enumerate(low_confidence_regions(hm, threshold_mm)[:most], start=1):
         p0, p1 = to_px(r.xmin, r.ymax), to_px(r.xmax, r.ymin)
         cv2.rectangle(canvas, p0, p1, (255, 255, 255), 2)
@@ -64,8 +74,12 @@ class _Labels:
 
 def overlaps(boxes) -> list[tuple]:
     """Pairs of boxes (x0, y0, x1, y1) that share pixels: for the test that labels never collide."""
-    return [(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:]
-            if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]]
+    return [
+        (a, b)
+        for i, a in enumerate(boxes)
+        for b in boxes[i + 1 :]
+        if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+    ]
 
 
 def _fit_title(title, width, scale=0.55):
@@ -104,7 +118,7 @@ def _field_picture(err, x, y, title, vmax, bar_label, size):
     top = float(vmax) if vmax else (float(np.nanmax(err)) if finite.any() else 1.0)
     top = top if top > 0 else 1.0
     norm = np.where(finite, np.clip(err / top, 0, 1), 0)
-    img8 = (norm * 255).astype(np.uint8)[::-1]                 # y up on the page
+    img8 = (norm * 255).astype(np.uint8)[::-1]  # y up on the page
     colour = cv2.applyColorMap(img8, cv2.COLORMAP_TURBO)
     colour[~finite[::-1]] = (200, 200, 200)
     span_x, span_y = max(float(x[-1] - x[0]), 1e-9), max(float(y[-1] - y[0]), 1e-9)
@@ -124,7 +138,7 @@ def _field_picture(err, x, y, title, vmax, bar_label, size):
     margin_t = 10 + line_h * len(lines) + _Labels.size(bar_label, 0.45)[1] + 10
     margin_b = 2 * _Labels.size("Ag", 0.45)[1] + 14
     canvas = np.full((margin_t + max(h, 120) + margin_b, width, 3), 255, np.uint8)
-    canvas[margin_t:margin_t + h, margin_l:margin_l + w] = colour
+    canvas[margin_t : margin_t + h, margin_l : margin_l + w] = colour
     labels = _Labels(canvas)
     for i, line in enumerate(lines):
         labels.put(line, 8, 8 + i * line_h, tscale)
@@ -133,19 +147,24 @@ def _field_picture(err, x, y, title, vmax, bar_label, size):
     labels.put(f"{x[0]:.1f}", margin_l, below)
     right_x = f"{x[-1]:.1f}"
     labels.put(right_x, margin_l + w - _Labels.size(right_x, 0.45)[0], below)
-    labels.put("x mm", margin_l + w // 2 - _Labels.size("x mm", 0.45)[0] // 2,
-               below + _Labels.size("Ag", 0.45)[1] + 2)
+    labels.put(
+        "x mm",
+        margin_l + w // 2 - _Labels.size("x mm", 0.45)[0] // 2,
+        below + _Labels.size("Ag", 0.45)[1] + 2,
+    )
     labels.put(y_labels[0], 6, margin_t)
     labels.put(y_labels[1], 6, margin_t + h - _Labels.size(y_labels[1], 0.45)[1])
     if h >= 3 * _Labels.size("Ag", 0.45)[1]:
         labels.put("y mm", 6, margin_t + h // 2 - 8)
     # the colour scale: its unit above, ticks beside, top = the largest value
     bx = margin_l + w + gap
-    bar = cv2.applyColorMap(np.linspace(255, 0, h).astype(np.uint8)[:, None].repeat(bar_w, 1), cv2.COLORMAP_TURBO)
-    canvas[margin_t:margin_t + h, bx:bx + bar_w] = bar
+    bar = cv2.applyColorMap(
+        np.linspace(255, 0, h).astype(np.uint8)[:, None].repeat(bar_w, 1), cv2.COLORMAP_TURBO
+    )
+    canvas[margin_t : margin_t + h, bx : bx + bar_w] = bar
     labels.put(bar_label, bx - 4, margin_t - _Labels.size(bar_label, 0.45)[1] - 4)
     tick_h = _Labels.size("0", 0.45)[1]
-    step = max(1, int(np.ceil(5 * (tick_h + 2) / max(h, 1))))   # a short map gets fewer ticks
+    step = max(1, int(np.ceil(5 * (tick_h + 2) / max(h, 1))))  # a short map gets fewer ticks
     for i, (frac, text) in enumerate(zip((0.0, 0.25, 0.5, 0.75, 1.0), ticks)):
         if i % step and i != 4:
             continue
@@ -158,4 +177,5 @@ def _field_picture(err, x, y, title, vmax, bar_label, size):
         fx = (xm - x[0]) / span_x
         fy = (ym - y[0]) / span_y
         return (int(round(margin_l + fx * (w - 1))), int(round(margin_t + (1 - fy) * (h - 1))))
+
     return canvas, to_px, labels.boxes

@@ -11,6 +11,7 @@ redrawn in place: a bar with the count for a counted stage, the seconds so far f
 it is plain lines: the stage's start, every quarter of a counted stage, and how long it took.
 The daemon's processing child has no display: the calls do nothing there.
 """
+
 from __future__ import annotations
 
 import sys
@@ -43,7 +44,7 @@ def shown(stream=None, tty: bool | None = None):
     previous, _display = _display, Display(stream, tty)
     swapped = tty and stream is sys.stdout
     if swapped:
-        sys.stdout = _AroundTheBar(stream, _display)    # a print() mid-stage goes above the bar
+        sys.stdout = _AroundTheBar(stream, _display)  # a print() mid-stage goes above the bar
     try:
         yield _display
     finally:
@@ -125,8 +126,10 @@ class Display:
         if self.total:
             frac = min(1.0, self.done / self.total)
             fill = int(round(BAR * frac))
-            return (f"{self.name} [{'#' * fill}{'-' * (BAR - fill)}] {100 * frac:3.0f} % "
-                    f"{self.done}/{self.total} · {self._elapsed()}")
+            return (
+                f"{self.name} [{'#' * fill}{'-' * (BAR - fill)}] {100 * frac:3.0f} % "
+                f"{self.done}/{self.total} · {self._elapsed()}"
+            )
         return f"{self.name} ... {self._elapsed()}"
 
     def _draw(self):

@@ -17,6 +17,7 @@ the base top, below the level with the stage at home, each once), and the
 calibration blocks processing reads must have the types it expects.
 `check_frames` then checks the frames' files without decoding them.
 """
+
 from __future__ import annotations
 
 import json
@@ -38,16 +39,16 @@ FORMAT = "inkslice.scan/1"
 # Limits of a scan that a bench box can produce. Beyond them the input is broken
 # or hostile, and refusing it early is what keeps processing from a traceback,
 # an out-of-memory kill or a part milled from nonsense.
-MAX_SCAN_JSON_BYTES = 16 * 1024 ** 2
-MAX_DEPTH = 32                     # nesting of objects and lists in scan.json
+MAX_SCAN_JSON_BYTES = 16 * 1024**2
+MAX_DEPTH = 32  # nesting of objects and lists in scan.json
 MAX_SIDE_PX = 20000
-MAX_PIXELS = 100_000_000           # per frame
+MAX_PIXELS = 100_000_000  # per frame
 MAX_FRAMES = 10000
-MAX_LEVEL_MM = 1000.0              # no bench box moves its liquid a metre
+MAX_LEVEL_MM = 1000.0  # no bench box moves its liquid a metre
 MAX_CAMERA_HEIGHT_MM = 10000.0
-MAX_DIST_COEF = 1000.0             # lens distortion coefficients are of order 1
-MAX_TANK_AREA_MM2 = 1e7            # 10 m²
-LEVEL_EPS_MM = 1e-6                # two levels closer than this are one level
+MAX_DIST_COEF = 1000.0  # lens distortion coefficients are of order 1
+MAX_TANK_AREA_MM2 = 1e7  # 10 m²
+LEVEL_EPS_MM = 1e-6  # two levels closer than this are one level
 PNG_SIG = b"\x89PNG\r\n\x1a\n"
 JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
@@ -56,16 +57,17 @@ JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0x
 class CameraModel:
     width: int
     height: int
-    homography: np.ndarray            # undistorted pixel (u, v, 1) -> liquid plane (x, y, 1), mm
-    K: np.ndarray | None = None       # OpenCV camera matrix
-    dist: np.ndarray | None = None    # OpenCV distortion coefficients
-    height_mm: float | None = None    # camera centre above the liquid plane
+    homography: np.ndarray  # undistorted pixel (u, v, 1) -> liquid plane (x, y, 1), mm
+    K: np.ndarray | None = None  # OpenCV camera matrix
+    dist: np.ndarray | None = None  # OpenCV distortion coefficients
+    height_mm: float | None = None  # camera centre above the liquid plane
     extra: dict = field(default_factory=dict)
 
     def to_json(self):
         out = dict(self.extra)
-        out.update(width=self.width, height=self.height,
-                   homography=np.asarray(self.homography, float).tolist())
+        out.update(
+            width=self.width, height=self.height, homography=np.asarray(self.homography, float).tolist()
+        )
         if self.K is not None:
             out["K"] = np.asarray(self.K, float).tolist()
         if self.dist is not None:
@@ -77,7 +79,7 @@ class CameraModel:
 
 @dataclass
 class FrameRef:
-    file: str            # relative to the scan folder
+    file: str  # relative to the scan folder
     level_mm: float
     extra: dict = field(default_factory=dict)
 
@@ -96,8 +98,9 @@ class Scan:
 
     def to_json(self):
         out = dict(self.extra)
-        out.update(format=FORMAT, units="mm", camera=self.camera.to_json(),
-                   frames=[f.to_json() for f in self.frames])
+        out.update(
+            format=FORMAT, units="mm", camera=self.camera.to_json(), frames=[f.to_json() for f in self.frames]
+        )
         return out
 
     def frame_path(self, ref: FrameRef) -> Path:
@@ -105,6 +108,7 @@ class Scan:
 
 
 # -- validation helpers: each names the file and the key that is wrong --------
+
 
 def _matrix(where, obj, key, shape):
     try:
@@ -159,37 +163,56 @@ def _check_homography(where, H, w, h):
     wz = p[:, 2]
     # the denominator is linear in (u, v): same sign at the corners = same sign on the whole frame
     if not (np.all(wz > 0) or np.all(wz < 0)) or np.min(np.abs(wz)) < 1e-3 * np.max(np.abs(wz)):
-        raise ScanError(where, "camera.homography puts the liquid plane's horizon across (or at the edge "
-                               "of) the image: part of the frame would map to infinity or behind the camera")
+        raise ScanError(
+            where,
+            "camera.homography puts the liquid plane's horizon across (or at the edge "
+            "of) the image: part of the frame would map to infinity or behind the camera",
+        )
     quad = p[:, :2] / wz[:, None]
     edge = np.roll(quad, -1, axis=0) - quad
     nxt = np.roll(edge, -1, axis=0)
     cross = edge[:, 0] * nxt[:, 1] - edge[:, 1] * nxt[:, 0]
     lengths = np.hypot(edge[:, 0], edge[:, 1]) * np.hypot(nxt[:, 0], nxt[:, 1])
-    if not np.all(np.isfinite(quad)) or np.any(np.abs(cross) <= 1e-9 * lengths) or \
-            not (np.all(cross > 0) or np.all(cross < 0)):
+    if (
+        not np.all(np.isfinite(quad))
+        or np.any(np.abs(cross) <= 1e-9 * lengths)
+        or not (np.all(cross > 0) or np.all(cross < 0))
+    ):
         raise ScanError(where, "camera.homography is singular: it maps the frame onto a line or a point")
-    area = 0.5 * abs(float(np.sum(quad[:, 0] * np.roll(quad[:, 1], -1) - np.roll(quad[:, 0], -1) * quad[:, 1])))
+    area = 0.5 * abs(
+        float(np.sum(quad[:, 0] * np.roll(quad[:, 1], -1) - np.roll(quad[:, 0], -1) * quad[:, 1]))
+    )
     mm_per_px = math.sqrt(area / (w * h))
     if not 1e-4 <= mm_per_px <= 100:
-        raise ScanError(where, f"camera.homography gives {mm_per_px:.3g} mm per pixel; a camera over a "
-                               "bench box sees between 0.0001 and 100 mm per pixel")
+        raise ScanError(
+            where,
+            f"camera.homography gives {mm_per_px:.3g} mm per pixel; a camera over a "
+            "bench box sees between 0.0001 and 100 mm per pixel",
+        )
 
 
 def _check_K(where, K, w, h):
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if not (fx > 0 and fy > 0):
-        raise ScanError(where, f"camera.K must have focal lengths fx, fy > 0 (it is not invertible "
-                               f"otherwise), got fx = {fx:g}, fy = {fy:g}")
+        raise ScanError(
+            where,
+            f"camera.K must have focal lengths fx, fy > 0 (it is not invertible "
+            f"otherwise), got fx = {fx:g}, fy = {fy:g}",
+        )
     if np.max(np.abs(K[2] - (0, 0, 1))) > 1e-9 or abs(K[1, 0]) > 1e-9:
         raise ScanError(where, "camera.K must have the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
     side = max(w, h)
     for name, f in (("fx", fx), ("fy", fy)):
         if not 0.05 * side <= f <= 1000 * side:
-            raise ScanError(where, f"camera.K's {name} = {f:g} px is no lens for a {w}x{h} image "
-                                   f"(expected {0.05 * side:g}..{1000 * side:g} px)")
+            raise ScanError(
+                where,
+                f"camera.K's {name} = {f:g} px is no lens for a {w}x{h} image "
+                f"(expected {0.05 * side:g}..{1000 * side:g} px)",
+            )
     if not (-0.5 * w <= cx <= 1.5 * w and -0.5 * h <= cy <= 1.5 * h):
-        raise ScanError(where, f"camera.K's principal point ({cx:g}, {cy:g}) is far outside the {w}x{h} image")
+        raise ScanError(
+            where, f"camera.K's principal point ({cx:g}, {cy:g}) is far outside the {w}x{h} image"
+        )
     if abs(K[0, 1]) > fx:
         raise ScanError(where, f"camera.K's skew {K[0, 1]:g} is larger than its focal length")
 
@@ -197,9 +220,15 @@ def _check_K(where, K, w, h):
 def _border_points(w, h, n=9):
     t = np.linspace(0, 1, n)
     u, v = t * (w - 1), t * (h - 1)
-    pts = np.concatenate([np.column_stack([u, np.zeros(n)]), np.column_stack([u, np.full(n, h - 1.0)]),
-                          np.column_stack([np.zeros(n), v]), np.column_stack([np.full(n, w - 1.0), v]),
-                          np.column_stack([u, v])])
+    pts = np.concatenate(
+        [
+            np.column_stack([u, np.zeros(n)]),
+            np.column_stack([u, np.full(n, h - 1.0)]),
+            np.column_stack([np.zeros(n), v]),
+            np.column_stack([np.full(n, w - 1.0), v]),
+            np.column_stack([u, v]),
+        ]
+    )
     return pts.reshape(-1, 1, 2)
 
 
@@ -208,8 +237,11 @@ def _check_distortion(where, K, dist, w, h):
     one that this undoes, across the whole frame, to well under a pixel."""
     biggest = float(np.max(np.abs(dist)))
     if biggest > MAX_DIST_COEF:
-        raise ScanError(where, f"camera.dist has a coefficient of {biggest:g}: lens distortion coefficients "
-                               f"are of order 1 (at most {MAX_DIST_COEF:g})")
+        raise ScanError(
+            where,
+            f"camera.dist has a coefficient of {biggest:g}: lens distortion coefficients "
+            f"are of order 1 (at most {MAX_DIST_COEF:g})",
+        )
     pts = _border_points(w, h)
     with np.errstate(all="ignore"):
         norm = cv2.undistortPoints(pts, K, dist)
@@ -220,8 +252,11 @@ def _check_distortion(where, K, dist, w, h):
             miss = float(np.max(np.hypot(*(back.reshape(-1, 2) - pts.reshape(-1, 2)).T)))
             ok = math.isfinite(miss) and miss <= 0.5
     if not ok:
-        raise ScanError(where, "camera.dist is not a lens that can be undone over the frame (undistorting "
-                               "its border and distorting it back misses by more than half a pixel)")
+        raise ScanError(
+            where,
+            "camera.dist is not a lens that can be undone over the frame (undistorting "
+            "its border and distorting it back misses by more than half a pixel)",
+        )
 
 
 def _camera(where, cam):
@@ -233,10 +268,15 @@ def _camera(where, cam):
             raise ScanError(where, f"camera.{key} is missing")
     w, h = cam["width"], cam["height"]
     if not (type(w) is int and type(h) is int and w > 0 and h > 0):
-        raise ScanError(where, f"camera.width/height must be positive integers, got {_short(w)} x {_short(h)}")
+        raise ScanError(
+            where, f"camera.width/height must be positive integers, got {_short(w)} x {_short(h)}"
+        )
     if w > MAX_SIDE_PX or h > MAX_SIDE_PX or w * h > MAX_PIXELS:
-        raise ScanError(where, f"camera.width/height of {_short(w)} x {_short(h)} pixels is more than a frame may "
-                               f"have ({MAX_SIDE_PX} a side, {MAX_PIXELS // 1_000_000} megapixels)")
+        raise ScanError(
+            where,
+            f"camera.width/height of {_short(w)} x {_short(h)} pixels is more than a frame may "
+            f"have ({MAX_SIDE_PX} a side, {MAX_PIXELS // 1_000_000} megapixels)",
+        )
     H = _matrix(where, cam["homography"], "camera.homography", (3, 3))
     _check_homography(where, H, w, h)
     K = _matrix(where, cam["K"], "camera.K", (3, 3)) if cam.get("K") is not None else None
@@ -254,8 +294,13 @@ def _camera(where, cam):
             _check_distortion(where, K, dist, w, h)
     hmm = None
     if cam.get("height_mm") is not None:
-        hmm = _positive_up_to(where, cam["height_mm"], "camera.height_mm", MAX_CAMERA_HEIGHT_MM,
-                              f"the camera must be above the liquid (0 < height <= {MAX_CAMERA_HEIGHT_MM:g} mm)")
+        hmm = _positive_up_to(
+            where,
+            cam["height_mm"],
+            "camera.height_mm",
+            MAX_CAMERA_HEIGHT_MM,
+            f"the camera must be above the liquid (0 < height <= {MAX_CAMERA_HEIGHT_MM:g} mm)",
+        )
     return CameraModel(w, h, H, K, dist, hmm, {k: v for k, v in cam.items() if k not in known})
 
 
@@ -283,18 +328,30 @@ def _check_extras(where, doc):
     """The blocks processing and its report read: their types and physical ranges."""
     top = MAX_LEVEL_MM
     if doc.get("level_at_home_mm") is not None:
-        top = _positive_up_to(where, doc["level_at_home_mm"], "level_at_home_mm", MAX_LEVEL_MM,
-                              f"the liquid with the stage at home must be above the base top, "
-                              f"at most {MAX_LEVEL_MM:g} mm")
+        top = _positive_up_to(
+            where,
+            doc["level_at_home_mm"],
+            "level_at_home_mm",
+            MAX_LEVEL_MM,
+            f"the liquid with the stage at home must be above the base top, at most {MAX_LEVEL_MM:g} mm",
+        )
     if "tank" in doc and doc["tank"] is not None:
         tank = doc["tank"]
         if not isinstance(tank, dict):
-            raise ScanError(where, f"tank must be an object like {{\"inner_area_mm2\": 31400}}, got "
-                                   f"{type(tank).__name__} {_short(tank)}")
+            raise ScanError(
+                where,
+                f'tank must be an object like {{"inner_area_mm2": 31400}}, got '
+                f"{type(tank).__name__} {_short(tank)}",
+            )
         if tank.get("inner_area_mm2") is None:
             raise ScanError(where, "tank.inner_area_mm2 is missing")
-        _positive_up_to(where, tank["inner_area_mm2"], "tank.inner_area_mm2", MAX_TANK_AREA_MM2,
-                        f"a tank's inner area must be > 0 and at most {MAX_TANK_AREA_MM2:g} mm²")
+        _positive_up_to(
+            where,
+            tank["inner_area_mm2"],
+            "tank.inner_area_mm2",
+            MAX_TANK_AREA_MM2,
+            f"a tank's inner area must be > 0 and at most {MAX_TANK_AREA_MM2:g} mm²",
+        )
     if doc.get("meniscus"):
         men = _object(where, doc["meniscus"], "meniscus")
         for key in ("capillary_length_mm", "contact_angle_deg"):
@@ -325,12 +382,18 @@ def _frame(where, i, fr, top):
         raise ScanError(where, f"frames[{i}].file must be a path inside the scan folder: {rel!r}")
     level = _number(where, fr["level_mm"], f"frames[{i}].level_mm")
     if level < 0:
-        raise ScanError(where, f"frames[{i}].level_mm is {level:g} mm: below the base top (0 mm), which "
-                               "the liquid never is while the part stands on it")
+        raise ScanError(
+            where,
+            f"frames[{i}].level_mm is {level:g} mm: below the base top (0 mm), which "
+            "the liquid never is while the part stands on it",
+        )
     if level > top + LEVEL_EPS_MM:
-        raise ScanError(where, f"frames[{i}].level_mm is {level:g} mm: beyond the stage's travel (the liquid "
-                               f"is at most {top:g} mm above the base top)")
-    for key in ("target_mm", "step_mm", "change"):         # the daemon's resume reads these
+        raise ScanError(
+            where,
+            f"frames[{i}].level_mm is {level:g} mm: beyond the stage's travel (the liquid "
+            f"is at most {top:g} mm above the base top)",
+        )
+    for key in ("target_mm", "step_mm", "change"):  # the daemon's resume reads these
         if fr.get(key) is not None:
             _number(where, fr[key], f"frames[{i}].{key}")
     return FrameRef(rel, level, {k: v for k, v in fr.items() if k not in ("file", "level_mm")})
@@ -341,12 +404,17 @@ def _check_levels(where, frames):
     for a, b in zip(order, order[1:]):
         if frames[b].level_mm - frames[a].level_mm < LEVEL_EPS_MM:
             i, j = sorted((a, b))
-            raise ScanError(where, f"frames[{i}] and frames[{j}] are both at level {frames[a].level_mm:g} mm: "
-                                   "each level is scanned once (which frame is right?)")
+            raise ScanError(
+                where,
+                f"frames[{i}] and frames[{j}] are both at level {frames[a].level_mm:g} mm: "
+                "each level is scanned once (which frame is right?)",
+            )
     files = {}
     for i, fr in enumerate(frames):
         if fr.file in files:
-            raise ScanError(where, f"frames[{i}] lists {fr.file} a second time (first in frames[{files[fr.file]}])")
+            raise ScanError(
+                where, f"frames[{i}] lists {fr.file} a second time (first in frames[{files[fr.file]}])"
+            )
         files[fr.file] = i
 
 
@@ -367,7 +435,7 @@ def load_scan(folder) -> Scan:
         doc = json.loads(where.read_text(encoding="utf-8"))
     except RecursionError:
         raise ScanError(where, f"nests objects or lists deeper than {MAX_DEPTH} levels") from None
-    except (UnicodeDecodeError, ValueError) as e:     # ValueError: JSON errors, a number of 5000 digits
+    except (UnicodeDecodeError, ValueError) as e:  # ValueError: JSON errors, a number of 5000 digits
         raise ScanError(where, f"not valid JSON ({_short(str(e), 120)})") from None
     if _depth_over(doc, MAX_DEPTH):
         raise ScanError(where, f"nests objects or lists deeper than {MAX_DEPTH} levels")
@@ -444,7 +512,9 @@ def check_frames(scan: Scan):
             raise ScanError(path, "is not a plain file")
         w, h, bits = image_header(path)
         if (w, h) != (scan.camera.width, scan.camera.height):
-            raise ScanError(path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}")
+            raise ScanError(
+                path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}"
+            )
         if bits != 8:
             raise ScanError(path, f"frame must be 8-bit, it has {bits} bits per sample")
 
@@ -462,8 +532,11 @@ def read_frame(scan: Scan, ref: FrameRef) -> np.ndarray:
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[:, :, :3]
     if img.shape[:2] != (scan.camera.height, scan.camera.width):
-        raise ScanError(path, f"frame is {img.shape[1]}x{img.shape[0]}, scan.json says "
-                              f"{scan.camera.width}x{scan.camera.height}")
+        raise ScanError(
+            path,
+            f"frame is {img.shape[1]}x{img.shape[0]}, scan.json says "
+            f"{scan.camera.width}x{scan.camera.height}",
+        )
     return img
 
 

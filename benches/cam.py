@@ -24,6 +24,7 @@ sampler uses, so both see the same surface), a 6 mm ball, zig-zag lines 1 mm
 apart with points 0.1 mm apart. Times are medians of repeated runs in this
 one process (the machine is shared and noisy); the ratio is what counts.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -78,8 +79,10 @@ def median_time(fn, repeats):
 def ocl_mesh(hm, ocl):
     """Two triangles per cell, split from (i, j) to (i+1, j+1) like appliance.cam.sampling."""
     surf = ocl.STLSurf()
-    P = [[ocl.Point(float(hm.x[i]), float(hm.y[j]), float(hm.z[j, i])) for i in range(hm.x.size)]
-         for j in range(hm.y.size)]
+    P = [
+        [ocl.Point(float(hm.x[i]), float(hm.y[j]), float(hm.z[j, i])) for i in range(hm.x.size)]
+        for j in range(hm.y.size)
+    ]
     for j in range(hm.y.size - 1):
         for i in range(hm.x.size - 1):
             p00, p10, p01, p11 = P[j][i], P[j][i + 1], P[j + 1][i], P[j + 1][i + 1]
@@ -89,14 +92,18 @@ def ocl_mesh(hm, ocl):
 
 
 def bench_dropcutter(quick):
-    print("== drop-cutter: ours vs OpenCAMLib (sample3 at 1 mm, 6 mm ball, lines 1 mm apart, points 0.1 mm) ==")
+    print(
+        "== drop-cutter: ours vs OpenCAMLib (sample3 at 1 mm, 6 mm ball, lines 1 mm apart, points 0.1 mm) =="
+    )
     hm = sample_map("sample3", 1.0)
     cutter = parse_cutter("ball6")
     lines = np.arange(0, 101, 10 if quick else 1).astype(float)
     n = 1001
     origins = np.column_stack([np.zeros(lines.size), lines])
     sampler = Sampler(hm, edge_step=0.05)
-    t_ours, ours = median_time(lambda: drop_lines(sampler, cutter, origins, (1.0, 0.0), n, 0.1), 3 if quick else 5)
+    t_ours, ours = median_time(
+        lambda: drop_lines(sampler, cutter, origins, (1.0, 0.0), n, 0.1), 3 if quick else 5
+    )
     npts = ours.size
     print(f"ours: {npts} points in {t_ours:.3f} s (median)")
     try:
@@ -127,10 +134,12 @@ def bench_dropcutter(quick):
     interior = (xs >= 3) & (xs <= 97) & (ys >= 3) & (ys <= 97)
     print(f"OpenCAMLib: {npts} points in {t_ocl:.2f} s (one run: it is the slow side; its default threads)")
     print(f"speed-up: {t_ocl / t_ours:.0f}x (target >= 50x)")
-    print(f"max |ours - OpenCAMLib|: {np.max(np.abs(diff)):.5f} mm over all points, "
-          f"{np.max(np.abs(diff[interior])):.5f} mm more than the radius inside the edge "
-          f"(target <= 0.002); ours lower by at most {max(0.0, -diff.min()):.5f} mm, "
-          f"higher by at most {max(0.0, diff.max()):.5f} mm")
+    print(
+        f"max |ours - OpenCAMLib|: {np.max(np.abs(diff)):.5f} mm over all points, "
+        f"{np.max(np.abs(diff[interior])):.5f} mm more than the radius inside the edge "
+        f"(target <= 0.002); ours lower by at most {max(0.0, -diff.min()):.5f} mm, "
+        f"higher by at most {max(0.0, diff.max()):.5f} mm"
+    )
 
 
 def bench_fullmap(quick):
@@ -148,18 +157,28 @@ def run_rs274(text, folder):
     """LinuxCNC's interpreter on a program: (exit code, its complaint or '')."""
     src = Path(folder) / "p.ngc"
     src.write_text(text)
-    r = subprocess.run([RS274, "-g", str(src), str(Path(folder) / "out.txt")], stdin=subprocess.DEVNULL,
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [RS274, "-g", str(src), str(Path(folder) / "out.txt")],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     return r.returncode, (r.stderr or r.stdout).strip().splitlines()[-1:] if r.returncode else []
 
 
 def bench_dialects(quick):
     """Every dialect of one finishing plan for a dissertation sample, each through its checker."""
     name = "sample3"
-    st = (FinishSettings(parse_cutter("ball6"), scallop=None, stepover=1.0) if quick
-          else FinishSettings(parse_cutter("ball6"), scallop=0.01))
-    print(f"== dialects: {name}, ball6, {'stepover 1 mm' if quick else 'scallop 0.01 mm'}; "
-          "each through LinuxCNC's `rs274 -g`, GRBL and Fanuc through our rule checkers too ==")
+    st = (
+        FinishSettings(parse_cutter("ball6"), scallop=None, stepover=1.0)
+        if quick
+        else FinishSettings(parse_cutter("ball6"), scallop=0.01)
+    )
+    print(
+        f"== dialects: {name}, ball6, {'stepover 1 mm' if quick else 'scallop 0.01 mm'}; "
+        "each through LinuxCNC's `rs274 -g`, GRBL and Fanuc through our rule checkers too =="
+    )
     hm = sample_map(name, 1.0)
     jobs = finishing_gcodes(hm, st, DIALECT_NAMES)
     have_rs274 = Path(RS274).exists()
@@ -172,12 +191,18 @@ def bench_dialects(quick):
             if have_rs274:
                 t = time.perf_counter()
                 rc, why = run_rs274(job.text, tmp)
-                how.append(f"rs274 -g exit {rc} in {time.perf_counter() - t:.1f} s{' ' + ' '.join(why) if why else ''}")
+                how.append(
+                    f"rs274 -g exit {rc} in {time.perf_counter() - t:.1f} s{' ' + ' '.join(why) if why else ''}"
+                )
             if d in RULE_CHECKERS:
                 problems = RULE_CHECKERS[d](job.text)
-                how.append(f"check_{d}: {len(problems)} problems" + (f" (first: {problems[0]})" if problems else ""))
-            print(f"{d:12s} {len(lines):7d} lines, longest {max(len(l) for l in lines):3d} chars: {'; '.join(how)}",
-                  flush=True)
+                how.append(
+                    f"check_{d}: {len(problems)} problems" + (f" (first: {problems[0]})" if problems else "")
+                )
+            print(
+                f"{d:12s} {len(lines):7d} lines, longest {max(len(l) for l in lines):3d} chars: {'; '.join(how)}",
+                flush=True,
+            )
 
 
 # sample -> cutters (name, requested scallop). Sample 4 is 10 x 10 mm and very
@@ -191,7 +216,9 @@ PLAN = {
 
 
 def bench_acceptance(quick, only_sample=None, only_cutter=None):
-    print("== acceptance: finishing programs verified by simulated milling (sim lattice 0.1 mm; sample4 0.02 mm) ==")
+    print(
+        "== acceptance: finishing programs verified by simulated milling (sim lattice 0.1 mm; sample4 0.02 mm) =="
+    )
     print("sample   cutter      req.scallop  passes  gouge     scallop max  mean     | dissertation gouge")
     for name, cuts in PLAN.items():
         if only_sample and name != only_sample:
@@ -201,7 +228,7 @@ def bench_acceptance(quick, only_sample=None, only_cutter=None):
         res = 0.02 if name == "sample4" else 0.1
         d = 0.02 if name == "sample4" else 0.1
         top = float(np.nanmax(hm.z))
-        for cname, h in (cuts[:1] if quick else cuts):
+        for cname, h in cuts[:1] if quick else cuts:
             if only_cutter and cname != only_cutter:
                 continue
             cutter = parse_cutter(cname)
@@ -211,16 +238,24 @@ def bench_acceptance(quick, only_sample=None, only_cutter=None):
             job = finishing_gcode(hm, FinishSettings(cutter, scallop=h, resolution=d))
             tg = time.perf_counter() - t
             rep, _ = verify_gcode(job.text, hm, resolution=res, edge_band=max(0.5, 5 * res))
-            drep, _ = verify_gcode(dissertation_gcode(hm), hm, cutter=cutter, z_zero=top, resolution=res,
-                                   edge_band=max(0.5, 5 * res))
+            drep, _ = verify_gcode(
+                dissertation_gcode(hm),
+                hm,
+                cutter=cutter,
+                z_zero=top,
+                resolution=res,
+                edge_band=max(0.5, 5 * res),
+            )
             ok = rep.gouge <= 0.005 and abs(rep.scallop_max - h) <= 0.1 * h
             dev = rep.deviation[rep.measured]
             p999 = float(np.percentile(dev, 99.9)) if dev.size else float("nan")
-            print(f"{name:8s} {cname:11s} {h:<12g} {job.summary['passes']:6d}  {rep.gouge:.4f}    "
-                  f"{rep.scallop_max:.4f}       {rep.scallop_mean:.4f}   | {drep.gouge:.3f}   "
-                  f"{'OK' if ok else 'MISS'}  (max at x={rep.scallop_at[0]:.1f} y={rep.scallop_at[1]:.1f}, "
-                  f"99.9th percentile {p999:.4f}; gen {tg:.0f} s, {job.runtime_s / 60:.0f} min to mill)",
-                  flush=True)
+            print(
+                f"{name:8s} {cname:11s} {h:<12g} {job.summary['passes']:6d}  {rep.gouge:.4f}    "
+                f"{rep.scallop_max:.4f}       {rep.scallop_mean:.4f}   | {drep.gouge:.3f}   "
+                f"{'OK' if ok else 'MISS'}  (max at x={rep.scallop_at[0]:.1f} y={rep.scallop_at[1]:.1f}, "
+                f"99.9th percentile {p999:.4f}; gen {tg:.0f} s, {job.runtime_s / 60:.0f} min to mill)",
+                flush=True,
+            )
 
 
 # The finishing run the bench times, as a child process: CPU seconds and peak RSS are
@@ -248,15 +283,22 @@ print(json.dumps({"cpu": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_SELF
                   "passes": job.summary["passes"], "lines": job.summary["lines"]}))
 """
 
-OLD_REF = "30fd316"      # the planner before issue 20 (issue 20 measured it)
+OLD_REF = "30fd316"  # the planner before issue 20 (issue 20 measured it)
 
 
 def run_finishing(checkout, name, step, cutter, scallop):
     import json
     import os
+
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    r = subprocess.run([sys.executable, "-c", FINISH_CHILD, name, str(step), cutter, str(scallop)],
-                       cwd=str(checkout), env=env, capture_output=True, text=True, timeout=3600)
+    r = subprocess.run(
+        [sys.executable, "-c", FINISH_CHILD, name, str(step), cutter, str(scallop)],
+        cwd=str(checkout),
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=3600,
+    )
     if r.returncode:
         raise RuntimeError(f"finishing in {checkout} failed: {r.stderr.strip().splitlines()[-1:]}")
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -265,37 +307,47 @@ def run_finishing(checkout, name, step, cutter, scallop):
 def old_checkout(ref, folder):
     """A detached `git worktree` of `ref` in `folder`, or None (no git, unknown ref)."""
     repo = Path(__file__).resolve().parent.parent
-    r = subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(folder), ref],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        ["git", "-C", str(repo), "worktree", "add", "--detach", str(folder), ref],
+        capture_output=True,
+        text=True,
+    )
     return Path(folder) if r.returncode == 0 else None
 
 
 def bench_finishing(quick, old_ref=OLD_REF):
     """Issue 20's speed case: sample 1 (a Gaussian dome, 100 x 100 mm) from a 0.5 mm map, 6 mm ball."""
-    print(f"== finishing: sample1 (100 x 100 mm dome) from a 0.5 mm map, ball6; each run a child process, "
-          f"CPU = its process_time, peak = its ru_maxrss; 'old' = a git worktree of {old_ref} run the same way ==")
-    print("scallop  new CPU s  new peak MB  passes |  old CPU s  old peak MB  passes | CPU ratio  peak ratio  target")
+    print(
+        f"== finishing: sample1 (100 x 100 mm dome) from a 0.5 mm map, ball6; each run a child process, "
+        f"CPU = its process_time, peak = its ru_maxrss; 'old' = a git worktree of {old_ref} run the same way =="
+    )
+    print(
+        "scallop  new CPU s  new peak MB  passes |  old CPU s  old peak MB  passes | CPU ratio  peak ratio  target"
+    )
     repo = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory() as tmp:
         old = None if old_ref in ("", "none") else old_checkout(old_ref, Path(tmp) / "old")
         if old_ref not in ("", "none") and old is None:
             print(f"(could not make a git worktree of {old_ref}: no comparison)")
         try:
-            for h, cpu_max in ((0.05, 5.0), (0.01, 20.0))[:1 if quick else 2]:
+            for h, cpu_max in ((0.05, 5.0), (0.01, 20.0))[: 1 if quick else 2]:
                 new = run_finishing(repo, "sample1", 0.5, "ball6", h)
                 row = f"{h:<8g} {new['cpu']:9.1f}  {new['peak_mb']:11.0f}  {new['passes']:6d} |"
                 if old is not None:
                     o = run_finishing(old, "sample1", 0.5, "ball6", h)
-                    row += (f" {o['cpu']:9.1f}  {o['peak_mb']:11.0f}  {o['passes']:6d} | "
-                            f"{o['cpu'] / new['cpu']:8.1f}x  {o['peak_mb'] / new['peak_mb']:9.1f}x")
+                    row += (
+                        f" {o['cpu']:9.1f}  {o['peak_mb']:11.0f}  {o['passes']:6d} | "
+                        f"{o['cpu'] / new['cpu']:8.1f}x  {o['peak_mb'] / new['peak_mb']:9.1f}x"
+                    )
                 else:
                     row += "         -            -       - |        -          -"
                 ok = new["cpu"] <= cpu_max and new["peak_mb"] <= 250
                 print(f"{row}  <= {cpu_max:g} s, <= 250 MB: {'OK' if ok else 'MISS'}", flush=True)
         finally:
             if old is not None:
-                subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(old)],
-                               capture_output=True)
+                subprocess.run(
+                    ["git", "-C", str(repo), "worktree", "remove", "--force", str(old)], capture_output=True
+                )
 
 
 def main(argv=None):

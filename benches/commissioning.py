@@ -12,6 +12,7 @@ model, no tank, no meniscus) and once after, and prints Ea against the part's tr
     .venv/bin/python benches/commissioning.py                     # sample3, physics
     .venv/bin/python benches/commissioning.py --sample sample1 --views 6
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,15 +27,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from appliance.daemon.processing import in_process        # noqa: E402
-from appliance.outputs import read_heightmap_csv            # noqa: E402
-from appliance.daemon.service import BenchService           # noqa: E402
-from appliance.sim import surfaces                          # noqa: E402
-from appliance.sim.fakes import SimulatedBenchFactory       # noqa: E402
-from appliance.sim.physics import meniscus_rise             # noqa: E402
-from appliance.sim.render import effects_preset             # noqa: E402
-from appliance.sim.rig import Rig                           # noqa: E402
-from appliance.surface.stats import seed_statistics         # noqa: E402
+from appliance.daemon.processing import in_process  # noqa: E402
+from appliance.outputs import read_heightmap_csv  # noqa: E402
+from appliance.daemon.service import BenchService  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.fakes import SimulatedBenchFactory  # noqa: E402
+from appliance.sim.physics import meniscus_rise  # noqa: E402
+from appliance.sim.render import effects_preset  # noqa: E402
+from appliance.sim.rig import Rig  # noqa: E402
+from appliance.surface.stats import seed_statistics  # noqa: E402
 
 TRUE_LEVEL_ZERO = 57.3
 
@@ -43,7 +44,11 @@ def wait(svc, job_id, timeout=3600):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         job = svc.job(job_id)
-        if job["status"] in ("done", "failed", "cancelled") and svc.state()["state"] in ("done", "failed", "cancelled"):
+        if job["status"] in ("done", "failed", "cancelled") and svc.state()["state"] in (
+            "done",
+            "failed",
+            "cancelled",
+        ):
             return job
         time.sleep(0.5)
     raise SystemExit(f"job {job_id} did not finish in {timeout} s")
@@ -56,8 +61,13 @@ def scan_params(sample, step, effects):
     below = float(meniscus_rise(math.pi / 2)) if effects_preset(effects).meniscus else 0.0
     top = math.floor(part.z_max / step) * step
     bottom = math.floor((part.z_min_top - step - below) / step) * step
-    return {"name": sample, "levels_to_mm": top, "levels_from_mm": max(bottom, 0.5),
-            "level_step_mm": step, "settle_s": 0.0}
+    return {
+        "name": sample,
+        "levels_to_mm": top,
+        "levels_from_mm": max(bottom, 0.5),
+        "level_step_mm": step,
+        "settle_s": 0.0,
+    }
 
 
 def statistics(svc, job, sample):
@@ -77,8 +87,10 @@ def scan(svc, params, label, sample):
         raise SystemExit(f"{label}: the scan {job['status']}: {job['reason']}")
     report = json.loads(svc.job_file(job["id"], "report.json").read_text())
     s = statistics(svc, job, sample)
-    print(f"  {label:<34} Ea {s['Ea']:.4f} mm, sigma {s['sigma']:.4f}, max {s['max_error']:.3f} mm, "
-          f"matching {s['matching']:.3f} % ({job['levels_done']} frames, {time.monotonic() - t0:.0f} s)")
+    print(
+        f"  {label:<34} Ea {s['Ea']:.4f} mm, sigma {s['sigma']:.4f}, max {s['max_error']:.3f} mm, "
+        f"matching {s['matching']:.3f} % ({job['levels_done']} frames, {time.monotonic() - t0:.0f} s)"
+    )
     for w in report["calibration"]["warnings"]:
         print(f"    warning: {w}")
     return s
@@ -90,8 +102,10 @@ def commission(svc, views, diameter):
     c = svc.commission("level_zero", "measure")
     lz = c["active"]["detected"]["level_at_home_mm"]
     svc.commission("level_zero", "accept")
-    print(f"  level zero: {lz:.4f} mm (true {TRUE_LEVEL_ZERO}: {abs(lz - TRUE_LEVEL_ZERO) * 1000:.1f} um off), "
-          f"{time.monotonic() - t0:.0f} s")
+    print(
+        f"  level zero: {lz:.4f} mm (true {TRUE_LEVEL_ZERO}: {abs(lz - TRUE_LEVEL_ZERO) * 1000:.1f} um off), "
+        f"{time.monotonic() - t0:.0f} s"
+    )
     t0 = time.monotonic()
     svc.commission("camera", "start")
     for _ in range(views):
@@ -108,10 +122,12 @@ def commission(svc, views, diameter):
         raise SystemExit(f"meniscus: {c['active']}")
     c = svc.commission("meniscus", "accept")
     men = next(s for s in c["steps"] if s["id"] == "meniscus")["result"]
-    print(f"  meniscus: capillary length {men['capillary_length_mm']:.3f} mm, contact angle "
-          f"{men['contact_angle_deg']:.2f} deg; the {diameter:g} mm ball measured to "
-          f"{men['reference']['mean_abs_error_mm']:.4f} mm (max {men['reference']['max_error_mm']:.3f}) "
-          f"({job['levels_done']} frames, {time.monotonic() - t0:.0f} s)")
+    print(
+        f"  meniscus: capillary length {men['capillary_length_mm']:.3f} mm, contact angle "
+        f"{men['contact_angle_deg']:.2f} deg; the {diameter:g} mm ball measured to "
+        f"{men['reference']['mean_abs_error_mm']:.4f} mm (max {men['reference']['max_error_mm']:.3f}) "
+        f"({job['levels_done']} frames, {time.monotonic() - t0:.0f} s)"
+    )
 
 
 def main():
@@ -124,23 +140,31 @@ def main():
     ap.add_argument("--skip-before", action="store_true", help="only the scan after commissioning")
     args = ap.parse_args()
     e = effects_preset(args.effects)
-    print(f"{args.sample} on the simulated bench (simavr, 2048 x 1536, effects {args.effects}: capillary length "
-          f"{e.capillary_length_mm} mm, contact angle {e.contact_angle_deg} deg, tank 150 x 150 mm), "
-          f"level step {args.step:g} mm")
-    factory = SimulatedBenchFactory(args.sample, Rig(), effects=args.effects, level_at_home_mm=TRUE_LEVEL_ZERO)
+    print(
+        f"{args.sample} on the simulated bench (simavr, 2048 x 1536, effects {args.effects}: capillary length "
+        f"{e.capillary_length_mm} mm, contact angle {e.contact_angle_deg} deg, tank 150 x 150 mm), "
+        f"level step {args.step:g} mm"
+    )
+    factory = SimulatedBenchFactory(
+        args.sample, Rig(), effects=args.effects, level_at_home_mm=TRUE_LEVEL_ZERO
+    )
     with tempfile.TemporaryDirectory(prefix="commissioning-") as tmp:
         svc = BenchService(Path(tmp) / "data", factory, processor=in_process)
         try:
             params = scan_params(args.sample, args.step, args.effects)
             if not args.skip_before:
                 # level zero entered right: what is left out is the camera, tank and meniscus
-                before = scan(svc, {**params, "level_at_home_mm": TRUE_LEVEL_ZERO}, "before commissioning", args.sample)
+                before = scan(
+                    svc, {**params, "level_at_home_mm": TRUE_LEVEL_ZERO}, "before commissioning", args.sample
+                )
             print("commissioning:")
             commission(svc, args.views, args.diameter)
             after = scan(svc, params, "after commissioning", args.sample)
             if not args.skip_before:
-                print(f"=> Ea {before['Ea']:.4f} mm before, {after['Ea']:.4f} mm after commissioning "
-                      f"({before['Ea'] / after['Ea']:.1f}x lower)")
+                print(
+                    f"=> Ea {before['Ea']:.4f} mm before, {after['Ea']:.4f} mm after commissioning "
+                    f"({before['Ea'] / after['Ea']:.1f}x lower)"
+                )
         finally:
             svc.close()
             factory.close()

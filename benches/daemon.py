@@ -15,6 +15,7 @@ appliance/daemon/processing.py); its peak is printed separately.
 Measured 2026-11-22 (shared 2-core box, load ~15): daemon peak 122 MB (idle 96 MB); the
 processing child 481 MB with the default pipeline (440 MB with --pipeline seed).
 """
+
 import argparse
 import json
 import shutil
@@ -29,12 +30,12 @@ import cv2
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from appliance.daemon.levels import LevelPlan                   # noqa: E402
-from appliance.daemon.rpc import BenchClient                     # noqa: E402
-from appliance.daemon.settings import DEFAULTS, validate         # noqa: E402
-from appliance.errors import DeviceError                         # noqa: E402
-from appliance.sim.fakes import LevelSeededCamera, replay_name, small_rig   # noqa: E402
-from appliance.sim.surfaces import get                           # noqa: E402
+from appliance.daemon.levels import LevelPlan  # noqa: E402
+from appliance.daemon.rpc import BenchClient  # noqa: E402
+from appliance.daemon.settings import DEFAULTS, validate  # noqa: E402
+from appliance.errors import DeviceError  # noqa: E402
+from appliance.sim.fakes import LevelSeededCamera, replay_name, small_rig  # noqa: E402
+from appliance.sim.surfaces import get  # noqa: E402
 
 LIMIT_MB = 250.0
 
@@ -42,7 +43,7 @@ LIMIT_MB = 250.0
 def proc_status(pid, key):
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith(key + ":"):
-            return int(line.split()[1]) / 1024          # kB -> MB
+            return int(line.split()[1]) / 1024  # kB -> MB
     return None
 
 
@@ -50,9 +51,10 @@ def levels_of(params):
     plan = LevelPlan(validate(DEFAULTS, params))
     out, frames = [], []
 
-    class F:                                            # just enough of a FrameRef for the plan
+    class F:  # just enough of a FrameRef for the plan
         def __init__(self, target, step):
             self.level_mm, self.extra = target, {"target_mm": target, "step_mm": step}
+
     while (nxt := plan.next_target(frames)) is not None:
         out.append(nxt[0])
         frames.append(F(*nxt))
@@ -70,15 +72,24 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="640 x 480, 10 levels")
     ap.add_argument("--keep", action="store_true", help="keep the data folder and print where it is")
-    ap.add_argument("--pipeline", default=None,
-                    help="processing pipeline for the job (default: processing's own; --quick: seed, "
-                         "since our finishing toolpath takes minutes on a busy machine)")
+    ap.add_argument(
+        "--pipeline",
+        default=None,
+        help="processing pipeline for the job (default: processing's own; --quick: seed, "
+        "since our finishing toolpath takes minutes on a busy machine)",
+    )
     args = ap.parse_args()
     w, h, n = (640, 480, 10) if args.quick else (2048, 1536, 80)
     surface = get("sphere")
     step = 0.4 if not args.quick else 3.0
-    params = {"name": "memory bench", "surface": surface.name, "levels_from_mm": 0.0,
-              "levels_to_mm": round(step * (n - 1), 3), "level_step_mm": step, "settle_s": 0.0}
+    params = {
+        "name": "memory bench",
+        "surface": surface.name,
+        "levels_from_mm": 0.0,
+        "levels_to_mm": round(step * (n - 1), 3),
+        "level_step_mm": step,
+        "settle_s": 0.0,
+    }
     pipeline = args.pipeline or ("seed" if args.quick else "")
     if pipeline:
         params["pipeline"] = pipeline
@@ -91,10 +102,29 @@ def main():
         print(f"rendered {n} frames of {w} x {h} in {time.monotonic() - t0:.1f} s")
         sock = tmp / "d.sock"
         log = open(tmp / "daemon.log", "wb")
-        proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake",
-                                 "--replay", str(tmp / "replay"), "--frame", f"{w}x{h}",
-                                 "--surface", surface.name, "--data", str(tmp / "data"), "--socket", str(sock)],
-                                stdout=log, stderr=log, cwd=REPO)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "appliance.cli",
+                "daemon",
+                "--sim",
+                "fake",
+                "--replay",
+                str(tmp / "replay"),
+                "--frame",
+                f"{w}x{h}",
+                "--surface",
+                surface.name,
+                "--data",
+                str(tmp / "data"),
+                "--socket",
+                str(sock),
+            ],
+            stdout=log,
+            stderr=log,
+            cwd=REPO,
+        )
         client = BenchClient(sock)
         while True:
             try:
@@ -127,11 +157,23 @@ def main():
             sys.exit(f"scan {job['status']}: {job['reason']}")
         print(f"scan: {job['levels_done']} levels of {w} x {h}, capture {t_scan:.1f} s, total {total:.1f} s")
         print(f"daemon RSS idle: {idle_mb:.1f} MB")
-        print(f"daemon peak RSS (VmHWM) during the scan: {hwm:.1f} MB  (limit {LIMIT_MB:.0f} MB: "
-              f"{'OK' if hwm < LIMIT_MB else 'OVER'})")
+        print(
+            f"daemon peak RSS (VmHWM) during the scan: {hwm:.1f} MB  (limit {LIMIT_MB:.0f} MB: "
+            f"{'OK' if hwm < LIMIT_MB else 'OVER'})"
+        )
         print(f"processing child: {events[0] if events else 'no figure'}")
-        print(json.dumps({"width": w, "height": h, "levels": job["levels_done"], "daemon_peak_mb": round(hwm, 1),
-                          "daemon_idle_mb": round(idle_mb, 1), "capture_s": round(t_scan, 1)}))
+        print(
+            json.dumps(
+                {
+                    "width": w,
+                    "height": h,
+                    "levels": job["levels_done"],
+                    "daemon_peak_mb": round(hwm, 1),
+                    "daemon_idle_mb": round(idle_mb, 1),
+                    "capture_s": round(t_scan, 1),
+                }
+            )
+        )
         return 0 if hwm < LIMIT_MB else 1
     finally:
         if args.keep:

@@ -16,6 +16,7 @@ miss is a job whose processing ran far from the learned median (the same job's p
 50 to 105 s as the other work came and went); the estimate cannot know the CPU it will get. On a
 quiet box the processing time repeats and the error is that of the first figure in each run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,9 +27,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from appliance.daemon.service import BenchService          # noqa: E402
-from appliance.sim.fakes import FakeBench                    # noqa: E402
-from appliance.web.eta import EtaSmoother                    # noqa: E402
+from appliance.daemon.service import BenchService  # noqa: E402
+from appliance.sim.fakes import FakeBench  # noqa: E402
+from appliance.web.eta import EtaSmoother  # noqa: E402
 
 TARGET = 0.20
 
@@ -54,8 +55,15 @@ def at_quarter(rows):
     total = rows[-1][0]
     t, state, daemon, shown = next(r for r in rows if r[0] >= 0.25 * total)
     left = total - t
-    return {"total_s": total, "t_s": t, "state": state, "left_s": left, "daemon_s": daemon, "shown_s": shown,
-            "processing_s": total - next(r[0] for r in rows if r[1] == "processing")}
+    return {
+        "total_s": total,
+        "t_s": t,
+        "state": state,
+        "left_s": left,
+        "daemon_s": daemon,
+        "shown_s": shown,
+        "processing_s": total - next(r[0] for r in rows if r[1] == "processing"),
+    }
 
 
 def main(argv=None):
@@ -64,28 +72,40 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=3)
     a = ap.parse_args(argv)
     step = 2.0 if a.quick else 1.0
-    params = {"name": "eta bench cone", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 2.0,
-              "level_step_mm": step, "settle_s": 0.3}
+    params = {
+        "name": "eta bench cone",
+        "surface": "cone",
+        "levels_to_mm": 24.0,
+        "levels_from_mm": 2.0,
+        "level_step_mm": step,
+        "settle_s": 0.3,
+    }
     with tempfile.TemporaryDirectory() as tmp:
         svc = BenchService(Path(tmp) / "data", FakeBench("cone"))
         try:
             warm = at_quarter(run_job(svc, params))
-            print(f"warm-up job (no history): took {warm['total_s']:.1f} s, processing {warm['processing_s']:.1f} s; "
-                  f"at 25 % it showed {warm['shown_s']} s for {warm['left_s']:.1f} s left")
+            print(
+                f"warm-up job (no history): took {warm['total_s']:.1f} s, processing {warm['processing_s']:.1f} s; "
+                f"at 25 % it showed {warm['shown_s']} s for {warm['left_s']:.1f} s left"
+            )
             errors = []
             for i in range(a.jobs):
                 q = at_quarter(run_job(svc, params))
                 err_shown = abs(q["shown_s"] - q["left_s"]) / q["left_s"]
                 err_daemon = abs(q["daemon_s"] - q["left_s"]) / q["left_s"]
                 errors.append(err_shown)
-                print(f"job {i + 1}: took {q['total_s']:.1f} s (processing {q['processing_s']:.1f} s); at 25 % "
-                      f"({q['t_s']:.1f} s, {q['state']}) left {q['left_s']:.1f} s, shown {q['shown_s']:.1f} s "
-                      f"(error {100 * err_shown:.1f} %), daemon's {q['daemon_s']:.1f} s (error {100 * err_daemon:.1f} %)")
+                print(
+                    f"job {i + 1}: took {q['total_s']:.1f} s (processing {q['processing_s']:.1f} s); at 25 % "
+                    f"({q['t_s']:.1f} s, {q['state']}) left {q['left_s']:.1f} s, shown {q['shown_s']:.1f} s "
+                    f"(error {100 * err_shown:.1f} %), daemon's {q['daemon_s']:.1f} s (error {100 * err_daemon:.1f} %)"
+                )
         finally:
             svc.close()
     worst = max(errors)
-    print(f"worst shown-ETA error at 25 %: {100 * worst:.1f} % (target {100 * TARGET:.0f} %): "
-          f"{'holds' if worst <= TARGET else 'MISSED'}")
+    print(
+        f"worst shown-ETA error at 25 %: {100 * worst:.1f} % (target {100 * TARGET:.0f} %): "
+        f"{'holds' if worst <= TARGET else 'MISSED'}"
+    )
     return 0 if worst <= TARGET else 1
 
 

@@ -17,6 +17,7 @@ Figures (issue 6 acceptance):
      max and RMS deviation in % of max_rate over the ramps, and the move time
      against the ideal trapezoid's.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,13 +32,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from appliance.hw import protocol as P               # noqa: E402
-from appliance.hw.stage import SerialStage            # noqa: E402
+from appliance.hw import protocol as P  # noqa: E402
+from appliance.hw.stage import SerialStage  # noqa: E402
 from appliance.sim.hil import SimulatedBench, build  # noqa: E402
 
 F_CPU = 16_000_000
-CYC_PER_TICK = 8              # Timer1 at clk/8
-K = 48                        # RAMP_SEGMENTS
+CYC_PER_TICK = 8  # Timer1 at clk/8
+K = 48  # RAMP_SEGMENTS
 TICK_HZ = 2_000_000
 MIN_IV, MAX_IV = 40, 65535
 
@@ -133,36 +134,50 @@ def jitter_for_rate(rate, accel, distance, speed):
     rises, polls = measure_move(rate, accel, distance, speed)
     plan = planned_intervals(distance, rate, accel) * CYC_PER_TICK
     measured = np.diff(rises)
-    plan = plan[1:len(measured) + 1]
+    plan = plan[1 : len(measured) + 1]
     if len(rises) != distance:
         return None, f"{len(rises)} edges for {distance} steps"
     dev_us = np.abs(measured - plan) / 16.0
     cruise = plan == plan.min()
     achieved = F_CPU / np.median(measured[cruise])
-    return dict(rate=rate, jitter_us=float(dev_us.max()), jitter_p99_us=float(np.percentile(dev_us, 99)),
-                achieved_hz=float(achieved), polls=polls[0], overruns=polls[1]), None
+    return dict(
+        rate=rate,
+        jitter_us=float(dev_us.max()),
+        jitter_p99_us=float(np.percentile(dev_us, 99)),
+        achieved_hz=float(achieved),
+        polls=polls[0],
+        overruns=polls[1],
+    ), None
 
 
 def accel_profile(rate, accel, distance, speed):
     rises, _ = measure_move(rate, accel, distance, speed, load=False)
     first_iv = planned_intervals(distance, rate, accel)[0] * CYC_PER_TICK
-    t = (rises - (rises[0] - first_iv)) / F_CPU            # seconds since the timer started
+    t = (rises - (rises[0] - first_iv)) / F_CPU  # seconds since the timer started
     dt = np.diff(t)
     tm = (t[1:] + t[:-1]) / 2
     v_meas = 1.0 / dt
     t_acc = rate / accel
-    T_ideal = distance / rate + t_acc                      # trapezoid from rest to rest
+    T_ideal = distance / rate + t_acc  # trapezoid from rest to rest
     v_ideal = np.minimum.reduce([accel * tm, np.full_like(tm, rate), accel * (T_ideal - tm)])
     ramps = (tm < t_acc) | (tm > T_ideal - t_acc)
     dev = (v_meas - v_ideal) / rate * 100
-    return dict(max_dev_pct=float(np.abs(dev[ramps]).max()), rms_dev_pct=float(np.sqrt(np.mean(dev[ramps] ** 2))),
-                time_s=float(t[-1]), ideal_time_s=T_ideal,
-                time_err_pct=float((t[-1] - T_ideal) / T_ideal * 100))
+    return dict(
+        max_dev_pct=float(np.abs(dev[ramps]).max()),
+        rms_dev_pct=float(np.sqrt(np.mean(dev[ramps] ** 2))),
+        time_s=float(t[-1]),
+        ideal_time_s=T_ideal,
+        time_err_pct=float((t[-1] - T_ideal) / T_ideal * 100),
+    )
 
 
 def avr_size():
-    out = subprocess.run(["avr-size", "-C", "--mcu=atmega328p", str(build() / "inkslice-stepper.elf")],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        ["avr-size", "-C", "--mcu=atmega328p", str(build() / "inkslice-stepper.elf")],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     flash = re.search(r"Program:\s+(\d+) bytes \(([\d.]+)% Full\)", out)
     ram = re.search(r"Data:\s+(\d+) bytes \(([\d.]+)% Full\)", out)
     return int(flash[1]), float(flash[2]), int(ram[1]), float(ram[2])
@@ -174,8 +189,10 @@ def main():
     args = ap.parse_args()
 
     fb, fp, rb, rp = avr_size()
-    print(f"avr-size: flash {fb} B = {fp:.1f} % of 32 KB, RAM {rb} B = {rp:.1f} % of 2 KB "
-          f"(target <= 50 % each: {'PASS' if fp <= 50 and rp <= 50 else 'FAIL'})")
+    print(
+        f"avr-size: flash {fb} B = {fp:.1f} % of 32 KB, RAM {rb} B = {rp:.1f} % of 2 KB "
+        f"(target <= 50 % each: {'PASS' if fp <= 50 and rp <= 50 else 'FAIL'})"
+    )
 
     t = time.monotonic()
     with SimulatedBench(speed=1.0) as bench:
@@ -189,7 +206,7 @@ def main():
     print(f"\nstep timing under continuous status polling, accel {accel} steps/s^2, sim at real time:")
     print(f"{'max_rate':>9} {'achieved':>9} {'jitter max':>11} {'p99':>7} {'polls':>6} {'rx overruns':>11}")
     for r in rates:
-        distance = max(8000, r // 2)                       # >= 0.5 s of cruise
+        distance = max(8000, r // 2)  # >= 0.5 s of cruise
         res, problem = jitter_for_rate(r, accel, distance, speed=1.0)
         if res is None:
             print(f"{r:>9} failed: {problem}")
@@ -197,17 +214,25 @@ def main():
         ok = res["jitter_us"] < 2.0 and res["overruns"] == 0
         if ok:
             best = max(best, res["achieved_hz"])
-        print(f"{r:>9} {res['achieved_hz']:>9.0f} {res['jitter_us']:>9.2f}us {res['jitter_p99_us']:>5.2f}us "
-              f"{res['polls']:>6} {res['overruns']:>11}  {'ok' if ok else 'FAIL'}")
-    print(f"highest step rate reached with jitter < 2 us: {best:.0f} Hz "
-          f"(target >= 20000: {'PASS' if best >= 20000 else 'FAIL'}; max_rate is capped at 40000 by codes.def)")
+        print(
+            f"{r:>9} {res['achieved_hz']:>9.0f} {res['jitter_us']:>9.2f}us {res['jitter_p99_us']:>5.2f}us "
+            f"{res['polls']:>6} {res['overruns']:>11}  {'ok' if ok else 'FAIL'}"
+        )
+    print(
+        f"highest step rate reached with jitter < 2 us: {best:.0f} Hz "
+        f"(target >= 20000: {'PASS' if best >= 20000 else 'FAIL'}; max_rate is capped at 40000 by codes.def)"
+    )
 
     d = 8000 if args.quick else 32000
     prof = accel_profile(16000, 80000, d, speed=0)
     print(f"\nacceleration profile, default settings (16000 steps/s, 80000 steps/s^2), {d}-step move:")
-    print(f"  velocity vs ideal trapezoid over the ramps: max {prof['max_dev_pct']:.2f} % of max_rate, "
-          f"RMS {prof['rms_dev_pct']:.2f} %")
-    print(f"  move time {prof['time_s']:.4f} s vs ideal {prof['ideal_time_s']:.4f} s ({prof['time_err_pct']:+.2f} %)")
+    print(
+        f"  velocity vs ideal trapezoid over the ramps: max {prof['max_dev_pct']:.2f} % of max_rate, "
+        f"RMS {prof['rms_dev_pct']:.2f} %"
+    )
+    print(
+        f"  move time {prof['time_s']:.4f} s vs ideal {prof['ideal_time_s']:.4f} s ({prof['time_err_pct']:+.2f} %)"
+    )
 
 
 if __name__ == "__main__":

@@ -52,6 +52,7 @@ but a rise the model believes is not flagged: the ring's and crater's crests sta
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
 """
+
 from __future__ import annotations
 
 import argparse
@@ -63,12 +64,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from meniscus import bench_folder, commission, described, scan_part  # noqa: E402
-from uncertainty import honesty                            # noqa: E402
-from appliance.sim import surfaces                          # noqa: E402
-from appliance.vision.refine import RESOLUTION_MM           # noqa: E402
+from uncertainty import honesty  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.vision.refine import RESOLUTION_MM  # noqa: E402
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,plateau,ring"
-HELD_OUT = "crater,steep-front"    # shapes the uncertainty map was not tuned on
+HELD_OUT = "crater,steep-front"  # shapes the uncertainty map was not tuned on
 TARGETS = {"Ea": 0.05, "p99": 0.2, "max": 1.0}
 
 
@@ -76,13 +77,17 @@ def measure(name, seed, tmp, camera, meniscus, refine_mm):
     """-> (label, Ea, p99, max, honest share, cells over 0.1 mm, share marked) of one scan."""
     t0 = time.perf_counter()
     maps = []
-    ea, p99, mx = scan_part(name, "harsh", tmp, camera, meniscus, maps=maps, from_above=True, seed=seed,
-                            refine_mm=refine_mm)
+    ea, p99, mx = scan_part(
+        name, "harsh", tmp, camera, meniscus, maps=maps, from_above=True, seed=seed, refine_mm=refine_mm
+    )
     share, big, marked = honesty(surfaces.get(name), maps[0])
     label = name if seed == 1 else f"{name}:{seed}"
-    print(f"  {label:<14} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
-          f"{100 * share:.0f} % of {big} cells over 0.1 mm marked uncertain "
-          f"({100 * marked:.1f} % of all marked) ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print(
+        f"  {label:<14} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
+        f"{100 * share:.0f} % of {big} cells over 0.1 mm marked uncertain "
+        f"({100 * marked:.1f} % of all marked) ({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
     return label, ea, p99, mx, share, big, marked
 
 
@@ -100,35 +105,56 @@ def summary(title, rows, targets=True):
     print(f"  {'part':<14} {'Ea':>7} {'p99 in':>7} {'max':>7} {'honest':>7} {'marked':>7}")
     for label, ea, p99, mx, share, big, marked in rows:
         over = [k for k, v in zip(TARGETS, (ea, p99, mx)) if targets and v > TARGETS[k]]
-        print(f"  {label:<14} {ea:7.4f} {p99:7.3f} {mx:7.3f} {100 * share:6.0f}% {100 * marked:6.1f}%"
-              + (f"  over: {', '.join(over)}" if over else ""))
+        print(
+            f"  {label:<14} {ea:7.4f} {p99:7.3f} {mx:7.3f} {100 * share:6.0f}% {100 * marked:6.1f}%"
+            + (f"  over: {', '.join(over)}" if over else "")
+        )
     big = sum(r[5] for r in rows)
     if rows:
-        print(f"  all: {100 * sum(r[4] * r[5] for r in rows) / max(big, 1):.1f} % of {big} cells off by more than "
-              f"0.1 mm marked uncertain (target >= 80 %); {100 * sum(r[6] for r in rows) / len(rows):.1f} % of "
-              "the cells marked (mean over the parts)")
+        print(
+            f"  all: {100 * sum(r[4] * r[5] for r in rows) / max(big, 1):.1f} % of {big} cells off by more than "
+            f"0.1 mm marked uncertain (target >= 80 %); {100 * sum(r[6] for r in rows) / len(rows):.1f} % of "
+            "the cells marked (mean over the parts)"
+        )
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parts", default=PARTS)
-    ap.add_argument("--heldout", default=HELD_OUT,
-                    help="NAME[:SEED],... scans the uncertainty map was not tuned on (render seed 1 unless given); "
-                         "'' for none")
-    ap.add_argument("--keep", default=None, metavar="DIR",
-                    help="render into DIR and reuse what is there (renders take minutes a part)")
-    ap.add_argument("--refine-mm", type=float, default=RESOLUTION_MM,
-                    help="bisect the steps in which a face came out at once to this, as the daemon's runner does "
-                         "(0: only the plan's levels)")
+    ap.add_argument(
+        "--heldout",
+        default=HELD_OUT,
+        help="NAME[:SEED],... scans the uncertainty map was not tuned on (render seed 1 unless given); "
+        "'' for none",
+    )
+    ap.add_argument(
+        "--keep",
+        default=None,
+        metavar="DIR",
+        help="render into DIR and reuse what is there (renders take minutes a part)",
+    )
+    ap.add_argument(
+        "--refine-mm",
+        type=float,
+        default=RESOLUTION_MM,
+        help="bisect the steps in which a face came out at once to this, as the daemon's runner does "
+        "(0: only the plan's levels)",
+    )
     args = ap.parse_args()
     with bench_folder(args.keep, "harsh-bench-") as (tmp, camera):
         t0 = time.perf_counter()
         meniscus, doc = commission(tmp, "harsh", camera)
-        print(f"harsh: meniscus commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
-              + described(doc),
-              flush=True)
-        rows = [measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.parts)]
-        held = [measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.heldout)]
+        print(
+            f"harsh: meniscus commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
+            + described(doc),
+            flush=True,
+        )
+        rows = [
+            measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.parts)
+        ]
+        held = [
+            measure(name, seed, tmp, camera, meniscus, args.refine_mm) for name, seed in parsed(args.heldout)
+        ]
     summary("summary, harsh preset (mm); targets Ea <= 0.05, p99 <= 0.2, max <= 1", rows)
     if held:
         summary("held out (scans and shapes the uncertainty map was not tuned on)", held, targets=False)

@@ -59,6 +59,7 @@ reference ball is commissioned from its plain levels (the runner would also refi
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
 """
+
 from __future__ import annotations
 
 import argparse
@@ -76,15 +77,15 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from appliance import process as proc                      # noqa: E402
-from appliance.cli import main as cli                       # noqa: E402
-from appliance.sim import surfaces                          # noqa: E402
-from appliance.sim.levels import sculpture_levels           # noqa: E402
-from appliance.sim.physics import meniscus_rise             # noqa: E402
-from appliance.sim.render import effects_preset             # noqa: E402
+from appliance import process as proc  # noqa: E402
+from appliance.cli import main as cli  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.levels import sculpture_levels  # noqa: E402
+from appliance.sim.physics import meniscus_rise  # noqa: E402
+from appliance.sim.render import effects_preset  # noqa: E402
 from appliance.sim.scanrender import refine_scan, render_scan  # noqa: E402
-from appliance.vision.refine import RESOLUTION_MM           # noqa: E402
-from seed_table import calibrated_camera, use_camera        # noqa: E402
+from appliance.vision.refine import RESOLUTION_MM  # noqa: E402
+from seed_table import calibrated_camera, use_camera  # noqa: E402
 
 PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
 
@@ -110,7 +111,9 @@ def errors(surface, hm, inset_mm=3.0):
     return float(e_all.mean()), float(np.percentile(e_in, 99)), float(e_all.max())
 
 
-def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_above=False, seed=1, refine_mm=0.0):
+def scan_part(
+    name, model, tmp, camera, meniscus, step=1.0, maps=None, from_above=False, seed=1, refine_mm=0.0
+):
     """-> (Ea, interior p99, max) in mm; the height map is appended to `maps` when given.
     `from_above`: the scan starts at an empty frame above the top, as the daemon's does.
     `refine_mm` > 0: the steps in which a face came out at once are bisected to that, as the
@@ -120,8 +123,14 @@ def scan_part(name, model, tmp, camera, meniscus, step=1.0, maps=None, from_abov
     e = effects_preset(model)
     below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
     if not (folder / "scan.json").is_file():
-        render_scan(surface, folder, levels=sculpture_levels(surface, step, max(below, 0.0), from_above),
-                    effects=model, seed=seed, workers=2)
+        render_scan(
+            surface,
+            folder,
+            levels=sculpture_levels(surface, step, max(below, 0.0), from_above),
+            effects=model,
+            seed=seed,
+            workers=2,
+        )
         use_camera(folder, camera)
     if refine_mm > 0:
         refine_scan(surface, folder, refine_mm, effects=model, seed=seed, workers=2)
@@ -155,27 +164,40 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", default="physics,physics2")
     ap.add_argument("--parts", default=PARTS)
-    ap.add_argument("--keep", default=None, metavar="DIR",
-                    help="render into DIR and reuse what is there (to compare corrections on the same scans)")
-    ap.add_argument("--refine-mm", type=float, default=RESOLUTION_MM,
-                    help="bisect the steps in which a face came out at once to this, as the runner does "
-                         "(0: only the plan's levels; a kept folder keeps the frames it has)")
+    ap.add_argument(
+        "--keep",
+        default=None,
+        metavar="DIR",
+        help="render into DIR and reuse what is there (to compare corrections on the same scans)",
+    )
+    ap.add_argument(
+        "--refine-mm",
+        type=float,
+        default=RESOLUTION_MM,
+        help="bisect the steps in which a face came out at once to this, as the runner does "
+        "(0: only the plan's levels; a kept folder keeps the frames it has)",
+    )
     args = ap.parse_args()
     rows = []
     with bench_folder(args.keep, "meniscus-bench-") as (tmp, camera):
         for model in args.models.split(","):
             t0 = time.perf_counter()
             meniscus, doc = commission(tmp, model, camera)
-            print(f"\n{model}: commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
-                  + described(doc),
-                  flush=True)
+            print(
+                f"\n{model}: commissioned from the reference ball ({time.perf_counter() - t0:.0f} s): "
+                + described(doc),
+                flush=True,
+            )
             for name in args.parts.split(","):
                 t0 = time.perf_counter()
                 ea, p99, mx = scan_part(name, model, tmp, camera, meniscus, refine_mm=args.refine_mm)
                 extra = refinement_frames(tmp, name, model)
                 rows.append((model, name, ea, p99, mx, extra))
-                print(f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
-                      f"{extra} refinement frames ({time.perf_counter() - t0:.0f} s)", flush=True)
+                print(
+                    f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
+                    f"{extra} refinement frames ({time.perf_counter() - t0:.0f} s)",
+                    flush=True,
+                )
     print("\nsummary (mm)")
     print(f"  {'model':<9} {'part':<12} {'Ea':>7} {'p99 in':>7} {'max':>7} {'refined':>7}")
     for model, name, ea, p99, mx, extra in rows:

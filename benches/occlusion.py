@@ -29,6 +29,7 @@ physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,15 +41,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np                                          # noqa: E402
-from scipy import ndimage                                   # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import ndimage  # noqa: E402
 
-from appliance import process as proc                      # noqa: E402
-from appliance.sim import surfaces                          # noqa: E402
-from appliance.sim.scanrender import render_scan, scan_levels   # noqa: E402
+from appliance import process as proc  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.scanrender import render_scan, scan_levels  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from seed_table import calibrated_camera, calibrated_meniscus, use_camera   # noqa: E402
+from seed_table import calibrated_camera, calibrated_meniscus, use_camera  # noqa: E402
 
 PARTS = ("stepped-block", "blade")
 
@@ -61,7 +62,12 @@ def tail(surface, hm):
     ok = on & np.isfinite(err)
     interior = ndimage.binary_erosion(on, np.ones((3, 3)), border_value=0) & ok
     e = err[interior] if interior.any() else err[ok]
-    return float(err[ok].mean()), float(np.percentile(e, 99)), float(e.max()), int((on & ~np.isfinite(hm.z)).sum())
+    return (
+        float(err[ok].mean()),
+        float(np.percentile(e, 99)),
+        float(e.max()),
+        int((on & ~np.isfinite(hm.z)).sum()),
+    )
 
 
 def calibration(keep: Path, effects):
@@ -90,8 +96,11 @@ def run(part, effects, keep: Path, grid_n, step):
     t2 = time.perf_counter()
     ea, p99, mx, holes = tail(surface, job.heightmap)
     occ = job.diagnostics.get("fit", {}).get("occluded_nodes", 0)
-    print(f"  {part:<14} {effects:<8} Ea {ea:7.4f}  p99 {p99:7.3f}  max {mx:7.3f} mm  holes {holes:3d}  "
-          f"occluded nodes {occ:5d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)", flush=True)
+    print(
+        f"  {part:<14} {effects:<8} Ea {ea:7.4f}  p99 {p99:7.3f}  max {mx:7.3f} mm  holes {holes:3d}  "
+        f"occluded nodes {occ:5d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)",
+        flush=True,
+    )
     return ea
 
 
@@ -103,7 +112,9 @@ def main():
     ap.add_argument("--step", type=float, default=1.0, help="level step, mm")
     ap.add_argument("--keep", help="folder to keep rendered scans and calibrations in (and reuse)")
     a = ap.parse_args()
-    print(f"occluded walls, {a.step:g} mm steps, {a.grid} x {a.grid} grid: errors of our fit against the true part")
+    print(
+        f"occluded walls, {a.step:g} mm steps, {a.grid} x {a.grid} grid: errors of our fit against the true part"
+    )
     with tempfile.TemporaryDirectory(prefix="occlusion-") as tmp:
         keep = Path(a.keep or tmp)
         keep.mkdir(parents=True, exist_ok=True)

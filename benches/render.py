@@ -6,6 +6,7 @@ Prints (CPU ms of this process, so a busy machine does not inflate it), per part
 levels spread from the part's top to its base (the frames the seed-table
 bench renders), and the PNG write time (scanfile.write_frame's encoder).
 """
+
 import argparse
 import statistics
 import sys
@@ -55,8 +56,10 @@ def main():
     ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
     print(f"PNG encode (level 1): {1000 * (time.perf_counter() - t):.0f} ms, {len(buf) / 1e6:.2f} MB")
     for preset, times in overall.items():
-        print(f"ALL {preset:9s} median {statistics.median(times):6.0f} ms  mean {statistics.mean(times):6.0f} ms "
-              f"max {max(times):6.0f} ms per 2048x1536 frame")
+        print(
+            f"ALL {preset:9s} median {statistics.median(times):6.0f} ms  mean {statistics.mean(times):6.0f} ms "
+            f"max {max(times):6.0f} ms per 2048x1536 frame"
+        )
 
 
 if __name__ == "__main__":

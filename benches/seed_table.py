@@ -18,6 +18,7 @@ Effects:
     .venv/bin/python benches/seed_table.py --quick          # realistic at 1 mm only
     .venv/bin/python benches/seed_table.py --effects physics
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,29 +31,54 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from appliance import process as proc                      # noqa: E402
-from appliance.cli import main as cli                       # noqa: E402
-from appliance.sim import surfaces                          # noqa: E402
-from appliance.sim.levels import sculpture_levels           # noqa: E402
-from appliance.sim.physics import meniscus_rise             # noqa: E402
-from appliance.sim.scanrender import render_scan            # noqa: E402
-from appliance.surface.seedtables import TABLES, best_ea    # noqa: E402
+from appliance import process as proc  # noqa: E402
+from appliance.cli import main as cli  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.levels import sculpture_levels  # noqa: E402
+from appliance.sim.physics import meniscus_rise  # noqa: E402
+from appliance.sim.scanrender import render_scan  # noqa: E402
+from appliance.surface.seedtables import TABLES, best_ea  # noqa: E402
 
-TABLE_KEY = {"seed:captured": "captured", "seed:spline": "spline", "seed:nearest": "nearest", "seed:lsq3": "lsq"}
+TABLE_KEY = {
+    "seed:captured": "captured",
+    "seed:spline": "spline",
+    "seed:nearest": "nearest",
+    "seed:lsq3": "lsq",
+}
 
 
 def calibrated_camera(tmp: Path) -> dict:
     """Our camera calibration from chessboards the virtual bench renders (vision's calibrate)."""
     from appliance.sim.boards import render_calibration
+
     render_calibration(tmp / "boards")
     doc = json.loads((tmp / "boards" / "board.json").read_text())
     pose = doc["plane"]["board_pose"]
     cols, rows = doc["board"]["inner_corners"]
     images = sorted(str(p) for p in (tmp / "boards").glob("pose_*.png"))
     out = tmp / "calibration.json"
-    assert cli(["calibrate", *images, "--plane", str(tmp / "boards" / "plane.png"), "--pattern", f"{cols}x{rows}",
-                "--square-mm", str(doc["board"]["square_mm"]), "--board-origin", str(pose["x0"]), str(pose["y0"]),
-                "--board-angle", str(pose["angle_deg"]), "--out", str(out)]) == 0
+    assert (
+        cli(
+            [
+                "calibrate",
+                *images,
+                "--plane",
+                str(tmp / "boards" / "plane.png"),
+                "--pattern",
+                f"{cols}x{rows}",
+                "--square-mm",
+                str(doc["board"]["square_mm"]),
+                "--board-origin",
+                str(pose["x0"]),
+                str(pose["y0"]),
+                "--board-angle",
+                str(pose["angle_deg"]),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return json.loads(out.read_text())
 
 
@@ -86,30 +112,40 @@ def run_sample(sample, step, effects, tmp, camera=None, meniscus=None):
     t0 = time.perf_counter()
     # with a meniscus the scan goes on until the ink is the wall rise below the top's lowest point
     below = float(meniscus_rise(math.pi / 2)) if effects == "physics" else 0.0
-    render_scan(surface, folder, levels=sculpture_levels(surface, step, below), effects=effects, seed=1, workers=2)
+    render_scan(
+        surface, folder, levels=sculpture_levels(surface, step, below), effects=effects, seed=1, workers=2
+    )
     if camera:
         use_camera(folder, camera)
     t1 = time.perf_counter()
     job = proc.process(folder, compare=True, meniscus=meniscus, truth=surface)
     t2 = time.perf_counter()
-    print(f"\n{sample}, level step {step:g} mm, effects {effects}: {len(json.loads((folder / 'scan.json').read_text())['frames'])} "
-          f"frames (render {t1 - t0:.0f} s, both pipelines {t2 - t1:.0f} s)")
-    print(f"  {'method':<44} {'Ea mm':>8} {'sigma':>8} {'max mm':>8} {'Ep tab%':>8} {'match %':>9}"
-          f"  | {'diss Ea':>7} {'diss sigma':>9} {'diss Ep':>8}")
+    print(
+        f"\n{sample}, level step {step:g} mm, effects {effects}: {len(json.loads((folder / 'scan.json').read_text())['frames'])} "
+        f"frames (render {t1 - t0:.0f} s, both pipelines {t2 - t1:.0f} s)"
+    )
+    print(
+        f"  {'method':<44} {'Ea mm':>8} {'sigma':>8} {'max mm':>8} {'Ep tab%':>8} {'match %':>9}"
+        f"  | {'diss Ea':>7} {'diss sigma':>9} {'diss Ep':>8}"
+    )
     for k, s in job.stats.items():
         print(row(proc.label(k), s, TABLES[sample].get(TABLE_KEY.get(k, ""))))
     ours = job.stats["inkslice:fit"]
     extra = {}
     if effects == "physics":
-        for name, kw in (("without displacement correction", dict(displacement=False, meniscus=meniscus)),
-                         ("without meniscus correction", dict(meniscus=False))):
+        for name, kw in (
+            ("without displacement correction", dict(displacement=False, meniscus=meniscus)),
+            ("without meniscus correction", dict(meniscus=False)),
+        ):
             s = proc.process(folder, truth=surface, **kw).stats["inkslice:fit"]
             extra[name] = s["Ea"]
             print(row(f"InkSlice fit {name}", s))
     best = best_ea(sample)
-    print(f"  => ours Ea {ours['Ea']:.4f} mm, matching {ours['matching']:.3f} %; dissertation's best Ea "
-          f"{best:.4f} mm: {best / ours['Ea']:.0f}x lower" +
-          "".join(f"; {k}: Ea {v:.4f} mm ({v / ours['Ea']:.1f}x worse)" for k, v in extra.items()))
+    print(
+        f"  => ours Ea {ours['Ea']:.4f} mm, matching {ours['matching']:.3f} %; dissertation's best Ea "
+        f"{best:.4f} mm: {best / ours['Ea']:.0f}x lower"
+        + "".join(f"; {k}: Ea {v:.4f} mm ({v / ours['Ea']:.1f}x worse)" for k, v in extra.items())
+    )
     return ours
 
 
@@ -122,7 +158,9 @@ def main():
     if args.effects:
         runs = [(args.effects, 1.0)] + ([(args.effects, 2.0)] if args.effects == "realistic" else [])
     else:
-        runs = [("realistic", 1.0)] if args.quick else [("realistic", 1.0), ("realistic", 2.0), ("physics", 1.0)]
+        runs = (
+            [("realistic", 1.0)] if args.quick else [("realistic", 1.0), ("realistic", 2.0), ("physics", 1.0)]
+        )
     with tempfile.TemporaryDirectory(prefix="seed-table-") as tmp:
         tmp = Path(tmp)
         camera = meniscus = None
@@ -132,16 +170,26 @@ def main():
                 t0 = time.perf_counter()
                 camera = calibrated_camera(tmp)
                 meniscus = calibrated_meniscus(tmp, effects, camera)
-                print(f"\ncalibrated the camera from rendered boards and the meniscus from a sphere scan "
-                      f"({time.perf_counter() - t0:.0f} s): {json.loads(meniscus.read_text())}")
+                print(
+                    f"\ncalibrated the camera from rendered boards and the meniscus from a sphere scan "
+                    f"({time.perf_counter() - t0:.0f} s): {json.loads(meniscus.read_text())}"
+                )
             for sample in args.samples.split(","):
-                ours = run_sample(sample, step, effects, tmp, camera if effects == "physics" else None,
-                                  meniscus if effects == "physics" else None)
+                ours = run_sample(
+                    sample,
+                    step,
+                    effects,
+                    tmp,
+                    camera if effects == "physics" else None,
+                    meniscus if effects == "physics" else None,
+                )
                 summary.append((sample, effects, step, ours))
         print("\nsummary: ours (InkSlice fit) per run")
         for sample, effects, step, s in summary:
-            print(f"  {sample} {effects:<9} {step:g} mm: Ea {s['Ea']:.4f} mm, sigma {s['sigma']:.4f}, "
-                  f"matching {s['matching']:.3f} %, {best_ea(sample) / s['Ea']:.0f}x below the dissertation's best")
+            print(
+                f"  {sample} {effects:<9} {step:g} mm: Ea {s['Ea']:.4f} mm, sigma {s['sigma']:.4f}, "
+                f"matching {s['matching']:.3f} %, {best_ea(sample) / s['Ea']:.0f}x below the dissertation's best"
+            )
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ lines. Both gouge ~0.058 mm on the 84-85 degree face, the drop-cutter's
 contacts on a face that steep on a 0.2 mm map (the 2 mm rest ball, 0.111);
 on the 72-degree mesa of tests/test_cam_tools.py all stay within 0.012.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -67,9 +68,9 @@ def walls_part(step=0.2):
     X, Y = np.meshgrid(x, x)
     r = np.hypot(X - 20, Y - 20)
     phi = np.arctan2(Y - 20, X - 20)
-    wall = np.radians(72.5 + 12.5 * np.sin(phi))          # 60 .. 85 degrees round the mesa
+    wall = np.radians(72.5 + 12.5 * np.sin(phi))  # 60 .. 85 degrees round the mesa
     H = 8.0
-    s = H / (4 * np.tan(wall))                             # logistic's steepest slope is H / 4s
+    s = H / (4 * np.tan(wall))  # logistic's steepest slope is H / 4s
     Z = 1 + H / (1 + np.exp((r - 9) / s)) + 0.8 * np.clip(1 - (r / 9) ** 2, 0, 1)
     return HeightMap(x, x, Z)
 
@@ -79,6 +80,7 @@ def band_figures(rep, hm):
     xs = hm.x[0] + 0.1 * np.arange(st[1])
     ys = hm.y[0] + 0.1 * np.arange(st[0])
     from appliance.cam.sampling import Sampler
+
     s = Sampler(hm)
     X, Y = np.meshgrid(xs, ys)
     Z = s.z(X, Y)
@@ -86,8 +88,12 @@ def band_figures(rep, hm):
     slope = np.degrees(np.arctan(np.hypot(gx, gy)))
     band = rep.measured & (slope >= WALL_BAND_DEG)
     dev = np.maximum(rep.deviation[band], 0)
-    return band.sum() * 0.01, float(dev.max()) if dev.size else float("nan"), \
-        float(np.percentile(dev, 99)) if dev.size else float("nan"), float(np.mean(dev > 1.1 * SCALLOP)) if dev.size else 0
+    return (
+        band.sum() * 0.01,
+        float(dev.max()) if dev.size else float("nan"),
+        float(np.percentile(dev, 99)) if dev.size else float("nan"),
+        float(np.mean(dev > 1.1 * SCALLOP)) if dev.size else 0,
+    )
 
 
 def timed(fn):
@@ -98,30 +104,47 @@ def timed(fn):
 
 def walls():
     hm = walls_part()
-    print(f"walls part: {hm.x.size} x {hm.y.size} map at 0.2 mm, wall slope 60-85 deg, scallop {SCALLOP} mm, ball6")
-    print(f"{'strategy':<20}{'CPU s':>7}{'lines':>8}{'gouge':>8}{'max sc':>8}{'uncut %':>8}"
-          f"{'wall mm2':>9}{'wall max':>9}{'wall p99':>9}{'>1.1h %':>8}")
+    print(
+        f"walls part: {hm.x.size} x {hm.y.size} map at 0.2 mm, wall slope 60-85 deg, scallop {SCALLOP} mm, ball6"
+    )
+    print(
+        f"{'strategy':<20}{'CPU s':>7}{'lines':>8}{'gouge':>8}{'max sc':>8}{'uncut %':>8}"
+        f"{'wall mm2':>9}{'wall max':>9}{'wall p99':>9}{'>1.1h %':>8}"
+    )
     ball = Tool(2, parse_cutter("ball6"))
     for name, fn in (
-            ("steep+shallow", lambda: post_operations(*plan_operations(hm, [Operation("finish", ball, "steep")],
-                                                                      scallop=SCALLOP), "linuxcnc")[0].text),
-            ("zig-zag alone", lambda: finishing_gcode(hm, FinishSettings(ball.cutter, scallop=SCALLOP)).text)):
+        (
+            "steep+shallow",
+            lambda: (
+                post_operations(
+                    *plan_operations(hm, [Operation("finish", ball, "steep")], scallop=SCALLOP), "linuxcnc"
+                )[0].text
+            ),
+        ),
+        ("zig-zag alone", lambda: finishing_gcode(hm, FinishSettings(ball.cutter, scallop=SCALLOP)).text),
+    ):
         text, cpu = timed(fn)
         rep, _ = verify_gcode(text, hm)
         area, wmax, wp99, over = band_figures(rep, hm)
-        print(f"{name:<20}{cpu:7.1f}{text.count(chr(10)):8d}{rep.gouge:8.4f}{rep.scallop_max:8.4f}"
-              f"{100 * rep.uncut_fraction:8.2f}{area:9.0f}{wmax:9.4f}{wp99:9.4f}{100 * over:8.2f}")
+        print(
+            f"{name:<20}{cpu:7.1f}{text.count(chr(10)):8d}{rep.gouge:8.4f}{rep.scallop_max:8.4f}"
+            f"{100 * rep.uncut_fraction:8.2f}{area:9.0f}{wmax:9.4f}{wp99:9.4f}{100 * over:8.2f}"
+        )
         for what, (x, y) in (("gouge", rep.gouge_at), ("max scallop", rep.scallop_at)):
             ang = 72.5 + 12.5 * np.sin(np.arctan2(y - 20, x - 20))
-            print(f"{'':<20}{what} at x={x:.1f} y={y:.1f}: {np.hypot(x - 20, y - 20):.2f} mm from the axis, "
-                  f"where the wall is {ang:.0f} deg")
+            print(
+                f"{'':<20}{what} at x={x:.1f} y={y:.1f}: {np.hypot(x - 20, y - 20):.2f} mm from the axis, "
+                f"where the wall is {ang:.0f} deg"
+            )
 
 
 def tools():
     hm = walls_part()
     ops = parse_operations("rough T1, finish T2 steep, rest T3", default_tools())
     (planned, top), cpu = timed(lambda: plan_operations(hm, ops, scallop=SCALLOP))
-    print(f"three-tool job (rough T1 flat6, finish T2 ball6 steep, rest T3 ball2): planned in {cpu:.1f} s CPU")
+    print(
+        f"three-tool job (rough T1 flat6, finish T2 ball6 steep, rest T3 ball2): planned in {cpu:.1f} s CPU"
+    )
     tmp = Path(tempfile.mkdtemp())
     try:
         for d in ("linuxcnc", "mach3", "fanuc", "grbl"):
@@ -131,21 +154,29 @@ def tools():
                 if d != "grbl" and Path(RS274).exists():
                     f = tmp / "p.ngc"
                     f.write_text(p.text)
-                    r = subprocess.run([RS274, "-g", str(f), str(tmp / "o.txt")], capture_output=True,
-                                       stdin=subprocess.DEVNULL, timeout=300)
+                    r = subprocess.run(
+                        [RS274, "-g", str(f), str(tmp / "o.txt")],
+                        capture_output=True,
+                        stdin=subprocess.DEVNULL,
+                        timeout=300,
+                    )
                     checks.append("rs274 " + ("ok" if r.returncode == 0 else "FAILED"))
                 if d == "fanuc":
                     checks.append("fanuc rules " + ("ok" if not check_fanuc(p.text) else "FAILED"))
                 if d == "grbl":
                     checks.append("grbl rules " + ("ok" if not check_grbl(p.text) else "FAILED"))
-                print(f"  {p.name}: {p.text.count(chr(10))} lines, {p.runtime_s / 60:.1f} min, {', '.join(checks)}")
+                print(
+                    f"  {p.name}: {p.text.count(chr(10))} lines, {p.runtime_s / 60:.1f} min, {', '.join(checks)}"
+                )
         whole, _ = verify_gcode(post_operations(planned, top, "linuxcnc", job="walls")[0].text, hm)
         fin = [p for p in planned if p.op.kind == "finish"]
         alone, _ = verify_gcode(post_operations(fin, top, "linuxcnc", job="walls")[0].text, hm)
         left = lambda rep: float(np.sum(np.maximum(rep.deviation, 0)[rep.part]) * 0.01)
         for name, rep in (("whole job", whole), ("finishing alone", alone)):
-            print(f"  {name:<16} gouge {rep.gouge:.4f} mm, material left {left(rep):8.2f} mm^3, "
-                  f"uncut {rep.uncut_area:6.1f} mm^2, crashes {rep.crashes}")
+            print(
+                f"  {name:<16} gouge {rep.gouge:.4f} mm, material left {left(rep):8.2f} mm^3, "
+                f"uncut {rep.uncut_area:6.1f} mm^2, crashes {rep.crashes}"
+            )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

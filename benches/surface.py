@@ -11,6 +11,7 @@ as 2048 x 1536 frames give them (0.08 mm/px), reconstructed on a 0.1 mm grid
 Ideal: samples 1-4 at 1 mm steps on the dissertation's 50 x 50 grid, our fit
 beside the dissertation's methods on the same waterlines and its tables.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -25,13 +26,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np                                              # noqa: E402
+import numpy as np  # noqa: E402
 
-from appliance.sim import surfaces                              # noqa: E402
-from appliance.sim.ideal import ideal_waterlines                # noqa: E402
-from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct   # noqa: E402
-from appliance.surface.seedtables import TABLES                 # noqa: E402
-from appliance.surface.stats import seed_statistics             # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.ideal import ideal_waterlines  # noqa: E402
+from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct  # noqa: E402
+from appliance.surface.seedtables import TABLES  # noqa: E402
+from appliance.surface.stats import seed_statistics  # noqa: E402
 
 
 def stats_for(surface, hm):
@@ -42,14 +43,17 @@ def stats_for(surface, hm):
 
 def speed(quick):
     import cv2
+
     cv2.setNumThreads(1)
     s = surfaces.get("sample1")
     levels = np.linspace(s.z_max + 0.2, 0.5, 80)
     res = 0.25 if quick else 0.08
     t0 = time.perf_counter()
     lines = ideal_waterlines(s, levels, res)
-    print(f"speed: {len(lines)} levels, {sum(len(w.points) for w in lines)} waterline points "
-          f"(at {res} mm), made in {time.perf_counter() - t0:.1f} s")
+    print(
+        f"speed: {len(lines)} levels, {sum(len(w.points) for w in lines)} waterline points "
+        f"(at {res} mm), made in {time.perf_counter() - t0:.1f} s"
+    )
     grid = GridSpec(s.bounds, spacing_mm=0.1)
     times = []
     for _ in range(1 if quick else 3):
@@ -61,18 +65,23 @@ def speed(quick):
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     st = stats_for(s, rec.heightmap)
-    print(f"  0.1 mm grid {rec.heightmap.z.shape[1]} x {rec.heightmap.z.shape[0]}: median {statistics.median(times):.2f} s "
-          f"(runs {', '.join(f'{x:.2f}' for x in times)}), peak traced memory {peak / 2**20:.0f} MB, "
-          f"Ea {st['Ea']:.4f} mm")
+    print(
+        f"  0.1 mm grid {rec.heightmap.z.shape[1]} x {rec.heightmap.z.shape[0]}: median {statistics.median(times):.2f} s "
+        f"(runs {', '.join(f'{x:.2f}' for x in times)}), peak traced memory {peak / 2**20:.0f} MB, "
+        f"Ea {st['Ea']:.4f} mm"
+    )
 
 
 def ideal(quick):
     names = ("sample1", "sample4") if quick else ("sample1", "sample2", "sample3", "sample4")
     print("\nideal waterlines, 1 mm steps, 50 x 50 grid: Ea / sigma / max (mm), degree of matching %")
-    print(f"  {'sample':<8} {'method':<10} {'Ea':>8} {'sigma':>8} {'max':>8} {'DoM %':>9}   diss best Ea   x better")
+    print(
+        f"  {'sample':<8} {'method':<10} {'Ea':>8} {'sigma':>8} {'max':>8} {'DoM %':>9}   diss best Ea   x better"
+    )
     for name in names:
         s = surfaces.get(name)
         from appliance.sim.scanrender import scan_levels
+
         lv = scan_levels(s, 1.0)
         res = (0.2 if quick else 0.1) * (s.bounds[1] - s.bounds[0]) / 100
         lines = ideal_waterlines(s, lv, res)
@@ -82,12 +91,15 @@ def ideal(quick):
             rec = reconstruct(lines, g, ReconstructOptions(method=m))
             st = stats_for(s, rec.heightmap)
             extra = f"   {diss_best:8.4f}   {diss_best / st['Ea']:8.1f}" if m == "fit" else ""
-            print(f"  {name:<8} {m:<10} {st['Ea']:8.4f} {st['sigma']:8.4f} {st['max_error']:8.4f} "
-                  f"{st['matching']:9.4f}{extra}")
+            print(
+                f"  {name:<8} {m:<10} {st['Ea']:8.4f} {st['sigma']:8.4f} {st['max_error']:8.4f} "
+                f"{st['matching']:9.4f}{extra}"
+            )
 
 
 def camera_centre(cam):
     from appliance.surface.meniscus import camera_centre_xy
+
     return camera_centre_xy(cam.K, cam.homography)
 
 
@@ -100,11 +112,12 @@ def rendered(quick, samples, preset, keep=None):
     from appliance.sim.scanrender import render_scan
     from appliance.surface.meniscus import MeniscusModel
     from appliance.vision.pipeline import WaterlineExtractor
+
     print(f"\nrendered frames ({preset} effects), 1 mm steps, 50 x 50 grid: Ea / sigma / DoM %")
     for name in samples:
         s = surfaces.get(name)
         with tempfile.TemporaryDirectory(prefix="surface-bench-") as tmp:
-            tmp = keep or tmp                     # --keep DIR: render once, re-process later
+            tmp = keep or tmp  # --keep DIR: render once, re-process later
             folder = Path(tmp) / f"{name}-{preset}"
             t0 = time.perf_counter()
             if not (folder / "scan.json").is_file():
@@ -117,20 +130,26 @@ def rendered(quick, samples, preset, keep=None):
             for ref in sorted(scan.frames, key=lambda f: -f.level_mm):
                 try:
                     lines.append(ex.extract(read_frame(scan, ref), ref.level_mm))
-                except Exception as e:            # noqa: BLE001 - report and go on
+                except Exception as e:  # noqa: BLE001 - report and go on
                     print(f"  {name}: frame at {ref.level_mm} failed: {e}")
             t2 = time.perf_counter()
             tank = scan.extra.get("tank", {}).get("inner_area_mm2", 22500.0)
             men = truth["meniscus"]
-            model = MeniscusModel(men["capillary_length_mm"], np.radians(men["contact_angle_deg"]),
-                                  camera_centre(scan.camera), scan.camera.height_mm)
+            model = MeniscusModel(
+                men["capillary_length_mm"],
+                np.radians(men["contact_angle_deg"]),
+                camera_centre(scan.camera),
+                scan.camera.height_mm,
+            )
             g = GridSpec(s.bounds, n=(50, 50))
             print(f"  {name}: render {t1 - t0:.0f} s, extract {t2 - t1:.0f} s")
-            for label, opt in (("no corrections", ReconstructOptions()),
-                               ("displacement", ReconstructOptions(tank_area_mm2=tank)),
-                               ("displ.+meniscus", ReconstructOptions(tank_area_mm2=tank, meniscus=model)),
-                               ("nearest (diss.)", ReconstructOptions(method="nearest", tank_area_mm2=tank)),
-                               ("lsq3 (diss.)", ReconstructOptions(method="lsq3", tank_area_mm2=tank))):
+            for label, opt in (
+                ("no corrections", ReconstructOptions()),
+                ("displacement", ReconstructOptions(tank_area_mm2=tank)),
+                ("displ.+meniscus", ReconstructOptions(tank_area_mm2=tank, meniscus=model)),
+                ("nearest (diss.)", ReconstructOptions(method="nearest", tank_area_mm2=tank)),
+                ("lsq3 (diss.)", ReconstructOptions(method="lsq3", tank_area_mm2=tank)),
+            ):
                 st = stats_for(s, reconstruct(lines, g, opt).heightmap)
                 print(f"    {label:<18} {st['Ea']:8.4f} {st['sigma']:8.4f} {st['matching']:9.4f}")
 

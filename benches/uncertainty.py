@@ -40,6 +40,7 @@ Milled (verify at 0.2 mm, ball 6 mm, scallop 0.05 mm) against the true part: gou
     nice -n 10 .venv/bin/python benches/uncertainty.py --keep /tmp/scans            # all parts
     nice -n 10 .venv/bin/python benches/uncertainty.py --parts sample1 --mill --keep /tmp/scans
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,19 +55,19 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np                                           # noqa: E402
-from scipy import ndimage                                    # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import ndimage  # noqa: E402
 
-from appliance import process as proc                        # noqa: E402
-from appliance.outputs import meniscus_model                 # noqa: E402
-from appliance.scanfile import load_scan                     # noqa: E402
-from appliance.sim import surfaces                           # noqa: E402
-from appliance.sim.scanrender import render_scan             # noqa: E402
-from appliance.surface.heightmap import HeightMap            # noqa: E402
-from appliance.surface.uncertainty import DEFAULT_UNCERTAIN_MM, SOURCES   # noqa: E402
+from appliance import process as proc  # noqa: E402
+from appliance.outputs import meniscus_model  # noqa: E402
+from appliance.scanfile import load_scan  # noqa: E402
+from appliance.sim import surfaces  # noqa: E402
+from appliance.sim.scanrender import render_scan  # noqa: E402
+from appliance.surface.heightmap import HeightMap  # noqa: E402
+from appliance.surface.uncertainty import DEFAULT_UNCERTAIN_MM, SOURCES  # noqa: E402
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,crater"
-BIG_MM = 0.1            # an error a machinist would feel; also the low-confidence threshold
+BIG_MM = 0.1  # an error a machinist would feel; also the low-confidence threshold
 
 
 def scan_of(name, preset, step, root: Path, seed=1):
@@ -82,8 +83,11 @@ def truth_meniscus(folder, truth):
     men = truth.get("meniscus")
     if not men or not men.get("enabled"):
         return None
-    doc = {"capillary_length_mm": men["capillary_length_mm"], "contact_angle_deg": men["contact_angle_deg"],
-           "contact_line_curvature": 1.0 if men.get("contact_line_curvature") else 0.0}
+    doc = {
+        "capillary_length_mm": men["capillary_length_mm"],
+        "contact_angle_deg": men["contact_angle_deg"],
+        "contact_line_curvature": 1.0 if men.get("contact_line_curvature") else 0.0,
+    }
     return meniscus_model(doc, load_scan(folder).camera, "truth")
 
 
@@ -92,7 +96,9 @@ def errors(surface, hm, inset_mm=3.0):
     inside = surface.inside(X, Y) & hm.on_part
     err = np.where(inside, np.abs(hm.z - surface.height(X, Y)), np.nan)
     cell = min(abs(hm.spacing[0]), abs(hm.spacing[1]))
-    interior = ndimage.binary_erosion(surface.inside(X, Y), iterations=max(1, int(math.ceil(inset_mm / cell))))
+    interior = ndimage.binary_erosion(
+        surface.inside(X, Y), iterations=max(1, int(math.ceil(inset_mm / cell)))
+    )
     return err, inside, interior & inside
 
 
@@ -122,21 +128,30 @@ def at(hm, field, xy):
 def mill(surface, job, resolution):
     """The program `process` writes, cut into a block and compared with the true part."""
     from appliance.cam.jobs import verify_gcode
+
     text = proc.toolpath_files(job)["toolpath.gcode"].decode()
     true = true_heightmap(surface, job.heightmap)
     rep, _ = verify_gcode(text, true, resolution=resolution)
     dev = np.where(rep.measured, rep.deviation, np.nan)
     # the gouge's tail over the whole true part (edge cells too: a rim cut low is a gouge)
-    gouge_p99 = float(np.percentile(np.maximum(-rep.deviation[rep.part], 0.0), 99)) if rep.part.any() else float("nan")
+    gouge_p99 = (
+        float(np.percentile(np.maximum(-rep.deviation[rep.part], 0.0), 99))
+        if rep.part.any()
+        else float("nan")
+    )
     hm = job.heightmap
 
     def said(xy):
         src = SOURCES[int(at(hm, hm.source, xy))] if hm.source is not None else "?"
         return f"{src} +-{float(at(hm, hm.sigma, xy)):.2f}"
+
     if not np.isfinite(dev).any():
         return rep, gouge_p99, float("nan"), (float("nan"),) * 2, said(rep.gouge_at), "?"
     k = np.unravel_index(np.nanargmax(dev), dev.shape)
-    ex_at = (float(true.x[0] + k[1] * resolution), float(true.y[0] + k[0] * resolution))   # the stock's lattice
+    ex_at = (
+        float(true.x[0] + k[1] * resolution),
+        float(true.y[0] + k[0] * resolution),
+    )  # the stock's lattice
     return rep, gouge_p99, float(dev[k]), ex_at, said(rep.gouge_at), said(ex_at)
 
 
@@ -146,15 +161,21 @@ def main():
     ap.add_argument("--preset", default="harsh")
     ap.add_argument("--step", type=float, default=1.0)
     ap.add_argument("--keep", help="folder to keep rendered scans in (and reuse)")
-    ap.add_argument("--mill", action="store_true", help="also mill the finishing program against the true part")
+    ap.add_argument(
+        "--mill", action="store_true", help="also mill the finishing program against the true part"
+    )
     ap.add_argument("--mill-resolution", type=float, default=0.2)
     a = ap.parse_args()
     tmp = tempfile.TemporaryDirectory(prefix="uncertainty-bench-")
     root = Path(a.keep or tmp.name)
     root.mkdir(parents=True, exist_ok=True)
-    print(f"{a.preset} preset, {a.step:g} mm steps; errors in mm; 'uncertain' = uncertainty_mm > "
-          f"{DEFAULT_UNCERTAIN_MM:g}; honest = share of the cells off by more than {BIG_MM:g} mm that are uncertain")
-    print(f"  {'part':<11} {'Ea':>7} {'p99 in':>7} {'max in':>7} {'>0.1':>6} {'honest':>7} {'marked':>7}   sources")
+    print(
+        f"{a.preset} preset, {a.step:g} mm steps; errors in mm; 'uncertain' = uncertainty_mm > "
+        f"{DEFAULT_UNCERTAIN_MM:g}; honest = share of the cells off by more than {BIG_MM:g} mm that are uncertain"
+    )
+    print(
+        f"  {'part':<11} {'Ea':>7} {'p99 in':>7} {'max in':>7} {'>0.1':>6} {'honest':>7} {'marked':>7}   sources"
+    )
     big_all = honest_all = cells_all = marked_all = 0
     milled = []
     for name in a.parts.split(","):
@@ -175,27 +196,45 @@ def main():
         marked_all += int(marked.sum())
         ei = err[interior]
         src = hm.source[inside]
-        mix = ", ".join(f"{n} {100 * np.mean(src == k):.0f}%" for k, n in enumerate(SOURCES) if np.any(src == k))
-        print(f"  {name:<11} {np.mean(e):7.4f} {np.percentile(ei, 99):7.3f} {np.max(ei):7.3f} {int(big.sum()):6d} "
-              f"{100 * honest:6.1f}% {100 * np.mean(marked):6.1f}%   {mix}   ({time.perf_counter() - t0:.0f} s)",
-              flush=True)
+        mix = ", ".join(
+            f"{n} {100 * np.mean(src == k):.0f}%" for k, n in enumerate(SOURCES) if np.any(src == k)
+        )
+        print(
+            f"  {name:<11} {np.mean(e):7.4f} {np.percentile(ei, 99):7.3f} {np.max(ei):7.3f} {int(big.sum()):6d} "
+            f"{100 * honest:6.1f}% {100 * np.mean(marked):6.1f}%   {mix}   ({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
         missed = big & ~marked
         if missed.any():
             worst = np.argsort(-np.where(missed, e, -1))[:3]
-            print("      missed (error / uncertainty / source): " + ", ".join(
-                f"{e[i]:.3f}/{u[i]:.3f}/{SOURCES[src[i]] if src[i] >= 0 else '?'}" for i in worst if missed[i]))
+            print(
+                "      missed (error / uncertainty / source): "
+                + ", ".join(
+                    f"{e[i]:.3f}/{u[i]:.3f}/{SOURCES[src[i]] if src[i] >= 0 else '?'}"
+                    for i in worst
+                    if missed[i]
+                )
+            )
         if a.mill:
             milled.append((name,) + mill(surface, job, a.mill_resolution))
     if cells_all:
-        print(f"  all parts: {big_all} cells off by more than {BIG_MM:g} mm, {100 * honest_all / max(big_all, 1):.1f} % "
-              f"of them marked uncertain; {100 * marked_all / cells_all:.1f} % of all cells marked")
+        print(
+            f"  all parts: {big_all} cells off by more than {BIG_MM:g} mm, {100 * honest_all / max(big_all, 1):.1f} % "
+            f"of them marked uncertain; {100 * marked_all / cells_all:.1f} % of all cells marked"
+        )
     if milled:
-        print(f"\nmilled against the true part (verify, {a.mill_resolution:g} mm): what a machinist would see")
-        print(f"  {'part':<11} {'gouge':>7} {'p99':>6} {'at x,y':>13} {'map said':>20} {'excess':>7} {'at x,y':>13} "
-              f"{'map said':>20} {'uncut %':>8}")
+        print(
+            f"\nmilled against the true part (verify, {a.mill_resolution:g} mm): what a machinist would see"
+        )
+        print(
+            f"  {'part':<11} {'gouge':>7} {'p99':>6} {'at x,y':>13} {'map said':>20} {'excess':>7} {'at x,y':>13} "
+            f"{'map said':>20} {'uncut %':>8}"
+        )
         for name, rep, g99, excess, ex_at, g_said, ex_said in milled:
-            print(f"  {name:<11} {rep.gouge:7.3f} {g99:6.3f} {rep.gouge_at[0]:6.1f},{rep.gouge_at[1]:<6.1f} {g_said:>20} "
-                  f"{excess:7.3f} {ex_at[0]:6.1f},{ex_at[1]:<6.1f} {ex_said:>20} {100 * rep.uncut_fraction:8.2f}")
+            print(
+                f"  {name:<11} {rep.gouge:7.3f} {g99:6.3f} {rep.gouge_at[0]:6.1f},{rep.gouge_at[1]:<6.1f} {g_said:>20} "
+                f"{excess:7.3f} {ex_at[0]:6.1f},{ex_at[1]:<6.1f} {ex_said:>20} {100 * rep.uncut_fraction:8.2f}"
+            )
 
 
 if __name__ == "__main__":

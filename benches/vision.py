@@ -18,6 +18,7 @@ Accuracy: frames rendered with known waterlines (Surface.level_sdf is the exact
 signed distance to the level curve): RMS distance of our sub-pixel points and
 of the Canny edge pixels, in pixels and mm, per condition.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,6 +41,7 @@ from appliance.vision.pipeline import WaterlineExtractor  # noqa: E402
 
 def replace_effects(e, **kw):
     from dataclasses import replace
+
     return replace(e, **kw)
 
 
@@ -60,8 +62,10 @@ def interleaved(fns, repeats):
             w, c = timed(fn)
             walls[k].append(w)
             cpus[k].append(c)
-    return ({k: 1e3 * float(np.median(v)) for k, v in walls.items()},
-            {k: 1e3 * float(np.median(v)) for k, v in cpus.items()})
+    return (
+        {k: 1e3 * float(np.median(v)) for k, v in walls.items()},
+        {k: 1e3 * float(np.median(v)) for k, v in cpus.items()},
+    )
 
 
 def peak_mb(fn):
@@ -79,6 +83,7 @@ def float_pipeline(frame):
     from skimage.color import rgb2gray
     from skimage.feature import canny
     from skimage.filters import threshold_otsu
+
     gray = rgb2gray(frame[:, :, ::-1].astype(np.float64) / 255.0)
     med = ndimage.median_filter(gray, size=3)
     bw = (med > threshold_otsu(med)).astype(np.float64)
@@ -93,6 +98,7 @@ def mm_per_px(camera):
     def f(p):
         h = Hm @ np.array([p[0], p[1], 1.0])
         return h[:2] / h[2]
+
     J = np.column_stack([f(c + [1, 0]) - f(c), f(c + [0, 1]) - f(c)])
     return float(np.sqrt(abs(np.linalg.det(J))))
 
@@ -106,7 +112,9 @@ def speed(rig, quick):
     cam = rig.camera_model(distorted=eff.lens_distortion)
     step = 0.25
     levels = [25.0 - k * step for k in range(4 if quick else 8)]
-    print(f"rendering {len(levels)} frames of {surf.name} (preset 'realistic', {step} mm apart)...", flush=True)
+    print(
+        f"rendering {len(levels)} frames of {surf.name} (preset 'realistic', {step} mm apart)...", flush=True
+    )
     frames = [render_frame(surf, lv, rig, eff, np.random.default_rng(k)) for k, lv in enumerate(levels)]
     reps = 15 if quick else 40
     f0, f1 = frames[0], frames[1]
@@ -134,8 +142,15 @@ def speed(rig, quick):
         return ts, e
 
     buf = np.empty_like(f0)
-    wall, cpu = interleaved({"memcpy": lambda: np.copyto(buf, f0), "steady": steady, "first": first,
-                             "seed": lambda: seed.seed_slice(f0, levels[0], cam)}, reps)
+    wall, cpu = interleaved(
+        {
+            "memcpy": lambda: np.copyto(buf, f0),
+            "steady": steady,
+            "first": first,
+            "seed": lambda: seed.seed_slice(f0, levels[0], cam),
+        },
+        reps,
+    )
     modes = []
     for _ in range(3):
         modes.append(ex.last_mode)
@@ -144,8 +159,10 @@ def speed(rig, quick):
     full_reads = sum(e.kind == "full-frame" for e in scan_ex.events)
     try:
         float_pipeline(f0[:64, :64])
-        fw, fc = interleaved({"float": lambda: float_pipeline(f0), "memcpy": lambda: np.copyto(buf, f0),
-                              "steady": steady}, 3 if quick else 5)
+        fw, fc = interleaved(
+            {"float": lambda: float_pipeline(f0), "memcpy": lambda: np.copyto(buf, f0), "steady": steady},
+            3 if quick else 5,
+        )
         m_float = peak_mb(lambda: float_pipeline(f0))
     except ImportError:
         fw = fc = {"float": float("nan"), "memcpy": float("nan"), "steady": float("nan")}
@@ -154,34 +171,57 @@ def speed(rig, quick):
     m_first = peak_mb(first)
     m_steady = peak_mb(steady)
     print()
-    print(f"Speed, {f0.shape[1]} x {f0.shape[0]} BGR frame, one thread, median ms per frame "
-          f"({reps} interleaved rounds); wall clock and CPU time of this thread")
+    print(
+        f"Speed, {f0.shape[1]} x {f0.shape[0]} BGR frame, one thread, median ms per frame "
+        f"({reps} interleaved rounds); wall clock and CPU time of this thread"
+    )
     print(f"  {'':44s} {'wall':>8s} {'CPU':>8s}   ratios on CPU (wall)")
-    print(f"  {'memcpy of the %.1f MB frame' % (f0.nbytes / 1e6):44s} {wall['memcpy']:8.2f} {cpu['memcpy']:8.2f}")
-    for key, label in (("steady", "ours, steady state (frame k given k-1)"), ("first", "ours, first frame of a scan")):
-        print(f"  {label:44s} {wall[key]:8.2f} {cpu[key]:8.2f}   {cpu[key] / cpu['memcpy']:5.1f}x memcpy "
-              f"({wall[key] / wall['memcpy']:.1f}x)")
-    print(f"  {'ours over a %d-frame scan, %.2f mm steps' % (len(levels), step):44s} "
-          f"{np.median(scan_ts[1:]) * 1e3:8.2f} {'':8s}   median of frames 2..; {full_reads} fell back to a full read")
+    print(
+        f"  {'memcpy of the %.1f MB frame' % (f0.nbytes / 1e6):44s} {wall['memcpy']:8.2f} {cpu['memcpy']:8.2f}"
+    )
+    for key, label in (
+        ("steady", "ours, steady state (frame k given k-1)"),
+        ("first", "ours, first frame of a scan"),
+    ):
+        print(
+            f"  {label:44s} {wall[key]:8.2f} {cpu[key]:8.2f}   {cpu[key] / cpu['memcpy']:5.1f}x memcpy "
+            f"({wall[key] / wall['memcpy']:.1f}x)"
+        )
+    print(
+        f"  {'ours over a %d-frame scan, %.2f mm steps' % (len(levels), step):44s} "
+        f"{np.median(scan_ts[1:]) * 1e3:8.2f} {'':8s}   median of frames 2..; {full_reads} fell back to a full read"
+    )
     print(f"  {'dissertation pipeline, OpenCV (seed.py)':44s} {wall['seed']:8.2f} {cpu['seed']:8.2f}")
     # The float pipeline runs in its own interleaved rounds (5 x 1-3 s); its 227 MB
     # also evicts our buffers, so the steady state measured beside it is cache-cold.
     # Its ratio to ours goes through the memcpy measured in both sets (load-normalised).
     ratio_c = fc["float"] / fc["memcpy"] * cpu["memcpy"] / cpu["steady"]
     ratio_w = fw["float"] / fw["memcpy"] * wall["memcpy"] / wall["steady"]
-    print(f"  {'dissertation pipeline, float64 MATLAB-style':44s} {fw['float']:8.1f} {fc['float']:8.1f}   "
-          f"{ratio_c:5.0f}x ours steady ({ratio_w:.0f}x), {ratio_c * cpu['steady'] / cpu['first']:.0f}x ours first "
-          f"({ratio_w * wall['steady'] / wall['first']:.0f}x)")
-    print(f"  {'  (ours steady beside it, cache-cold)':44s} {fw['steady']:8.2f} {fc['steady']:8.2f}   "
-          f"{fc['float'] / fc['steady']:5.0f}x ({fw['float'] / fw['steady']:.0f}x) taken directly")
-    print(f"Peak memory per frame (tracemalloc): ours steady {m_steady:.1f} MB, first {m_first:.1f} MB "
-          f"(+ {2 * f0.shape[0] * f0.shape[1] / 1e6:.1f} MB of buffers kept for the scan); float pipeline {m_float:.0f} MB")
+    print(
+        f"  {'dissertation pipeline, float64 MATLAB-style':44s} {fw['float']:8.1f} {fc['float']:8.1f}   "
+        f"{ratio_c:5.0f}x ours steady ({ratio_w:.0f}x), {ratio_c * cpu['steady'] / cpu['first']:.0f}x ours first "
+        f"({ratio_w * wall['steady'] / wall['first']:.0f}x)"
+    )
+    print(
+        f"  {'  (ours steady beside it, cache-cold)':44s} {fw['steady']:8.2f} {fc['steady']:8.2f}   "
+        f"{fc['float'] / fc['steady']:5.0f}x ({fw['float'] / fw['steady']:.0f}x) taken directly"
+    )
+    print(
+        f"Peak memory per frame (tracemalloc): ours steady {m_steady:.1f} MB, first {m_first:.1f} MB "
+        f"(+ {2 * f0.shape[0] * f0.shape[1] / 1e6:.1f} MB of buffers kept for the scan); float pipeline {m_float:.0f} MB"
+    )
     print(f"Read modes seen in steady state: {', '.join(sorted(set(modes)))}")
-    print(f"Targets (steady state, CPU / wall): >= 200x faster than float: "
-          f"{'yes' if ratio_c >= 200 else 'NO'} / {'yes' if ratio_w >= 200 else 'NO'}; within 6x of memcpy: "
-          f"{'yes' if cpu['steady'] <= 6 * cpu['memcpy'] else 'NO'} / {'yes' if wall['steady'] <= 6 * wall['memcpy'] else 'NO'}")
-    print("ROI: the first frame finds the part on a 1-in-4 sample of the tank (the roi= option, default the frame)")
-    print("and reads 24 px tiles within ~25 px of that outline; frame k reads the tiles within 13 px of frame")
+    print(
+        f"Targets (steady state, CPU / wall): >= 200x faster than float: "
+        f"{'yes' if ratio_c >= 200 else 'NO'} / {'yes' if ratio_w >= 200 else 'NO'}; within 6x of memcpy: "
+        f"{'yes' if cpu['steady'] <= 6 * cpu['memcpy'] else 'NO'} / {'yes' if wall['steady'] <= 6 * wall['memcpy'] else 'NO'}"
+    )
+    print(
+        "ROI: the first frame finds the part on a 1-in-4 sample of the tank (the roi= option, default the frame)"
+    )
+    print(
+        "and reads 24 px tiles within ~25 px of that outline; frame k reads the tiles within 13 px of frame"
+    )
     print("k-1's waterline plus tiles where a 1-in-16 lattice over the tank changed; a waterline that leaves")
     print("the band makes a full read of the tank.")
 
@@ -194,7 +234,9 @@ CONDITIONS = {
     "glare": Effects(glare_spots=8, glare_strength=200.0),
     "salt-and-pepper": Effects(salt_pepper=1e-3),
     "vignetting": Effects(vignetting=0.4),
-    "glare+noise": Effects(glare_spots=8, glare_strength=200.0, noise_sigma=2.5, salt_pepper=3e-4, dust_specks=60),
+    "glare+noise": Effects(
+        glare_spots=8, glare_strength=200.0, noise_sigma=2.5, salt_pepper=3e-4, dust_specks=60
+    ),
     "realistic": PRESETS["realistic"],
     # the 'harsh' preset's optics without its physics (displacement and meniscus
     # move the true waterline off the nominal level: the surface team's correction)
@@ -210,15 +252,17 @@ def errors_px(surf, level, pts_mm, scale):
 
 
 def rms(e):
-    return float(np.sqrt(np.mean(e ** 2))) if len(e) else float("nan")
+    return float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")
 
 
 def accuracy(rig, quick):
     cases = CASES[:2] if quick else CASES
     print()
     print("Accuracy on rendered frames: distance of each point from the true level curve")
-    print(f"  {'condition':16s} {'ours RMS px':>11s} {'mm':>7s} {'max px':>7s} {'pts':>6s}"
-          f" | {'Canny RMS px':>12s} {'mm':>7s} {'pts':>6s} {'far':>5s}")
+    print(
+        f"  {'condition':16s} {'ours RMS px':>11s} {'mm':>7s} {'max px':>7s} {'pts':>6s}"
+        f" | {'Canny RMS px':>12s} {'mm':>7s} {'pts':>6s} {'far':>5s}"
+    )
     worst = {}
     for name, eff in CONDITIONS.items():
         ours, canny = [], []
@@ -232,17 +276,23 @@ def accuracy(rig, quick):
             ours.append(errors_px(surf, level, wl.points, scale))
             ec = errors_px(surf, level, seed.seed_slice(frame, level, cam).edges_mm, scale)
             far += int(np.sum(ec > 5))
-            canny.append(ec[ec <= 5])        # Canny edges of glare/specks far off are counted apart
+            canny.append(ec[ec <= 5])  # Canny edges of glare/specks far off are counted apart
         e, c = np.concatenate(ours), np.concatenate(canny)
         worst[name] = rms(e)
-        print(f"  {name:16s} {rms(e):11.3f} {rms(e) * scale:7.4f} {e.max():7.2f} {len(e):6d}"
-              f" | {rms(c):12.3f} {rms(c) * scale:7.4f} {len(c):6d} {far:5d}")
-    print(f"  (parts and levels: {', '.join(f'{s} at {lv:g} mm' for s, lv in cases)}; "
-          f"{scale:.4f} mm/px; Canny 'far' = edge pixels more than 5 px off, left out of its RMS)")
+        print(
+            f"  {name:16s} {rms(e):11.3f} {rms(e) * scale:7.4f} {e.max():7.2f} {len(e):6d}"
+            f" | {rms(c):12.3f} {rms(c) * scale:7.4f} {len(c):6d} {far:5d}"
+        )
+    print(
+        f"  (parts and levels: {', '.join(f'{s} at {lv:g} mm' for s, lv in cases)}; "
+        f"{scale:.4f} mm/px; Canny 'far' = edge pixels more than 5 px off, left out of its RMS)"
+    )
     clean_ok = worst["clean"] <= 0.1
     noisy_ok = all(worst[n] <= 0.25 for n in CONDITIONS if n != "clean")
-    print(f"Targets: clean <= 0.1 px: {'yes' if clean_ok else 'NO'}; glare/noise/vignetting <= 0.25 px: "
-          f"{'yes' if noisy_ok else 'NO'}")
+    print(
+        f"Targets: clean <= 0.1 px: {'yes' if clean_ok else 'NO'}; glare/noise/vignetting <= 0.25 px: "
+        f"{'yes' if noisy_ok else 'NO'}"
+    )
 
 
 def calibration_bench():
@@ -253,6 +303,7 @@ def calibration_bench():
     from test_vision_calibration import _rot, draw_board, pose_to_board, rays
     from appliance.scanfile import CameraModel
     from appliance.vision.calibration import Board, BoardPose, calibrate
+
     rig = Rig()
     size, K, dist = (rig.width, rig.height), rig.K(), rig.dist_coeffs()
     r = rays(K, dist, size)
@@ -263,20 +314,29 @@ def calibration_bench():
     for cx in (-0.35, 0.0, 0.35):
         for cy in (-0.3, 0.0, 0.3):
             R = _rot(*rng.uniform(-0.3, 0.3, 3))
-            centre = np.array([cx * 330 * rig.width / 2 / K[0, 0], cy * 330 * rig.height / 2 / K[0, 0], 330.0])
-            views.append(draw_board(R, centre - R @ np.array([40.0, 25.0, 0.0]), lambda x, y: (x, y),
-                                    r, size, K[0, 0], board))
+            centre = np.array(
+                [cx * 330 * rig.width / 2 / K[0, 0], cy * 330 * rig.height / 2 / K[0, 0], 330.0]
+            )
+            views.append(
+                draw_board(
+                    R, centre - R @ np.array([40.0, 25.0, 0.0]), lambda x, y: (x, y), r, size, K[0, 0], board
+                )
+            )
     pose = BoardPose(10.0, 80.0, 0.0)
     Rc = rig.rotation()
     plane = draw_board(Rc, -Rc @ rig.centre, pose_to_board(pose), r, size, K[0, 0], board)
     cam, rep = calibrate(views, plane, board, pose)
-    est = CameraModel(rig.width, rig.height, np.array(cam["homography"]), np.array(cam["K"]), np.array(cam["dist"]))
+    est = CameraModel(
+        rig.width, rig.height, np.array(cam["homography"]), np.array(cam["K"]), np.array(cam["dist"])
+    )
     u, v = np.meshgrid(np.linspace(20, rig.width - 20, 41), np.linspace(20, rig.height - 20, 31))
     uv = np.column_stack([u.ravel(), v.ravel()])
     e = np.hypot(*(seed.pixels_to_mm(uv, est) - seed.pixels_to_mm(uv, rig.camera_model(distorted=True))).T)
-    print(f"Calibration: corner reprojection {rep['reprojection_rms_px']:.3f} px; liquid-plane error over the "
-          f"field max {e.max() * 1000:.1f} um, RMS {np.sqrt(np.mean(e ** 2)) * 1000:.1f} um (target 20 um); "
-          f"camera height {cam['height_mm']:.2f} mm (true {rig.height_mm:.2f})")
+    print(
+        f"Calibration: corner reprojection {rep['reprojection_rms_px']:.3f} px; liquid-plane error over the "
+        f"field max {e.max() * 1000:.1f} um, RMS {np.sqrt(np.mean(e**2)) * 1000:.1f} um (target 20 um); "
+        f"camera height {cam['height_mm']:.2f} mm (true {rig.height_mm:.2f})"
+    )
 
 
 def main(argv=None):
@@ -284,7 +344,9 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="fewer repeats and cases")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-speed", action="store_true")
-    p.add_argument("--calibration", action="store_true", help="also calibrate from full-size boards (~1.5 min)")
+    p.add_argument(
+        "--calibration", action="store_true", help="also calibrate from full-size boards (~1.5 min)"
+    )
     args = p.parse_args(argv)
     cv2.setNumThreads(1)
     rig = Rig()

@@ -18,6 +18,7 @@ within about two minutes. Run: `PYTHONPATH=$PWD .venv/bin/python benches/web_abu
 (--quick: 2 anonymous bodies and 50 timed requests instead of 5 and 200). Exits 1 if a
 target is missed.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,16 +36,32 @@ from pathlib import Path
 
 MiB = 1024 * 1024
 ANON_REQUESTS = 5
-ANON_BODY = 100 * MiB            # announced by each anonymous request (under the 256 MiB upload cap)
+ANON_BODY = 100 * MiB  # announced by each anonymous request (under the 256 MiB upload cap)
 LOGINS = 50
 IDLE = 300
 TIMED = 200
 
 
 def start_server(data: Path):
-    proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "serve", "--fake", "--host", "127.0.0.1",
-                             "--port", "0", "--data", str(data), "--no-usb"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "appliance.cli",
+            "serve",
+            "--fake",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--data",
+            str(data),
+            "--no-usb",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
     url_line, pw_line = proc.stdout.readline(), proc.stdout.readline()
     port = int(re.search(r"127\.0\.0\.1:(\d+)/", url_line).group(1))
     password = re.search(r"password: (\S+)", pw_line).group(1)
@@ -83,8 +100,14 @@ def login(port, password, src="127.0.0.1"):
     _, h, page = request(port, "GET", "/login", src=src)
     cookie, csrf = cookie_of(h), csrf_in(page)
     form = urllib.parse.urlencode({"password": password, "csrf_token": csrf})
-    status, h, _ = request(port, "POST", "/login", form, {"Cookie": cookie, "Content-Type":
-                                                           "application/x-www-form-urlencoded"}, src=src)
+    status, h, _ = request(
+        port,
+        "POST",
+        "/login",
+        form,
+        {"Cookie": cookie, "Content-Type": "application/x-www-form-urlencoded"},
+        src=src,
+    )
     assert status == 302, status
     cookie = cookie_of(h)
     _, _, page = request(port, "GET", "/", headers={"Cookie": cookie})
@@ -92,6 +115,7 @@ def login(port, password, src="127.0.0.1"):
 
 
 # -- instruments -------------------------------------------------------------------------------
+
 
 def disk_held(pid: int, data: Path) -> int:
     """Bytes in the data folder plus bytes in every regular file the server has open."""
@@ -103,8 +127,9 @@ def disk_held(pid: int, data: Path) -> int:
             target = os.readlink(fd)
         except OSError:
             continue
-        if os.path.isabs(target.split(" (deleted)")[0]) and (target.endswith("(deleted)") or
-                                                              not target.startswith(str(data))):
+        if os.path.isabs(target.split(" (deleted)")[0]) and (
+            target.endswith("(deleted)") or not target.startswith(str(data))
+        ):
             if not target.startswith(("/dev", "/proc")) and (st.st_mode & 0o170000) == 0o100000:
                 total += st.st_size
     return total
@@ -139,6 +164,7 @@ class Peak(threading.Thread):
 
 
 # -- attacks ---------------------------------------------------------------------------------------
+
 
 def push_body(port, head: bytes, size: int, deadline_s: float, src="127.0.0.1") -> str:
     """Send headers then up to `size` bytes of body, until the server answers or hangs up."""
@@ -177,28 +203,47 @@ def bench_disk(pid, port, data, token):
     control = Peak(lambda: disk_held(pid, data))
     base = disk_held(pid, data)
     control.start()
-    head = (f"POST /api/uploads/scan HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {token}\r\n"
-            f"Content-Type: application/zip\r\nContent-Length: {8 * MiB}\r\n\r\n").encode()
+    head = (
+        f"POST /api/uploads/scan HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {token}\r\n"
+        f"Content-Type: application/zip\r\nContent-Length: {8 * MiB}\r\n\r\n"
+    ).encode()
     ctl = push_body(port, head, 8 * MiB, 20)
     ctl_peak = control.stop() - base
     peak = Peak(lambda: disk_held(pid, data))
     base = disk_held(pid, data)
     peak.start()
     results = []
-    threads = [threading.Thread(target=lambda i=i: results.append(push_body(
-        port, (f"POST /login HTTP/1.1\r\nHost: x\r\nContent-Type: application/octet-stream\r\n"
-               f"Content-Length: {ANON_BODY}\r\n\r\n").encode(), ANON_BODY, 15, src=f"127.0.1.{i + 1}")))
-        for i in range(ANON_REQUESTS)]
+    threads = [
+        threading.Thread(
+            target=lambda i=i: results.append(
+                push_body(
+                    port,
+                    (
+                        f"POST /login HTTP/1.1\r\nHost: x\r\nContent-Type: application/octet-stream\r\n"
+                        f"Content-Length: {ANON_BODY}\r\n\r\n"
+                    ).encode(),
+                    ANON_BODY,
+                    15,
+                    src=f"127.0.1.{i + 1}",
+                )
+            )
+        )
+        for i in range(ANON_REQUESTS)
+    ]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
     used = peak.stop() - base
-    print(f"control   a logged-in 8 MiB body: {ctl}; disk held at its peak {ctl_peak / MiB:.1f} MiB "
-          "(the instrument sees spooled bodies)")
-    print(f"disk      {ANON_REQUESTS} anonymous bodies of {ANON_BODY // MiB} MiB: answered {sorted(set(results))}; "
-          f"peak disk held {used / MiB:.3f} MiB = {used / ANON_REQUESTS / MiB:.3f} MiB per request "
-          f"(target <= 1 MiB)  {verdict(used <= ANON_REQUESTS * MiB, 'disk')}")
+    print(
+        f"control   a logged-in 8 MiB body: {ctl}; disk held at its peak {ctl_peak / MiB:.1f} MiB "
+        "(the instrument sees spooled bodies)"
+    )
+    print(
+        f"disk      {ANON_REQUESTS} anonymous bodies of {ANON_BODY // MiB} MiB: answered {sorted(set(results))}; "
+        f"peak disk held {used / MiB:.3f} MiB = {used / ANON_REQUESTS / MiB:.3f} MiB per request "
+        f"(target <= 1 MiB)  {verdict(used <= ANON_REQUESTS * MiB, 'disk')}"
+    )
 
 
 def bench_logins(pid, port):
@@ -215,8 +260,17 @@ def bench_logins(pid, port):
     def attempt(src, cookie, csrf):
         body = urllib.parse.urlencode({"password": "wrong-password", "csrf_token": csrf})
         go.wait()
-        codes.append(request(port, "POST", "/login", body, {"Cookie": cookie, "Content-Type":
-                                                              "application/x-www-form-urlencoded"}, src=src)[0])
+        codes.append(
+            request(
+                port,
+                "POST",
+                "/login",
+                body,
+                {"Cookie": cookie, "Content-Type": "application/x-www-form-urlencoded"},
+                src=src,
+            )[0]
+        )
+
     t0 = time.monotonic()
     threads = [threading.Thread(target=attempt, args=f) for f in forms]
     for t in threads:
@@ -227,16 +281,20 @@ def bench_logins(pid, port):
     time.sleep(0.2)
     top = peak.stop()
     counts = {c: codes.count(c) for c in sorted(set(codes))}
-    print(f"memory    {LOGINS} parallel wrong logins from {LOGINS} addresses in {took:.2f} s: answers {counts}; "
-          f"RSS {base / MiB:.0f} MB before, peak {top / MiB:.0f} MB (target < 250 MB)  "
-          f"{verdict(top < 250 * MiB, 'memory')}")
+    print(
+        f"memory    {LOGINS} parallel wrong logins from {LOGINS} addresses in {took:.2f} s: answers {counts}; "
+        f"RSS {base / MiB:.0f} MB before, peak {top / MiB:.0f} MB (target < 250 MB)  "
+        f"{verdict(top < 250 * MiB, 'memory')}"
+    )
 
 
 def bench_idle(port, cookie):
     idle = []
     for i in range(IDLE):
-        s = socket.create_connection(("127.0.0.1", port), timeout=5, source_address=(f"127.0.3.{1 + i % 6}", 0))
-        s.sendall(b"GET /api/state HTTP/1.1\r\nHost: x\r\n")      # and never the blank line
+        s = socket.create_connection(
+            ("127.0.0.1", port), timeout=5, source_address=(f"127.0.3.{1 + i % 6}", 0)
+        )
+        s.sendall(b"GET /api/state HTTP/1.1\r\nHost: x\r\n")  # and never the blank line
         idle.append(s)
     time.sleep(0.5)
     times, codes = [], []
@@ -263,18 +321,27 @@ def bench_idle(port, cookie):
     times.sort()
     p50, p99 = times[len(times) // 2], times[min(len(times) - 1, int(len(times) * 0.99))]
     ok = codes.count(200)
-    print(f"idle      {IDLE} half-sent requests ({still_open} still held open at the end); {ok}/{len(codes)} "
-          f"logged-in requests answered 200, p50 {p50 * 1000:.1f} ms, p99 {p99 * 1000:.1f} ms "
-          f"(target < 500 ms)  {verdict(p99 < 0.5 and ok == len(codes), 'idle')}")
+    print(
+        f"idle      {IDLE} half-sent requests ({still_open} still held open at the end); {ok}/{len(codes)} "
+        f"logged-in requests answered 200, p50 {p50 * 1000:.1f} ms, p99 {p99 * 1000:.1f} ms "
+        f"(target < 500 ms)  {verdict(p99 < 0.5 and ok == len(codes), 'idle')}"
+    )
 
 
 def bench_logout(port, password):
     cookie, csrf = login(port, password)
     before = request(port, "GET", "/api/state", headers={"Cookie": cookie})[0]
-    request(port, "POST", "/logout", urllib.parse.urlencode({"csrf_token": csrf}),
-            {"Cookie": cookie, "Content-Type": "application/x-www-form-urlencoded"})
+    request(
+        port,
+        "POST",
+        "/logout",
+        urllib.parse.urlencode({"csrf_token": csrf}),
+        {"Cookie": cookie, "Content-Type": "application/x-www-form-urlencoded"},
+    )
     after = request(port, "GET", "/api/state", headers={"Cookie": cookie})[0]
-    print(f"logout    a copied cookie: {before} before logout, {after} after  {verdict(after == 401, 'logout')}")
+    print(
+        f"logout    a copied cookie: {before} before logout, {after} after  {verdict(after == 401, 'logout')}"
+    )
 
 
 def main():
@@ -286,13 +353,16 @@ def main():
     with tempfile.TemporaryDirectory(prefix="inkslice-web-abuse-") as tmp:
         data = Path(tmp) / "data"
         proc, port, password = start_server(data)
-        stop_at = threading.Timer(150, proc.kill)     # the whole run is bounded, whatever hangs
+        stop_at = threading.Timer(150, proc.kill)  # the whole run is bounded, whatever hangs
         stop_at.start()
         try:
             from appliance.web.auth import Credentials
+
             token = Credentials(data / "web").create_token("bench")[1]
-            cookie, _ = login(port, password)          # before the login storm (its limits lock logins)
-            print(f"server    pid {proc.pid}, http://127.0.0.1:{port}/, RSS {rss(proc.pid) / MiB:.0f} MB idle")
+            cookie, _ = login(port, password)  # before the login storm (its limits lock logins)
+            print(
+                f"server    pid {proc.pid}, http://127.0.0.1:{port}/, RSS {rss(proc.pid) / MiB:.0f} MB idle"
+            )
             bench_disk(proc.pid, port, data, token)
             bench_logins(proc.pid, port)
             bench_idle(port, cookie)

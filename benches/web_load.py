@@ -19,6 +19,7 @@ within 10 % of the unloaded one. Bounded: at most --max-requests requests and --
     .venv/bin/python benches/web_load.py            # 50 clients, 41-level scan
     .venv/bin/python benches/web_load.py --quick    # 20 clients, short scan (make bench)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,15 +40,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from appliance.web.auth import Credentials          # noqa: E402
+from appliance.web.auth import Credentials  # noqa: E402
 
 
 def scan_params(levels, settle_s=0.5):
     # settle_s 0.5 s is the daemon's default: on the real bench ripples need that long, and a
     # real scan's time is mostly these waits, the moves and the processing
     top = 2.0 + 0.5 * (levels - 1)
-    return {"name": "load bench", "surface": "cone", "levels_to_mm": top, "levels_from_mm": 2.0,
-            "level_step_mm": 0.5, "settle_s": settle_s}
+    return {
+        "name": "load bench",
+        "surface": "cone",
+        "levels_to_mm": top,
+        "levels_from_mm": 2.0,
+        "level_step_mm": 0.5,
+        "settle_s": settle_s,
+    }
 
 
 class Api:
@@ -59,8 +66,9 @@ class Api:
     def call(self, method, path, body=None):
         for attempt in (1, 2):
             try:
-                self.conn.request(method, path, body=json.dumps(body) if body is not None else None,
-                                  headers=self.headers)
+                self.conn.request(
+                    method, path, body=json.dumps(body) if body is not None else None, headers=self.headers
+                )
                 r = self.conn.getresponse()
                 data = r.read()
                 return r.status, data
@@ -112,7 +120,7 @@ class Crowd:
         self.clients, self.period, self.max_requests = clients, period, max_requests
         self.stop = threading.Event()
         self.lock = threading.Lock()
-        self.samples: list[tuple[float, float]] = []    # (time, latency s)
+        self.samples: list[tuple[float, float]] = []  # (time, latency s)
         self.errors = 0
         self.requests = 0
         self.frames = 0
@@ -156,9 +164,9 @@ class Crowd:
                 r = conn.getresponse()
                 event = None
                 while not self.stop.is_set():
-                    line = r.readline()          # de-chunked by http.client
+                    line = r.readline()  # de-chunked by http.client
                     if not line:
-                        break                   # the server ends streams after ~50 s; reconnect
+                        break  # the server ends streams after ~50 s; reconnect
                     line = line.decode().rstrip("\n")
                     if line.startswith("event: "):
                         event = line[7:]
@@ -206,26 +214,38 @@ def pct(values, p):
 
 
 def _terminate(signum, frame):
-    raise SystemExit(128 + signum)          # run the finally blocks: stop the daemon and the server
+    raise SystemExit(128 + signum)  # run the finally blocks: stop the daemon and the server
 
 
 def main(argv=None):
     signal.signal(signal.SIGTERM, _terminate)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--clients", type=int, default=50)
-    ap.add_argument("--period", type=float, default=0.5, help="seconds between one client's polls (default 0.5)")
+    ap.add_argument(
+        "--period", type=float, default=0.5, help="seconds between one client's polls (default 0.5)"
+    )
     ap.add_argument("--levels", type=int, default=41)
     ap.add_argument("--rounds", type=int, default=3, help="(unloaded, loaded) scan pairs (default 3)")
     ap.add_argument("--quick", action="store_true", help="20 clients, 15 levels, 1 round, no warm-up scan")
     ap.add_argument("--max-requests", type=int, default=40000)
-    ap.add_argument("--with-processing", action="store_true",
-                    help="wait for processing and compare whole jobs (default: capture only, processing cancelled)")
-    ap.add_argument("--check", action="store_true",
-                    help="exit 1 when a target is missed (default: print the verdict; on a shared machine "
-                         "the targets measure the neighbours as much as the box)")
-    ap.add_argument("--nice", type=int, default=0,
-                    help="niceness of the client process (default 0: the clients compete with the box, "
-                         "which only makes the figures worse)")
+    ap.add_argument(
+        "--with-processing",
+        action="store_true",
+        help="wait for processing and compare whole jobs (default: capture only, processing cancelled)",
+    )
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 when a target is missed (default: print the verdict; on a shared machine "
+        "the targets measure the neighbours as much as the box)",
+    )
+    ap.add_argument(
+        "--nice",
+        type=int,
+        default=0,
+        help="niceness of the client process (default 0: the clients compete with the box, "
+        "which only makes the figures worse)",
+    )
     ap.add_argument("--max-s", type=float, default=420.0)
     args = ap.parse_args(argv)
     if args.quick:
@@ -238,18 +258,51 @@ def main(argv=None):
         token = Credentials(data / "web").create_token("load bench")[1]
         procs = []
         try:
-            daemon = subprocess.Popen([sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake",
-                                       "--surface", "cone", "--data", str(data), "--log-level", "WARNING"],
-                                      cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            daemon = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "appliance.cli",
+                    "daemon",
+                    "--sim",
+                    "fake",
+                    "--surface",
+                    "cone",
+                    "--data",
+                    str(data),
+                    "--log-level",
+                    "WARNING",
+                ],
+                cwd=ROOT,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
             procs.append(daemon)
             sock = data / "daemon.sock"
             while not sock.exists():
                 if daemon.poll() is not None or time.monotonic() > deadline:
                     raise SystemExit(f"daemon did not start: {daemon.stderr.read()}")
                 time.sleep(0.05)
-            web = subprocess.Popen([sys.executable, "-m", "appliance.cli", "serve", "--data", str(data),
-                                    "--host", "127.0.0.1", "--port", "0", "--no-usb"],
-                                   cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            web = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "appliance.cli",
+                    "serve",
+                    "--data",
+                    str(data),
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    "0",
+                    "--no-usb",
+                ],
+                cwd=ROOT,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
             procs.append(web)
             m = re.search(r"http://127\.0\.0\.1:(\d+)", web.stdout.readline())
             if not m:
@@ -278,11 +331,15 @@ def main(argv=None):
                 unloaded.append(total)
                 crowd.stop.clear()
                 crowd.start()
-                time.sleep(2.0)                         # every client connected and polling
+                time.sleep(2.0)  # every client connected and polling
                 t_start = time.monotonic()
                 c2 = (cpu_s(daemon.pid), cpu_s(web.pid))
-                total_l, _ = run_scan(api, params, timeout=max(10.0, deadline - time.monotonic()),
-                                      with_processing=args.with_processing)
+                total_l, _ = run_scan(
+                    api,
+                    params,
+                    timeout=max(10.0, deadline - time.monotonic()),
+                    with_processing=args.with_processing,
+                )
                 t_end = time.monotonic()
                 c3 = (cpu_s(daemon.pid), cpu_s(web.pid))
                 cpu["daemon_u"].append(c1[0] - c0[0])
@@ -293,8 +350,11 @@ def main(argv=None):
                 loaded.append(total_l)
                 lat += [dt for t, dt in crowd.samples if t_start <= t <= t_end]
                 crowd.samples.clear()
-                print(f"round {rnd + 1}: scan of {job['levels_total']} levels: unloaded {total:.2f} s, "
-                      f"loaded {total_l:.2f} s", flush=True)
+                print(
+                    f"round {rnd + 1}: scan of {job['levels_total']} levels: unloaded {total:.2f} s, "
+                    f"loaded {total_l:.2f} s",
+                    flush=True,
+                )
                 if time.monotonic() > deadline:
                     print("time budget used up; stopping early")
                     break
@@ -312,24 +372,34 @@ def main(argv=None):
     p50, p95, p99, worst = (pct(lat, q) * 1000 for q in (50, 95, 99, 100))
     med_u, med_l = statistics.median(unloaded), statistics.median(loaded)
     change = (med_l - med_u) / med_u * 100
-    print(f"load: {args.clients} clients polling /api/state every {args.period:g} s "
-          f"(~{args.clients / args.period:.0f} req/s) + 1 live view ({crowd.frames} frames, {crowd.events} events); "
-          f"{crowd.requests} requests, {crowd.errors} errors")
-    print(f"/api/state latency during loaded scans ({len(lat)} requests): p50 {p50:.1f} ms, p95 {p95:.1f} ms, "
-          f"p99 {p99:.1f} ms, max {worst:.1f} ms")
+    print(
+        f"load: {args.clients} clients polling /api/state every {args.period:g} s "
+        f"(~{args.clients / args.period:.0f} req/s) + 1 live view ({crowd.frames} frames, {crowd.events} events); "
+        f"{crowd.requests} requests, {crowd.errors} errors"
+    )
+    print(
+        f"/api/state latency during loaded scans ({len(lat)} requests): p50 {p50:.1f} ms, p95 {p95:.1f} ms, "
+        f"p99 {p99:.1f} ms, max {worst:.1f} ms"
+    )
     what = "whole job incl. processing" if args.with_processing else "capture: homing, moves, settle, frames"
-    print(f"scan duration ({what}), median of {len(unloaded)}: unloaded {med_u:.2f} s, loaded {med_l:.2f} s "
-          f"({change:+.1f} %)")
+    print(
+        f"scan duration ({what}), median of {len(unloaded)}: unloaded {med_u:.2f} s, loaded {med_l:.2f} s "
+        f"({change:+.1f} %)"
+    )
     ok = p99 < 100 and abs(change) <= 10 and crowd.errors == 0
-    print(f"CPU: the daemon (with any processing child) used {statistics.median(cpu['daemon_u']):.1f} s per scan "
-          f"unloaded, {statistics.median(cpu['daemon_l']):.1f} s loaded; the web server used "
-          f"{statistics.median(cpu['web_u']) * 100:.0f} % of one core unloaded, "
-          f"{statistics.median(cpu['web_l']) * 100:.0f} % under load")
-    print(f"machine load average (1 min) at start {load0:.1f}, at end {os.getloadavg()[0]:.1f} on "
-          f"{os.cpu_count()} cores: durations are only comparable on an otherwise quiet machine")
+    print(
+        f"CPU: the daemon (with any processing child) used {statistics.median(cpu['daemon_u']):.1f} s per scan "
+        f"unloaded, {statistics.median(cpu['daemon_l']):.1f} s loaded; the web server used "
+        f"{statistics.median(cpu['web_u']) * 100:.0f} % of one core unloaded, "
+        f"{statistics.median(cpu['web_l']) * 100:.0f} % under load"
+    )
+    print(
+        f"machine load average (1 min) at start {load0:.1f}, at end {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} cores: durations are only comparable on an otherwise quiet machine"
+    )
     print(f"verdict: {'PASS' if ok else 'FAIL'} (p99 < 100 ms, duration within 10 %, no errors)")
     if crowd.errors:
-        return 1                    # failed requests are a defect whatever the machine's load
+        return 1  # failed requests are a defect whatever the machine's load
     return 0 if ok or not args.check else 1
 
 

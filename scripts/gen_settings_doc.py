@@ -9,6 +9,7 @@ committed page differs from what this script writes.
     .venv/bin/python scripts/gen_settings_doc.py            # (re)write docs/settings.md
     .venv/bin/python scripts/gen_settings_doc.py --check    # exit 1 if it is out of date
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from appliance.daemon import settings as S          # noqa: E402
-from appliance.hw.devices import WIRING              # noqa: E402
+from appliance.daemon import settings as S  # noqa: E402
+from appliance.hw.devices import WIRING  # noqa: E402
 
 OUT = REPO / "docs" / "settings.md"
 
@@ -29,7 +30,7 @@ WIRING_HELP = {
     "stage_port": "Serial port of the stage controller (the udev rule names it /dev/inkslice-stage).",
     "camera": "The camera's device (the udev rule names it /dev/inkslice-camera).",
     "camera_settings": "Fixed camera controls: width, height, exposure, gain, wb_temperature, focus "
-                       "(everything automatic is switched off for a scan).",
+    "(everything automatic is switched off for a scan).",
     "gpiochip": "The GPIO chip the lines below belong to.",
     "light_line": "GPIO line (offset on the chip) switching the LED panel.",
     "led_line": "GPIO line of the status LED.",
@@ -81,8 +82,9 @@ overwrites it. Restart the daemon after a change.
 def allowed(s) -> str:
     """The values a setting may take, as settings.validate checks them."""
     if s.kind in ("choice", "bool"):
-        return ", ".join("empty" if c == "" else f"`{json.dumps(c) if isinstance(c, bool) else c}`"
-                         for c in s.allowed())
+        return ", ".join(
+            "empty" if c == "" else f"`{json.dumps(c) if isinstance(c, bool) else c}`" for c in s.allowed()
+        )
     if s.kind == "text":
         return s.pattern_says
     if s.kind == "int":
@@ -99,19 +101,29 @@ def shown(value) -> str:
 def render() -> str:
     missing = sorted(set(S.DEFAULTS) ^ set(S.HELP))
     if missing:
-        raise SystemExit(f"gen_settings_doc: settings without a HELP sentence (or HELP without a setting): {missing}")
+        raise SystemExit(
+            f"gen_settings_doc: settings without a HELP sentence (or HELP without a setting): {missing}"
+        )
     unexplained = sorted(set(WIRING) ^ set(WIRING_HELP))
     if unexplained:
-        raise SystemExit(f"gen_settings_doc: wiring keys without a sentence here (or stale ones): {unexplained}")
+        raise SystemExit(
+            f"gen_settings_doc: wiring keys without a sentence here (or stale ones): {unexplained}"
+        )
     lines = [HEADER.format(max_levels=S.MAX_LEVELS)]
     for gid, title in S.GROUPS:
-        lines.append(f"\n### {title}\n\n| setting | default | unit | allowed | what it does |\n|---|---|---|---|---|\n")
+        lines.append(
+            f"\n### {title}\n\n| setting | default | unit | allowed | what it does |\n|---|---|---|---|---|\n"
+        )
         for st in (st for st in S.SCHEMA if st.group == gid):
-            lines.append(f"| `{st.key}` | {shown(st.default)} | {st.unit or '-'} | {allowed(st)} | "
-                         f"**{st.label}.** {st.help} |\n")
+            lines.append(
+                f"| `{st.key}` | {shown(st.default)} | {st.unit or '-'} | {allowed(st)} | "
+                f"**{st.label}.** {st.help} |\n"
+            )
         if gid == "security":
-            lines.append("\nThe admin password and the API tokens are kept by the web service itself "
-                         "(Settings page, Security section; docs/api/README.md).\n")
+            lines.append(
+                "\nThe admin password and the API tokens are kept by the web service itself "
+                "(Settings page, Security section; docs/api/README.md).\n"
+            )
     lines.append(WIRING_HEADER)
     for key, default in WIRING.items():
         lines.append(f"| `{key}` | {shown(default)} | {WIRING_HELP[key]} |\n")

@@ -1,4 +1,5 @@
 """Small height maps with known shapes for the CAM tests."""
+
 import numpy as np
 
 from appliance.surface.heightmap import HeightMap

@@ -1,4 +1,5 @@
 """Shared bits of the daemon tests: a small fast scan on the fake bench."""
+
 import time
 
 import numpy as np
@@ -12,8 +13,15 @@ FINAL = ("done", "failed", "cancelled")
 # above its tip (a first frame showing the part makes the scan start higher, see levels.py)
 # The dissertation's pipeline: our finishing toolpath takes minutes on a busy 2-core box,
 # and these tests are about the daemon, not the CAM.
-SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
-        "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
+SCAN = {
+    "name": "cone",
+    "surface": "cone",
+    "levels_to_mm": 24.0,
+    "levels_from_mm": 6.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+    "pipeline": "seed",
+}
 
 
 def service(tmp_path, faults=None, processor=in_process, **kw):
@@ -34,4 +42,5 @@ def wait_final(svc, job_id, timeout=60.0):
 def read_heightmap(path):
     """heightmap.csv -> the grid of z (NaN off the part)."""
     from appliance.outputs import read_heightmap_csv
+
     return np.asarray(read_heightmap_csv(path).z, float)

@@ -5,6 +5,7 @@ clone): the AVR ELF and the simavr harness once per session, the cmocka and
 fuzzer binaries in their own tests.  RawLink speaks the line protocol by hand
 so the protocol tests can send exactly the bytes a spec case describes.
 """
+
 import subprocess
 import time
 from pathlib import Path
@@ -21,7 +22,9 @@ BUILD = build_dir()
 
 def make(*targets, check=True):
     BUILD.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run(["make", "-C", str(FIRMWARE_DIR), f"BUILD={BUILD}", *targets], capture_output=True, text=True)
+    r = subprocess.run(
+        ["make", "-C", str(FIRMWARE_DIR), f"BUILD={BUILD}", *targets], capture_output=True, text=True
+    )
     if check and r.returncode != 0:
         raise AssertionError(f"make {' '.join(targets)} failed:\n{r.stdout}\n{r.stderr}")
     return r
@@ -43,7 +46,7 @@ def bench(fw_build):
 class RawLink:
     """The protocol by hand: exact lines in, parsed lines out."""
 
-    def __init__(self, port, timeout=5.0):       # generous: CI machines are shared and loaded
+    def __init__(self, port, timeout=5.0):  # generous: CI machines are shared and loaded
         self.ser = serial.Serial(port, 115200, timeout=timeout)
         self.timeout = timeout
 
@@ -64,7 +67,7 @@ class RawLink:
                 try:
                     return P.parse_line(raw)
                 except P.ProtocolError:
-                    continue      # e.g. the tail of a boot banner sent before the port was opened
+                    continue  # e.g. the tail of a boot banner sent before the port was opened
         raise AssertionError("no line from the firmware")
 
     def reply(self, seq=None, timeout=None):

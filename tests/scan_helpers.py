@@ -4,6 +4,7 @@ A cone (apex 20 mm, slope 1:1) seen orthographically at 0.25 mm per pixel:
 its waterline at level L is a circle of radius 20 - L about (30, 30) mm.
 The edge is anti-aliased by a linear ramp so its 50 % grey crossing is exact.
 """
+
 import numpy as np
 
 from appliance.scanfile import CameraModel, FrameRef, Scan, write_frame, write_scan_json
@@ -21,7 +22,7 @@ def camera():
 def cone_frame(level):
     u, v = np.meshgrid(np.arange(W) + 0.0, np.arange(H) + 0.0)
     x, y = u * MM_PER_PX, (H - v) * MM_PER_PX
-    d = (20 - level) - np.hypot(x - 30, y - 30)          # mm inside the waterline
+    d = (20 - level) - np.hypot(x - 30, y - 30)  # mm inside the waterline
     cover = np.clip(0.5 + d / MM_PER_PX, 0, 1)
     ink, part = np.array([60, 20, 10.0]), np.array([220, 225, 230.0])
     img = ink + cover[..., None] * (part - ink)

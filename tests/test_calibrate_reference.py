@@ -1,6 +1,7 @@
 """Meniscus calibration from a reference part, end to end on the virtual bench:
 render a sphere with a known meniscus, `inkslice calibrate --reference`, then
 `inkslice process --meniscus` on a scan of another part with the same ink."""
+
 import json
 
 import numpy as np
@@ -59,11 +60,25 @@ def test_a_ball_lying_anywhere_on_the_base_recovers_the_inks_meniscus(tmp_path):
     """The reference a user can buy: a 25.4 mm precision ball, put down by hand off the centre.
     It is found in the scan, then fitted like the sphere."""
     ball = surfaces.ball(25.4, 44.0, 56.0)
-    levels = [round(26.0 - 0.75 * i, 3) for i in range(22)]          # 26 .. 10.25 mm: past its equator
+    levels = [round(26.0 - 0.75 * i, 3) for i in range(22)]  # 26 .. 10.25 mm: past its equator
     render_scan(ball, tmp_path / "ball", levels=levels, rig=RIG, effects=INK, seed=6, workers=2)
     out = tmp_path / "meniscus.json"
-    assert main(["calibrate", "--reference", "ball", "--diameter", "25.4", "--scan", str(tmp_path / "ball"),
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--reference",
+                "ball",
+                "--diameter",
+                "25.4",
+                "--scan",
+                str(tmp_path / "ball"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc = json.loads(out.read_text())
     assert doc["capillary_length_mm"] == pytest.approx(2.0, abs=0.15)
     assert doc["contact_angle_deg"] == pytest.approx(10.0, abs=2.0)

@@ -1,4 +1,5 @@
 """Drop-cutter on shapes with exact answers: a flat, a step, a sphere, a V-groove, an edge."""
+
 import cv2
 import numpy as np
 import pytest
@@ -22,17 +23,17 @@ def test_flat_surface_tip_is_the_surface(cutter):
 def test_sphere_ball_and_flat():
     # a cap of radius 10 on z0 = 5, sampled every 0.1 mm
     rho, zc = 10.0, 5.0
-    hm = grid_map(lambda X, Y: zc + np.sqrt(np.maximum(rho ** 2 - X ** 2 - Y ** 2, 0)), -13, 13, -13, 13, 0.1)
+    hm = grid_map(lambda X, Y: zc + np.sqrt(np.maximum(rho**2 - X**2 - Y**2, 0)), -13, 13, -13, 13, 0.1)
     s = Sampler(hm, edge_step=0.05)
     r = np.array([0.0, 1.0, 2.33, 3.7])
     ball = drop_points(s, BALL, r, 0 * r)
     # ball centre rides on the sphere of radius rho + R
-    exact = zc + np.sqrt((rho + 3) ** 2 - r ** 2) - 3
+    exact = zc + np.sqrt((rho + 3) ** 2 - r**2) - 3
     assert np.max(np.abs(ball - exact)) < 0.002
-    assert np.all(ball <= exact + 1e-9)          # the lattice can only under-reach, never over
+    assert np.all(ball <= exact + 1e-9)  # the lattice can only under-reach, never over
     rf = np.array([3.5, 5.0, 6.2])
     flat = drop_points(s, FLAT, rf, 0 * rf)
-    exact_f = zc + np.sqrt(rho ** 2 - (rf - 3) ** 2)   # the rim touches where the sphere is highest
+    exact_f = zc + np.sqrt(rho**2 - (rf - 3) ** 2)  # the rim touches where the sphere is highest
     assert np.max(np.abs(flat - exact_f)) < 0.002
 
 
@@ -54,7 +55,7 @@ def test_step_wall_is_a_contact_even_between_lattice_points():
     # 10 mm below x = 50, 20 mm from it: a wall the 0.5 mm map turns into one steep cell side
     hm = grid_map(lambda X, Y: np.where(X >= 50, 20.0, 10.0), 30, 70, 0, 20, 0.5)
     s = Sampler(hm, edge_step=0.05)
-    x = 47.35                        # its offset lattice (x + 0.1 k) straddles the wall top at x = 50
+    x = 47.35  # its offset lattice (x + 0.1 k) straddles the wall top at x = 50
     z = drop_points(s, BALL, [x], [10.0])[0]
     assert z == pytest.approx(20 - (3 - np.sqrt(9 - (50 - x) ** 2)), abs=1e-6)
     # without the wall segments the lattice misses the top corner by ~0.1 mm
@@ -80,13 +81,15 @@ def test_part_edge_is_a_contact():
 
 def test_flat_cutter_is_a_disc_dilation():
     rng = np.random.default_rng(5)
-    hm = grid_map(lambda X, Y: 5 + np.sin(X / 3) * np.cos(Y / 4) + 0.3 * np.sin(X * Y / 50), 0, 30, 0, 30, 0.1)
+    hm = grid_map(
+        lambda X, Y: 5 + np.sin(X / 3) * np.cos(Y / 4) + 0.3 * np.sin(X * Y / 50), 0, 30, 0, 30, 0.1
+    )
     hm.z += rng.normal(0, 0.01, hm.z.shape)
     s = Sampler(hm)
     got = drop_grid(s, FLAT, 0.0, 0.0, hm.x.size, hm.y.size, 0.1)
     m = 30
-    yy, xx = np.mgrid[-m:m + 1, -m:m + 1]
-    disc = ((xx ** 2 + yy ** 2) <= (3 / 0.1) ** 2 + 1e-9).astype(np.uint8)
+    yy, xx = np.mgrid[-m : m + 1, -m : m + 1]
+    disc = ((xx**2 + yy**2) <= (3 / 0.1) ** 2 + 1e-9).astype(np.uint8)
     padded = np.pad(hm.z.astype(np.float32), m, constant_values=0.0)
     ref = cv2.dilate(padded, disc)[m:-m, m:-m]
     assert np.max(np.abs(got - ref)) < 1e-5
@@ -114,13 +117,14 @@ def test_flat_end_on_a_slope_touches_with_its_rim_exactly():
     # stop short of the rim (0.007 mm low here); the finishing drop-cutter searches
     # the rim itself.
     from appliance.cam.zigzag import drop_points as finishing_drop
+
     g = np.array([0.24, 0.08])
     hm = grid_map(lambda X, Y: 10 + g[0] * X + g[1] * Y, 0, 30, 0, 30, 1.0)
     s = Sampler(hm, edge_step=0.05)
     x, y = np.array([12.0, 15.3]), np.array([11.0, 14.7])
     exact = 10 + g @ np.vstack([x, y]) + 3 * np.hypot(*g)
     lattice = drop_points(s, FLAT, x, y)
-    assert np.max(exact - lattice) > 0.003           # what the lattice alone misses
+    assert np.max(exact - lattice) > 0.003  # what the lattice alone misses
     got = finishing_drop(s, FLAT, x, y)
     assert np.max(np.abs(got - exact)) < 2e-4
 
@@ -132,6 +136,7 @@ def test_edge_pairs_left_out_could_not_raise_a_tip(cutter, step, monkeypatch):
     # 0.1 mm (patches of ten segments): the pairs the bounds leave out change no tip,
     # and they do leave most of them out
     from appliance.cam import dropcutter
+
     rng = np.random.default_rng(3)
     hm = grid_map(lambda X, Y: 6 + 0.2 * X + np.where(X > 12, 4.0, 0.0), 0, 24, 0, 20, step)
     hm.z += rng.normal(0, 0.05, hm.z.shape)
@@ -179,4 +184,4 @@ def test_lines_meet_the_edges_as_the_same_points_one_by_one(angle, stride):
     # (single-precision dilation relative to each slab's top: a few 1e-6 mm apart)
     assert np.max(np.abs(lines - points)) < 2e-5
     bare = drop_lines(Sampler(hm), BALL, origins, e1, n, 0.1, stride=stride)
-    assert np.max(lines - bare) > 1.0          # the edges raised some tips
+    assert np.max(lines - bare) > 1.0  # the edges raised some tips

@@ -1,5 +1,6 @@
 """Programs a controller accepts: motion hygiene, dialects (rs274, GRBL and Fanuc rules),
 machine limits, boundary handling, roughing, parsing back, bad input, the commands."""
+
 import re
 import shutil
 import subprocess
@@ -31,8 +32,11 @@ def bowl():
 def finish(hm=None, **kw):
     kw.setdefault("scallop", 0.05)
     cutter = parse_cutter(kw.pop("cutter", "ball6"))
-    job_kw = {k: kw.pop(k) for k in list(kw) if k in ("dialect", "machine", "feed", "plunge", "z_offset",
-                                                     "material", "rpm", "clearance")}
+    job_kw = {
+        k: kw.pop(k)
+        for k in list(kw)
+        if k in ("dialect", "machine", "feed", "plunge", "z_offset", "material", "rpm", "clearance")
+    }
     return finishing_gcode(hm if hm is not None else bowl(), FinishSettings(cutter, **kw), **job_kw)
 
 
@@ -45,13 +49,16 @@ def test_motion_hygiene(linuxcnc_text):
     lines = [l for l in linuxcnc_text.splitlines() if not l.startswith("(")]
     p = parse_gcode(linuxcnc_text)
     safe = p.xyz[0, 2]
-    assert p.kind[0] == 0 and re.fullmatch(r"G0 Z[\d.]+", lines[lines.index(next(l for l in lines if l.startswith("G0")))])
-    assert safe > np.nanmax(bowl().z)                                  # above the part's top
+    assert p.kind[0] == 0 and re.fullmatch(
+        r"G0 Z[\d.]+", lines[lines.index(next(l for l in lines if l.startswith("G0")))]
+    )
+    assert safe > np.nanmax(bowl().z)  # above the part's top
     # rapids only at the safe height, or straight up out of a cut
     for k in np.flatnonzero(p.kind == 0)[1:]:
         prev = p.xyz[k - 1]
         assert p.xyz[k, 2] == pytest.approx(safe) and (
-            np.allclose(prev[:2], p.xyz[k, :2]) or prev[2] == pytest.approx(safe))
+            np.allclose(prev[:2], p.xyz[k, :2]) or prev[2] == pytest.approx(safe)
+        )
     # every descent is a G1 at the plunge feed, the cuts at the cutting feed
     first_g1 = next(i for i, l in enumerate(lines) if l.startswith("G1"))
     assert "F" in lines[first_g1] and any(l.startswith("M3 S") for l in lines[:first_g1])
@@ -63,11 +70,18 @@ def test_motion_hygiene(linuxcnc_text):
 
 
 def _rs274(tmp_path, text):
-    assert shutil.which(RS274) or __import__("os").path.exists(RS274), "rs274 missing: scripts/setup.sh --test installs linuxcnc-uspace"
+    assert shutil.which(RS274) or __import__("os").path.exists(RS274), (
+        "rs274 missing: scripts/setup.sh --test installs linuxcnc-uspace"
+    )
     src = tmp_path / "p.ngc"
     src.write_text(text)
-    r = subprocess.run([RS274, "-g", str(src), str(tmp_path / "out.txt")], stdin=subprocess.DEVNULL,
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [RS274, "-g", str(src), str(tmp_path / "out.txt")],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     return r
 
 
@@ -86,11 +100,11 @@ def test_grbl_and_fanuc_rules():
     g = finish(dialect="grbl").text
     assert check_grbl(g) == []
     assert max(len(l) for l in g.splitlines()) <= 80
-    assert check_grbl("N10 G64 X1.5\nM6\n")          # catches N words, G64, M6, 1 decimal
+    assert check_grbl("N10 G64 X1.5\nM6\n")  # catches N words, G64, M6, 1 decimal
     f = finish(dialect="fanuc").text
     assert check_fanuc(f) == []
     assert f.splitlines()[0] == "%" and f.splitlines()[1] == "O0001"
-    assert check_fanuc("%\nO0001\nG1 X10 F100\n%\n")   # X10 without a point is 10 microns there
+    assert check_fanuc("%\nO0001\nG1 X10 F100\n%\n")  # X10 without a point is 10 microns there
     # all dialects describe the same moves
     a = parse_gcode(g).xyz
     b = parse_gcode(f).xyz
@@ -103,7 +117,7 @@ def test_dissertation_dialect_and_its_gouge():
     assert text == dissertation_gcode(hm)
     rep, _ = verify_gcode(text, hm, cutter="ball6", z_zero=float(np.nanmax(hm.z)), resolution=0.1)
     ours, _ = verify_gcode(finish(hm).text, hm, resolution=0.1)
-    assert rep.gouge > 0.1                       # surface points as tool tips: the ball digs in
+    assert rep.gouge > 0.1  # surface points as tool tips: the ball digs in
     assert ours.gouge <= 0.005
 
 
@@ -116,8 +130,13 @@ def test_parser_round_trip_and_errors():
     assert np.allclose(inch.xyz[0], [25.4, 50.8, 76.2])
     rel = parse_gcode("G90 G0 X1 Y1 Z1\nG91 G1 X1 F100\n")
     assert np.allclose(rel.xyz[1], [2, 1, 1])
-    for bad, what in (("G1 X1\n", "no feed"), ("G2 X1 Y1 I1 F10\n", "arcs"), ("G0 X1 Q5\n", "Q5"),
-                      ("G0 X1 (open\n", "parenthesis"), ("M30\nG0 X1\n", "after the program end")):
+    for bad, what in (
+        ("G1 X1\n", "no feed"),
+        ("G2 X1 Y1 I1 F10\n", "arcs"),
+        ("G0 X1 Q5\n", "Q5"),
+        ("G0 X1 (open\n", "parenthesis"),
+        ("M30\nG0 X1\n", "after the program end"),
+    ):
         with pytest.raises(InkSliceError, match=what):
             parse_gcode(bad)
 
@@ -143,7 +162,7 @@ def test_feed_limits_slow_moves_down():
     feed = p.feed[1:]
     vz = np.where(L > 0, feed * d[:, 2] / np.where(L > 0, L, 1), 0)
     g1 = p.kind[1:] == 1
-    assert np.all(vz[g1] <= 200.0 * 1.02)      # the printed coordinates are rounded
+    assert np.all(vz[g1] <= 200.0 * 1.02)  # the printed coordinates are rounded
     assert np.nanmax(feed) == 1500.0
 
 
@@ -156,7 +175,7 @@ def test_boundary_margin():
         dist = s.part_distance(p.xyz[cut, 0], p.xyz[cut, 1])
         assert dist.max() <= margin + 1e-6
         if margin:
-            assert dist.max() > margin - 0.2       # it does use the margin
+            assert dist.max() > margin - 0.2  # it does use the margin
     with pytest.raises(SettingError, match="more than the cutter radius"):
         finish(hm, margin=3.5)
 
@@ -177,34 +196,41 @@ def test_roughing_takes_the_block_down_to_the_allowance():
     hm = bowl()
     top = float(np.nanmax(hm.z)) + 2
     job = roughing_gcode(hm, RoughSettings(parse_cutter("flat6"), top, stepdown=1.5, leave=0.3))
-    assert check_grbl(roughing_gcode(hm, RoughSettings(parse_cutter("flat6"), top), dialect="grbl").text) == []
+    assert (
+        check_grbl(roughing_gcode(hm, RoughSettings(parse_cutter("flat6"), top), dialect="grbl").text) == []
+    )
     rep, _ = verify_gcode(job.text, hm, resolution=0.1, uncut_tol=0.3 + 1.5 + 0.05)
     dev = rep.deviation[rep.part]
     assert rep.crashes == 0
-    assert dev.min() >= 0.3 - 0.02                 # never into the stock to leave
+    assert dev.min() >= 0.3 - 0.02  # never into the stock to leave
     levels = np.unique(np.round(parse_gcode(job.text).xyz[:, 2], 3))
-    assert levels.size > 5                          # it went down level by level
-    assert rep.uncut_area == 0.0                    # and left no more than leave + one step anywhere
+    assert levels.size > 5  # it went down level by level
+    assert rep.uncut_area == 0.0  # and left no more than leave + one step anywhere
 
 
-@pytest.mark.parametrize("kw, what", [
-    (dict(cutter="ball40"), "larger than the part"),
-    (dict(feed=0.0), "feed"),
-    (dict(feed=-100.0), "feed"),
-    (dict(plunge=0.0), "plunge feed"),
-    (dict(scallop=None, stepover=0.0), "stepover"),
-    (dict(scallop=None, stepover=-1.0), "stepover"),
-    (dict(scallop=0.0), "scallop"),
-    (dict(leave=-0.1), "stock to leave"),
-    (dict(resolution=0.0), "resolution"),
-])
+@pytest.mark.parametrize(
+    "kw, what",
+    [
+        (dict(cutter="ball40"), "larger than the part"),
+        (dict(feed=0.0), "feed"),
+        (dict(feed=-100.0), "feed"),
+        (dict(plunge=0.0), "plunge feed"),
+        (dict(scallop=None, stepover=0.0), "stepover"),
+        (dict(scallop=None, stepover=-1.0), "stepover"),
+        (dict(scallop=0.0), "scallop"),
+        (dict(leave=-0.1), "stock to leave"),
+        (dict(resolution=0.0), "resolution"),
+    ],
+)
 def test_bad_settings_are_refused_with_a_clear_error(kw, what):
     with pytest.raises(SettingError) as e:
         finish(**kw)
     assert what in str(e.value)
 
 
-@pytest.mark.parametrize("kw, what", [(dict(clearance=-5.0), "clearance"), (dict(z_offset=float("nan")), "z offset")])
+@pytest.mark.parametrize(
+    "kw, what", [(dict(clearance=-5.0), "clearance"), (dict(z_offset=float("nan")), "z offset")]
+)
 def test_program_frame_is_refused_before_planning(kw, what, monkeypatch):
     # a finishing plan takes seconds to minutes; a bad clearance was refused only after it
     import appliance.cam.jobs as jobs
@@ -228,8 +254,12 @@ def test_heightmap_with_a_hole_is_refused():
 
 
 def test_bad_cutter_names():
-    for bad, what in (("ball", "not a cutter name"), ("bull6", "needs a corner radius"),
-                      ("bull6r3", "corner radius"), ("flat6r1", "no corner radius")):
+    for bad, what in (
+        ("ball", "not a cutter name"),
+        ("bull6", "needs a corner radius"),
+        ("bull6r3", "corner radius"),
+        ("flat6r1", "no corner radius"),
+    ):
         with pytest.raises(SettingError, match=what):
             parse_cutter(bad)
 
@@ -237,12 +267,28 @@ def test_bad_cutter_names():
 def test_commands_end_to_end(tmp_path, capsys):
     from appliance.cli import main
     from appliance.outputs import write_heightmap_csv
+
     csv = tmp_path / "heightmap.csv"
     write_heightmap_csv(csv, bowl())
     out = tmp_path / "toolpath.gcode"
     rough = tmp_path / "rough.gcode"
-    assert main(["toolpath", str(csv), "-o", str(out), "--scallop", "0.05", "--rough-out", str(rough),
-                 "--dialect", "grbl"]) == 0
+    assert (
+        main(
+            [
+                "toolpath",
+                str(csv),
+                "-o",
+                str(out),
+                "--scallop",
+                "0.05",
+                "--rough-out",
+                str(rough),
+                "--dialect",
+                "grbl",
+            ]
+        )
+        == 0
+    )
     said = capsys.readouterr().out
     assert "estimated run time" in said and "passes" in said
     assert check_grbl(out.read_text()) == [] and check_grbl(rough.read_text()) == []
@@ -261,6 +307,7 @@ def test_commands_end_to_end(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def bowl_files(tmp_path_factory):
     from appliance.outputs import write_heightmap_csv
+
     d = tmp_path_factory.mktemp("bad")
     write_heightmap_csv(d / "bowl.csv", bowl())
     holes = bowl()
@@ -271,28 +318,59 @@ def bowl_files(tmp_path_factory):
     return d
 
 
-@pytest.mark.parametrize("argv, where, what", [
-    (["toolpath", "{d}/bowl.csv", "--cutter", "ball40"], "cutter", "larger than the part"),
-    (["toolpath", "{d}/bowl.csv", "--feed", "0"], "feed", "must be > 0"),
-    (["toolpath", "{d}/bowl.csv", "--feed", "-100"], "feed", "must be > 0"),
-    (["toolpath", "{d}/bowl.csv", "--stepover", "0"], "stepover", "must be > 0"),
-    (["toolpath", "{d}/bowl.csv", "--stepover", "-0.5"], "stepover", "must be > 0"),
-    (["toolpath", "{d}/bowl.csv", "--scallop", "-0.01"], "scallop", "must be > 0"),
-    (["toolpath", "{d}/bowl.csv", "--angle", "nan"], "angle", "degrees"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/holes.csv"], "{d}/holes.csv", "no height inside the part"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--resolution", "0"], "resolution", "must be > 0"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--edge-band", "-1"], "edge band", "must be >= 0"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--scallop", "0"], "--scallop", "must be > 0"),
-    # were: a program with `G0 Znan` and exit 0; a "program never sets Z" traceback (twice);
-    # a --max-gouge check that always passed
-    (["toolpath", "{d}/bowl.csv", "--z-offset", "nan"], "z offset", "must be a number"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--z-zero", "nan"], "--z-zero", "must be a number"),
-    (["verify", "{d}/flat2d.gcode", "--against", "{d}/bowl.csv", "--cutter", "ball6"], "{d}/flat2d.gcode",
-     "never sets Z"),
-    (["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--max-gouge", "nan"], "--max-gouge", "must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "argv, where, what",
+    [
+        (["toolpath", "{d}/bowl.csv", "--cutter", "ball40"], "cutter", "larger than the part"),
+        (["toolpath", "{d}/bowl.csv", "--feed", "0"], "feed", "must be > 0"),
+        (["toolpath", "{d}/bowl.csv", "--feed", "-100"], "feed", "must be > 0"),
+        (["toolpath", "{d}/bowl.csv", "--stepover", "0"], "stepover", "must be > 0"),
+        (["toolpath", "{d}/bowl.csv", "--stepover", "-0.5"], "stepover", "must be > 0"),
+        (["toolpath", "{d}/bowl.csv", "--scallop", "-0.01"], "scallop", "must be > 0"),
+        (["toolpath", "{d}/bowl.csv", "--angle", "nan"], "angle", "degrees"),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/holes.csv"],
+            "{d}/holes.csv",
+            "no height inside the part",
+        ),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--resolution", "0"],
+            "resolution",
+            "must be > 0",
+        ),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--edge-band", "-1"],
+            "edge band",
+            "must be >= 0",
+        ),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--scallop", "0"],
+            "--scallop",
+            "must be > 0",
+        ),
+        # were: a program with `G0 Znan` and exit 0; a "program never sets Z" traceback (twice);
+        # a --max-gouge check that always passed
+        (["toolpath", "{d}/bowl.csv", "--z-offset", "nan"], "z offset", "must be a number"),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--z-zero", "nan"],
+            "--z-zero",
+            "must be a number",
+        ),
+        (
+            ["verify", "{d}/flat2d.gcode", "--against", "{d}/bowl.csv", "--cutter", "ball6"],
+            "{d}/flat2d.gcode",
+            "never sets Z",
+        ),
+        (
+            ["verify", "{d}/ok.gcode", "--against", "{d}/bowl.csv", "--max-gouge", "nan"],
+            "--max-gouge",
+            "must be >= 0",
+        ),
+    ],
+)
 def test_bad_input_is_one_line_naming_where_and_what(bowl_files, tmp_path, capsys, argv, where, what):
     from appliance.cli import main
+
     argv = [a.format(d=bowl_files) for a in argv]
     if argv[0] == "toolpath":
         argv += ["-o", str(tmp_path / "out.gcode")]
@@ -307,6 +385,7 @@ def test_every_dialect_of_a_dissertation_sample_passes_its_checkers(tmp_path):
     # sample 4 (the steep 10 mm saddle), one plan written in every dialect
     from appliance.cam.jobs import finishing_gcodes
     from appliance.cam.posts import DIALECT_NAMES
+
     s = surfaces.get("sample4")
     x0, x1, y0, y1 = s.bounds
     hm = grid_map(s.height, x0, x1, y0, y1, 0.2)

@@ -1,5 +1,6 @@
 """Posting a job again from its height map (another cutter, scallop or dialect, no
 rescan), the file names, and the preview JSON beside every program."""
+
 import json
 
 import numpy as np
@@ -23,7 +24,9 @@ def job_folder(tmp_path, name="bowl-job"):
 def test_a_job_is_posted_again_for_another_dialect_and_cutter(tmp_path, capsys):
     job = job_folder(tmp_path)
     assert main(["toolpath", str(job), "--dialect", "grbl", "--scallop", "0.05"]) == 0
-    assert main(["toolpath", str(job), "--dialect", "linuxcnc", "--cutter", "ball4", "--scallop", "0.05"]) == 0
+    assert (
+        main(["toolpath", str(job), "--dialect", "linuxcnc", "--cutter", "ball4", "--scallop", "0.05"]) == 0
+    )
     grbl = job / "bowl-job-finish-ball6-grbl.nc"
     lcnc = job / "bowl-job-finish-ball4-linuxcnc.nc"
     assert grbl.is_file() and lcnc.is_file()
@@ -38,8 +41,21 @@ def test_a_job_is_posted_again_for_another_dialect_and_cutter(tmp_path, capsys):
 
 def test_the_preview_tells_rapids_from_feeds_and_marks_tool_changes(tmp_path):
     job = job_folder(tmp_path)
-    assert main(["toolpath", str(job), "--operations", "rough T1, finish T2", "--dialect", "mach3",
-                 "--scallop", "0.1"]) == 0
+    assert (
+        main(
+            [
+                "toolpath",
+                str(job),
+                "--operations",
+                "rough T1, finish T2",
+                "--dialect",
+                "mach3",
+                "--scallop",
+                "0.1",
+            ]
+        )
+        == 0
+    )
     program = job / "bowl-job-rough-flat6-finish-ball6-mach3.nc"
     doc = json.loads(program.with_suffix(".preview.json").read_text())
     assert doc["format"] == FORMAT

@@ -1,4 +1,5 @@
 """Scallop: the formulas against the simulation, and the planner holding the requested height."""
+
 import numpy as np
 import pytest
 
@@ -20,7 +21,7 @@ def test_formulas_invert_each_other():
 
 def test_swept_profile_of_a_ball_is_the_swept_cylinder():
     dy, t = np.array([0.0, 1.0, 2.5]), np.array([0.0, 0.5, 1.2])
-    assert np.allclose(swept_offset(BALL, dy, t), 3 - np.sqrt(9 - dy ** 2) * np.sqrt(1 + t ** 2))
+    assert np.allclose(swept_offset(BALL, dy, t), 3 - np.sqrt(9 - dy**2) * np.sqrt(1 + t**2))
     # the numeric search used for bull noses agrees with the closed form for a ball-like bull
     near_ball = parse_cutter("bull6r2.9999")
     assert np.allclose(swept_offset(near_ball, dy, t), swept_offset(BALL, dy, t), atol=2e-3)
@@ -35,7 +36,7 @@ def _fixed(hm, stepover, resolution=0.05):
 
 def test_flat_scallop_matches_formula_in_simulation():
     hm = grid_map(lambda X, Y: 8.0, 0, 24, 0, 20, 1.0)
-    s = 20 / 40                                   # 0.5 mm: passes land on the 0.05 mm lattice
+    s = 20 / 40  # 0.5 mm: passes land on the 0.05 mm lattice
     rep = _fixed(hm, s)
     assert rep.gouge < 1e-6
     assert rep.scallop_max == pytest.approx(ball_scallop(3, s), rel=0.02)
@@ -62,8 +63,9 @@ def test_planner_holds_requested_scallop_on_a_curved_surface(cutter, h):
     # a saddle-ish curved patch with slopes both along and across the passes. A bull
     # nose's worst cusps are in the strip beside the passes' starts, which it reaches
     # only from passes to the side (0.016 there when the planner looked 0.3 mm apart)
-    hm = grid_map(lambda X, Y: 12 + 0.004 * (X - 12) ** 2 - 0.006 * (Y - 10) ** 2 + 0.15 * X,
-                  0, 24, 0, 20, 0.5)
+    hm = grid_map(
+        lambda X, Y: 12 + 0.004 * (X - 12) ** 2 - 0.006 * (Y - 10) ** 2 + 0.15 * X, 0, 24, 0, 20, 0.5
+    )
     job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=h))
     rep, _ = verify_gcode(job.text, hm, resolution=0.05, edge_band=1.0)
     assert rep.gouge <= 0.005
@@ -84,8 +86,7 @@ def test_steep_faces_with_a_small_ball_do_not_gouge():
 
 def test_planner_holds_the_scallop_with_a_small_ball():
     # a curved patch with slopes along and across the passes, at the 1 mm tools' scale
-    hm = grid_map(lambda X, Y: 5 + 0.05 * (X - 2) ** 2 - 0.08 * (Y - 1.5) ** 2 + 0.3 * X,
-                  0, 4, 0, 3, 0.1)
+    hm = grid_map(lambda X, Y: 5 + 0.05 * (X - 2) ** 2 - 0.08 * (Y - 1.5) ** 2 + 0.3 * X, 0, 4, 0, 3, 0.1)
     h = 0.005
     job = finishing_gcode(hm, FinishSettings(parse_cutter("ball1"), scallop=h, resolution=0.02))
     rep, _ = verify_gcode(job.text, hm, resolution=0.01, edge_band=0.5)
@@ -131,6 +132,7 @@ def test_a_tiny_step_leaves_a_tiny_scallop_at_a_downhill_corner(cutter, h):
     # 0.01 mm step): the planner crawled at its minimum step (18 min for 0.87 mm)
     from appliance.cam.sampling import Sampler
     from appliance.cam.zigzag import _frame, _PassProbe
+
     hm = grid_map(lambda X, Y: 30 - 0.83 * Y - 0.15 * X, 0, 20, 0, 10, 0.5)
     st = FinishSettings(parse_cutter(cutter), scallop=h)
     s = Sampler(hm, edge_step=0.05)

@@ -1,6 +1,7 @@
 """Several tools in one job: the tool table, the operations, tool changes a
 controller accepts (rs274 for LinuxCNC/Mach3/Fanuc, our GRBL and Fanuc rules),
 one file per tool for GRBL, and a verification of the whole job."""
+
 import numpy as np
 import pytest
 
@@ -50,7 +51,7 @@ def test_a_tools_own_feeds_win_over_the_table():
     t = parse_tool_table([{**DEFAULT_TOOL_TABLE[1], "feeds": {"wax": {"feed_mm_min": 700, "rpm": 9000}}}])[2]
     c = t.conditions("wax")
     assert (c.feed, c.rpm) == (700, 9000)
-    assert t.conditions("wood").feed != 700                 # no entry: the feeds table's figure
+    assert t.conditions("wood").feed != 700  # no entry: the feeds table's figure
 
 
 def test_operations_are_checked_against_the_table():
@@ -62,8 +63,11 @@ def test_operations_are_checked_against_the_table():
     with pytest.raises(SettingError, match="must be smaller"):
         parse_operations("finish T3, rest T2", tools)
     ops = parse_operations("rough T1, finish T2 steep, rest T3", tools)
-    assert [(o.kind, o.tool.number, o.strategy) for o in ops] == [("rough", 1, "zigzag"), ("finish", 2, "steep"),
-                                                                 ("rest", 3, "steep")]
+    assert [(o.kind, o.tool.number, o.strategy) for o in ops] == [
+        ("rough", 1, "zigzag"),
+        ("finish", 2, "steep"),
+        ("rest", 3, "steep"),
+    ]
 
 
 @pytest.mark.parametrize("dialect", ["linuxcnc", "mach3", "fanuc"])
@@ -85,14 +89,17 @@ def test_tool_changing_controllers_get_one_program_with_tn_m6_and_g43(tmp_path, 
     if dialect == "fanuc":
         assert check_fanuc(p.text) == []
     parsed = parse_gcode(p.text)
-    assert sorted(set(parsed.tool.tolist())) == [1, 2, 3]      # no move before the first change
+    assert sorted(set(parsed.tool.tolist())) == [1, 2, 3]  # no move before the first change
 
 
 def test_grbl_gets_one_file_per_tool_each_opening_with_a_pause(job):
     hm, planned, top = job
     posted = post_operations(planned, top, "grbl", job="demo")
-    assert [p.name for p in posted] == ["demo-rough-flat6-grbl.nc", "demo-finish-ball6-grbl.nc",
-                                        "demo-rest-ball2-grbl.nc"]
+    assert [p.name for p in posted] == [
+        "demo-rough-flat6-grbl.nc",
+        "demo-finish-ball6-grbl.nc",
+        "demo-rest-ball2-grbl.nc",
+    ]
     for p, n in zip(posted, (1, 2, 3)):
         lines = p.text.splitlines()
         m0 = lines.index("M0")
@@ -133,6 +140,7 @@ def test_verify_refuses_a_change_to_a_tool_the_header_does_not_describe(job):
 def test_the_settings_keep_the_tool_table_and_operations_checked_together():
     from appliance.cam.tools import parse_tool_text
     from appliance.daemon import settings as S
+
     tools = parse_tool_text(S.DEFAULTS["tool_table"])
     assert [t.name for t in tools.values()] == ["flat6", "ball6", "ball2"]
     assert len(parse_operations(S.DEFAULTS["operations"], tools)) == 3
@@ -144,24 +152,27 @@ def test_the_settings_keep_the_tool_table_and_operations_checked_together():
         S.validate(S.DEFAULTS, {"tool_table": "T2 drill D3"})
     with pytest.raises(SettingError, match="steep_angle_deg"):
         S.validate(S.DEFAULTS, {"steep_angle_deg": 90})
-    assert S.validate(S.DEFAULTS, {"tool_table": "T1 flat D8; T2 ball D6; T3 ball D3"})["tool_table"].startswith("T1 flat D8")
+    assert S.validate(S.DEFAULTS, {"tool_table": "T1 flat D8; T2 ball D6; T3 ball D3"})[
+        "tool_table"
+    ].startswith("T1 flat D8")
 
 
 def test_steep_walls_get_constant_z_passes_and_the_two_regions_cover_the_part():
     from appliance.cam import waterline as W
     from appliance.cam.sampling import Sampler
+
     hm = grid_map(lambda X, Y: 1 + 5 / (1 + np.exp((np.hypot(X - 10, Y - 10) - 5) / 0.4)), 0, 20, 0, 20, 0.25)
     s = Sampler(hm, edge_step=0.05)
     st = W.SteepSettings(parse_cutter("ball4"), scallop=0.05)
     field = W.tip_field(s, st.cutter, st.grid)
     steep, shallow = W.regions(field, st)
     on = np.isfinite(field.tip)
-    assert (steep | shallow)[on].all()                     # no gap
-    assert (steep & shallow).sum() > 0.05 * steep.sum()    # and a seam cut by both
+    assert (steep | shallow)[on].all()  # no gap
+    assert (steep & shallow).sum() > 0.05 * steep.sum()  # and a seam cut by both
     p = W.plan(s, st, field=field)
     assert p.levels >= 5 and p.waterline_runs >= p.levels - 2 and p.zigzag_runs > 0
     # a waterline holds its height: each run within half a level step (the drop, not the contour, sets Z)
-    for r in p.runs[p.zigzag_runs:]:
+    for r in p.runs[p.zigzag_runs :]:
         assert np.ptp(r[:, 2]) < p.level_step / 2
     # the level step holds the vertical scallop on the steepest wall: (dz / sin t)^2 / (8 r cos t) = h
     t = np.radians(80)

@@ -2,6 +2,7 @@
 every step measured, the calibration then in every scan.json and named in the report; a
 scan without it warned about; every step cancellable with the bench free afterwards; the
 whole commissioning carried to a fresh box as one file; an ink change marking results stale."""
+
 import json
 import time
 
@@ -14,13 +15,19 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim.fakes import FakeBench
 from daemon_helpers import wait_final
 
-TRUE_LEVEL_ZERO = 57.3          # the bench's truth; the daemon's setting starts at 60
+TRUE_LEVEL_ZERO = 57.3  # the bench's truth; the daemon's setting starts at 60
 # a short scan of the cone with the dissertation's (fast) pipeline: these tests are about what
 # goes into scan.json and the report, not the science. It starts above the cone's tip (23.2 mm,
 # with the ink 2.7 mm below the setting's level): a first frame showing the part would make the
 # scan start higher (daemon/levels.py)
-SCAN = {"name": "cone", "levels_to_mm": 28.0, "levels_from_mm": 10.0, "level_step_mm": 2.0,
-        "settle_s": 0.0, "pipeline": "seed"}
+SCAN = {
+    "name": "cone",
+    "levels_to_mm": 28.0,
+    "levels_from_mm": 10.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+    "pipeline": "seed",
+}
 SHORT = {"levels_to_mm": 28.0, "levels_from_mm": 22.0}
 
 
@@ -124,24 +131,37 @@ def test_the_scan_carries_the_calibration_in_force(commissioned):
     assert "## Calibration" in md and "commissioned camera (measured, " in md
     # `inkslice process` on the folder (our pipeline) corrects with what scan.json carries
     from appliance.process import process
+
     ours = process(svc.job_file(job["id"], "scan/scan.json").parent, truth=False)
     assert ours.diagnostics["corrections"] == {"displacement_tank_area_mm2": 22500.0, "meniscus": True}
-    assert ours.calibration["warnings"] == [] and "meniscus: capillary length" in ours.calibration["used"]["meniscus"]
+    assert (
+        ours.calibration["warnings"] == []
+        and "meniscus: capillary length" in ours.calibration["used"]["meniscus"]
+    )
 
 
 def test_a_scan_without_commissioning_gets_warnings(tmp_path):
     svc, _ = box(tmp_path)
     try:
-        job = wait_final(svc, svc.start_scan({**SCAN, "pipeline": "inkslice", "levels_to_mm": 24.0,
-                                              "level_at_home_mm": TRUE_LEVEL_ZERO}), timeout=300)
+        job = wait_final(
+            svc,
+            svc.start_scan(
+                {**SCAN, "pipeline": "inkslice", "levels_to_mm": 24.0, "level_at_home_mm": TRUE_LEVEL_ZERO}
+            ),
+            timeout=300,
+        )
         assert job["status"] == "done", job["reason"]
         doc = json.loads(svc.job_file(job["id"], "scan/scan.json").read_text())
         assert "tank" not in doc and "meniscus" not in doc
         assert doc["calibration"]["level_zero"]["method"] == "setting"
         warnings = json.loads(svc.job_file(job["id"], "report.json").read_text())["calibration"]["warnings"]
         text = " | ".join(warnings)
-        for expected in ("no meniscus calibration was used", "no tank area calibration was used",
-                         "the camera was not commissioned", "level zero was not measured"):
+        for expected in (
+            "no meniscus calibration was used",
+            "no tank area calibration was used",
+            "the camera was not commissioned",
+            "level zero was not measured",
+        ):
             assert expected in text, text
         assert "no meniscus calibration was used" in svc.job_file(job["id"], "report.md").read_text()
     finally:
@@ -149,16 +169,20 @@ def test_a_scan_without_commissioning_gets_warnings(tmp_path):
 
 
 CANCEL_POINTS = [
-    ("level_zero", []), ("level_zero", ["measure"]),
-    ("camera", []), ("camera", ["view"]), ("camera", ["view", "view", "view", "plane"]),
-    ("meniscus", []), ("meniscus", ["scan"]),
+    ("level_zero", []),
+    ("level_zero", ["measure"]),
+    ("camera", []),
+    ("camera", ["view"]),
+    ("camera", ["view", "view", "view", "plane"]),
+    ("meniscus", []),
+    ("meniscus", ["scan"]),
 ]
 
 
 def test_cancel_at_each_step_then_a_scan_starts(tmp_path):
     svc, bench = box(tmp_path)
     try:
-        svc.commission("tank", "enter", {"area_mm2": 20000})          # enter: nothing to cancel
+        svc.commission("tank", "enter", {"area_mm2": 20000})  # enter: nothing to cancel
         for sid, actions in CANCEL_POINTS:
             svc.commission(sid, "start")
             for a in actions:
@@ -226,7 +250,7 @@ def test_skipping_the_meniscus_during_its_scan_cancels_the_scan(tmp_path):
 
 def test_export_then_import_on_a_fresh_box_gives_the_same_commissioning(commissioned, tmp_path):
     svc, *_ = commissioned
-    doc = json.loads(json.dumps(svc.export_commissioning()))       # as the file carries it
+    doc = json.loads(json.dumps(svc.export_commissioning()))  # as the file carries it
     fresh, _ = box(tmp_path, "fresh")
     try:
         with pytest.raises(SettingError, match="not a commissioning export"):
@@ -235,10 +259,10 @@ def test_export_then_import_on_a_fresh_box_gives_the_same_commissioning(commissi
         del broken["results"]["meniscus"]["result"]["contact_angle_deg"]
         with pytest.raises(SettingError, match="meniscus: contact_angle_deg is missing"):
             fresh.import_commissioning(broken)
-        assert fresh.store.calibrations() == []                     # a refused file changes nothing
+        assert fresh.store.calibrations() == []  # a refused file changes nothing
         fresh.import_commissioning(doc)
         a, b = svc.commissioning(), fresh.commissioning()
-        strip = lambda c: [{k: v for k, v in s.items() if k != "method"} for s in c["steps"]]   # noqa: E731
+        strip = lambda c: [{k: v for k, v in s.items() if k != "method"} for s in c["steps"]]  # noqa: E731
         assert strip(a) == strip(b)
         assert fresh.settings()["level_at_home_mm"] == svc.settings()["level_at_home_mm"]
         assert fresh.export_commissioning()["results"] == doc["results"]
@@ -266,6 +290,7 @@ def test_an_ink_change_makes_meniscus_and_level_zero_stale(tmp_path):
 def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
     """The web server talks to the daemon over its socket (rpc.BenchClient): the same calls."""
     from appliance.daemon import rpc
+
     svc, bench = box(tmp_path)
     server = rpc.serve(svc, tmp_path / "daemon.sock")
     client = rpc.BenchClient(tmp_path / "daemon.sock")
@@ -276,8 +301,10 @@ def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
             client.commission("level_zero", "measure")
         c = client.commission("level_zero", "start")
         assert c["active"]["holds_bench"] and c["active"]["prompt"].startswith("Take everything off the base")
-        assert svc.state()["message"] == c["active"]["prompt"]      # the page says it, the display in short
-        assert wait_for(lambda: bench.panel.display.lines[:3] == ["SETUP LEVEL 0", "EMPTY THE BASE", "see the phone"])
+        assert svc.state()["message"] == c["active"]["prompt"]  # the page says it, the display in short
+        assert wait_for(
+            lambda: bench.panel.display.lines[:3] == ["SETUP LEVEL 0", "EMPTY THE BASE", "see the phone"]
+        )
         assert client.commission("level_zero", "cancel")["active"] is None
         doc = client.export_commissioning()
         assert set(doc["results"]) == {"tank"} and client.ink_changed()["ink_changed"]

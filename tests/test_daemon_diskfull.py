@@ -7,6 +7,7 @@ mid-scan and mid-processing, the job ends `failed` with a reason that starts
 "disk:", no new scan is taken while its end is not stored, and once space is
 freed it resumes to the same result as an uninterrupted scan.
 """
+
 import errno
 import json
 import os
@@ -22,7 +23,7 @@ from appliance.daemon.store import ACTIVE, DiskFull, Store
 from appliance.errors import DeviceError
 from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
-DISK_MB = 16            # a scan of the cone with its outputs takes ~1.5 MB
+DISK_MB = 16  # a scan of the cone with its outputs takes ~1.5 MB
 
 
 def roomy(path):
@@ -60,8 +61,11 @@ class SmallDisk:
 def small_disk(tmp_path):
     mount = tmp_path / "disk"
     mount.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={DISK_MB}m", "tmpfs", str(mount)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={DISK_MB}m", "tmpfs", str(mount)],
+        capture_output=True,
+        text=True,
+    )
     if r.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs to fill (needs root): {r.stderr.strip()}")
     try:
@@ -103,10 +107,10 @@ def test_the_store_turns_sqlite_disk_full_into_a_disk_fault_and_keeps_a_jobs_end
     with pytest.raises(DiskFull) as caught:
         store.update_job("j1", levels_done=3)
     assert str(caught.value).startswith("disk: full: the job store cannot write (database or disk is full)")
-    assert not store._db.in_transaction                 # SQLite's own rollback was not fought
+    assert not store._db.in_transaction  # SQLite's own rollback was not fought
     with pytest.raises(DiskFull):
         store.update_job("j1", status="failed", reason="disk: full while writing")
-    store.event("j1", "failed", "disk: full while writing")     # held, not raised
+    store.event("j1", "failed", "disk: full while writing")  # held, not raised
     job = store.get_job("j1")
     assert (job["status"], job["reason"]) == ("failed", "disk: full while writing")
     assert store.list_jobs(ACTIVE) == []
@@ -117,7 +121,7 @@ def test_the_store_turns_sqlite_disk_full_into_a_disk_fault_and_keeps_a_jobs_end
     store.flush_unwritten()
     assert store.unwritten() == {}
     store.close()
-    again = Store(small_disk.mount)                     # really on disk, not only in memory
+    again = Store(small_disk.mount)  # really on disk, not only in memory
     try:
         assert again.get_job("j1")["status"] == "failed"
         assert [e["kind"] for e in again.events("j1")][:1] == ["failed"]
@@ -132,18 +136,24 @@ def fill_after_frames(svc, disk, n):
 
     def on_frame(image, info):
         keep(image, info)
-        if len(list((disk.mount / "data" / "jobs").glob("*/scan/frames/*.png"))) == n and not disk.filler.exists():
+        if (
+            len(list((disk.mount / "data" / "jobs").glob("*/scan/frames/*.png"))) == n
+            and not disk.filler.exists()
+        ):
             disk.fill()
+
     svc._keep_frame = on_frame
 
 
 def filling_processor(disk, processor):
     """Processing meets a full disk the first time; runs normally afterwards."""
+
     def process(*args):
         if not disk.filler.exists() and not getattr(process, "filled", False):
             disk.fill()
             process.filled = True
         return processor(*args)
+
     return process
 
 
@@ -154,7 +164,7 @@ def end_on_a_full_disk_then_resume(svc, disk, reference):
     print(f"\nfailed at {job['levels_done']} levels: {job['reason']}")
     assert svc.state()["state"] == "failed"
     assert svc.state()["hardware"]["disk"].startswith("fault: full")
-    with pytest.raises(DeviceError) as refused:           # nothing new while the disk is full
+    with pytest.raises(DeviceError) as refused:  # nothing new while the disk is full
         svc.start_scan(SCAN)
     assert str(refused.value).startswith("disk: full")
     assert [j["id"] for j in svc.jobs()] == [job_id]
@@ -173,14 +183,18 @@ def test_a_disk_that_fills_mid_scan_fails_the_job_which_resumes_once_space_is_fr
     try:
         fill_after_frames(svc, small_disk, 4)
         job = end_on_a_full_disk_then_resume(svc, small_disk, reference)
-        assert job["levels_done"] == job["levels_total"] > 10      # the plan's 10 and the refinement's
+        assert job["levels_done"] == job["levels_total"] > 10  # the plan's 10 and the refinement's
     finally:
         svc.close()
 
 
-def test_a_disk_that_fills_during_processing_fails_the_job_which_resumes_once_space_is_freed(small_disk, reference):
+def test_a_disk_that_fills_during_processing_fails_the_job_which_resumes_once_space_is_freed(
+    small_disk, reference
+):
     """Processing in its child process, as in the daemon: the child reports the full disk in one line."""
-    svc, _ = service(small_disk.mount, processor=filling_processor(small_disk, child_process), disk_free_mb=roomy)
+    svc, _ = service(
+        small_disk.mount, processor=filling_processor(small_disk, child_process), disk_free_mb=roomy
+    )
     try:
         end_on_a_full_disk_then_resume(svc, small_disk, reference)
     finally:
@@ -189,8 +203,10 @@ def test_a_disk_that_fills_during_processing_fails_the_job_which_resumes_once_sp
 
 def killed_mid_scan(data):
     """A daemon's store with job j1 scanning, left as a SIGKILL leaves it (write-ahead log and all)."""
-    code = ("import os, sys; from appliance.daemon.store import Store; s = Store(sys.argv[1]); "
-            "s.create_job('j1', 'cone', {}, {}, 10); s.update_job('j1', status='scanning'); os._exit(0)")
+    code = (
+        "import os, sys; from appliance.daemon.store import Store; s = Store(sys.argv[1]); "
+        "s.create_job('j1', 'cone', {}, {}, 10); s.update_job('j1', status='scanning'); os._exit(0)"
+    )
     subprocess.run([sys.executable, "-c", code, str(data)], check=True)
 
 
@@ -206,7 +222,7 @@ def test_a_restart_on_a_full_disk_marks_the_interrupted_job_in_memory_and_stores
             svc.resume("j1")
         assert str(refused.value).startswith("disk: full: the end of job j1 (failed) is not yet stored")
         small_disk.free()
-        svc.resume("j1")                                  # writes the mark first, then resumes
+        svc.resume("j1")  # writes the mark first, then resumes
         assert svc.job("j1")["attempts"] == 2
     finally:
         svc.close()
@@ -214,7 +230,7 @@ def test_a_restart_on_a_full_disk_marks_the_interrupted_job_in_memory_and_stores
 
 def test_a_store_that_cannot_even_open_says_the_disk_is_full(small_disk):
     data = small_disk.mount / "data"
-    Store(data).close()                                   # a clean stop: no write-ahead log left
+    Store(data).close()  # a clean stop: no write-ahead log left
     small_disk.fill()
     with pytest.raises(DiskFull, match="^disk: full: the job store cannot write"):
         Store(data)
@@ -229,9 +245,12 @@ def test_a_jobs_end_held_back_by_a_full_disk_is_written_when_the_daemon_stops_af
     with pytest.raises(DiskFull):
         store.update_job("j1", status="failed", reason="disk: full while writing")
     small_disk.free()
-    store.close()                                       # nobody started a scan in between
+    store.close()  # nobody started a scan in between
     again = Store(data)
     try:
-        assert (again.get_job("j1")["status"], again.get_job("j1")["reason"]) == ("failed", "disk: full while writing")
+        assert (again.get_job("j1")["status"], again.get_job("j1")["reason"]) == (
+            "failed",
+            "disk: full while writing",
+        )
     finally:
         again.close()

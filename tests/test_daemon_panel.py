@@ -1,4 +1,5 @@
 """The bench's front panel: short/long presses, the long press's USB copy, what the display says."""
+
 import json
 import time
 from pathlib import Path
@@ -16,6 +17,7 @@ from daemon_helpers import SCAN, wait_final
 def light_processor(scan_folder, out_folder, options, stop=None):
     """Outputs shaped like process_scan's, at no cost: the panel, not the science, is tested here."""
     from appliance.atomicio import write_text
+
     n = len(json.loads((Path(scan_folder) / "scan.json").read_text())["frames"])
     write_text(Path(out_folder) / "toolpath.gcode", f"G21 G90\nF800\n(levels {n})\nG1 X1 Y2 Z3\nM2\n")
     write_text(Path(out_folder) / "heightmap.csv", "x,y,z\n0.0000,0.0000,1.0000\n")
@@ -37,10 +39,10 @@ def test_press_timer_tells_short_from_long():
     assert t.edge(True, 10.0) is None and t.check(11.0) is None
     assert t.edge(False, 11.5) == "short"
     assert t.edge(True, 20.0) is None
-    assert t.check(21.9) is None and t.check(22.0) == "long"      # reported while still held
-    assert t.check(23.0) is None and t.edge(False, 24.0) is None   # once, and the release says nothing
-    assert t.edge(True, 30.0) is None and t.edge(False, 32.5) == "long"   # polled only after the release
-    assert t.edge(False, 40.0) is None                             # a release without a press (held at start)
+    assert t.check(21.9) is None and t.check(22.0) == "long"  # reported while still held
+    assert t.check(23.0) is None and t.edge(False, 24.0) is None  # once, and the release says nothing
+    assert t.edge(True, 30.0) is None and t.edge(False, 32.5) == "long"  # polled only after the release
+    assert t.edge(False, 40.0) is None  # a release without a press (held at start)
 
 
 @pytest.fixture
@@ -54,6 +56,7 @@ def bench(tmp_path):
     def unmount(s):
         """What inkslice-stick@.service's stop does, as far as the mount table shows it."""
         mounts.write_text("".join(l for l in mounts.read_text().splitlines(True) if f" {s.mount} " not in l))
+
     usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp_path / "nosys", unmount=unmount)
     factory = FakeBench("cone")
     svc = BenchService(tmp_path / "data", factory, processor=light_processor, panel_interval_s=0.02, usb=usb)
@@ -79,7 +82,7 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     n = long_press(svc, panel)
     assert (n["code"], n["ok"]) == ("no_gcode", False)
     wait_for(lambda: panel.display.lines[:1] == ["USB: NOTHING"], what="the display")
-    assert svc.state()["state"] == "idle"                  # a long press never starts a scan
+    assert svc.state()["state"] == "idle"  # a long press never starts a scan
 
     job_id = svc.start_scan(SCAN)
     assert wait_final(svc, job_id)["status"] == "done"
@@ -98,12 +101,16 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     assert (stick / "inkslice" / name).read_bytes() == gcode
     assert n["text"] == f"copied {name} to the USB stick and unmounted it, safe to remove"
     assert mounts.read_text() == ""
-    lines = wait_for(lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display")
+    lines = wait_for(
+        lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display"
+    )
     assert lines[1] == name[:18] and lines[2] == "safe to remove"
-    assert [p.name for p in (stick / "inkslice").iterdir()] == [name]      # no temporary file left
+    assert [p.name for p in (stick / "inkslice").iterdir()] == [name]  # no temporary file left
     # the event log keeps every outcome, newest first
     usb_events = [e["message"] for e in svc.events() if e["kind"] == "usb"]
-    assert usb_events[0] == n["text"] and "no USB stick" in usb_events[1] and "no finished job" in usb_events[2]
+    assert (
+        usb_events[0] == n["text"] and "no USB stick" in usb_events[1] and "no finished job" in usb_events[2]
+    )
 
     # a short press gives the display back to the bench and starts a scan as before
     panel.button.press()
@@ -116,16 +123,18 @@ def test_the_long_press_takes_the_newest_finished_job_with_gcode(bench):
     """Job picking is the daemon's: it knows its own job rows (hw/usb.py only copies)."""
     svc, *_ = bench
     assert svc.latest_gcode() is None
-    for job_id, status, outputs in (("1-old", "done", ["toolpath.gcode", "report.md"]),
-                                    ("2-grbl", "done", ["report.md", "toolpath-grbl.nc"]),
-                                    ("3-ball", "done", ["reference.json", "heightmap.csv"]),
-                                    ("4-now", "scanning", [])):
+    for job_id, status, outputs in (
+        ("1-old", "done", ["toolpath.gcode", "report.md"]),
+        ("2-grbl", "done", ["report.md", "toolpath-grbl.nc"]),
+        ("3-ball", "done", ["reference.json", "heightmap.csv"]),
+        ("4-now", "scanning", []),
+    ):
         svc.store.create_job(job_id, job_id, svc.settings(), {}, 1)
         svc.store.update_job(job_id, status=status, outputs=outputs)
         time.sleep(0.01)
     assert svc.latest_gcode() == ("2-grbl", "toolpath-grbl.nc")
     svc.store.update_job("2-grbl", outputs=["toolpath.gcode", "toolpath-grbl.nc"])
-    assert svc.latest_gcode() == ("2-grbl", "toolpath.gcode")       # the finishing program first
+    assert svc.latest_gcode() == ("2-grbl", "toolpath.gcode")  # the finishing program first
 
 
 def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
@@ -137,7 +146,7 @@ def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
     wait_for(lambda: svc.state()["state"] == "scanning", what="scanning")
     n = long_press(svc, panel)
     assert n["code"] == "copied" and first in n["text"]
-    assert svc.state()["state"] in ("scanning", "processing", "done")     # still going
+    assert svc.state()["state"] in ("scanning", "processing", "done")  # still going
     assert wait_final(svc, second)["status"] == "done"
 
 
@@ -146,15 +155,18 @@ def test_a_stick_that_will_not_unmount_is_not_called_safe_to_remove(bench):
 
     def busy(s):
         raise DeviceError(s.mount, "systemctl: Job for inkslice-stick@sdb1.service failed")
+
     svc.usb.unmount = busy
     job_id = svc.start_scan(SCAN)
     assert wait_final(svc, job_id)["status"] == "done"
     mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
     n = long_press(svc, panel)
     assert (n["code"], n["ok"]) == ("still_mounted", False)
-    assert (stick / "inkslice" / f"{job_id}-toolpath.gcode").is_file()          # the copy itself is there
+    assert (stick / "inkslice" / f"{job_id}-toolpath.gcode").is_file()  # the copy itself is there
     assert "could not unmount it (systemctl: Job for" in n["text"] and "safe to remove" not in n["text"]
-    lines = wait_for(lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display")
+    lines = wait_for(
+        lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display"
+    )
     assert lines[2] == "NOT unmounted"
 
 
@@ -189,6 +201,7 @@ def test_gpio_button_maps_kernel_edges_to_presses(monkeypatch):
 
     def ev(kind, t):
         return SimpleNamespace(event_type=kind, timestamp_ns=int(t * 1e9))
+
     now = [100.0]
     monkeypatch.setattr(gpio.time, "monotonic", lambda: now[0])
     b = gpio.GpioButton.__new__(gpio.GpioButton)
@@ -198,8 +211,8 @@ def test_gpio_button_maps_kernel_edges_to_presses(monkeypatch):
     assert b.poll() == "short" and b.poll() is None
     b._req.events = [ev(rise, 101.0)]
     now[0] = 101.5
-    assert b.poll() is None                     # still held, not yet long
+    assert b.poll() is None  # still held, not yet long
     now[0] = 103.1
-    assert b.poll() == "long"                   # held 2.1 s: reported before the release
+    assert b.poll() == "long"  # held 2.1 s: reported before the release
     b._req.events = [ev(fall, 104.0)]
     assert b.poll() is None

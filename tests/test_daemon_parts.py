@@ -1,5 +1,6 @@
 """The daemon's smaller parts: the level plan, the store, the socket facade,
 sd_notify and the watchdog, the drivers' failure modes without hardware."""
+
 import json
 import os
 import socket
@@ -27,22 +28,30 @@ def frames_of(plan):
 
 
 def test_a_fixed_plan_runs_top_down_and_ends_on_the_bottom():
-    plan = LevelPlan(S.validate(S.DEFAULTS, {"levels_to_mm": 10.0, "levels_from_mm": 1.0, "level_step_mm": 2.0}))
+    plan = LevelPlan(
+        S.validate(S.DEFAULTS, {"levels_to_mm": 10.0, "levels_from_mm": 1.0, "level_step_mm": 2.0})
+    )
     assert frames_of(plan) == [10.0, 8.0, 6.0, 4.0, 2.0, 1.0]
     assert plan.estimate_total([]) == 6
-    plan = LevelPlan(S.validate(S.DEFAULTS, {"levels_to_mm": 10.0, "levels_from_mm": 0.0, "level_step_mm": 0.1}))
+    plan = LevelPlan(
+        S.validate(S.DEFAULTS, {"levels_to_mm": 10.0, "levels_from_mm": 0.0, "level_step_mm": 0.1})
+    )
     levels = frames_of(plan)
     assert len(levels) == 101 == plan.estimate_total([]) and levels[-1] == 0.0
-    assert max(abs(a - (10.0 - 0.1 * k)) for k, a in enumerate(levels)) < 1e-9      # computed, no drift
+    assert max(abs(a - (10.0 - 0.1 * k)) for k, a in enumerate(levels)) < 1e-9  # computed, no drift
 
 
 def test_the_adaptive_rule_aims_at_the_target_change_within_bounds():
-    plan = LevelPlan(S.validate(S.DEFAULTS, {"step_mode": "adaptive", "step_min_mm": 0.2, "step_max_mm": 3.0,
-                                             "adaptive_change": 0.02}))
-    assert plan.next_step(1.0, 0.04) == pytest.approx(0.5)      # twice the target: half the step
-    assert plan.next_step(1.0, 0.01) == pytest.approx(2.0)      # half: double (at most 2x per frame)
-    assert plan.next_step(1.0, 1.0) == pytest.approx(0.2)       # bounded below
-    assert plan.next_step(2.0, 0.0) == pytest.approx(3.0)       # nothing visible: bounded above
+    plan = LevelPlan(
+        S.validate(
+            S.DEFAULTS,
+            {"step_mode": "adaptive", "step_min_mm": 0.2, "step_max_mm": 3.0, "adaptive_change": 0.02},
+        )
+    )
+    assert plan.next_step(1.0, 0.04) == pytest.approx(0.5)  # twice the target: half the step
+    assert plan.next_step(1.0, 0.01) == pytest.approx(2.0)  # half: double (at most 2x per frame)
+    assert plan.next_step(1.0, 1.0) == pytest.approx(0.2)  # bounded below
+    assert plan.next_step(2.0, 0.0) == pytest.approx(3.0)  # nothing visible: bounded above
     a = np.zeros((10, 10), bool)
     b = a.copy()
     b[2:6, 2:6] = True
@@ -71,10 +80,14 @@ def test_the_store_keeps_jobs_settings_calibrations_and_events(tmp_path):
     store.save_settings({"level_step_mm": 0.3})
     store.add_calibration({"camera": {"width": 1}})
     store.close()
-    store = Store(tmp_path)                           # everything survives a reopen
+    store = Store(tmp_path)  # everything survives a reopen
     job = store.get_job("j1")
-    assert (job["status"], job["levels_done"], job["outputs"], job["params"]) == \
-        ("scanning", 2, ["x.csv"], {"surface": "cone"})
+    assert (job["status"], job["levels_done"], job["outputs"], job["params"]) == (
+        "scanning",
+        2,
+        ["x.csv"],
+        {"surface": "cone"},
+    )
     assert store.load_settings() == {"level_step_mm": 0.3}
     assert store.calibrations()[0]["camera"] == {"width": 1}
     assert store.events("j1")[0]["kind"] == "created"
@@ -87,17 +100,18 @@ def test_the_store_keeps_jobs_settings_calibrations_and_events(tmp_path):
 
 def test_the_socket_client_is_the_facade(tmp_path):
     from appliance.daemon.rpc import BenchClient, serve
+
     svc, _ = service(tmp_path)
     server = serve(svc, tmp_path / "d.sock")
     client = BenchClient(tmp_path / "d.sock")
     try:
         assert client.state()["state"] == "idle"
-        with pytest.raises(SettingError) as e:           # the error type and its parts survive the trip
+        with pytest.raises(SettingError) as e:  # the error type and its parts survive the trip
             client.start_scan({**SCAN, "level_step_mm": -1})
         assert e.value.where == "level_step_mm"
         # subscribe before starting: on a busy machine homing can be over before a
         # subscription made after start_scan sees its first state
-        stream = client.subscribe(timeout=60)            # streamed over the socket as they change
+        stream = client.subscribe(timeout=60)  # streamed over the socket as they change
         assert next(stream)["state"] == "idle"
         job_id = client.start_scan(SCAN)
         states = []
@@ -138,6 +152,7 @@ def test_the_level_sensor_reading_is_kept_with_each_frame(tmp_path):
     from appliance.daemon.processing import in_process
     from appliance.daemon.service import BenchService
     from appliance.sim.fakes import FakeBench
+
     svc = BenchService(tmp_path / "data", FakeBench("cone", level_sensor=True), processor=in_process)
     try:
         job = wait_final(svc, svc.start_scan(SCAN))
@@ -157,7 +172,7 @@ def test_notify_sends_datagrams_and_the_daemon_pings_the_watchdog(tmp_path, monk
     rx.bind(path)
     rx.settimeout(20)
     monkeypatch.delenv("NOTIFY_SOCKET", raising=False)
-    assert notify("READY=1") is False                  # outside systemd: a no-op
+    assert notify("READY=1") is False  # outside systemd: a no-op
     monkeypatch.setenv("NOTIFY_SOCKET", path)
     assert notify("STATUS=x") is True and rx.recv(100) == b"STATUS=x"
     monkeypatch.setenv("WATCHDOG_USEC", "400000")
@@ -165,9 +180,12 @@ def test_notify_sends_datagrams_and_the_daemon_pings_the_watchdog(tmp_path, monk
     assert watchdog_interval() == pytest.approx(0.2)
     env = {**os.environ, "NOTIFY_SOCKET": path, "WATCHDOG_USEC": "300000"}
     env.pop("WATCHDOG_PID")
-    proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake",
-                             "--data", str(tmp_path / "data")], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake", "--data", str(tmp_path / "data")],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     try:
         got = []
         while not (any(m.startswith(b"READY=1") for m in got) and got.count(b"WATCHDOG=1") >= 3):
@@ -182,18 +200,20 @@ def test_notify_sends_datagrams_and_the_daemon_pings_the_watchdog(tmp_path, monk
 def test_drivers_report_missing_hardware_clearly(tmp_path):
     from appliance.hw.camera import V4L2Camera, find_by_id
     from appliance.hw.devices import HardwareBench
+
     with pytest.raises(DeviceError, match="no such device"):
         V4L2Camera(str(tmp_path / "video9"))
     with pytest.raises(DeviceError, match="plugged"):
         find_by_id("no-such-camera-xyz")
-    bench = HardwareBench({"gpiochip": str(tmp_path / "gpiochip9"), "i2c_bus": 97,
-                           "stage_port": str(tmp_path / "ttyACM9")})
-    panel = bench.open_panel()                         # all missing: reported, not raised
+    bench = HardwareBench(
+        {"gpiochip": str(tmp_path / "gpiochip9"), "i2c_bus": 97, "stage_port": str(tmp_path / "ttyACM9")}
+    )
+    panel = bench.open_panel()  # all missing: reported, not raised
     assert set(panel.hardware) == {"led", "button", "display"}
     assert all(v.startswith("missing") for v in panel.hardware.values()), panel.hardware
     assert panel.led is None and panel.display is None
     with pytest.raises(DeviceError, match="serial port"):
-        bench.open(S.DEFAULTS, {})                     # the stage is required
+        bench.open(S.DEFAULTS, {})  # the stage is required
 
 
 def test_the_daemon_runs_on_without_a_panel(tmp_path):
@@ -204,6 +224,7 @@ def test_the_daemon_runs_on_without_a_panel(tmp_path):
 
     class NoPanel(FakeBench):
         open_panel = HardwareBench({"gpiochip": str(tmp_path / "none"), "i2c_bus": 97}).open_panel
+
     svc = BenchService(tmp_path / "data", NoPanel("cone"), processor=in_process)
     try:
         assert svc.state()["hardware"]["display"].startswith("missing")
@@ -214,10 +235,11 @@ def test_the_daemon_runs_on_without_a_panel(tmp_path):
 
 def test_the_display_picture_is_in_ssd1306_page_order():
     from appliance.hw.display import HEIGHT, WIDTH, render_lines, to_pages
+
     img = np.zeros((HEIGHT, WIDTH), np.uint8)
-    img[0, 0] = 1          # page 0, column 0, bit 0
-    img[9, 5] = 1          # page 1, column 5, bit 1
-    img[63, 127] = 1       # page 7, column 127, bit 7
+    img[0, 0] = 1  # page 0, column 0, bit 0
+    img[9, 5] = 1  # page 1, column 5, bit 1
+    img[63, 127] = 1  # page 7, column 127, bit 7
     pages = to_pages(img)
     assert len(pages) == 1024
     assert pages[0] == 1 and pages[128 + 5] == 2 and pages[7 * 128 + 127] == 128 and sum(pages) == 131
@@ -229,7 +251,8 @@ def test_auto_resume_continues_an_interrupted_scan_at_start(tmp_path):
     from appliance.daemon.processing import in_process
     from appliance.daemon.service import BenchService
     from appliance.sim.fakes import FakeBench
-    store = Store(tmp_path / "data")                   # what a killed daemon leaves behind
+
+    store = Store(tmp_path / "data")  # what a killed daemon leaves behind
     settings = S.validate(S.DEFAULTS, {k: v for k, v in SCAN.items() if k in S.DEFAULTS})
     store.create_job("j1", "cone", settings, {"name": "cone", "surface": "cone"}, 10)
     store.update_job("j1", status="scanning")
@@ -240,7 +263,7 @@ def test_auto_resume_continues_an_interrupted_scan_at_start(tmp_path):
         assert svc.interrupted == ["j1"]
         job = wait_final(svc, "j1")
         assert job["status"] == "done" and job["attempts"] == 2
-        assert job["levels_done"] == job["levels_total"] > 10      # the plan's 10 and the refinement's
+        assert job["levels_done"] == job["levels_total"] > 10  # the plan's 10 and the refinement's
         assert [e["kind"] for e in svc.events("j1")][:3] == ["done", "resumed", "interrupted"]
     finally:
         svc.close()
@@ -253,13 +276,15 @@ def test_the_settle_time_waits_out_the_virtual_inks_ripple(tmp_path):
 
     from appliance.sim.fakes import LevelSeededCamera, small_rig
     from appliance.sim.render import Effects
+
     rig = small_rig(320, 240)
     still = LevelSeededCamera("cone", rig, lambda: 10.0).capture()
-    rippling = LevelSeededCamera("cone", rig, lambda: 10.0, effects=Effects(ripple_mm=0.3, ripple_decay_s=0.1),
-                                 clock=time.monotonic)
+    rippling = LevelSeededCamera(
+        "cone", rig, lambda: 10.0, effects=Effects(ripple_mm=0.3, ripple_decay_s=0.1), clock=time.monotonic
+    )
     rippling.note_move_finished()
     at_once = rippling.capture()
-    time.sleep(2.0)                                   # 20 decay times: the daemon's settle_s
+    time.sleep(2.0)  # 20 decay times: the daemon's settle_s
     settled = rippling.capture()
     assert np.abs(at_once.astype(int) - still).max() > 20
     assert np.abs(settled.astype(int) - still).max() <= 1
@@ -270,9 +295,12 @@ def test_processing_options_are_what_process_scan_takes():
 
     from appliance import process as P
     from appliance.daemon.processing import options_for
-    accepted = set(inspect.signature(P.process).parameters) | set(inspect.signature(P.process_scan).parameters)
+
+    accepted = set(inspect.signature(P.process).parameters) | set(
+        inspect.signature(P.process_scan).parameters
+    )
     opts = options_for(S.DEFAULTS)
-    assert set(opts) <= accepted and opts["grid_n"] == 50 and "method" not in opts   # "" = its default
+    assert set(opts) <= accepted and opts["grid_n"] == 50 and "method" not in opts  # "" = its default
     methods = [m for m in S.surface_methods() if m]
     opts = options_for(S.validate(S.DEFAULTS, {"method": methods[-1], "cutter_diameter_mm": 3.0}))
     assert opts["method"] == methods[-1] and opts["keep"] == ["scan"]

@@ -2,6 +2,7 @@
 times; each restart finds a consistent store and intact files, and the
 resumed scan equals an uninterrupted one. Device faults injected into the
 daemon process end the job with a clear reason."""
+
 import json
 import os
 import random
@@ -28,8 +29,22 @@ class Daemon:
     def __init__(self, tmp_path, faults=None):
         self.data, self.sock = tmp_path / "data", tmp_path / "d.sock"
         self.log = open(tmp_path / "daemon.log", "ab")
-        cmd = [sys.executable, "-m", "appliance.cli", "daemon", "--sim", "fake", "--surface", "cone",
-               "--data", str(self.data), "--socket", str(self.sock), "--faults", json.dumps(faults or {})]
+        cmd = [
+            sys.executable,
+            "-m",
+            "appliance.cli",
+            "daemon",
+            "--sim",
+            "fake",
+            "--surface",
+            "cone",
+            "--data",
+            str(self.data),
+            "--socket",
+            str(self.sock),
+            "--faults",
+            json.dumps(faults or {}),
+        ]
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log)
         self.client = BenchClient(self.sock, timeout=10)
         end = time.monotonic() + 30
@@ -49,7 +64,7 @@ class Daemon:
 
     def stop(self):
         self.proc.terminate()
-        assert self.proc.wait(timeout=30) == 0          # SIGTERM is a clean stop
+        assert self.proc.wait(timeout=30) == 0  # SIGTERM is a clean stop
         self.log.close()
 
 
@@ -71,7 +86,9 @@ def reference(tmp_path_factory):
         job = wait_final(svc, svc.start_scan(PARAMS))
         assert job["status"] == "done"
         scan = json.loads(svc.job_file(job["id"], "scan/scan.json").read_text())
-        return read_heightmap(svc.job_file(job["id"], "heightmap.csv")), [f["level_mm"] for f in scan["frames"]]
+        return read_heightmap(svc.job_file(job["id"], "heightmap.csv")), [
+            f["level_mm"] for f in scan["frames"]
+        ]
     finally:
         svc.close()
 
@@ -133,7 +150,9 @@ def test_sigkill_ten_times_then_resume_equals_an_uninterrupted_scan(tmp_path, re
             continue
         landed += 1
         phases.append(f"{st['state']}@{st['levels_done']}")
-        assert job["status"] == "failed" and job["interrupted"] and job["reason"].startswith("interrupted"), job
+        assert job["status"] == "failed" and job["interrupted"] and job["reason"].startswith("interrupted"), (
+            job
+        )
         daemon.client.resume(job_id)
     print(f"killed mid-job at: {', '.join(phases)}; jobs finished between kills: {finished}")
     assert landed == 10, phases
@@ -142,11 +161,14 @@ def test_sigkill_ten_times_then_resume_equals_an_uninterrupted_scan(tmp_path, re
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("faults, text", [
-    ({"camera": {"unplug_after": 3}}, "camera"),
-    ({"stage": {"reset_after_moves": 4}}, "stage: the controller was reset"),
-    ({"disk": {"after_frames": 2, "free_mb": 150}}, "disk: nearly full"),
-])
+@pytest.mark.parametrize(
+    "faults, text",
+    [
+        ({"camera": {"unplug_after": 3}}, "camera"),
+        ({"stage": {"reset_after_moves": 4}}, "stage: the controller was reset"),
+        ({"disk": {"after_frames": 2, "free_mb": 150}}, "disk: nearly full"),
+    ],
+)
 def test_faults_in_the_daemon_process_end_with_a_clear_reason(tmp_path, faults, text):
     daemon = Daemon(tmp_path, faults)
     try:
@@ -193,6 +215,7 @@ def big_scan_folder(reference_scan, folder, frames=1500):
 
 def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restart_removes(tmp_path):
     import threading
+
     ref, _ = service(tmp_path / "ref")
     try:
         ref_job = wait_final(ref, ref.start_scan(SCAN))
@@ -202,7 +225,9 @@ def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restar
         ref.close()
     daemon = Daemon(tmp_path)
     jobs = daemon.data / "jobs"
-    threading.Thread(target=lambda: pytest.raises(Exception, daemon.client.import_scan, source), daemon=True).start()
+    threading.Thread(
+        target=lambda: pytest.raises(Exception, daemon.client.import_scan, source), daemon=True
+    ).start()
     end = time.monotonic() + 60
     while not [d for d in jobs.glob(".import-*") if len(list(d.glob("scan/frames/*"))) >= 100]:
         assert time.monotonic() < end, "the import never started copying"
@@ -211,13 +236,15 @@ def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restar
     stray = list(jobs.glob(".import-*"))
     assert len(stray) == 1 and not list(jobs.glob("2*")), "killed after the copy was complete"
     found = audit_of(daemon.data)
-    assert len(found) == 1 and found[0].startswith("jobs: imports left half-copied (removed when the "
-                                                   "daemon starts), ") and stray[0].name in found[0], found
-    daemon = Daemon(tmp_path)                          # start-up removes it
+    assert (
+        len(found) == 1
+        and found[0].startswith("jobs: imports left half-copied (removed when the daemon starts), ")
+        and stray[0].name in found[0]
+    ), found
+    daemon = Daemon(tmp_path)  # start-up removes it
     try:
         assert list(jobs.glob(".import-*")) == []
         assert daemon.client.jobs() == []
     finally:
         daemon.stop()
     assert audit_of(daemon.data) == []
-

@@ -1,4 +1,5 @@
 """The daemon's socket under many clients: nobody refused, the web's client keeps few connections."""
+
 import socket
 import threading
 
@@ -28,8 +29,9 @@ def together(n, fn):
         gate.wait()
         try:
             fn(i)
-        except Exception as e:              # noqa: BLE001 - collected for the assertion
+        except Exception as e:  # noqa: BLE001 - collected for the assertion
             errors.append(e)
+
     threads = [threading.Thread(target=run, args=(i,)) for i in range(n)]
     for t in threads:
         t.start()
@@ -59,10 +61,11 @@ def test_a_shared_client_reuses_a_few_connections(daemon):
     def counting(timeout):
         opened.append(1)
         return connect(timeout)
+
     client._connect = counting
     errors = together(50, lambda i: [client.state() for _ in range(5)] and client.jobs())
     assert errors == [], errors[:3]
-    assert 1 <= len(opened) <= 4                # 300 calls, at most four connections
+    assert 1 <= len(opened) <= 4  # 300 calls, at most four connections
     assert len(client._idle) == len(opened)
     client.close()
     assert client._idle == []
@@ -73,7 +76,7 @@ def test_a_dead_kept_connection_is_replaced(daemon):
     client = rpc.BenchClient(sock, timeout=20)
     assert client.state()["state"] == "idle"
     conn = client._idle[0]
-    conn.sock.shutdown(socket.SHUT_RDWR)        # as if the daemon had restarted since
-    assert client.state()["state"] == "idle"    # a fresh connection, no error for the caller
+    conn.sock.shutdown(socket.SHUT_RDWR)  # as if the daemon had restarted since
+    assert client.state()["state"] == "idle"  # a fresh connection, no error for the caller
     assert client._idle and client._idle[0] is not conn
     client.close()

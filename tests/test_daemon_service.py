@@ -1,5 +1,6 @@
 """BenchService on the in-memory fake bench: the state machine, the facade,
 cancel and resume, and faults leaving the hardware safe with a clear reason."""
+
 import json
 import shutil
 
@@ -92,17 +93,22 @@ def test_settings_are_validated_and_stored(tmp_path):
     svc, _ = service(tmp_path)
     try:
         assert svc.update_settings({"level_step_mm": 0.25})["level_step_mm"] == 0.25
-        for bad, key in (({"level_step_mm": -1}, "level_step_mm"), ({"dialect": "heidenhain"}, "dialect"),
-                         ({"nope": 1}, "nope"), ({"grid": 2.5}, "grid"), ({"auto_resume": "yes"}, "auto_resume")):
+        for bad, key in (
+            ({"level_step_mm": -1}, "level_step_mm"),
+            ({"dialect": "heidenhain"}, "dialect"),
+            ({"nope": 1}, "nope"),
+            ({"grid": 2.5}, "grid"),
+            ({"auto_resume": "yes"}, "auto_resume"),
+        ):
             with pytest.raises(SettingError) as e:
                 svc.update_settings(bad)
             assert e.value.where == key
-        assert svc.settings()["level_step_mm"] == 0.25          # a refused change changed nothing
+        assert svc.settings()["level_step_mm"] == 0.25  # a refused change changed nothing
     finally:
         svc.close()
     svc2, _ = service(tmp_path)
     try:
-        assert svc2.settings()["level_step_mm"] == 0.25          # survives a restart
+        assert svc2.settings()["level_step_mm"] == 0.25  # survives a restart
     finally:
         svc2.close()
 
@@ -115,7 +121,7 @@ def test_latest_frame_is_a_small_jpeg_with_the_waterline(tmp_path):
         jpeg, info = svc.latest_frame()
         img = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
         assert img.shape[1] == 160 and info["level_mm"] == 6.0 and info["waterline"]
-        red = img[..., 2].astype(int) - img[..., 1] > 60          # the drawn waterline
+        red = img[..., 2].astype(int) - img[..., 1] > 60  # the drawn waterline
         assert red.sum() > 50
     finally:
         svc.close()
@@ -143,7 +149,7 @@ def test_cancel_stops_the_motor_and_resume_matches_an_uninterrupted_scan(tmp_pat
         svc.resume(job_id)
         job = wait_final(svc, job_id)
         assert job["status"] == "done" and job["attempts"] == 2
-        assert bench.last.stage.calls[0] == "home"               # a resume re-homes first
+        assert bench.last.stage.calls[0] == "home"  # a resume re-homes first
         got = read_heightmap(svc.job_file(job_id, "heightmap.csv"))
         assert np.nanmax(np.abs(got - ref_map)) <= 0.005
         assert audit(svc.store) == []
@@ -151,11 +157,14 @@ def test_cancel_stops_the_motor_and_resume_matches_an_uninterrupted_scan(tmp_pat
         svc.close()
 
 
-@pytest.mark.parametrize("faults, where, text", [
-    ({"camera": {"unplug_after": 4}}, "camera", "unplugged"),
-    ({"stage": {"reset_after_moves": 5}}, "stage", "controller was reset"),
-    ({"stage": {"unplug_after_moves": 3}}, "stage", "unplugged"),
-])
+@pytest.mark.parametrize(
+    "faults, where, text",
+    [
+        ({"camera": {"unplug_after": 4}}, "camera", "unplugged"),
+        ({"stage": {"reset_after_moves": 5}}, "stage", "controller was reset"),
+        ({"stage": {"unplug_after_moves": 3}}, "stage", "unplugged"),
+    ],
+)
 def test_device_faults_end_the_job_safely_with_a_clear_reason(tmp_path, faults, where, text):
     svc, bench = service(tmp_path, faults=faults)
     try:
@@ -164,7 +173,7 @@ def test_device_faults_end_the_job_safely_with_a_clear_reason(tmp_path, faults, 
         assert job["reason"].startswith(where) and text in job["reason"], job["reason"]
         assert bench.last.light.on is False
         if "unplug_after_moves" not in faults.get("stage", {}):
-            assert bench.last.stage.calls[-1] == "stop"         # motor stopped
+            assert bench.last.stage.calls[-1] == "stop"  # motor stopped
         assert svc.state()["hardware"][where].startswith("fault")
         # what was captured is kept, and listed
         assert 2 <= job["levels_done"] <= 5
@@ -199,6 +208,7 @@ def test_a_real_enospc_while_writing_fails_the_job_without_a_half_frame(tmp_path
     import errno
 
     from appliance import atomicio
+
     real = atomicio.write_bytes
     count = {"n": 0}
 
@@ -228,13 +238,14 @@ def test_a_processing_error_fails_the_job_and_keeps_the_scan(tmp_path):
     try:
         job = wait_final(svc, svc.start_scan(SCAN))
         assert job["status"] == "failed" and "no waterline" in job["reason"]
-        assert job["levels_done"] == job["levels_total"] > 10       # every frame kept
+        assert job["levels_done"] == job["levels_total"] > 10  # every frame kept
     finally:
         svc.close()
 
 
 def test_processing_in_a_child_process_gives_the_same_files(tmp_path):
     from appliance.daemon.processing import child_process
+
     svc, _ = service(tmp_path, processor=child_process)
     try:
         job = wait_final(svc, svc.start_scan(SCAN))
@@ -249,8 +260,15 @@ def test_processing_in_a_child_process_gives_the_same_files(tmp_path):
 def test_adaptive_steps_are_finer_where_the_waterline_moves_fast(tmp_path):
     svc, _ = service(tmp_path)
     try:
-        params = {**SCAN, "step_mode": "adaptive", "level_step_mm": 1.0, "step_min_mm": 0.25,
-                  "step_max_mm": 4.0, "adaptive_change": 0.08, "levels_from_mm": 0.0}
+        params = {
+            **SCAN,
+            "step_mode": "adaptive",
+            "level_step_mm": 1.0,
+            "step_min_mm": 0.25,
+            "step_max_mm": 4.0,
+            "adaptive_change": 0.08,
+            "levels_from_mm": 0.0,
+        }
         job = wait_final(svc, svc.start_scan(params))
         assert job["status"] == "done", job["reason"]
         doc = json.loads(svc.job_file(job["id"], "scan/scan.json").read_text())
@@ -269,8 +287,9 @@ def test_adaptive_steps_are_finer_where_the_waterline_moves_fast(tmp_path):
 
 
 def test_panel_reports_missing_hardware_and_the_button_starts_and_cancels(tmp_path):
-    svc, bench = service(tmp_path, faults={"panel": {"display": "missing"},
-                                           "stage": {"seconds_per_mm": 0.05}})
+    svc, bench = service(
+        tmp_path, faults={"panel": {"display": "missing"}, "stage": {"seconds_per_mm": 0.05}}
+    )
     try:
         hw = svc.state()["hardware"]
         assert hw["display"] == "missing" and hw["led"] == "ok"
@@ -281,8 +300,9 @@ def test_panel_reports_missing_hardware_and_the_button_starts_and_cancels(tmp_pa
                 break
         assert svc.jobs()[0]["name"] == "started at the bench"
         import time
+
         time.sleep(0.1)
-        assert bench.panel.led.on is True                      # steady on while working
+        assert bench.panel.led.on is True  # steady on while working
         bench.panel.button.press()
         for st in svc.subscribe(timeout=10):
             if st["state"] == "cancelled":
@@ -294,7 +314,8 @@ def test_panel_reports_missing_hardware_and_the_button_starts_and_cancels(tmp_pa
 
 def test_cancel_interrupts_a_long_move_at_once(tmp_path):
     import time
-    svc, bench = service(tmp_path, faults={"stage": {"seconds_per_mm": 1.0}})   # homing takes ~40 s
+
+    svc, bench = service(tmp_path, faults={"stage": {"seconds_per_mm": 1.0}})  # homing takes ~40 s
     try:
         job_id = svc.start_scan(SCAN)
         for st in svc.subscribe(timeout=10):
@@ -316,6 +337,7 @@ PLATEAU = {**SCAN, "name": "plateau", "surface": "plateau", "levels_to_mm": 26.0
 
 def _levels(svc, job_id):
     import json
+
     frames = json.loads(svc.job_file(job_id, "scan/scan.json").read_text())["frames"]
     return [(f["level_mm"], f.get("refines")) for f in frames]
 
@@ -335,7 +357,7 @@ def test_a_scan_cut_while_refining_a_step_finishes_the_bisection_when_resumed(tm
     try:
         job_id = svc.start_scan(PLATEAU)
         for st in svc.subscribe(timeout=30):
-            if st["levels_done"] >= 4:            # 26, 24 and two of the step's bisection
+            if st["levels_done"] >= 4:  # 26, 24 and two of the step's bisection
                 break
         svc.cancel()
         assert svc.job(job_id)["status"] == "cancelled"

@@ -1,6 +1,7 @@
 """A whole scan through the daemon on the simulated bench: the real stepper
 firmware under simavr behind the real SerialStage, and the renderer's
 VirtualCamera looking at where the simulated stage really is."""
+
 import json
 import shutil
 
@@ -13,16 +14,28 @@ from appliance.daemon.service import BenchService
 from appliance.cli import main as cli_main
 from daemon_helpers import read_heightmap, wait_final
 
-pytestmark = [pytest.mark.simavr,
-              pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-                                 reason="needs gcc-avr and simavr (scripts/setup.sh)")]
-PARAMS = {"name": "cone on simavr", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
-          "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
+pytestmark = [
+    pytest.mark.simavr,
+    pytest.mark.skipif(
+        shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
+        reason="needs gcc-avr and simavr (scripts/setup.sh)",
+    ),
+]
+PARAMS = {
+    "name": "cone on simavr",
+    "surface": "cone",
+    "levels_to_mm": 24.0,
+    "levels_from_mm": 6.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+    "pipeline": "seed",
+}
 
 
 @pytest.fixture(scope="module")
 def factory():
     from appliance.sim.fakes import SimulatedBenchFactory, small_rig
+
     f = SimulatedBenchFactory("cone", small_rig(320, 240))
     yield f
     f.close()
@@ -30,7 +43,9 @@ def factory():
 
 @pytest.fixture(scope="module")
 def reference(factory, tmp_path_factory):
-    svc = BenchService(tmp_path_factory.mktemp("simref") / "data", factory, processor=factory.processor(in_process))
+    svc = BenchService(
+        tmp_path_factory.mktemp("simref") / "data", factory, processor=factory.processor(in_process)
+    )
     try:
         job = wait_final(svc, svc.start_scan(PARAMS), timeout=120)
         return svc, job
@@ -48,7 +63,9 @@ def test_a_whole_scan_on_simavr_matches_inkslice_process(reference, factory, tmp
     # the stage really went there: the last level's position, counted from STEP edges
     at_home = job["settings"]["level_at_home_mm"]
     assert abs(factory.bench.stage_position_mm() - (at_home - 6.0)) < 1e-9
-    assert cli_main(["process", str(job_dir / "scan"), "-o", str(tmp_path / "cli"), "--pipeline", "seed"]) == 0
+    assert (
+        cli_main(["process", str(job_dir / "scan"), "-o", str(tmp_path / "cli"), "--pipeline", "seed"]) == 0
+    )
     for name in ("heightmap.csv", "toolpath.gcode"):
         assert (tmp_path / "cli" / name).read_bytes() == (job_dir / name).read_bytes(), name
     report = json.loads((job_dir / "report.json").read_text())
@@ -83,17 +100,24 @@ def test_an_mcu_reset_mid_scan_stops_the_job_and_resume_finishes_it(reference, f
         svc.close()
 
 
-
 # the plateau: flat at 25 mm inside r < 22 mm. Its top comes out of the ink all at once
 # between the levels 26 and 24; the runner goes back into that step and bisects it.
-PLATEAU = {"name": "plateau on simavr", "surface": "plateau", "levels_to_mm": 26.0, "levels_from_mm": 20.0,
-           "level_step_mm": 2.0, "settle_s": 0.0, "pipeline": "seed"}
+PLATEAU = {
+    "name": "plateau on simavr",
+    "surface": "plateau",
+    "levels_to_mm": 26.0,
+    "levels_from_mm": 20.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+    "pipeline": "seed",
+}
 
 
 def test_a_face_out_at_once_is_bisected_by_going_back_into_its_step(factory, tmp_path):
     from appliance.scanfile import load_scan, read_frame
     from appliance.vision.part import find_part
     from appliance.vision.refine import face_bracket, mask_pixel_mm, surfaced_faces
+
     svc = BenchService(tmp_path / "data", factory, processor=factory.processor(in_process))
     try:
         job = wait_final(svc, svc.start_scan(PLATEAU), timeout=180)
@@ -106,12 +130,14 @@ def test_a_face_out_at_once_is_bisected_by_going_back_into_its_step(factory, tmp
     assert [f.level_mm for f in plan] == [26.0, 24.0, 22.0, 20.0]
     # right after the frame that showed the face, marked with the step, at the levels the stage
     # reached (exact 1/1600 mm steps): a bisection of the 2 mm step down to 0.0625 mm
-    assert scan.frames[2:2 + len(extra)] == extra and len(extra) == 5
+    assert scan.frames[2 : 2 + len(extra)] == extra and len(extra) == 5
     assert all(f.extra["refines"] == [26.0, 24.0] and 24.0 < f.level_mm < 26.0 for f in extra)
     assert extra[0].level_mm == 25.0
     # read back from the frames alone, the face is now known to within 0.1 mm
     part = {f.file: find_part(read_frame(scan, f), scan.camera, f.level_mm) for f in scan.frames}
-    faces = surfaced_faces(part[plan[0].file], part[plan[1].file], mask_pixel_mm(scan.camera, part[plan[1].file].shape))
+    faces = surfaced_faces(
+        part[plan[0].file], part[plan[1].file], mask_pixel_mm(scan.camera, part[plan[1].file].shape)
+    )
     assert len(faces) == 1
     lo, hi = face_bracket(faces[0], 26.0, 24.0, [(f.level_mm, part[f.file]) for f in extra])
     assert hi - lo <= 0.1 and 24.5 < lo < 25.5

@@ -1,5 +1,6 @@
 """The firmware as package data: where it builds, and `inkslice firmware` flashing through avrdude.
 (tests/test_installed_copy.py does the same from an installed wheel.)"""
+
 import os
 import shutil
 import sys
@@ -21,7 +22,7 @@ def test_the_build_goes_to_a_cache_folder_of_its_own_never_into_the_sources(monk
     assert here.parent == tmp_path / "cache" / "inkslice" and not here.is_relative_to(firmware.SOURCE)
     assert firmware.codes_path() == firmware.SOURCE / "codes.def" and firmware.codes_path().is_file()
     monkeypatch.setenv("INKSLICE_FIRMWARE_DIR", str(tmp_path / "other-tree"))
-    assert firmware.build_dir() != here                # another tree never reuses these objects
+    assert firmware.build_dir() != here  # another tree never reuses these objects
     monkeypatch.setenv("INKSLICE_FIRMWARE_BUILD", str(tmp_path / "here"))
     assert firmware.build_dir() == tmp_path / "here"
 
@@ -41,12 +42,16 @@ def test_flash_without_avrdude_is_one_clear_line(monkeypatch, capsys):
 
 @needs_avr
 def test_a_failing_avrdude_names_the_port_and_says_why(monkeypatch, tmp_path, capsys):
-    fake_avrdude(tmp_path / "bin", "print('avrdude: stk500_recv(): programmer is not responding', "
-                                   "file=sys.stderr); sys.exit(1)")
+    fake_avrdude(
+        tmp_path / "bin",
+        "print('avrdude: stk500_recv(): programmer is not responding', file=sys.stderr); sys.exit(1)",
+    )
     monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}:{os.environ['PATH']}")
     assert cli_main(["firmware", "flash", "--port", "/dev/ttyACM0"]) == 2
-    assert capsys.readouterr().err == ("inkslice: error: /dev/ttyACM0: avrdude failed: "
-                                       "avrdude: stk500_recv(): programmer is not responding\n")
+    assert capsys.readouterr().err == (
+        "inkslice: error: /dev/ttyACM0: avrdude failed: "
+        "avrdude: stk500_recv(): programmer is not responding\n"
+    )
 
 
 @needs_avr

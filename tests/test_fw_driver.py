@@ -1,6 +1,7 @@
 """The Python side of the protocol, without simavr: framing, parsing, and the
 driver against a scripted fake controller on a pty (identify refusal,
 timeouts, resend on a damaged reply)."""
+
 import os
 import threading
 import time
@@ -89,6 +90,7 @@ def firmware(proto=1, damage_first=0):
             state["damaged"] += 1
             line = line[:3] + b"X" + line[4:]
         return [line]
+
     return answer
 
 
@@ -107,8 +109,8 @@ def test_a_silent_device_fails_within_the_timeout_with_a_clear_message():
         t = time.monotonic()
         with pytest.raises(DeviceError, match="no reply to ID"):
             SerialStage(fake.port, timeout=0.8)
-        assert time.monotonic() - t < 0.8 + 2.0      # its timeout, plus slack for a loaded machine
-        assert len(fake.lines) >= 3 and len(set(fake.lines)) == 1   # the same line, resent
+        assert time.monotonic() - t < 0.8 + 2.0  # its timeout, plus slack for a loaded machine
+        assert len(fake.lines) >= 3 and len(set(fake.lines)) == 1  # the same line, resent
     finally:
         fake.close()
 
@@ -138,6 +140,7 @@ def test_on_a_link_that_slows_down_the_driver_waits_as_long_as_the_measured_roun
         for line in script(body):
             threading.Timer(delay[0], lambda out=line: os.write(fake.master, out)).start()
         return []
+
     fake = FakeController(answer)
     stage = SerialStage(fake.port, timeout=1.0, reply_timeout=0.05)
     try:
@@ -146,10 +149,10 @@ def test_on_a_link_that_slows_down_the_driver_waits_as_long_as_the_measured_roun
             assert stage.get_setting("max_rate") == P.SETTINGS["max_rate"].default
         c = stage.counters
         assert c["worst_round_trip_s"] >= 1.4
-        assert c["longest_command_s"] > stage.timeout          # longer than the fixed timeout, and fine
+        assert c["longest_command_s"] > stage.timeout  # longer than the fixed timeout, and fine
         assert c["resends"] <= c["commands"] // 2
         assert c["over_budget"] == 0
     finally:
         stage.close()
-        time.sleep(delay[0])                                    # the last replies land before the pty closes
+        time.sleep(delay[0])  # the last replies land before the pty closes
         fake.close()

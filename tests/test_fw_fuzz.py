@@ -1,4 +1,5 @@
 """A bounded libFuzzer run of the firmware's line parser (ASan + UBSan)."""
+
 import os
 import re
 import subprocess
@@ -17,15 +18,31 @@ def test_line_parser_survives_a_bounded_fuzz_run(tmp_path):
     corpus = tmp_path / "corpus"
     corpus.mkdir()
     # seeds that pass the CRC, so the fuzzer starts past the checksum wall
-    seeds = [(1, "ID"), (2, "MOVE", -1600), (3, "SET", "accel", 80000), (4, "GET", "soft_max"),
-             (65535, "HOME"), (9, "DRIVER", "tmc2209"), (10, "STATUS")]
+    seeds = [
+        (1, "ID"),
+        (2, "MOVE", -1600),
+        (3, "SET", "accel", 80000),
+        (4, "GET", "soft_max"),
+        (65535, "HOME"),
+        (9, "DRIVER", "tmc2209"),
+        (10, "STATUS"),
+    ]
     for i, s in enumerate(seeds):
         (corpus / f"seed{i}").write_bytes(P.encode_command(*s) * 2)
-    r = subprocess.run([str(BUILD / "fuzz_parser"), f"-max_total_time={FUZZ_SECONDS}", "-print_final_stats=1",
-                        # RSS under ASan sits near 1 GB on this machine from the first run;
-                        # a real leak is still caught by LeakSanitizer at exit
-                        "-rss_limit_mb=3072", str(corpus)],
-                       capture_output=True, text=True, timeout=FUZZ_SECONDS + 120)
+    r = subprocess.run(
+        [
+            str(BUILD / "fuzz_parser"),
+            f"-max_total_time={FUZZ_SECONDS}",
+            "-print_final_stats=1",
+            # RSS under ASan sits near 1 GB on this machine from the first run;
+            # a real leak is still caught by LeakSanitizer at exit
+            "-rss_limit_mb=3072",
+            str(corpus),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=FUZZ_SECONDS + 120,
+    )
     out = r.stderr
     m = re.search(r"Done (\d+) runs in (\d+) second", out)
     print(out[-1500:])

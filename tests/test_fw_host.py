@@ -1,5 +1,6 @@
 """The firmware's pure C sources on the host: cmocka unit tests, size budget,
 and the one code table both sides read."""
+
 import re
 import subprocess
 
@@ -21,8 +22,12 @@ def test_host_unit_tests_of_planner_protocol_crc_and_settings_pass():
 
 def test_firmware_uses_at_most_half_of_flash_and_ram():
     make("firmware")
-    out = subprocess.run(["avr-size", "-C", "--mcu=atmega328p", str(BUILD / "inkslice-stepper.elf")],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        ["avr-size", "-C", "--mcu=atmega328p", str(BUILD / "inkslice-stepper.elf")],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     flash = float(re.search(r"Program:.*\(([\d.]+)% Full\)", out).group(1))
     ram = float(re.search(r"Data:.*\(([\d.]+)% Full\)", out).group(1))
     print(out)
@@ -41,7 +46,7 @@ def test_code_table_numbers_are_unique_per_kind_and_cover_the_protocol():
         assert len(names) == len(set(names)), kind
     text = (FIRMWARE_DIR / "codes.def").read_text()
     lines = [l for l in text.splitlines() if l.startswith("CODE(")]
-    assert len(lines) == sum(len(c) for c in P.CODES.values())   # no line the regex missed
+    assert len(lines) == sum(len(c) for c in P.CODES.values())  # no line the regex missed
     assert {"bad_checksum", "not_homed", "soft_limit", "busy"} <= set(P.ERROR_NUMBER)
     assert {"idle", "moving", "homing", "alarm", "estop"} == {c.name for c in P.STATES.values()}
     assert P.SETTINGS["steps_per_rev"].default * 1000 / P.SETTINGS["lead_um"].default == 1600

@@ -2,6 +2,7 @@
 
 Each test reads as one clause of appliance/firmware/stepper/PROTOCOL.md and checks it
 on the unmodified ELF through the HIL harness (a fresh MCU per test)."""
+
 import threading
 import time
 
@@ -60,13 +61,13 @@ def test_unknown_verbs_bad_arguments_and_long_lines_have_their_codes(link):
     link.send_raw(b"\n" + b"9" * 80 + b"\n")
     r = link.reply()
     assert (r.seq, r.error) == (0, err("line_too_long"))
-    assert link.ask(10, "ID").ok                       # and the link still works
+    assert link.ask(10, "ID").ok  # and the link still works
 
 
 def test_status_byte_is_answered_mid_line_without_disturbing_the_line(link):
     data = P.encode_command(11, "STATUS")
     link.send_raw(data[:5])
-    st = link.status()                                  # '?' in the middle of the line
+    st = link.status()  # '?' in the middle of the line
     assert st.state == "idle" and st.flags["fresh_boot"]
     link.send_raw(data[5:])
     r = link.reply(11)
@@ -82,7 +83,7 @@ def test_move_before_homing_is_refused_not_homed(bench, link):
 def test_homing_finds_the_switch_and_the_stage_ends_at_the_pulloff(bench, link):
     st = home(link)
     assert st.position == P.SETTINGS["home_pulloff"].default
-    assert bench.stage_position_steps() == st.position     # the firmware's 0 is where the switch closes
+    assert bench.stage_position_steps() == st.position  # the firmware's 0 is where the switch closes
 
 
 def test_homing_starting_on_the_switch_backs_off_first(bench, link):
@@ -96,14 +97,14 @@ def test_a_resent_move_is_acknowledged_again_but_not_executed_twice(bench, link)
     home(link)
     line = link.send(20, "MOVE", 48000)
     assert link.reply(20).ok
-    link.send_raw(line)                                  # the host "lost" the ok: same line again
+    link.send_raw(line)  # the host "lost" the ok: same line again
     r = link.reply(20)
-    assert r.ok                                          # a second execution would say error:8 busy
+    assert r.ok  # a second execution would say error:8 busy
     assert link.wait_idle().position == 48000
     link.send_raw(line)
     assert link.reply(20).ok
     backoff, pulloff = P.SETTINGS["home_backoff"].default, P.SETTINGS["home_pulloff"].default
-    assert bench.stats()["steps_up"] == backoff + pulloff + (48000 - pulloff)   # homing, then the move once
+    assert bench.stats()["steps_up"] == backoff + pulloff + (48000 - pulloff)  # homing, then the move once
     assert bench.stage_position_steps() == 48000
 
 
@@ -124,18 +125,18 @@ def test_impossible_settings_are_refused(link):
 
 # ---- hard limits and the emergency stop ----
 def test_hitting_the_top_switch_stops_the_move_and_raises_an_alarm(fw_build):
-    with SimulatedBench(speed=0, stage_mm=5.0, top_switch_mm=12.0) as bench:   # a short machine
+    with SimulatedBench(speed=0, stage_mm=5.0, top_switch_mm=12.0) as bench:  # a short machine
         link = RawLink(bench.port)
         try:
             home(link)
-            assert link.ask(31, "MOVE", 24000).ok                # 15 mm: inside the soft limits, past the switch
+            assert link.ask(31, "MOVE", 24000).ok  # 15 mm: inside the soft limits, past the switch
             st = link.wait_idle()
             assert st.state == "alarm" and st.alarm == "hard_limit_top"
             assert st.flags["limit_top"] and not st.homed
-            assert bench.stage_position_steps() == 19200          # stopped on the switch, not past it
+            assert bench.stage_position_steps() == 19200  # stopped on the switch, not past it
             assert bench.stats()["stalls"] == 0
             assert link.ask(32, "MOVE", 8000).error == err("not_homed")
-            home(link, 33)                                        # HOME clears the alarm
+            home(link, 33)  # HOME clears the alarm
         finally:
             link.close()
 
@@ -145,8 +146,13 @@ def test_hitting_the_home_switch_outside_homing_is_a_bottom_hard_limit(bench, li
     assert link.ask(34, "SET", "soft_min", -5000).ok
     assert link.ask(35, "MOVE", -4000).ok
     st = link.wait_idle()
-    assert (st.state, st.alarm, st.flags["limit_bottom"], st.homed) == ("alarm", "hard_limit_bottom", True, False)
-    assert bench.stage_position_steps() == 0                  # stopped where the switch closed
+    assert (st.state, st.alarm, st.flags["limit_bottom"], st.homed) == (
+        "alarm",
+        "hard_limit_bottom",
+        True,
+        False,
+    )
+    assert bench.stage_position_steps() == 0  # stopped where the switch closed
 
 
 def test_emergency_stop_halts_within_one_step_period(bench, link):
@@ -158,7 +164,7 @@ def test_emergency_stop_halts_within_one_step_period(bench, link):
     st = link.wait_idle()
     assert st.state == "estop" and st.alarm == "emergency_stop" and not st.homed
     s = bench.stats()
-    byte_cycles = 11 * F_CPU / 117647                         # simavr delivers the byte one frame later
+    byte_cycles = 11 * F_CPU / 117647  # simavr delivers the byte one frame later
     step_period = F_CPU / P.SETTINGS["max_rate"].default
     late = s["last_step_cycle"] - (s["estop_feed_cycle"] + byte_cycles)
     print(f"last step {late / 16:.1f} us after the stop byte arrived (one step = {step_period / 16:.1f} us)")
@@ -186,7 +192,7 @@ def test_settings_survive_a_reset_and_a_damaged_eeprom_restores_defaults(bench, 
     bench.reset_mcu(wait_boot=True)
     assert link.ask(61, "GET", "accel").payload == "123456"
     assert "settings=ok" in link.ask(62, "ID").payload
-    bench.eeprom(20, bench.eeprom(20) ^ 0x10)                 # flip one bit of the stored image
+    bench.eeprom(20, bench.eeprom(20) ^ 0x10)  # flip one bit of the stored image
     bench.reset_mcu(wait_boot=True)
     assert "settings=defaults" in link.ask(63, "ID").payload
     assert link.status().flags["settings_defaulted"]
@@ -246,7 +252,7 @@ def test_driver_gives_up_within_its_timeout_when_the_line_is_dead(bench):
         t = time.monotonic()
         with pytest.raises(DeviceError, match="no valid reply to ID"):
             stage.transact("ID")
-        assert time.monotonic() - t < 1.0 + 2.0      # its timeout, plus slack for a loaded machine
+        assert time.monotonic() - t < 1.0 + 2.0  # its timeout, plus slack for a loaded machine
     finally:
         stage.close()
 
@@ -262,7 +268,7 @@ def test_simulated_bench_at_real_time_starts_and_identifies(fw_build):
 def test_driver_recovers_from_an_emergency_stop_byte_forged_by_line_noise(bench):
     """PROTOCOL.md rule 6: a Ctrl-X the driver never sent is handled like a reset."""
     stage = SerialStage(bench.port, timeout=10.0)
-    noise = RawLink(bench.port)                # a second writer on the same line
+    noise = RawLink(bench.port)  # a second writer on the same line
     try:
         stage.home()
         t = threading.Timer(0.02, noise.send_raw, args=(P.RT_ESTOP,))
@@ -283,8 +289,10 @@ def test_the_bench_flags_bytes_a_real_2_byte_fifo_would_lose(fw_build):
     build that spends 400 us per byte) must be caught; the real firmware,
     here and in every other test and the soak, must count 0."""
     from fw_helpers import make
+
     make("slow-rx")
     from fw_helpers import BUILD
+
     with SimulatedBench(speed=0, elf=BUILD / "slow-rx.elf") as b:
         link = RawLink(b.port)
         try:
@@ -296,9 +304,9 @@ def test_the_bench_flags_bytes_a_real_2_byte_fifo_would_lose(fw_build):
     with SimulatedBench(speed=1.0) as b:
         link = RawLink(b.port)
         try:
-            b.eeprom(0, 0)                                  # the next boot rewrites the image (~0.2 s)
+            b.eeprom(0, 0)  # the next boot rewrites the image (~0.2 s)
             b.reset_mcu()
-            link.send_raw(P.encode_command(1, "ID") * 3)    # ... while the host already talks
+            link.send_raw(P.encode_command(1, "ID") * 3)  # ... while the host already talks
             time.sleep(0.4)
             for seq in range(3, 13):
                 assert link.ask(seq, "STATUS").ok

@@ -9,6 +9,7 @@ Under load (issue 19: 5 runs in a row beside 2 busy processes) the simulated
 MCU runs slower and its replies come late: the driver's budget follows the
 measured round trip instead of a fixed 3 s (hw/stage.py). The figures printed
 are the run's time, the worst round trip and the largest budget given."""
+
 import random
 import threading
 import time
@@ -41,7 +42,7 @@ def test_1000_moves_through_a_noisy_line_and_3_resets_each_execute_exactly_once(
             timers = []
             for i in range(MOVES):
                 target = min(150000, max(1600, position + rng.randint(-1600, 1600)))
-                if i in reset_moves:          # pull the reset line while this move is under way
+                if i in reset_moves:  # pull the reset line while this move is under way
                     t = threading.Timer(rng.uniform(0.0005, 0.004), bench.reset_mcu)
                     t.start()
                     timers.append(t)
@@ -61,15 +62,17 @@ def test_1000_moves_through_a_noisy_line_and_3_resets_each_execute_exactly_once(
     faults = {k: v for k, v in s.items() if k.startswith(("rx_", "tx_"))}
     print(f"\nsoak: {MOVES} moves in {took:.1f} s; resets {s['resets']}; wire {faults}")
     print(f"driver: {c}; slowest move {slowest:.2f} s")
-    print(f"worst round trip {c['worst_round_trip_s'] * 1000:.0f} ms; longest command "
-          f"{c['longest_command_s']:.2f} s of a budget up to {c['longest_budget_s']:.2f} s")
+    print(
+        f"worst round trip {c['worst_round_trip_s'] * 1000:.0f} ms; longest command "
+        f"{c['longest_command_s']:.2f} s of a budget up to {c['longest_budget_s']:.2f} s"
+    )
     assert s["resets"] == RESETS
-    assert c["rehomes"] >= RESETS                      # every reset was noticed and recovered from
-    assert c["idle_off_target"] == 0                   # no acknowledged move was ever found not done
-    assert c["over_budget"] == 0                       # no command outlived its budget,
-    assert c["longest_budget_s"] <= max(stage.timeout, ATTEMPTS * MAX_WAIT_S)   # and that stays bounded
+    assert c["rehomes"] >= RESETS  # every reset was noticed and recovered from
+    assert c["idle_off_target"] == 0  # no acknowledged move was ever found not done
+    assert c["over_budget"] == 0  # no command outlived its budget,
+    assert c["longest_budget_s"] <= max(stage.timeout, ATTEMPTS * MAX_WAIT_S)  # and that stays bounded
     assert s["stalls"] == 0
-    assert s["rx_overruns"] == 0                       # a real 2-byte receive FIFO would have kept up
+    assert s["rx_overruns"] == 0  # a real 2-byte receive FIFO would have kept up
     injected = sum(v for k, v in faults.items() if not k.endswith("bytes"))
     total = s["rx_bytes"] + s["tx_bytes"]
-    assert 0.005 < injected / total < 0.02             # the line really was that bad
+    assert 0.005 < injected / total < 0.02  # the line really was that bad

@@ -12,6 +12,7 @@ The last tests build small graphs by hand to show that the checker catches each 
 of violation, so a green run means the package obeys the rules, not that the checker
 looks away.
 """
+
 from __future__ import annotations
 
 import ast
@@ -25,6 +26,7 @@ MAY_USE_SIM = ("sim", "commands")
 
 
 # -- building the graph --------------------------------------------------------------------------
+
 
 def module_name(rel: Path) -> str:
     """appliance/daemon/runner.py -> appliance.daemon.runner; a package's __init__ is the package."""
@@ -43,7 +45,7 @@ def imported_modules(module: str, is_package: bool, tree: ast.AST, modules) -> s
         if isinstance(node, ast.Import):
             found.update(resolve(alias.name, modules) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            base = package[:len(package) - node.level + 1] if node.level else []
+            base = package[: len(package) - node.level + 1] if node.level else []
             origin = ".".join(base + ([node.module] if node.module else []))
             for alias in node.names:
                 full = f"{origin}.{alias.name}"
@@ -65,13 +67,17 @@ def resolve(name: str, modules) -> str | None:
 
 def graph_of(sources: dict[str, tuple[bool, str]]) -> dict[str, set[str]]:
     """{module: (is_package, source)} -> {module: modules of the package it imports}."""
-    return {module: imported_modules(module, is_package, ast.parse(text), sources)
-            for module, (is_package, text) in sources.items()}
+    return {
+        module: imported_modules(module, is_package, ast.parse(text), sources)
+        for module, (is_package, text) in sources.items()
+    }
 
 
 def package_sources() -> dict[str, tuple[bool, str]]:
-    return {module_name(p.relative_to(PACKAGE)): (p.name == "__init__.py", p.read_text())
-            for p in sorted(PACKAGE.rglob("*.py"))}
+    return {
+        module_name(p.relative_to(PACKAGE)): (p.name == "__init__.py", p.read_text())
+        for p in sorted(PACKAGE.rglob("*.py"))
+    }
 
 
 def package_graph() -> dict[str, set[str]]:
@@ -79,6 +85,7 @@ def package_graph() -> dict[str, set[str]]:
 
 
 # -- the rules -------------------------------------------------------------------------------------
+
 
 def room(module: str) -> str:
     """appliance.daemon.runner -> daemon; top-level modules (appliance.process) are their own room."""
@@ -90,7 +97,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Every strongly connected group of two or more modules, each as one circle through it."""
     index, low, stack, on_stack, groups = {}, {}, [], set(), []
 
-    def visit(v):                       # Tarjan, iterative enough for a package this size
+    def visit(v):  # Tarjan, iterative enough for a package this size
         index[v] = low[v] = len(index)
         stack.append(v)
         on_stack.add(v)
@@ -122,7 +129,7 @@ def _circle_through(graph, group: set[str]) -> list[str]:
     start = min(group)
     paths = {start: [start]}
     frontier = [start]
-    while frontier:                     # breadth first: the shortest way back to start
+    while frontier:  # breadth first: the shortest way back to start
         nxt = []
         for v in frontier:
             for w in sorted(graph[v] & group):
@@ -150,6 +157,7 @@ def room_violations(graph: dict[str, set[str]]) -> list[str]:
 
 # -- the package obeys them ---------------------------------------------------------------------------
 
+
 def test_no_module_of_the_package_is_part_of_an_import_circle():
     found = cycles(package_graph())
     assert found == [], "import circles:\n" + "\n".join(" -> ".join(c) for c in found)
@@ -164,11 +172,12 @@ def test_the_graph_sees_the_whole_package():
     graph = package_graph()
     assert "appliance.daemon.service" in graph and "appliance.web.app" in graph and "appliance" in graph
     assert "appliance.daemon.runner" in graph["appliance.daemon.service"]
-    assert "appliance.web.auth" in graph["appliance.web.pages"]      # relative, at the top
-    assert "appliance.daemon.importing" in graph["appliance.daemon.service"]     # inside a function
+    assert "appliance.web.auth" in graph["appliance.web.pages"]  # relative, at the top
+    assert "appliance.daemon.importing" in graph["appliance.daemon.service"]  # inside a function
 
 
 # -- the checker catches what it should (small graphs made up for the purpose) ------------------------
+
 
 def _graph(**files: str) -> dict[str, set[str]]:
     """Made-up modules: keyword a__b__c is appliance/a/b/c.py (c = init: the package a/b)."""
@@ -181,34 +190,58 @@ def _graph(**files: str) -> dict[str, set[str]]:
 
 
 def test_a_circle_through_function_local_imports_is_found_and_printed():
-    graph = _graph(daemon__init="",
-                   daemon__runner="from .levels import plan\n",
-                   daemon__levels="def f():\n    from . import processing\n",
-                   daemon__processing="def g():\n    from .runner import Cancelled\n",
-                   daemon__store="from . import levels\n")
-    assert cycles(graph) == [["appliance.daemon.levels", "appliance.daemon.processing",
-                              "appliance.daemon.runner", "appliance.daemon.levels"]]
+    graph = _graph(
+        daemon__init="",
+        daemon__runner="from .levels import plan\n",
+        daemon__levels="def f():\n    from . import processing\n",
+        daemon__processing="def g():\n    from .runner import Cancelled\n",
+        daemon__store="from . import levels\n",
+    )
+    assert cycles(graph) == [
+        [
+            "appliance.daemon.levels",
+            "appliance.daemon.processing",
+            "appliance.daemon.runner",
+            "appliance.daemon.levels",
+        ]
+    ]
 
 
 def test_two_modules_importing_each_other_by_absolute_and_relative_names_are_a_circle():
-    graph = _graph(web__init="", web__app="import appliance.web.pages\n",
-                   web__pages="def login():\n    from .app import client_address\n")
+    graph = _graph(
+        web__init="",
+        web__app="import appliance.web.pages\n",
+        web__pages="def login():\n    from .app import client_address\n",
+    )
     assert cycles(graph) == [["appliance.web.app", "appliance.web.pages", "appliance.web.app"]]
 
 
 def test_a_graph_without_circles_passes():
-    graph = _graph(errors="", vision__init="", vision__types="from ..errors import InkSliceError\n",
-                   surface__init="", surface__fit="from ..vision import types\nfrom ..vision.types import W\n")
+    graph = _graph(
+        errors="",
+        vision__init="",
+        vision__types="from ..errors import InkSliceError\n",
+        surface__init="",
+        surface__fit="from ..vision import types\nfrom ..vision.types import W\n",
+    )
     assert cycles(graph) == [] and room_violations(graph) == []
 
 
 def test_a_pure_room_importing_a_device_the_daemon_the_web_or_the_simulator_is_refused():
-    graph = _graph(hw__init="", hw__usb="", daemon__init="", daemon__calibration="", web__init="",
-                   web__app="", sim__init="", sim__render="",
-                   vision__printboard="def board():\n    from ..daemon.calibration import BOARD\n",
-                   surface__reference="from appliance.sim.render import render_frame\n",
-                   cam__jobs="from ..web.app import create_app\n",
-                   cam__posts="from ..hw.usb import copy_verified\n")
+    graph = _graph(
+        hw__init="",
+        hw__usb="",
+        daemon__init="",
+        daemon__calibration="",
+        web__init="",
+        web__app="",
+        sim__init="",
+        sim__render="",
+        vision__printboard="def board():\n    from ..daemon.calibration import BOARD\n",
+        surface__reference="from appliance.sim.render import render_frame\n",
+        cam__jobs="from ..web.app import create_app\n",
+        cam__posts="from ..hw.usb import copy_verified\n",
+    )
     assert room_violations(graph) == [
         "appliance.cam.jobs imports appliance.web.app: the cam room may not use web",
         "appliance.cam.posts imports appliance.hw.usb: the cam room may not use hw",
@@ -218,15 +251,27 @@ def test_a_pure_room_importing_a_device_the_daemon_the_web_or_the_simulator_is_r
 
 
 def test_the_web_importing_device_code_is_refused():
-    graph = _graph(hw__init="", hw__usb="", web__init="",
-                   web__app="def create_app():\n    from ..hw.usb import UsbExporter\n")
-    assert room_violations(graph) == ["appliance.web.app imports appliance.hw.usb: the web room may not use hw"]
+    graph = _graph(
+        hw__init="",
+        hw__usb="",
+        web__init="",
+        web__app="def create_app():\n    from ..hw.usb import UsbExporter\n",
+    )
+    assert room_violations(graph) == [
+        "appliance.web.app imports appliance.hw.usb: the web room may not use hw"
+    ]
 
 
 def test_production_code_importing_the_simulator_is_refused_but_commands_may():
-    graph = _graph(sim__init="", sim__fakes="", daemon__init="", commands__init="",
-                   daemon__main="import appliance.sim.fakes\n", commands__demo="from ..sim import fakes\n",
-                   process="from .sim.fakes import SimBench\n")
+    graph = _graph(
+        sim__init="",
+        sim__fakes="",
+        daemon__init="",
+        commands__init="",
+        daemon__main="import appliance.sim.fakes\n",
+        commands__demo="from ..sim import fakes\n",
+        process="from .sim.fakes import SimBench\n",
+    )
     assert room_violations(graph) == [
         "appliance.daemon.main imports appliance.sim.fakes: production code never imports the simulator",
         "appliance.process imports appliance.sim.fakes: production code never imports the simulator",

@@ -25,6 +25,7 @@ Flask...). The checkout's editable install is not reachable that way: a path
 added by a .pth line is not scanned for .pth files, so the editable finder
 never loads, and the test asserts `appliance` comes from the fresh venv.
 """
+
 from __future__ import annotations
 
 import http.cookiejar
@@ -45,19 +46,24 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-pytestmark = [pytest.mark.slow, pytest.mark.simavr,
-              pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-                                 reason="needs gcc-avr and simavr (scripts/setup.sh)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.simavr,
+    pytest.mark.skipif(
+        shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
+        reason="needs gcc-avr and simavr (scripts/setup.sh)",
+    ),
+]
 
 
 @dataclass
 class Installed:
     wheel: Path
     venv: Path
-    site: Path               # the venv's site-packages, where the wheel went
-    run_dir: Path            # the working folder of every process (not the checkout)
+    site: Path  # the venv's site-packages, where the wheel went
+    run_dir: Path  # the working folder of every process (not the checkout)
     env: dict
-    shipped: list = None     # site_files() right after the install
+    shipped: list = None  # site_files() right after the install
 
     def site_files(self) -> list[Path]:
         """What the wheel put into site-packages (byte-code caches aside): nothing may add to it."""
@@ -67,17 +73,32 @@ class Installed:
         return str(self.venv / "bin" / name)
 
     def run(self, *args, **kw) -> subprocess.CompletedProcess:
-        return subprocess.run(list(args), cwd=self.run_dir, env=self.env, capture_output=True, text=True,
-                              timeout=kw.pop("timeout", 300), **kw)
+        return subprocess.run(
+            list(args),
+            cwd=self.run_dir,
+            env=self.env,
+            capture_output=True,
+            text=True,
+            timeout=kw.pop("timeout", 300),
+            **kw,
+        )
 
     def start(self, *args) -> subprocess.Popen:
-        return subprocess.Popen(list(args), cwd=self.run_dir, env=self.env, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True)
+        return subprocess.Popen(
+            list(args),
+            cwd=self.run_dir,
+            env=self.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
 
 
 def laid_out(root: Path) -> Path:
     """The sources as `systemd/install.sh` copies them to the box (/opt/inkslice under root)."""
-    r = subprocess.run([str(REPO / "systemd/install.sh"), "--root", str(root)], capture_output=True, text=True)
+    r = subprocess.run(
+        [str(REPO / "systemd/install.sh"), "--root", str(root)], capture_output=True, text=True
+    )
     assert r.returncode == 0, r.stderr
     return root / "opt" / "inkslice"
 
@@ -87,37 +108,58 @@ def installed(tmp_path_factory) -> Installed:
     tmp = tmp_path_factory.mktemp("installed")
     src = laid_out(tmp / "root")
     wheel_dir = tmp / "dist"
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(wheel_dir), str(src)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(wheel_dir), str(src)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
-    wheel, = wheel_dir.glob("inkslice-*.whl")
+    (wheel,) = wheel_dir.glob("inkslice-*.whl")
     venv = tmp / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     py = venv / "bin" / "python"
-    site = Path(subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                               check=True, capture_output=True, text=True).stdout.strip())
+    site = Path(
+        subprocess.run(
+            [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+    )
     (site / "shared-dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    r = subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", str(wheel)],
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
-    shutil.rmtree(tmp / "root")          # nothing of the sources is left to fall back on
+    shutil.rmtree(tmp / "root")  # nothing of the sources is left to fall back on
     run_dir = tmp / "run"
     run_dir.mkdir()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "INKSLICE_", "VIRTUAL_ENV"))}
-    env.update(PATH=f"{venv / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}", XDG_CACHE_HOME=str(tmp / "cache"),
-               PYTHONUNBUFFERED="1")
+    env.update(
+        PATH=f"{venv / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}",
+        XDG_CACHE_HOME=str(tmp / "cache"),
+        PYTHONUNBUFFERED="1",
+    )
     box = Installed(wheel, venv, site, run_dir, env)
     box.shipped = box.site_files()
     return box
 
 
 def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_table(installed):
-    r = installed.run(installed.bin("python"), "-c", """if True:
+    r = installed.run(
+        installed.bin("python"),
+        "-c",
+        """if True:
         import json, os, sys
         import appliance, appliance.hw.protocol as P
         from appliance.firmware import codes_path
         print(json.dumps({"appliance": appliance.__file__, "cwd": os.getcwd(), "path": sys.path,
-                          "codes": str(codes_path()), "settings": len(P.SETTINGS)}))""")
+                          "codes": str(codes_path()), "settings": len(P.SETTINGS)}))""",
+    )
     assert r.returncode == 0, r.stderr
     got = json.loads(r.stdout)
     assert Path(got["appliance"]).is_relative_to(installed.site)
@@ -128,21 +170,37 @@ def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_tab
     # test venv lives in the checkout): it holds numpy and friends, never a copy of `appliance`
     deps = Path(sysconfig.get_paths()["purelib"]).resolve()
     assert not (deps / "appliance").exists()
-    assert not [p for p in got["path"] if p and Path(p).resolve().is_relative_to(REPO) and Path(p).resolve() != deps]
+    assert not [
+        p for p in got["path"] if p and Path(p).resolve().is_relative_to(REPO) and Path(p).resolve() != deps
+    ]
 
 
 def test_the_wheel_holds_the_modules_of_the_checkout_and_what_they_need_at_run_time(installed):
     names = set(zipfile.ZipFile(installed.wheel).namelist())
-    tracked = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "appliance"], cwd=REPO, check=True,
-                             capture_output=True, text=True).stdout.split()
+    tracked = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard", "appliance"],
+        cwd=REPO,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.split()
     # every module, and nothing else (a stale build/ folder would add deleted ones)
     assert {n for n in names if n.endswith(".py")} == {n for n in tracked if n.endswith(".py")}
     fw = "appliance/firmware/stepper/"
-    needed = {fw + "codes.def", fw + "Makefile", fw + "sim/hil.c", "appliance/web/static/chessboard.pdf",
-              "appliance/web/static/chessboard.png"}
-    needed |= {n for n in tracked if n.startswith((fw + "src/", "appliance/web/templates/", "appliance/web/static/"))}
+    needed = {
+        fw + "codes.def",
+        fw + "Makefile",
+        fw + "sim/hil.c",
+        "appliance/web/static/chessboard.pdf",
+        "appliance/web/static/chessboard.png",
+    }
+    needed |= {
+        n for n in tracked if n.startswith((fw + "src/", "appliance/web/templates/", "appliance/web/static/"))
+    }
     assert needed <= names, sorted(needed - names)
-    assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf", ".hex"))], "build outputs shipped"
+    assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf", ".hex"))], (
+        "build outputs shipped"
+    )
 
 
 def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path):
@@ -151,12 +209,19 @@ def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path)
     fake_bin = tmp_path / "bin"
     fake_bin.mkdir()
     record = tmp_path / "avrdude.json"
-    (fake_bin / "avrdude").write_text(f"#!{sys.executable}\nimport json, sys\n"
-                                      f"json.dump(sys.argv[1:], open({str(record)!r}, 'w'))\n")
+    (fake_bin / "avrdude").write_text(
+        f"#!{sys.executable}\nimport json, sys\njson.dump(sys.argv[1:], open({str(record)!r}, 'w'))\n"
+    )
     (fake_bin / "avrdude").chmod(0o755)
     env = {**installed.env, "PATH": f"{fake_bin}:{installed.env['PATH']}"}
-    r = subprocess.run([installed.bin("inkslice"), "firmware", "flash", "--port", "/dev/ttyACM7"],
-                       cwd=installed.run_dir, env=env, capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [installed.bin("inkslice"), "firmware", "flash", "--port", "/dev/ttyACM7"],
+        cwd=installed.run_dir,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     assert "flashed /dev/ttyACM7" in r.stdout
     args = json.loads(record.read_text())
@@ -164,18 +229,21 @@ def test_the_installed_copy_builds_and_flashes_the_firmware(installed, tmp_path)
     hex_file = Path(re.fullmatch(r"flash:w:(.+):i", args[-1]).group(1))
     assert hex_file.is_relative_to(Path(installed.env["XDG_CACHE_HOME"]))
     lines = hex_file.read_text().splitlines()
-    assert lines[0].startswith(":") and lines[-1] == ":00000001FF" and len(lines) > 100     # Intel HEX
+    assert lines[0].startswith(":") and lines[-1] == ":00000001FF" and len(lines) > 100  # Intel HEX
     assert installed.site_files() == installed.shipped, "the build wrote into site-packages"
 
 
 # ---- both services from the installed copy -------------------------------------------------------
+
 
 class WebClient:
     """A browser's worth of HTTP: a cookie jar, the CSRF token, JSON in and out."""
 
     def __init__(self, url):
         self.url = url
-        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
+        self.opener = urllib.request.build_opener(
+            urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar())
+        )
         self.csrf = None
 
     def _csrf_of(self, path):
@@ -188,13 +256,18 @@ class WebClient:
         self.csrf = self._csrf_of("/")
 
     def call(self, method, path, body=None, timeout=30.0):
-        req = urllib.request.Request(self.url + path, method=method,
-                                     data=None if body is None else json.dumps(body).encode(),
-                                     headers={"Content-Type": "application/json", "X-CSRF-Token": self.csrf or ""})
+        req = urllib.request.Request(
+            self.url + path,
+            method=method,
+            data=None if body is None else json.dumps(body).encode(),
+            headers={"Content-Type": "application/json", "X-CSRF-Token": self.csrf or ""},
+        )
         try:
             with self.opener.open(req, timeout=timeout) as r:
                 data = r.read()
-                return r.status, (json.loads(data) if r.headers.get_content_type() == "application/json" else data)
+                return r.status, (
+                    json.loads(data) if r.headers.get_content_type() == "application/json" else data
+                )
         except urllib.error.HTTPError as e:
             return e.code, json.loads(e.read() or b"null")
 
@@ -252,7 +325,7 @@ TRUE_LEVEL_ZERO = 57.3
 # the dissertation's levels for sample 3 (benches/seed_table.py's sculpture_levels): from just
 # above its top down until the top's lowest point (28.7 mm) is a meniscus rise clear of the ink
 SAMPLE3 = {"levels_to_mm": 50.0, "levels_from_mm": 24.0, "level_step_mm": 1.0, "settle_s": 0.0}
-BENCH_EA_MM = 0.03          # what benches/seed_table.py --effects physics reaches on sample 3 (0.0238)
+BENCH_EA_MM = 0.03  # what benches/seed_table.py --effects physics reaches on sample 3 (0.0238)
 COMMISSION_TIMEOUT = 600.0  # an action on the bench (the level-zero search) answers when it is done
 
 
@@ -260,14 +333,36 @@ COMMISSION_TIMEOUT = 600.0  # an action on the bench (the level-zero search) ans
 def box(installed, tmp_path_factory):
     """The daemon (the simulated bench above) and the web, both from the venv, a client logged in."""
     data = tmp_path_factory.mktemp("box") / "data"
-    daemon = installed.start(installed.bin("inkslice"), "daemon", "--sim", "simavr", "--surface", "sample3",
-                             "--frame", FRAME, "--effects", "physics", "--level-zero", str(TRUE_LEVEL_ZERO),
-                             "--data", str(data))
+    daemon = installed.start(
+        installed.bin("inkslice"),
+        "daemon",
+        "--sim",
+        "simavr",
+        "--surface",
+        "sample3",
+        "--frame",
+        FRAME,
+        "--effects",
+        "physics",
+        "--level-zero",
+        str(TRUE_LEVEL_ZERO),
+        "--data",
+        str(data),
+    )
     web = None
     try:
         read_until(daemon, r"ready: data ")
-        web = installed.start(installed.bin("inkslice"), "serve", "--host", "127.0.0.1", "--port", "0",
-                              "--data", str(data), "--no-usb")
+        web = installed.start(
+            installed.bin("inkslice"),
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--data",
+            str(data),
+            "--no-usb",
+        )
         url = read_until(web, r"(http://127\.0\.0\.1:\d+)/").group(1)
         password = read_until(web, r"password: (\S+)").group(1)
         client = WebClient(url)
@@ -305,7 +400,7 @@ def commission(client: WebClient) -> dict:
     c = act(client, "meniscus", "scan")
     assert c["active"]["stage"] == "scanning", c["active"]
     end = time.monotonic() + COMMISSION_TIMEOUT
-    while c["active"]["stage"] == "scanning" and time.monotonic() < end:   # the page polls the same way
+    while c["active"]["stage"] == "scanning" and time.monotonic() < end:  # the page polls the same way
         time.sleep(1.0)
         status, c = client.get("/api/commissioning")
         assert status == 200, c
@@ -334,6 +429,7 @@ def height_map_error(client: WebClient, job: dict, tmp_path: Path) -> dict:
     from appliance.outputs import read_heightmap_csv
     from appliance.process import statistics_against
     from appliance.sim import surfaces
+
     path = tmp_path / f"{job['id']}-heightmap.csv"
     path.write_bytes(client.file(job["id"], "heightmap.csv"))
     return statistics_against(surfaces.get("sample3"), read_heightmap_csv(path))
@@ -350,8 +446,13 @@ def scans(installed, box, tmp_path_factory):
     before = scan(client, {**SAMPLE3, "name": "sample 3, not commissioned", "scallop_mm": 0.5})
     commissioned = commission(client)
     after = scan(client, {**SAMPLE3, "name": "sample 3, commissioned"})
-    return {"client": client, "before": before, "commissioning": commissioned, "after": after,
-            "tmp": tmp_path_factory.mktemp("downloads")}
+    return {
+        "client": client,
+        "before": before,
+        "commissioning": commissioned,
+        "after": after,
+        "tmp": tmp_path_factory.mktemp("downloads"),
+    }
 
 
 def test_before_commissioning_the_report_warns_that_no_meniscus_or_tank_calibration_was_used(scans):
@@ -359,8 +460,12 @@ def test_before_commissioning_the_report_warns_that_no_meniscus_or_tank_calibrat
     assert job["status"] == "done", job
     report = client.file(job["id"], "report.json")
     warnings = " | ".join(report["calibration"]["warnings"])
-    for expected in ("no meniscus calibration was used", "no tank area calibration was used",
-                     "the camera was not commissioned", "level zero was not measured"):
+    for expected in (
+        "no meniscus calibration was used",
+        "no tank area calibration was used",
+        "the camera was not commissioned",
+        "level zero was not measured",
+    ):
         assert expected in warnings, warnings
     md = client.file(job["id"], "report.md").decode()
     assert "no meniscus calibration was used" in md and "no tank area calibration was used" in md
@@ -370,8 +475,9 @@ def test_the_commissioning_through_the_web_measures_the_box(scans):
     c = scans["commissioning"]
     steps = {s["id"]: s for s in c["steps"]}
     assert c["active"] is None
-    assert {k: s["status"] for k, s in steps.items()} == dict.fromkeys(("level_zero", "camera", "tank", "meniscus"),
-                                                                       "done")
+    assert {k: s["status"] for k, s in steps.items()} == dict.fromkeys(
+        ("level_zero", "camera", "tank", "meniscus"), "done"
+    )
     assert abs(steps["level_zero"]["result"]["level_at_home_mm"] - TRUE_LEVEL_ZERO) <= 0.01
     assert steps["camera"]["result"]["plane_rms_mm"] < 0.1
     assert steps["tank"]["result"]["area_mm2"] == 22500.0
@@ -388,13 +494,18 @@ def test_the_commissioned_installed_copy_scans_sample_3_as_accurately_as_the_ben
     assert report["calibration"]["warnings"] == [], report["calibration"]
     used = report["calibration"]["used"]
     assert used["tank"].startswith("tank area 22500 mm² (entered, ")
-    assert "the 25.4 mm ball measured to" in used["meniscus"] and used["camera"].startswith("commissioned camera")
+    assert "the 25.4 mm ball measured to" in used["meniscus"] and used["camera"].startswith(
+        "commissioned camera"
+    )
     assert used["level_zero"].startswith("level zero at stage position 57.30")
     assert report["diagnostics"]["corrections"] == {"displacement_tank_area_mm2": 22500.0, "meniscus": True}
     err = height_map_error(client, job, scans["tmp"])
     assert err["Ea"] <= BENCH_EA_MM, err
     from appliance.cam.gcodeparse import parse_gcode
+
     program = parse_gcode(client.file(job["id"], "toolpath.gcode").decode(), "toolpath.gcode")
     feed_z = program.xyz[program.kind == 1, 2]
     assert len(feed_z) > 100 and feed_z.max() - feed_z.min() > 15.0, "sample 3's relief (21 mm) is milled"
-    assert installed.site_files() == installed.shipped, "the simulated bench or the scan wrote into site-packages"
+    assert installed.site_files() == installed.shipped, (
+        "the simulated bench or the scan wrote into site-packages"
+    )

@@ -6,6 +6,7 @@ output folder as it was. The folder is replaced whole: nothing of an earlier
 run survives beside the new set. The part stands on the base: heights below
 it are clamped and gaps inside the part filled, counted, never fatal.
 """
+
 import json
 import os
 
@@ -18,8 +19,15 @@ from appliance.outputs import read_heightmap_csv, write_heightmap_csv
 from appliance.surface.base import stand_on_base
 from appliance.surface.heightmap import HeightMap
 
-SET = {"heightmap.csv", "surface.stl", "toolpath.gcode", "toolpath-dissertation.gcode", "report.md",
-       "report.json", "error_inkslice_fit.png"}
+SET = {
+    "heightmap.csv",
+    "surface.stl",
+    "toolpath.gcode",
+    "toolpath-dissertation.gcode",
+    "report.md",
+    "report.json",
+    "error_inkslice_fit.png",
+}
 
 
 def dome(n=41, dip=0.0):
@@ -48,9 +56,9 @@ def test_heights_below_the_base_are_clamped_to_it_and_counted():
 def test_a_gap_inside_the_part_is_filled_from_its_neighbours_a_wide_hole_is_the_base():
     hm = dome()
     truth = hm.z.copy()
-    hm.z[20, 4:8] = np.nan                       # a narrow gap the waterlines missed
+    hm.z[20, 4:8] = np.nan  # a narrow gap the waterlines missed
     X, Y = hm.grid()
-    hole = np.hypot(X - 20, Y - 20) < 7          # a hole down to the base, 14 mm across
+    hole = np.hypot(X - 20, Y - 20) < 7  # a hole down to the base, 14 mm across
     hm.z[hole] = np.nan
     fixed, fix = stand_on_base(hm)
     assert fix.filled_cells == 4 and fix.base_cells == int(hole.sum())
@@ -62,16 +70,21 @@ def test_a_gap_inside_the_part_is_filled_from_its_neighbours_a_wide_hole_is_the_
 def test_toolpath_accepts_a_map_below_the_base_by_the_same_clamp(tmp_path, capsys):
     csv = tmp_path / "dips.csv"
     hm = dome(dip=0.4)
-    hm.z[20, 30] = np.nan                        # and one cell with no height inside the part
+    hm.z[20, 30] = np.nan  # and one cell with no height inside the part
     write_heightmap_csv(csv, hm)
     out = tmp_path / "toolpath.gcode"
     assert main(["toolpath", str(csv), "-o", str(out), "--scallop", "0.2"]) == 0
     said = capsys.readouterr().out
     assert "164 cells were below the base top (deepest 0.400 mm)" in said
     assert "1 cells with no height inside the part were filled" in said
-    zs = [float(w[1:]) for line in out.read_text().splitlines() if line.startswith("G1")
-          for w in line.split() if w.startswith("Z")]
-    assert zs and min(zs) >= -1e-6               # the tip never goes below the base top
+    zs = [
+        float(w[1:])
+        for line in out.read_text().splitlines()
+        if line.startswith("G1")
+        for w in line.split()
+        if w.startswith("Z")
+    ]
+    assert zs and min(zs) >= -1e-6  # the tip never goes below the base top
 
 
 # -- the folder is replaced whole --------------------------------------------------
@@ -87,7 +100,7 @@ def test_replace_folder_leaves_exactly_the_new_set_and_keeps_what_it_is_told(tmp
     assert sorted(p.name for p in out.iterdir()) == ["heightmap.csv", "scan", "toolpath.gcode"]
     assert (out / "toolpath.gcode").read_bytes() == b"new"
     assert (out / "scan" / "frames" / "0001.png").read_bytes() == b"frame"
-    assert [p.name for p in tmp_path.iterdir()] == ["job"]       # no staging folder left
+    assert [p.name for p in tmp_path.iterdir()] == ["job"]  # no staging folder left
 
 
 def test_a_crash_while_building_the_set_leaves_the_old_one(tmp_path, monkeypatch):
@@ -100,6 +113,7 @@ def test_a_crash_while_building_the_set_leaves_the_old_one(tmp_path, monkeypatch
             raise OSError(28, "No space left on device")
         written.append(path)
         path.write_bytes(data)
+
     monkeypatch.setattr(atomicio, "_write_new", crash_on_second)
     with pytest.raises(OSError):
         atomicio.replace_folder(out, {"a.txt": b"new a", "b.txt": b"new b"})
@@ -111,7 +125,7 @@ def test_a_crash_between_the_two_renames_of_the_fallback_swap_is_undone_next_tim
     out = tmp_path / "out"
     atomicio.replace_folder(out, {"a.txt": b"old"})
     parked = tmp_path / f"{atomicio.STAGING_PREFIX}out.old.123"
-    os.rename(out, parked)                        # the power went after the first rename
+    os.rename(out, parked)  # the power went after the first rename
     (tmp_path / f"{atomicio.STAGING_PREFIX}out.new.xyz").mkdir()
     atomicio.clear_staging(out)
     assert (out / "a.txt").read_bytes() == b"old"
@@ -128,10 +142,13 @@ def _file_as_parent(tmp_path):
     return tmp_path / "afile" / "OUT"
 
 
-@pytest.mark.parametrize("where, what", [
-    (_file_as_out, "exists and is not a folder; give a folder for the outputs"),
-    (_file_as_parent, "cannot be created: {tmp}/afile is not a folder"),
-])
+@pytest.mark.parametrize(
+    "where, what",
+    [
+        (_file_as_out, "exists and is not a folder; give a folder for the outputs"),
+        (_file_as_parent, "cannot be created: {tmp}/afile is not a folder"),
+    ],
+)
 def test_an_output_that_cannot_be_a_folder_is_one_line_before_any_work(tmp_path, capsys, where, what):
     out = where(tmp_path)
     assert main(["process", str(tmp_path / "no-scan-here"), "-o", str(out)]) == 2
@@ -158,6 +175,7 @@ def test_an_unwritable_output_parent_is_one_line_before_any_work(tmp_path, capsy
 @pytest.fixture
 def cone_scan(tmp_path):
     from scan_helpers import write_cone_scan
+
     write_cone_scan(tmp_path / "cone")
     return tmp_path / "cone"
 
@@ -169,7 +187,7 @@ def _files(folder):
 def test_no_file_of_an_earlier_run_is_left_beside_the_new_set(cone_scan, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "surface.stl").write_bytes(b"solid an earlier part")        # the seed pipeline writes none
+    (out / "surface.stl").write_bytes(b"solid an earlier part")  # the seed pipeline writes none
     (out / "toolpath.gcode").write_text("G1 Z-5 (an earlier part's program)\n")
     (out / "error_lsq3.png").write_bytes(b"an earlier --compare")
     assert main(["process", str(cone_scan), "-o", str(out), "--pipeline", "seed"]) == 0
@@ -218,6 +236,7 @@ def test_a_daemon_job_folder_is_replaced_whole_but_its_scan_is_kept(tmp_path):
     from appliance.daemon.processing import JOB_OWN, checked_outputs, in_process, options_for
     from appliance.daemon.settings import DEFAULTS
     from scan_helpers import write_cone_scan
+
     job = tmp_path / "job"
     write_cone_scan(job / "scan")
     (job / "surface.stl").write_bytes(b"an earlier run's mesh")
@@ -244,19 +263,27 @@ def test_a_scan_whose_last_frame_is_at_level_0_gets_its_program_and_the_clamp_is
     from appliance.sim.render import Effects
     from appliance.sim.rig import Rig
     from appliance.sim.scanrender import render_scan, scan_levels
-    sphere = surfaces.get("sphere")                  # a cap on a disc of radius 29 mm at (50, 50)
+
+    sphere = surfaces.get("sphere")  # a cap on a disc of radius 29 mm at (50, 50)
     levels = scan_levels(sphere, 2.0) + [0.0]
     rig = Rig(width=1024, height=768, focal_px=1900.0, principal_u=515.0, principal_v=381.5)
-    render_scan(sphere, tmp_path / "sphere", levels=levels, rig=rig,
-                effects=dataclasses.replace(Effects(), base_shows=True))
+    render_scan(
+        sphere,
+        tmp_path / "sphere",
+        levels=levels,
+        rig=rig,
+        effects=dataclasses.replace(Effects(), base_shows=True),
+    )
     out = tmp_path / "out"
-    assert main(["process", str(tmp_path / "sphere"), "-o", str(out), "--grid", "40", "--scallop", "0.2"]) == 0
+    assert (
+        main(["process", str(tmp_path / "sphere"), "-o", str(out), "--grid", "40", "--scallop", "0.2"]) == 0
+    )
     assert SET <= set(_files(out))
     report = json.loads((out / "report.json").read_text())
     fit = report["diagnostics"]["fit"]
     assert any("level 0 mm not used" in n for n in fit["notes"])
     hm = read_heightmap_csv(out / "heightmap.csv")
-    assert hm.x[0] > 19 and hm.x[-1] < 81 and hm.y[0] > 19 and hm.y[-1] < 81     # the part, not the base
+    assert hm.x[0] > 19 and hm.x[-1] < 81 and hm.y[0] > 19 and hm.y[-1] < 81  # the part, not the base
     assert np.nanmin(hm.z) >= 0.0
     assert set(fit["base"]) == {"clamped_cells", "deepest_dip_mm", "filled_cells", "base_cells"}
     assert "Base plane" in (out / "report.md").read_text()

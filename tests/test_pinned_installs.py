@@ -5,6 +5,7 @@ requirements-test.lock (setup for the tests, CI) pin each package to the version
 ran with, with the hashes of its files on PyPI. `make lock` (scripts/lock.sh) refreshes them.
 So a box set up next year installs what was tested, not what PyPI offers that day.
 """
+
 from __future__ import annotations
 
 import re
@@ -20,14 +21,16 @@ REPO = Path(__file__).resolve().parents[1]
 RUN_LOCK = REPO / "requirements.lock"
 TEST_LOCK = REPO / "requirements-test.lock"
 # Where a package gets installed, and which lock each installer must use.
-INSTALLERS = {"scripts/setup.sh": ("requirements.lock", "requirements-test.lock"),
-              "systemd/install.sh": ("requirements.lock",)}
+INSTALLERS = {
+    "scripts/setup.sh": ("requirements.lock", "requirements-test.lock"),
+    "systemd/install.sh": ("requirements.lock",),
+}
 
 
 def read_lock(path: Path) -> dict[str, tuple[str, list[str]]]:
     """{canonical name: (version, [sha256 hashes])} from a pip-compile lock file."""
     entries = {}
-    text = re.sub(r"\\\n\s*", " ", path.read_text())         # join continuation lines
+    text = re.sub(r"\\\n\s*", " ", path.read_text())  # join continuation lines
     for line in text.splitlines():
         line = line.split("#", 1)[0].strip()
         if not line:
@@ -60,14 +63,17 @@ def test_the_lock_pins_every_dependency_inside_pyproject_s_range(lock, extras):
             continue
         name = canonicalize_name(req.name)
         assert name in entries, f"{lock.name} does not pin {req.name}: run `make lock`"
-        assert req.specifier.contains(entries[name][0], prereleases=True), \
+        assert req.specifier.contains(entries[name][0], prereleases=True), (
             f"{lock.name} pins {req.name}=={entries[name][0]}, outside pyproject.toml's {req}: run `make lock`"
+        )
 
 
 def test_the_box_s_lock_is_the_test_lock_without_the_test_tools():
     run, test = read_lock(RUN_LOCK), read_lock(TEST_LOCK)
     assert set(run) <= set(test)
-    assert {n: run[n][0] for n in run} == {n: test[n][0] for n in run}, "the box would run other versions than the tests"
+    assert {n: run[n][0] for n in run} == {n: test[n][0] for n in run}, (
+        "the box would run other versions than the tests"
+    )
     tools = {canonicalize_name(Requirement(r).name) for r in project()["optional-dependencies"]["test"]}
     assert not tools & set(run), "the box's lock holds test tools"
 
@@ -90,15 +96,20 @@ def test_installers_take_packages_only_from_the_lock(script):
     """Every `pip install` either installs a lock with --require-hashes or the package itself
     with --no-deps: nothing resolves a dependency from an open range."""
     text = (REPO / script).read_text()
-    installs = [line.strip() for line in text.splitlines()
-                if re.search(r"\bpip install\b", line) and not line.lstrip().startswith("#")]
+    installs = [
+        line.strip()
+        for line in text.splitlines()
+        if re.search(r"\bpip install\b", line) and not line.lstrip().startswith("#")
+    ]
     assert installs, f"{script} installs nothing?"
     from_lock = [line for line in installs if "--require-hashes -r" in line]
     assert from_lock, f"{script} installs no lock file"
     for line in installs:
         if "--upgrade pip" in line:
-            continue                                         # pip itself, before anything else
-        assert line in from_lock or "--no-deps" in line, f"{script}: resolves dependencies outside the lock: {line}"
+            continue  # pip itself, before anything else
+        assert line in from_lock or "--no-deps" in line, (
+            f"{script}: resolves dependencies outside the lock: {line}"
+        )
     for lock in INSTALLERS[script]:
         assert re.search(rf"(^|[\s/=\"']){re.escape(lock)}\b", text, re.M), f"{script} never names {lock}"
 

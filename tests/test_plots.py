@@ -1,12 +1,16 @@
 """The error and uncertainty pictures: the part keeps its proportions, the title fits, the colour
 scale says its unit, and no two labels are drawn over each other."""
+
 import numpy as np
 import pytest
 
 from appliance import plots
 
-TITLES = ["short", "sample3: InkSlice regularised fit (our waterlines), error against the true part of 2013",
-          "x" * 12 + " " + "y" * 40]
+TITLES = [
+    "short",
+    "sample3: InkSlice regularised fit (our waterlines), error against the true part of 2013",
+    "x" * 12 + " " + "y" * 40,
+]
 
 
 @pytest.mark.parametrize("span", [(100, 100), (100, 50), (10, 100), (150, 12), (3, 3)])
@@ -28,7 +32,9 @@ def test_the_colour_scale_has_its_unit_and_the_overlap_check_catches_a_collision
     x = y = np.linspace(0, 50, 20)
     canvas, _, boxes = plots._field_picture(np.ones((20, 20)), x, y, "t", 0.3, "error, mm", 300)
     assert any(b[2] - b[0] == plots._Labels.size("error, mm", 0.45)[0] for b in boxes)
-    assert plots.overlaps([(0, 0, 10, 10), (5, 5, 20, 20)]) and not plots.overlaps([(0, 0, 10, 10), (10, 0, 20, 10)])
+    assert plots.overlaps([(0, 0, 10, 10), (5, 5, 20, 20)]) and not plots.overlaps(
+        [(0, 0, 10, 10), (10, 0, 20, 10)]
+    )
 
 
 def test_error_map_and_uncertainty_map_still_make_pngs():

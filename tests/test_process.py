@@ -3,6 +3,7 @@
 Every bad input must give one error line naming the file and the problem,
 a non-zero exit code, and leave what was already in OUT untouched.
 """
+
 import json
 import shutil
 
@@ -42,10 +43,16 @@ def test_dissertation_pipeline_writes_its_outputs(scan, tmp_path, capsys):
 
 def test_our_pipeline_writes_mesh_and_compensated_gcode(scan, tmp_path):
     out = tmp_path / "out"
-    assert run_cli("process", scan, "-o", out, "--scallop", "0.1") == 0    # a coarse finish: fast
+    assert run_cli("process", scan, "-o", out, "--scallop", "0.1") == 0  # a coarse finish: fast
     names = {p.name for p in out.iterdir()}
-    assert {"heightmap.csv", "surface.stl", "toolpath.gcode", "toolpath-dissertation.gcode",
-            "report.md", "report.json"} <= names
+    assert {
+        "heightmap.csv",
+        "surface.stl",
+        "toolpath.gcode",
+        "toolpath-dissertation.gcode",
+        "report.md",
+        "report.json",
+    } <= names
     hm = read_heightmap_csv(out / "heightmap.csv")
     X, Y = hm.grid()
     r = np.hypot(X - 30, Y - 30)
@@ -62,7 +69,7 @@ def test_our_pipeline_writes_mesh_and_compensated_gcode(scan, tmp_path):
     unc = json.loads((out / "report.json").read_text())["diagnostics"]["uncertainty"]
     report = (out / "report.md").read_text()
     assert "Uncertainty per cell" in report
-    if unc["regions"]:                               # the cone's apex sits above the top frame
+    if unc["regions"]:  # the cone's apex sits above the top frame
         first = unc["regions"][0]
         assert f"| 1 | {first['xmin']:.1f} .. {first['xmax']:.1f} |" in report
         assert f"low confidence 1: X {first['xmin']:.1f}..{first['xmax']:.1f}" in gcode
@@ -77,8 +84,9 @@ def test_process_with_truth_reports_statistics(scan, tmp_path):
     assert run_cli("process", scan, "-o", out, "--compare", "--scallop", "0.1") == 0
     report = json.loads((out / "report.json").read_text())
     assert report["truth"] == "cone"
-    assert set(report["statistics"]) == {"inkslice:fit"} | {f"seed:{m}" for m in
-                                                           ("captured", "spline", "nearest", "lsq1", "lsq2", "lsq3")}
+    assert set(report["statistics"]) == {"inkslice:fit"} | {
+        f"seed:{m}" for m in ("captured", "spline", "nearest", "lsq1", "lsq2", "lsq3")
+    }
     assert (out / "error_lsq3.png").stat().st_size > 1000
     assert (out / "error_inkslice_fit.png").stat().st_size > 1000
 
@@ -93,16 +101,19 @@ def _assert_untouched(out, before):
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
-@pytest.mark.parametrize("breakage, expected", [
-    ("missing_json", "scan.json: missing"),
-    ("malformed_json", "scan.json: not valid JSON"),
-    ("level_not_number", "frames[2].level_mm is not a number"),
-    ("frame_corrupt", "0003.png: frame does not load"),
-    ("frame_missing", "0003.png: frame file is missing"),
-    ("frame_wrong_size", "0003.png: frame is 10x10"),
-    ("no_camera", "scan.json: 'camera' is missing"),
-    ("singular_homography", "camera.homography is singular"),
-])
+@pytest.mark.parametrize(
+    "breakage, expected",
+    [
+        ("missing_json", "scan.json: missing"),
+        ("malformed_json", "scan.json: not valid JSON"),
+        ("level_not_number", "frames[2].level_mm is not a number"),
+        ("frame_corrupt", "0003.png: frame does not load"),
+        ("frame_missing", "0003.png: frame file is missing"),
+        ("frame_wrong_size", "0003.png: frame is 10x10"),
+        ("no_camera", "scan.json: 'camera' is missing"),
+        ("singular_homography", "camera.homography is singular"),
+    ],
+)
 def test_bad_input_gives_one_clear_line_and_keeps_out(scan, tmp_path, capsys, breakage, expected):
     doc = json.loads((scan / "scan.json").read_text())
     if breakage == "missing_json":
@@ -118,6 +129,7 @@ def test_bad_input_gives_one_clear_line_and_keeps_out(scan, tmp_path, capsys, br
         (scan / "frames/0003.png").unlink()
     elif breakage == "frame_wrong_size":
         import cv2
+
         cv2.imwrite(str(scan / "frames/0003.png"), np.zeros((10, 10, 3), np.uint8))
     elif breakage == "no_camera":
         del doc["camera"]
@@ -143,6 +155,7 @@ def test_missing_scan_folder(tmp_path, capsys):
 
 def test_unknown_keys_are_kept(scan):
     from appliance.scanfile import load_scan, write_scan_json
+
     s = load_scan(scan)
     assert s.extra["note"] == "unknown keys are kept"
     write_scan_json(s)

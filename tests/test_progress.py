@@ -1,4 +1,5 @@
 """Long commands show their progress: a bar redrawn in place on a terminal, plain lines in a pipe."""
+
 import io
 
 from appliance import progress
@@ -17,7 +18,7 @@ def test_on_a_terminal_a_counted_stage_is_a_bar_redrawn_in_place_and_prints_go_a
     assert "waterlines [############------------]  50 % 2/4" in text
     assert "waterlines [########################] 100 % 4/4" in text and " done\n" in text
     assert "surface (fit) ... " in text
-    assert text.count("\n") == 2                      # one finished line per stage, nothing else
+    assert text.count("\n") == 2  # one finished line per stage, nothing else
 
 
 def test_in_a_pipe_a_stage_is_plain_lines_its_start_its_quarters_and_its_time():
@@ -34,7 +35,7 @@ def test_in_a_pipe_a_stage_is_plain_lines_its_start_its_quarters_and_its_time():
 
 
 def test_nobody_listening_costs_nothing_and_prints_nothing(capsys):
-    progress.stage("waterlines", total=3)             # as in the daemon's processing child
+    progress.stage("waterlines", total=3)  # as in the daemon's processing child
     progress.step(2)
     assert capsys.readouterr() == ("", "")
 
@@ -43,6 +44,7 @@ def test_toolpath_and_verify_say_their_stages_in_a_pipe(tmp_path, capsys):
     import numpy as np
     from appliance.outputs import write_heightmap_csv
     from appliance.surface.heightmap import HeightMap
+
     x = np.linspace(0, 20, 41)
     X, Y = np.meshgrid(x, x)
     z = np.clip(6 - ((X - 10) ** 2 + (Y - 10) ** 2) / 15, 0, None)
@@ -52,7 +54,7 @@ def test_toolpath_and_verify_say_their_stages_in_a_pipe(tmp_path, capsys):
     assert main(["toolpath", str(csv), "-o", str(out), "--scallop", "0.2"]) == 0
     said = capsys.readouterr().out
     assert "finishing program ...\n" in said and "finishing program: done in " in said
-    assert "estimated run time" in said                         # the command's own lines still there
+    assert "estimated run time" in said  # the command's own lines still there
     assert main(["verify", str(out), "--against", str(csv), "--scallop", "0.2", "--max-gouge", "1"]) == 0
     said = capsys.readouterr().out
     assert "simulated milling ...\n" in said and "simulated milling: done in " in said

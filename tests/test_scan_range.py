@@ -4,6 +4,7 @@ stops the scan with a reason; the scan ends when the base is fully exposed.
 
 The demo's own part is the 30 mm sphere and the default range starts at
 20 mm: with default settings its first scan must still capture the top."""
+
 import json
 import shutil
 
@@ -16,7 +17,9 @@ from daemon_helpers import read_heightmap, service, wait_final
 
 
 def frame(target, shows_part, step=0.0, change=0.0):
-    return FrameRef("f", target, {"target_mm": target, "step_mm": step, "change": change, "shows_part": shows_part})
+    return FrameRef(
+        "f", target, {"target_mm": target, "step_mm": step, "change": change, "shows_part": shows_part}
+    )
 
 
 def scan_of(plan, top_of_part):
@@ -28,10 +31,10 @@ def scan_of(plan, top_of_part):
 
 
 def test_a_part_taller_than_the_range_makes_the_scan_start_higher_and_skip_what_it_has():
-    plan = LevelPlan(S.DEFAULTS, ceiling_mm=60.0)             # levels 20 -> 0 by 0.5 mm
+    plan = LevelPlan(S.DEFAULTS, ceiling_mm=60.0)  # levels 20 -> 0 by 0.5 mm
     levels = scan_of(plan, top_of_part=30.0)
-    assert levels[:3] == [20.0, 40.0, 39.5]                  # the tip showed at 20: twice as high, then down
-    assert levels.count(20.0) == 1 and levels[-1] == 0.0     # 20 is not taken twice; ends at the base
+    assert levels[:3] == [20.0, 40.0, 39.5]  # the tip showed at 20: twice as high, then down
+    assert levels.count(20.0) == 1 and levels[-1] == 0.0  # 20 is not taken twice; ends at the base
     assert sorted(levels, reverse=True) == [40.0 - 0.5 * k for k in range(81)]
 
 
@@ -44,10 +47,11 @@ def test_the_range_rises_up_to_the_ceiling_and_no_further():
     plan = LevelPlan(S.DEFAULTS, ceiling_mm=55.0)
     levels = scan_of(plan, top_of_part=50.0)
     assert levels[:4] == [20.0, 40.0, 55.0, 54.5]
-    with pytest.raises(PartTooTall, match="the part is taller than the range: it still stands out of the ink "
-                                          "at 55 mm"):
+    with pytest.raises(
+        PartTooTall, match="the part is taller than the range: it still stands out of the ink at 55 mm"
+    ):
         scan_of(plan, top_of_part=56.0)
-    with pytest.raises(PartTooTall):                         # no room at all above the range
+    with pytest.raises(PartTooTall):  # no room at all above the range
         scan_of(LevelPlan(S.DEFAULTS, ceiling_mm=20.0), top_of_part=21.0)
 
 
@@ -78,7 +82,7 @@ def test_a_scan_of_a_part_taller_than_the_default_range_captures_its_top(tmp_pat
         assert [f["shows_part"] for f in doc["frames"][:2]] == [True, False]
         assert job["levels_done"] == job["levels_total"] == len(doc["frames"]) and len(levels) == 81
         top = read_heightmap(svc.job_file(job["id"], "heightmap.csv"))
-        assert 29.5 < float(top[top == top].max()) <= 30.05            # the sphere is 30 mm tall
+        assert 29.5 < float(top[top == top].max()) <= 30.05  # the sphere is 30 mm tall
     finally:
         svc.close()
 
@@ -86,14 +90,16 @@ def test_a_scan_of_a_part_taller_than_the_default_range_captures_its_top(tmp_pat
 def test_a_part_taller_than_the_stage_can_clear_fails_the_scan_with_the_reason(tmp_path):
     svc, bench = service(tmp_path)
     try:
-        svc.update_settings({"level_at_home_mm": 25.0, "settle_s": 0.0})    # the ink can stand 25 mm at most
+        svc.update_settings({"level_at_home_mm": 25.0, "settle_s": 0.0})  # the ink can stand 25 mm at most
         job = wait_final(svc, svc.start_scan({"surface": "sphere"}))
         assert job["status"] == "failed"
-        assert job["reason"] == ("scan range: the part is taller than the range: it still stands out of the ink "
-                                 "at 25 mm, the highest level the stage reaches (lower the part on its base, or "
-                                 "fill more ink and calibrate level zero again)")
+        assert job["reason"] == (
+            "scan range: the part is taller than the range: it still stands out of the ink "
+            "at 25 mm, the highest level the stage reaches (lower the part on its base, or "
+            "fill more ink and calibrate level zero again)"
+        )
         doc = json.loads(svc.job_file(job["id"], "scan/scan.json").read_text())
-        assert [f["level_mm"] for f in doc["frames"]] == [20.0, 25.0]   # the frames so far are kept
+        assert [f["level_mm"] for f in doc["frames"]] == [20.0, 25.0]  # the frames so far are kept
         assert bench.last.light.on is False and bench.last.stage.calls[-1] == "stop"
     finally:
         svc.close()
@@ -101,14 +107,17 @@ def test_a_part_taller_than_the_stage_can_clear_fails_the_scan_with_the_reason(t
 
 @pytest.mark.slow
 @pytest.mark.simavr
-@pytest.mark.skipif(shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-                    reason="needs gcc-avr and simavr (scripts/setup.sh)")
+@pytest.mark.skipif(
+    shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
+    reason="needs gcc-avr and simavr (scripts/setup.sh)",
+)
 def test_the_demos_first_scan_with_default_settings_matches_its_sphere(tmp_path):
     """What `inkslice demo --serve` does on the first scan: the firmware under simavr, the
     sphere, a 640 x 480 virtual camera, every setting at its default (about 2.5 minutes)."""
     from appliance.daemon.processing import in_process
     from appliance.daemon.service import BenchService
     from appliance.sim.fakes import SimulatedBenchFactory, small_rig
+
     factory = SimulatedBenchFactory("sphere", small_rig(640, 480))
     svc = BenchService(tmp_path / "data", factory, processor=factory.processor(in_process))
     try:
@@ -116,7 +125,9 @@ def test_the_demos_first_scan_with_default_settings_matches_its_sphere(tmp_path)
         assert job["status"] == "done", job["reason"]
         report = json.loads(svc.job_file(job["id"], "report.json").read_text())
         fit = report["statistics"]["inkslice:fit"]
-        print(f"sphere, default settings: matching {fit['matching']:.3f} %, max error {fit['max_error']:.3f} mm")
+        print(
+            f"sphere, default settings: matching {fit['matching']:.3f} %, max error {fit['max_error']:.3f} mm"
+        )
         assert report["truth"] == "sphere" and fit["matching"] >= 99.9
     finally:
         svc.close()
@@ -134,9 +145,15 @@ def test_the_spheres_rim_is_not_clamped_to_the_levels_above_it(tmp_path):
     from appliance.sim import surfaces
     from appliance.sim.fakes import small_rig
     from appliance.sim.scanrender import render_scan
+
     sphere = surfaces.get("sphere")
-    render_scan(sphere, tmp_path / "scan", rig=small_rig(640, 480), seed=1,
-                levels=[round(30.5 - 0.5 * k, 6) for k in range(62)])
+    render_scan(
+        sphere,
+        tmp_path / "scan",
+        rig=small_rig(640, 480),
+        seed=1,
+        levels=[round(30.5 - 0.5 * k, 6) for k in range(62)],
+    )
     job = proc.process(tmp_path / "scan", truth=sphere)
     X, Y = job.heightmap.grid()
     rim = sphere.inside(X, Y) & (np.hypot(X - 50, Y - 50) > 28.5)

@@ -1,4 +1,5 @@
 """The dissertation's surface methods (surface/seed.py) on cases with exact answers."""
+
 import numpy as np
 import pytest
 
@@ -18,11 +19,14 @@ def test_grid_spans_the_points_with_50_cells():
     assert x[0] == pts[:, 0].min() and x[-1] == pts[:, 0].max()
 
 
-@pytest.mark.parametrize("degree, f", [
-    (1, lambda x, y: 3 + 0.2 * x - 0.1 * y),
-    (2, lambda x, y: 1 + 0.01 * x * x - 0.02 * x * y + 0.005 * y * y + 0.3 * y),
-    (3, lambda x, y: 2 + 1e-4 * x ** 3 - 2e-4 * x * x * y + 3e-4 * x * y * y - 1e-4 * y ** 3 + 0.1 * x),
-])
+@pytest.mark.parametrize(
+    "degree, f",
+    [
+        (1, lambda x, y: 3 + 0.2 * x - 0.1 * y),
+        (2, lambda x, y: 1 + 0.01 * x * x - 0.02 * x * y + 0.005 * y * y + 0.3 * y),
+        (3, lambda x, y: 2 + 1e-4 * x**3 - 2e-4 * x * x * y + 3e-4 * x * y * y - 1e-4 * y**3 + 0.1 * x),
+    ],
+)
 def test_least_squares_recovers_its_own_polynomial(degree, f):
     pts = scattered(f)
     x = y = np.linspace(0, 100, 50)
@@ -32,7 +36,7 @@ def test_least_squares_recovers_its_own_polynomial(degree, f):
 
 
 def test_lower_degree_cannot_follow_a_cubic():
-    f = lambda x, y: 1e-4 * x ** 3
+    f = lambda x, y: 1e-4 * x**3
     pts = scattered(f)
     x = y = np.linspace(0, 100, 50)
     X, Y = np.meshgrid(x, y)
@@ -58,13 +62,13 @@ def test_as_captured_is_the_highest_level_where_a_cell_was_exposed():
     x = y = np.arange(3.0)
     levels = [30.0, 20.0, 10.0]
     exposed = np.zeros((3, 3, 3), bool)
-    exposed[0, 1, 1] = True            # the top cell shows at level 30
-    exposed[1, 1, :] = True            # the middle row at 20
-    exposed[2] = True                  # everything at 10
+    exposed[0, 1, 1] = True  # the top cell shows at level 30
+    exposed[1, 1, :] = True  # the middle row at 20
+    exposed[2] = True  # everything at 10
     exposed[2, 0, 0] = False
     hm = seed.as_captured(x, y, levels, exposed)
     assert hm.z[1, 1] == 30 and hm.z[1, 0] == 20 and hm.z[2, 2] == 10
-    assert np.isnan(hm.z[0, 0])        # never exposed: not on the part
+    assert np.isnan(hm.z[0, 0])  # never exposed: not on the part
 
 
 def test_unknown_method_is_refused():

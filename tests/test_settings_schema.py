@@ -1,5 +1,6 @@
 """One settings schema: every setting says its type, unit, range or choices, help and group, and the
 daemon, the web API and `inkslice settings` refuse the same bad value with the same sentence."""
+
 import pytest
 
 from appliance.cam.posts import DIALECT_NAMES
@@ -49,10 +50,18 @@ def test_the_settings_know_every_dialect_the_toolpath_command_knows():
 
 
 # (key, as typed on the command line, as the web's JSON carries it)
-BAD = [("level_step_mm", "-1", -1), ("level_step_mm", "abc", "abc"), ("dialect", "heidenhain", "heidenhain"),
-       ("grid", "2.5", 2.5), ("auto_resume", "yes", "yes"), ("webhook_url", "ftp://box/x", "ftp://box/x"),
-       ("levels_to_mm", "500", 500), ("step_mode", "Fixed", "Fixed"), ("min_free_mb", "0", 0),
-       ("no_such_setting", "1", 1)]
+BAD = [
+    ("level_step_mm", "-1", -1),
+    ("level_step_mm", "abc", "abc"),
+    ("dialect", "heidenhain", "heidenhain"),
+    ("grid", "2.5", 2.5),
+    ("auto_resume", "yes", "yes"),
+    ("webhook_url", "ftp://box/x", "ftp://box/x"),
+    ("levels_to_mm", "500", 500),
+    ("step_mode", "Fixed", "Fixed"),
+    ("min_free_mb", "0", 0),
+    ("no_such_setting", "1", 1),
+]
 
 
 @pytest.mark.parametrize("key,typed,value", BAD, ids=[f"{k}={t}" for k, t, _ in BAD])
@@ -62,7 +71,7 @@ def test_daemon_web_and_cli_refuse_a_bad_value_with_the_same_sentence(tmp_path, 
         with pytest.raises(SettingError) as e:
             svc.update_settings({key: value})
         daemon_says = str(e.value)
-        assert svc.settings() == S.DEFAULTS                     # nothing changed
+        assert svc.settings() == S.DEFAULTS  # nothing changed
 
         app = create_app(svc, {"data_dir": str(tmp_path / "web")})
         app.config["TESTING"] = True
@@ -85,8 +94,15 @@ def test_daemon_web_and_cli_refuse_a_bad_value_with_the_same_sentence(tmp_path, 
 def test_the_cli_changes_a_setting_as_the_web_would(tmp_path, capsys):
     data = tmp_path / "data"
     data.mkdir()
-    assert cli_main(["settings", "set", "dialect=mach3", "grid=40", "auto_resume=true", "--data", str(data)]) == 0
+    assert (
+        cli_main(["settings", "set", "dialect=mach3", "grid=40", "auto_resume=true", "--data", str(data)])
+        == 0
+    )
     capsys.readouterr()
     assert cli_main(["settings", "show", "--data", str(data)]) == 0
     shown = capsys.readouterr().out
-    assert 'dialect = "mach3"' in shown and "grid = 40  [cells a side]" in shown and "auto_resume = true" in shown
+    assert (
+        'dialect = "mach3"' in shown
+        and "grid = 40  [cells a side]" in shown
+        and "auto_resume = true" in shown
+    )

@@ -1,5 +1,6 @@
 """Calibration images: OpenCV finds the board where the rig's true camera puts it,
 and calibrating from them recovers the true camera model and homography."""
+
 import json
 
 import cv2
@@ -12,11 +13,13 @@ from appliance.sim.rig import Rig
 
 def _find(path, board):
     gray = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2GRAY)
-    ok, c = cv2.findChessboardCorners(gray, (board.cols, board.rows),
-                                      cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    ok, c = cv2.findChessboardCorners(
+        gray, (board.cols, board.rows), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    )
     assert ok, f"{path.name}: board not found"
-    c = cv2.cornerSubPix(gray, c, (7, 7), (-1, -1),
-                         (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)).reshape(-1, 2)
+    c = cv2.cornerSubPix(
+        gray, c, (7, 7), (-1, -1), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+    ).reshape(-1, 2)
     return c
 
 
@@ -120,6 +123,8 @@ def test_calibration_recovers_the_camera_and_the_plane_homography(calib):
     a = np.column_stack([u, np.ones(len(u))]) @ Hm.T
     err = np.linalg.norm(a[:, :2] / a[:, 2:] - Q[:, :2], axis=1)
     pix = 0.079
-    print(f"calibrated pipeline on the liquid plane (70 x 70 mm): max {err.max():.4f} mm "
-          f"({err.max() / pix:.3f} px), rms {np.sqrt(np.mean(err ** 2)):.4f} mm")
+    print(
+        f"calibrated pipeline on the liquid plane (70 x 70 mm): max {err.max():.4f} mm "
+        f"({err.max() / pix:.3f} px), rms {np.sqrt(np.mean(err**2)):.4f} mm"
+    )
     assert err.max() < 0.5 * pix

@@ -3,12 +3,20 @@
 (tests/test_import_graph.py checks that with the other room rules), and never
 asks a device or a factory whether it happens to have a simulator-only method.
 What a bench offers is in hw/base.py's interfaces."""
+
 import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "appliance"
 ALLOWED = ("sim", "commands")
-SIMULATOR_ONLY = {"note_move_finished", "disk_free_mb", "usb", "extra_params", "calibration_target", "surface"}
+SIMULATOR_ONLY = {
+    "note_move_finished",
+    "disk_free_mb",
+    "usb",
+    "extra_params",
+    "calibration_target",
+    "surface",
+}
 
 
 def production_modules():
@@ -22,9 +30,14 @@ def test_no_production_module_probes_for_simulator_only_methods():
     probes = []
     for rel, tree in production_modules():
         for node in ast.walk(tree):
-            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
-                    and node.func.id in ("getattr", "hasattr") and len(node.args) >= 2 \
-                    and isinstance(node.args[1], ast.Constant) and node.args[1].value in SIMULATOR_ONLY:
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Name)
+                and node.func.id in ("getattr", "hasattr")
+                and len(node.args) >= 2
+                and isinstance(node.args[1], ast.Constant)
+                and node.args[1].value in SIMULATOR_ONLY
+            ):
                 probes.append(f"{rel}:{node.lineno}: {node.func.id}(..., {node.args[1].value!r})")
     assert probes == []
 
@@ -32,6 +45,7 @@ def test_no_production_module_probes_for_simulator_only_methods():
 def test_the_simulator_only_names_are_parts_of_the_interfaces():
     from appliance.hw.base import BenchFactory, Stage
     from appliance.hw.devices import HardwareBench
+
     bench = HardwareBench()
     assert isinstance(bench, BenchFactory) and bench.extra_params == () and bench.calibration_target == {}
     assert bench.disk_free_mb(PACKAGE) > 0

@@ -1,4 +1,5 @@
 """Displacement and meniscus: the shared definitions, and the renderer obeying them."""
+
 import math
 import sys
 from pathlib import Path
@@ -22,7 +23,7 @@ def _cone_volume_above(L):
     if L >= top:
         return 0.0
     if L <= 3:
-        return math.pi * 35 ** 2 * (top - 3) / 3 + math.pi * 35 ** 2 * (3 - L)
+        return math.pi * 35**2 * (top - 3) / 3 + math.pi * 35**2 * (3 - L)
     h = top - L
     r = h / t
     return math.pi * r * r * h / 3
@@ -70,8 +71,10 @@ def test_rendered_meniscus_is_the_contact_line_in_perspective():
     C = rig.centre
     Pc = P0 + (C[:2] - P0) * h / C[2]
     err = np.abs(cone.level_sdf(Pc[:, 0], Pc[:, 1], L + h))
-    print(f"meniscus contact line: max {err.max():.5f} mm; boundary moved "
-          f"{np.median(np.abs(cone.level_sdf(P0[:, 0], P0[:, 1], L))):.3f} mm inwards")
+    print(
+        f"meniscus contact line: max {err.max():.5f} mm; boundary moved "
+        f"{np.median(np.abs(cone.level_sdf(P0[:, 0], P0[:, 1], L))):.3f} mm inwards"
+    )
     assert err.max() < 0.01
     # and it really moved: the free-surface waterline is h / tan(30) = 2.4 mm further out
     assert np.median(cone.level_sdf(P0[:, 0], P0[:, 1], L)) > 2.0
@@ -98,10 +101,10 @@ def test_rendered_contact_line_obeys_the_model_right_up_to_the_walls():
     uv = np.vstack([_crossings(_gray(img), 1), _crossings(_gray(img), 0)])
     P = _to_plane(rig, uv)
     edge = np.minimum.reduce([P[:, 0], 100 - P[:, 0], P[:, 1], 100 - P[:, 1]])
-    P = P[edge > 0.5]                         # the walls themselves are no contact line
+    P = P[edge > 0.5]  # the walls themselves are no contact line
     C = rig.centre
     Q = P.copy()
-    for _ in range(4):                        # contact point, its slope, its rise
+    for _ in range(4):  # contact point, its slope, its rise
         e = 1e-3
         gx = (part.height(Q[:, 0] + e, Q[:, 1]) - part.height(Q[:, 0] - e, Q[:, 1])) / (2 * e)
         gy = (part.height(Q[:, 0], Q[:, 1] + e) - part.height(Q[:, 0], Q[:, 1] - e)) / (2 * e)
@@ -110,18 +113,24 @@ def test_rendered_contact_line_obeys_the_model_right_up_to_the_walls():
     resid = part.height(Q[:, 0], Q[:, 1]) - (L + h)
     near = np.minimum.reduce([Q[:, 0], 100 - Q[:, 0], Q[:, 1], 100 - Q[:, 1]]) < 5
     assert near.sum() > 50
-    print(f"contact line vs model: {P.shape[0]} points, max |resid| {np.abs(resid).max():.4f} mm, "
-          f"within 5 mm of a wall {np.abs(resid[near]).max():.4f} mm ({near.sum()} points)")
-    assert np.abs(resid).max() < 0.01        # was 0.15-2.6 mm before the renderer's fixes
+    print(
+        f"contact line vs model: {P.shape[0]} points, max |resid| {np.abs(resid).max():.4f} mm, "
+        f"within 5 mm of a wall {np.abs(resid[near]).max():.4f} mm ({near.sum()} points)"
+    )
+    assert np.abs(resid).max() < 0.01  # was 0.15-2.6 mm before the renderer's fixes
 
 
-SECOND_INK = Effects(meniscus=True, capillary_length_mm=2.3, contact_angle_deg=35.0, contact_line_curvature=True)
+SECOND_INK = Effects(
+    meniscus=True, capillary_length_mm=2.3, contact_angle_deg=35.0, contact_line_curvature=True
+)
 
 
 def test_second_model_rise_is_a_depression_on_flat_faces_and_follows_the_lines_bend():
     theta = math.radians(35)
     flat, steep = physics.meniscus_rise_curved(np.radians([0.0, 60.0]), 0.0, 2.3, theta)
-    assert math.isclose(flat, -2 * 2.3 * math.sin(theta / 2)) and flat < -1.3   # flatter than 35 deg: below the ink
+    assert (
+        math.isclose(flat, -2 * 2.3 * math.sin(theta / 2)) and flat < -1.3
+    )  # flatter than 35 deg: below the ink
     assert steep > 0
     # a line bending round the part (a peak, kappa > 0) lowers the meniscus, round the ink raises it
     beta = np.radians(50.0)
@@ -151,18 +160,19 @@ def test_rendered_second_model_is_the_contact_line_with_its_own_curvature():
     flanks, in opposite directions."""
     from appliance.sim.render import curvature_grid, surface_grid
     from scipy import ndimage
+
     part, L, rig = S.get("crater"), 15.0, Rig()
     img = render_frame(part, L, rig, SECOND_INK)
     uv = np.vstack([_crossings(_gray(img), 1), _crossings(_gray(img), 0)])
     P = _to_plane(rig, uv)
-    P = P[np.hypot(P[:, 0] - 50, P[:, 1] - 50) < 40]          # off the disc's wall
+    P = P[np.hypot(P[:, 0] - 50, P[:, 1] - 50) < 40]  # off the disc's wall
     grid = surface_grid(part)
     kgrid = np.asarray(curvature_grid(part)[0][..., 0], float)
     C, theta = rig.centre, math.radians(35)
 
     def residual(curved):
         Q = P.copy()
-        for _ in range(4):                    # contact point, its slope and bend, its rise
+        for _ in range(4):  # contact point, its slope and bend, its rise
             e = 1e-3
             gx = (part.height(Q[:, 0] + e, Q[:, 1]) - part.height(Q[:, 0] - e, Q[:, 1])) / (2 * e)
             gy = (part.height(Q[:, 0], Q[:, 1] + e) - part.height(Q[:, 0], Q[:, 1] - e)) / (2 * e)

@@ -1,5 +1,6 @@
 """The virtual bench's renderer: the waterline where the analytic level curve says,
 perspective as a pinhole camera says, and the effects deterministic."""
+
 import math
 
 import cv2
@@ -38,9 +39,9 @@ def _crossings(gray, axis, reach=6, min_cos=0.5):
                 a, b = row[i], row[i + 1]
                 if (a - mid) * (b - mid) <= 0 and a != b:
                     if min(a, b) <= lo + 1 or max(a, b) >= hi - 1:
-                        break          # a clipped neighbour: not a clean ramp
+                        break  # a clipped neighbour: not a clean ramp
                     if abs(b - a) < 0.5 * min_cos * (hi - lo):
-                        break          # grazing: too far off the normal
+                        break  # grazing: too far off the normal
                     t = (mid - a) / (b - a)
                     pts.append((i + t, r) if axis == 1 else (r, i + t))
                     break
@@ -53,9 +54,15 @@ def _gray(img):
 
 def _to_plane(rig, uv, undistort=False):
     if undistort:
-        uv = cv2.undistortPoints(uv.reshape(-1, 1, 2), rig.K(), rig.dist_coeffs(), None, None, rig.K(),
-                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
-                                     ).reshape(-1, 2)
+        uv = cv2.undistortPoints(
+            uv.reshape(-1, 1, 2),
+            rig.K(),
+            rig.dist_coeffs(),
+            None,
+            None,
+            rig.K(),
+            (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14),
+        ).reshape(-1, 2)
     Hm = rig.homography()
     p = np.column_stack([uv, np.ones(len(uv))]) @ Hm.T
     return p[:, :2] / p[:, 2:]
@@ -80,9 +87,10 @@ def test_homography_orientation_is_a_top_view():
     def xy(u, v):
         p = Hm @ [u, v, 1.0]
         return p[:2] / p[2]
+
     c = xy(1024, 768)
-    assert xy(1124, 768)[0] > c[0] + 7          # u right -> x right
-    assert xy(1024, 668)[1] > c[1] + 7          # v up the image -> y away from the viewer
+    assert xy(1124, 768)[0] > c[0] + 7  # u right -> x right
+    assert xy(1024, 668)[1] > c[1] + 7  # v up the image -> y away from the viewer
     assert 0.07 <= np.linalg.norm(xy(1025, 768) - c) <= 0.08
     # not a pure scale: the stand is tilted
     assert abs(Hm[2, 0]) + abs(Hm[2, 1]) > 1e-7
@@ -110,27 +118,33 @@ def _on_the_top(surface, margin=0.5):
     """Points well inside the footprint: there the waterline runs on the sculptured
     top. At the footprint's edge it runs on a wall, which faces away from the camera
     and is hidden by the rim (see the ring test)."""
+
     def keep(xy):
         fp = np.max([t.footprint(xy[:, 0], xy[:, 1]) for t in surface.tiers], axis=0)
         return fp > margin
+
     return keep
 
 
-@pytest.mark.parametrize("name,level", [("sample1", 20.0), ("twin-peaks", 14.0), ("sample3", 40.0),
-                                        ("sample2", 30.0)])
+@pytest.mark.parametrize(
+    "name,level", [("sample1", 20.0), ("twin-peaks", 14.0), ("sample3", 40.0), ("sample2", 30.0)]
+)
 def test_waterline_is_the_analytic_level_curve(name, level):
     err_mm, err_px, _ = _waterline_errors(S.get(name), level, Effects(), keep=_on_the_top(S.get(name)))
     assert err_mm.size > 300
-    print(f"{name} L={level}: {err_mm.size} crossings, max {err_mm.max():.5f} mm "
-          f"({err_px.max():.4f} px), rms {np.sqrt(np.mean(err_mm ** 2)):.5f} mm")
+    print(
+        f"{name} L={level}: {err_mm.size} crossings, max {err_mm.max():.5f} mm "
+        f"({err_px.max():.4f} px), rms {np.sqrt(np.mean(err_mm**2)):.5f} mm"
+    )
     assert err_mm.max() < 0.01
     assert err_px.max() < 0.1
 
 
 def test_waterline_through_lens_distortion():
     """Frames carry the lens distortion; undistorting the crossings recovers the curve."""
-    err_mm, err_px, _ = _waterline_errors(S.get("sample1"), 20.0, Effects(lens_distortion=True),
-                                          undistort=True)
+    err_mm, err_px, _ = _waterline_errors(
+        S.get("sample1"), 20.0, Effects(lens_distortion=True), undistort=True
+    )
     assert err_mm.size > 500
     print(f"distorted: max {err_mm.max():.5f} mm ({err_px.max():.4f} px)")
     assert err_mm.max() < 0.01 and err_px.max() < 0.1
@@ -168,9 +182,9 @@ def test_visible_wall_and_hidden_wall_of_the_ring():
     rim = o + (C[:2] - o) * (8.0 - level) / C[2]
     r_rim = np.hypot(rim[:, 0] - 50, rim[:, 1] - 50)
     print(f"rim silhouette: {o.shape[0]} crossings, max {np.abs(r_rim - 45).max():.5f} mm")
-    assert np.abs(r_rim - 45).max() < 0.01                # anti-aliased: as exact as the waterline
+    assert np.abs(r_rim - 45).max() < 0.01  # anti-aliased: as exact as the waterline
     r_seen = np.hypot(o[:, 0] - 50, o[:, 1] - 50)
-    assert np.median(r_seen - 45) > 8 * pix              # the waterline itself is hidden
+    assert np.median(r_seen - 45) > 8 * pix  # the waterline itself is hidden
 
 
 def test_a_low_rim_near_the_axis_hides_the_waterline():
@@ -189,14 +203,16 @@ def test_a_low_rim_near_the_axis_hides_the_waterline():
     P0 = xy[near]
     C = RIG.centre
     z = np.full(len(P0), level)
-    for _ in range(30):                    # the ray meets the boss's top: z = top(P(z))
+    for _ in range(30):  # the ray meets the boss's top: z = top(P(z))
         P = P0 + (C[:2] - P0) * ((z - level) / C[2])[:, None]
         z = boss.top(P[:, 0], P[:, 1])
     P = P0 + (C[:2] - P0) * ((z - level) / C[2])[:, None]
     err = np.abs(boss.footprint(P[:, 0], P[:, 1]))
     pix = float(np.median(pixel_map(RIG, False).pix))
-    print(f"low rim near the axis: {near.sum()} crossings, max {err.max():.5f} mm from the rim; "
-          f"waterline {np.median(P0[:, 1] - 55) / pix:.2f} px inside")
+    print(
+        f"low rim near the axis: {near.sum()} crossings, max {err.max():.5f} mm from the rim; "
+        f"waterline {np.median(P0[:, 1] - 55) / pix:.2f} px inside"
+    )
     assert err.max() < 0.01
     assert np.median(P0[:, 1] - 55) > 1.2 * pix
 
@@ -212,8 +228,7 @@ def test_a_point_on_top_of_a_tall_part_appears_where_the_pinhole_says():
     P0 = RIG.pixels_to_plane(uv)
     C = RIG.centre
     kx, ky = (C[0] - P0[:, 0]) / C[2], (C[1] - P0[:, 1]) / C[2]
-    hit, z, tier, wall = trace(grid, P0[:, 0], P0[:, 1], kx.astype(np.float32),
-                               ky.astype(np.float32), level)
+    hit, z, tier, wall = trace(grid, P0[:, 0], P0[:, 1], kx.astype(np.float32), ky.astype(np.float32), level)
     assert hit.all() and not wall.any()
     assert np.abs(z - Q[:, 2]).max() < 2e-3
     xh = P0[:, 0] + kx * (z - level)
@@ -244,6 +259,7 @@ def test_effects_are_deterministic_and_do_something():
 def _lit(effects, level, i):
     """Where glare (much brighter than the ink) and anything else (not the ink's colour) lie in frame i."""
     from appliance.sim.render import _liquid_layer
+
     ink = _liquid_layer(RIG, effects, level, np.random.default_rng([1, i]))
     plain = np.asarray(RIG.ink_bgr, np.float32)
     diff = np.abs(ink - plain).max(axis=2)
@@ -252,12 +268,13 @@ def _lit(effects, level, i):
 
 def test_harsh_glare_and_dust_move_and_flicker_from_frame_to_frame():
     from dataclasses import replace
+
     harsh = PRESETS["harsh"]
     glare = replace(harsh, dust_specks=0)
     g1, _ = _lit(glare, 20.0, 1)
     g1_again, _ = _lit(glare, 20.0, 1)
     g2, _ = _lit(glare, 19.0, 2)
-    assert np.array_equal(g1, g1_again)                        # a pure function of level and frame seed
+    assert np.array_equal(g1, g1_again)  # a pure function of level and frame seed
     assert g1.sum() > 5000 and g2.sum() > 5000
     # from one frame to the next the highlights move, resize and come and go...
     assert (g1 != g2).sum() > 0.3 * min(g1.sum(), g2.sum())
@@ -271,11 +288,12 @@ def test_harsh_glare_and_dust_move_and_flicker_from_frame_to_frame():
     _, d1 = _lit(dust, 20.0, 1)
     _, d2 = _lit(dust, 10.0, 2)
     assert d1.sum() > 500
-    assert (d1 & d2).sum() < 0.2 * d1.sum()                   # the specks drifted away
+    assert (d1 & d2).sum() < 0.2 * d1.sum()  # the specks drifted away
 
 
 def test_harsh_stage_wobble_and_lamp_flicker_differ_per_frame():
     from appliance.sim.render import _wobbled, camera_effects
+
     harsh = PRESETS["harsh"]
     pm = pixel_map(RIG, True)
     shifts = []
@@ -286,6 +304,10 @@ def test_harsh_stage_wobble_and_lamp_flicker_differ_per_frame():
     assert r.max() <= 0.05 + 1e-5 and r.max() > 0.02
     assert len({round(s[0], 5) for s in shifts}) == 12
     only_flicker = Effects(flicker=harsh.flicker)
-    means = [camera_effects(np.full((64, 64, 3), 150.0, np.float32), RIG, only_flicker, pm,
-                            np.random.default_rng([1, i])).mean() for i in range(12)]
+    means = [
+        camera_effects(
+            np.full((64, 64, 3), 150.0, np.float32), RIG, only_flicker, pm, np.random.default_rng([1, i])
+        ).mean()
+        for i in range(12)
+    ]
     assert max(means) - min(means) > 1.0 and max(means) <= 150 * 1.015 + 1 and min(means) >= 150 * 0.985 - 1

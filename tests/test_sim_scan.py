@@ -1,4 +1,5 @@
 """Scan folders from the virtual bench, the virtual camera, and `inkslice render`."""
+
 import json
 
 import numpy as np
@@ -25,17 +26,22 @@ def test_levels_run_from_above_the_top_down_to_the_base():
 
 
 def test_a_bench_scan_from_above_starts_with_a_frame_that_shows_no_part():
-    plateau = S.get("plateau")                   # its flat top lies on a level (25 mm)
+    plateau = S.get("plateau")  # its flat top lies on a level (25 mm)
     dissertation = sculpture_levels(plateau, 1.0)
     daemon_like = sculpture_levels(plateau, 1.0, from_above=True)
-    assert dissertation[0] < plateau.z_max == 25.0           # the top is above the first frame
+    assert dissertation[0] < plateau.z_max == 25.0  # the top is above the first frame
     assert daemon_like[:2] == [26.0, 25.0] and daemon_like[2:] == dissertation
 
 
 def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
     folder = tmp_path / "scan"
-    scan = render_scan("cone", folder, levels=[24.0, 15.0, 6.0],
-                       effects=Effects(displacement=True, lens_distortion=True), seed=7)
+    scan = render_scan(
+        "cone",
+        folder,
+        levels=[24.0, 15.0, 6.0],
+        effects=Effects(displacement=True, lens_distortion=True),
+        seed=7,
+    )
     assert sorted(p.name for p in folder.iterdir()) == ["frames", "scan.json"]
     loaded = load_scan(folder)
     assert [f.level_mm for f in loaded.frames] == [24.0, 15.0, 6.0]
@@ -52,12 +58,19 @@ def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
     assert truth["levels_true_mm"][0] == 24.0 and truth["levels_true_mm"][2] < 6.0 - 0.5
     assert truth["effects"]["displacement"] is True and truth["meniscus"]["enabled"] is False
     # the frame is the one render_frame gives for that level and seed
-    again = render_frame("cone", 15.0, rig, Effects(displacement=True, lens_distortion=True),
-                         np.random.default_rng([7, 1]))
+    again = render_frame(
+        "cone", 15.0, rig, Effects(displacement=True, lens_distortion=True), np.random.default_rng([7, 1])
+    )
     assert np.array_equal(again, img)
     # the same scan from two processes is the same scan
-    par = render_scan("cone", tmp_path / "par", levels=[24.0, 15.0, 6.0],
-                      effects=Effects(displacement=True, lens_distortion=True), seed=7, workers=2)
+    par = render_scan(
+        "cone",
+        tmp_path / "par",
+        levels=[24.0, 15.0, 6.0],
+        effects=Effects(displacement=True, lens_distortion=True),
+        seed=7,
+        workers=2,
+    )
     assert np.array_equal(read_frame(par, par.frames[1]), img)
     assert json.loads(truth_path(par.folder).read_text())["levels_true_mm"] == truth["levels_true_mm"]
     # no distortion in the frames -> no distortion in scan.json
@@ -74,10 +87,12 @@ def test_virtual_camera_renders_the_level_at_capture_time():
     b = cam.capture()
     assert cam.last_level_mm == 5.0
     bright = lambda im: int((im[..., 1] > 100).sum())
-    assert bright(b) > 3 * bright(a) > 0       # more of the cone stands out of the ink
-    assert np.allclose(cam.camera_model().dist, 0)          # clean frames carry no distortion
-    assert np.allclose(VirtualCamera("cone", level_mm=lambda: 1.0, effects="realistic")
-                       .camera_model().dist, Rig().dist_coeffs())
+    assert bright(b) > 3 * bright(a) > 0  # more of the cone stands out of the ink
+    assert np.allclose(cam.camera_model().dist, 0)  # clean frames carry no distortion
+    assert np.allclose(
+        VirtualCamera("cone", level_mm=lambda: 1.0, effects="realistic").camera_model().dist,
+        Rig().dist_coeffs(),
+    )
 
 
 def test_virtual_camera_ripple_settles():
@@ -85,8 +100,8 @@ def test_virtual_camera_ripple_settles():
     level = {"mm": 10.0}
     fx = Effects(ripple_mm=0.3, ripple_decay_s=0.5)
     cam = VirtualCamera("cone", level_mm=lambda: level["mm"], effects=fx, clock=lambda: t["now"])
-    settled = cam.capture()                      # first frame: long settled
-    level["mm"] = 10.0 + 1e-3                    # a move (tiny, so the part hardly changes)
+    settled = cam.capture()  # first frame: long settled
+    level["mm"] = 10.0 + 1e-3  # a move (tiny, so the part hardly changes)
     t["now"] = 100.0
     ringing = cam.capture()
     assert cam.last_ripple_age_s == 0.0
@@ -99,8 +114,21 @@ def test_virtual_camera_ripple_settles():
 
 def test_cli_render(tmp_path, capsys):
     out = tmp_path / "s4"
-    rc = main(["render", "sample4", "-o", str(out), "--step", "10", "--effects", "realistic",
-               "--seed", "3", "--quiet"])
+    rc = main(
+        [
+            "render",
+            "sample4",
+            "-o",
+            str(out),
+            "--step",
+            "10",
+            "--effects",
+            "realistic",
+            "--seed",
+            "3",
+            "--quiet",
+        ]
+    )
     assert rc == 0
     scan = load_scan(out)
     assert len(scan.frames) == 4 and truth_path(out).is_file()
@@ -121,18 +149,22 @@ def test_the_render_loop_refines_a_step_in_which_a_face_came_out_at_once_as_the_
     from appliance.sim.scanrender import refine_scan
     from appliance.vision.part import find_part
     from appliance.vision.refine import face_bracket, mask_pixel_mm, surfaced_faces
+
     folder = tmp_path / "plateau"
-    scan = render_scan("plateau", folder, levels=[26.0, 24.0, 22.0], rig=small_rig(320, 240), seed=2,
-                       refine_mm=0.1)
+    scan = render_scan(
+        "plateau", folder, levels=[26.0, 24.0, 22.0], rig=small_rig(320, 240), seed=2, refine_mm=0.1
+    )
     extra = [f for f in scan.frames if "refines" in f.extra]
     # the flat top (25 mm) came out between 26 and 24; the shoulders below it did not come out at once
     assert len(extra) == 5 and all(f.extra["refines"] == [26.0, 24.0] for f in extra)
     assert extra[0].level_mm == 25.0
     part = {f.file: find_part(read_frame(scan, f), scan.camera, f.level_mm) for f in scan.frames}
     above, below = scan.frames[0], scan.frames[1]
-    faces = surfaced_faces(part[above.file], part[below.file], mask_pixel_mm(scan.camera, part[below.file].shape))
+    faces = surfaced_faces(
+        part[above.file], part[below.file], mask_pixel_mm(scan.camera, part[below.file].shape)
+    )
     lo, hi = face_bracket(faces[0], 26.0, 24.0, [(f.level_mm, part[f.file]) for f in extra])
-    assert hi - lo <= 0.1 and 24.9 <= lo < hi <= 25.1          # a clean ink: the face is at 25 mm
+    assert hi - lo <= 0.1 and 24.9 <= lo < hi <= 25.1  # a clean ink: the face is at 25 mm
     truth = json.loads(truth_path(folder).read_text())
     assert [f["file"] for f in truth["frames"]] == [f.file for f in scan.frames]
-    assert refine_scan("plateau", folder, 0.1, rig=small_rig(320, 240), seed=2) == 0   # done is done
+    assert refine_scan("plateau", folder, 0.1, rig=small_rig(320, 240), seed=2) == 0  # done is done

@@ -1,4 +1,5 @@
 """The dissertation's statistics (eqs 3-27..3-30) on hand-computed cases."""
+
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ from appliance.surface.stats import seed_statistics
 
 def test_hand_computed_case():
     zt = np.array([10.0, 20.0, 30.0, 40.0])
-    zr = np.array([11.0, 18.0, 30.0, 44.0])           # errors 1, 2, 0, 4
+    zr = np.array([11.0, 18.0, 30.0, 44.0])  # errors 1, 2, 0, 4
     s = seed_statistics(zt, zr)
     assert s["n"] == 4
     assert s["max_error"] == 4.0
@@ -23,17 +24,20 @@ def test_hand_computed_case():
     assert s["matching"] == pytest.approx(100 - 100 * 1.75 / 40)
 
 
-@pytest.mark.parametrize("ea, normaliser, ep_table, matching", [
-    (0.5319, 49.81, 1.0678, 98.9322),     # table 5-3, least squares
-    (2.4648, 28.36, 8.6913, 91.3087),     # table 5-4, least squares
-    (0.6573, 32.42, 2.0273, 97.9727),     # table 5-1, least squares
-    (3.7843, 34.62, 10.9313, 89.0687),    # table 5-2, as captured
-])
+@pytest.mark.parametrize(
+    "ea, normaliser, ep_table, matching",
+    [
+        (0.5319, 49.81, 1.0678, 98.9322),  # table 5-3, least squares
+        (2.4648, 28.36, 8.6913, 91.3087),  # table 5-4, least squares
+        (0.6573, 32.42, 2.0273, 97.9727),  # table 5-1, least squares
+        (3.7843, 34.62, 10.9313, 89.0687),  # table 5-2, as captured
+    ],
+)
 def test_table_normalisation_reproduces_the_tables(ea, normaliser, ep_table, matching):
     """The tables divide Ea by the sample's largest |Z|; matching is 100 - that."""
     zt = np.array([normaliser, -normaliser / 2, 1.0])
     s = seed_statistics(zt, zt + ea, normaliser=normaliser)
-    assert s["Ep_table"] == pytest.approx(ep_table, abs=5e-4)      # the tables divided by unrounded Ea and max|Z|
+    assert s["Ep_table"] == pytest.approx(ep_table, abs=5e-4)  # the tables divided by unrounded Ea and max|Z|
     assert s["matching"] == pytest.approx(100 - s["Ep_table"], abs=1e-12)
     assert round(100 - ep_table, 4) == matching
 

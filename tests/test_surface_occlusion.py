@@ -4,6 +4,7 @@ The camera sees the rim of such a face (its silhouette), which moves outward fra
 frame as the ink drops. Read as a waterline it claims the part stands where there is ink.
 These tests pin the rule that tells a silhouette from a waterline (slices.silhouettes),
 and that the bench's two occluding parts render and reconstruct."""
+
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
@@ -11,13 +12,19 @@ from scipy.spatial import ConvexHull
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.surface.gridfit import Lattice, flat_faces, first_exposure, tilt_crossed_faces
-from appliance.surface.slices import (Perspective, check_waterlines, make_slice, mark_silhouettes, mark_walls,
-                                      silhouettes)
+from appliance.surface.slices import (
+    Perspective,
+    check_waterlines,
+    make_slice,
+    mark_silhouettes,
+    mark_walls,
+    silhouettes,
+)
 from appliance.vision.types import Waterline
 
 CAMERA = Perspective((0.0, 0.0), 300.0)
-RIM = np.array([[40.0, -10.0], [60.0, -10.0], [60.0, 10.0], [40.0, 10.0]])   # a plateau's rim, 20 mm up
-RIM_MM, RUN = 20.0, 1 / np.tan(np.radians(85.0))                            # its walls lean in at 85 deg
+RIM = np.array([[40.0, -10.0], [60.0, -10.0], [60.0, 10.0], [40.0, 10.0]])  # a plateau's rim, 20 mm up
+RIM_MM, RUN = 20.0, 1 / np.tan(np.radians(85.0))  # its walls lean in at 85 deg
 LEVELS = np.arange(19.0, 4.0, -1.0)
 
 
@@ -31,8 +38,12 @@ def _frustum_seen(level, jitter_mm=0.0):
     rim = CAMERA.xy + (RIM - CAMERA.xy) * (CAMERA.height_mm / (CAMERA.height_mm - (RIM_MM - level)))
     pts = np.vstack([section, rim])
     hull = pts[ConvexHull(pts).vertices]
-    loop = np.vstack([a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / 0.1), 1), endpoint=False)[:, None]
-                      for a, b in zip(hull, np.roll(hull, -1, axis=0))])
+    loop = np.vstack(
+        [
+            a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / 0.1), 1), endpoint=False)[:, None]
+            for a, b in zip(hull, np.roll(hull, -1, axis=0))
+        ]
+    )
     loop = c + (loop - c) * (1 + jitter_mm / np.linalg.norm(loop - c, axis=1))[:, None]
     return Waterline(float(level), [loop])
 
@@ -66,7 +77,7 @@ def test_a_silhouette_is_not_read_as_a_waterline():
     read_after = sum((b & ~s.wall).sum() for s, b in zip(after, behind))
     assert read_after < 0.05 * n
     for s, b in zip(after, behind):
-        assert np.all(s.hidden[b] <= s.wall[b])          # every hidden point is out of the level curves
+        assert np.all(s.hidden[b] <= s.wall[b])  # every hidden point is out of the level curves
         # the rim each shows is bracketed along its ray: it stands at 20 mm, above this level
         rim = s.rim[b & s.hidden]
         ok = np.isfinite(rim[:, 0])
@@ -81,7 +92,7 @@ def test_a_face_the_camera_sees_has_no_silhouette():
     dome = surfaces.get("sample1")
     slices, _ = check_waterlines(ideal_waterlines(dome, np.arange(37.0, 6.0, -1.0), 0.2))
     camera = Perspective((50.6, 49.3), 300.0)
-    inner = [(np.abs(s.P - 50.0) < 45).all(axis=1) for s in slices]     # away from the block's walls
+    inner = [(np.abs(s.P - 50.0) < 45).all(axis=1) for s in slices]  # away from the block's walls
     hidden = silhouettes(slices, camera)
     assert sum(i.sum() for i in inner) > 5000
     assert sum((h & i).sum() for h, i in zip(hidden, inner)) == 0
@@ -93,12 +104,12 @@ def test_a_face_that_came_out_at_once_lies_between_its_two_levels():
     square = [np.array([[0, 0], [30, 0], [30, 30], [0, 30]], float)]
     slices = [make_slice(13.0, []), make_slice(12.0, square), make_slice(11.0, square)]
     for s in slices:
-        s.wall = np.ones(len(s.P), bool)            # its outline is all wall
+        s.wall = np.ones(len(s.P), bool)  # its outline is all wall
     lat = Lattice(np.linspace(0, 30, 31), np.linspace(0, 30, 31))
     z_fe, first, _ = first_exposure(lat, slices, 0.25)
     z, mid, (lo, hi) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
-    assert mid[15, 15] and mid[1, 15]               # walls say nothing of where the top is
-    assert not mid[0, 15]                           # a node on the outline is on the rim: not sure
+    assert mid[15, 15] and mid[1, 15]  # walls say nothing of where the top is
+    assert not mid[0, 15]  # a node on the outline is on the rim: not sure
     assert z[15, 15] == pytest.approx(12.5)
     assert lo[15, 15] == 12.0 and hi[15, 15] == 13.0
 
@@ -111,22 +122,30 @@ def test_a_tilted_face_one_level_curve_crosses_is_one_plane():
     curve at half the largest slope the brackets allow they rise through it."""
     out = np.array([[0, 0], [60, 0], [60, 30], [0, 30]], float)
     beyond = np.array([[30, 0], [60, 0], [60, 30], [30, 30]], float)
-    slices = [make_slice(14.0, []), make_slice(13.0, []), make_slice(12.0, [beyond]), make_slice(11.0, [out]),
-              make_slice(10.0, [out])]
+    slices = [
+        make_slice(14.0, []),
+        make_slice(13.0, []),
+        make_slice(12.0, [beyond]),
+        make_slice(11.0, [out]),
+        make_slice(10.0, [out]),
+    ]
     for s in slices:
-        s.wall = np.abs(s.P[:, 0] - 30.0) > 1e-9   # the outline is wall, the curve x = 30 is not
+        s.wall = np.abs(s.P[:, 0] - 30.0) > 1e-9  # the outline is wall, the curve x = 30 is not
     lat = Lattice(np.linspace(0, 60, 61), np.linspace(0, 30, 31))
     z_fe, first, _ = first_exposure(lat, slices, 0.25)
     z, mid, _ = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
     assert z[15, 5] == pytest.approx(11.5) and z[15, 55] == pytest.approx(12.5)
     tilted = tilt_crossed_faces(lat, slices, z, mid, first, far_mm=3.0)
     assert tilted[15, 5] and tilted[15, 55]
-    slope = 0.5 / 29.0        # the farthest face node is 29 mm from the curve (x = 0 is on the rim)
+    slope = 0.5 / 29.0  # the farthest face node is 29 mm from the curve (x = 0 is on the rim)
     assert z[15, 5] == pytest.approx(12.0 - 25 * slope)
     assert z[15, 55] == pytest.approx(12.0 + 25 * slope)
     truth = 12.0 + (lat.x - 30.0) / 80.0
     row = mid[15]
-    assert np.abs(z[15, row] - truth[row]).mean() < 0.5 * np.abs(np.where(lat.x < 30, 11.5, 12.5) - truth)[row].mean()
+    assert (
+        np.abs(z[15, row] - truth[row]).mean()
+        < 0.5 * np.abs(np.where(lat.x < 30, 11.5, 12.5) - truth)[row].mean()
+    )
 
 
 def test_a_flat_face_no_curve_crosses_keeps_its_middle():
@@ -151,6 +170,7 @@ def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
     from appliance import process as proc
     from appliance.sim.rig import Rig
     from appliance.sim.scanrender import render_scan
+
     part = surfaces.get(name)
     rig = Rig(width=1024, height=768, focal_px=1900.0, principal_u=515.0, principal_v=381.5)
     render_scan(part, tmp_path / name, step_mm=1.0, rig=rig, seed=3)

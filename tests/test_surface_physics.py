@@ -1,4 +1,5 @@
 """Surface room: the displacement formula and the meniscus correction/calibration."""
+
 import numpy as np
 import pytest
 
@@ -10,8 +11,12 @@ from appliance.surface.displacement import emerged_volumes, true_levels
 from appliance.surface.meniscus import MeniscusModel, calibrate_meniscus
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 
-CYL = Surface("cyl", "flat-topped cylinder r 20, 30 high", (30, 70, 30, 70),
-              (Tier(disc_sdf(50, 50, 20), lambda x, y: np.full(np.broadcast(x, y).shape, 30.0)),))
+CYL = Surface(
+    "cyl",
+    "flat-topped cylinder r 20, 30 high",
+    (30, 70, 30, 70),
+    (Tier(disc_sdf(50, 50, 20), lambda x, y: np.full(np.broadcast(x, y).shape, 30.0)),),
+)
 
 
 def test_displacement_of_a_cylinder_matches_the_closed_form():
@@ -35,21 +40,22 @@ def test_emerged_volume_of_a_cone_from_its_areas():
     # the trapezoid rule on area (quadratic in depth here) and the small cap above 9.5 mm
     assert np.all(np.abs(V - exact) < 0.01 * exact + 0.1)
     with pytest.raises(SettingError):
-        true_levels(levels, areas, 100.0)      # a tank smaller than the part
+        true_levels(levels, areas, 100.0)  # a tank smaller than the part
 
 
 def test_displacement_correction_recovers_true_levels():
     from appliance.sim import physics
+
     dome = surfaces.get("sample1")
     nominal = np.arange(38.0, 13.0, -1.0)
     true = np.array([physics.true_level(dome, lv, 22500.0) for lv in nominal])
     lines = ideal_waterlines(dome, true, 0.4)
     for w, lv in zip(lines, nominal):
-        w.level_mm = float(lv)                # the scan only knows the nominal levels
+        w.level_mm = float(lv)  # the scan only knows the nominal levels
     rec = reconstruct(lines, GridSpec(dome.bounds, n=(26, 26)), ReconstructOptions(tank_area_mm2=22500.0))
     est = np.array(rec.diagnostics["displacement"]["true_mm"])
     assert np.max(np.abs(est - true)) < 0.03
-    assert np.max(nominal - true) > 1.0        # the effect is large; the correction takes it out
+    assert np.max(nominal - true) > 1.0  # the effect is large; the correction takes it out
 
 
 def test_meniscus_calibration_recovers_known_parameters():
@@ -65,6 +71,7 @@ def test_meniscus_calibration_through_the_cameras_perspective():
     rise must be that of the slope where it really is (taken where it was seen: 2.180 mm
     for 2.2, the error sample 4's steep faces multiply)."""
     from appliance.vision.types import Waterline
+
     sphere = surfaces.get("sphere")
     C, H = np.array([20.0, 30.0]), 300.0
     seen = []
@@ -75,13 +82,17 @@ def test_meniscus_calibration_through_the_cameras_perspective():
             loops.append(C + (lp - C) * (H / (H - h))[:, None])
         seen.append(Waterline(w.level_mm, loops))
     m = calibrate_meniscus(seen, sphere, camera_xy_mm=tuple(C), camera_height_mm=H)
-    assert abs(m.capillary_length_mm - 2.2) < 0.005           # measured 2.19999
+    assert abs(m.capillary_length_mm - 2.2) < 0.005  # measured 2.19999
     assert abs(m.contact_angle_rad - 0.2) < 0.002
 
 
 def test_meniscus_correction_removes_the_rise():
-    dome = Surface("dome", "paraboloid", (10.0, 90.0, 10.0, 90.0),
-                   (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),))
+    dome = Surface(
+        "dome",
+        "paraboloid",
+        (10.0, 90.0, 10.0, 90.0),
+        (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),),
+    )
     lines = meniscus_waterlines(dome, np.arange(20.5, 4.0, -1.0), 2.7, 0.0, resolution_mm=0.3)
     g = GridSpec(dome.bounds, n=(33, 33))
     raw = reconstruct(lines, g)
@@ -91,7 +102,7 @@ def test_meniscus_correction_removes_the_rise():
     inner = np.hypot(X - 50, Y - 50) < 25
     e_raw = np.nanmean(np.abs(raw.heightmap.z - dome.height(X, Y))[inner])
     e_fix = np.nanmean(np.abs(fixed.heightmap.z - dome.height(X, Y))[inner])
-    assert e_raw > 0.3                        # uncorrected, the rise biases the heights
+    assert e_raw > 0.3  # uncorrected, the rise biases the heights
     # measured: raw 0.84 mm, corrected 0.0068 mm (0.0012 when the top's solve settles, see
     # meniscus.FINE_ITERATIONS; 0.11 with the rise iterated from the fit's slope)
     assert e_fix < 0.01
@@ -102,6 +113,7 @@ def test_displacement_from_the_fitted_surface_matches_the_bench():
     levels the bench simulates; the contact lines' areas would not (a meniscus shrinks them)."""
     from appliance.sim import physics
     from appliance.surface.displacement import levels_from_surface
+
     part = surfaces.get("sample1")
     x = np.linspace(0.0, 100.0, 201)
     X, Y = np.meshgrid(x, x)
@@ -109,7 +121,7 @@ def test_displacement_from_the_fitted_surface_matches_the_bench():
     nominal = np.array([30.0, 20.0, 10.0, 2.0])
     true = np.array([physics.true_level(part, lv, 22500.0) for lv in nominal])
     est = levels_from_surface(nominal, z, 0.5 * 0.5, 22500.0)
-    assert np.max(nominal - true) > 5.0            # the bottom frame's ink is 5+ mm lower
+    assert np.max(nominal - true) > 5.0  # the bottom frame's ink is 5+ mm lower
     assert np.max(np.abs(est - true)) < 0.02
 
 
@@ -121,21 +133,22 @@ def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
     from appliance.surface.displacement import levels_from_surface
     from appliance.surface.gridfit import Lattice, area_weights
     from appliance.surface.slices import make_slice
+
     part = surfaces.get("sample1")
-    x = np.linspace(-0.4, 100.6, 102)                 # ~1 mm spacing, 0.4 mm off the edges
+    x = np.linspace(-0.4, 100.6, 102)  # ~1 mm spacing, 0.4 mm off the edges
     lat = Lattice(x, x)
     X, Y = np.meshgrid(x, x)
     inside = part.inside(X, Y)
     z = np.where(inside, part.height(X, Y), np.nan)
     square = np.array([[0.0, 0.0], [100.002, 0.0], [100.002, 100.002], [0.0, 100.002]])
     w = area_weights(lat, [make_slice(0.0, [square])])
-    assert abs(w.sum() * lat.hx * lat.hy - 100.002 ** 2) < 20.0      # within 0.2 %
+    assert abs(w.sum() * lat.hx * lat.hy - 100.002**2) < 20.0  # within 0.2 %
     nominal = np.array([30.0, 20.0, 10.0, 2.0])
     true = np.array([physics.true_level(part, lv, 22500.0) for lv in nominal])
     cell = lat.hx * lat.hy
     plain = levels_from_surface(nominal, z, cell, 22500.0)
     weighted = levels_from_surface(nominal, z, cell, 22500.0, weights=w)
-    assert np.max(np.abs(plain - true)) > 0.05       # the strip: ~2 % of the volume
+    assert np.max(np.abs(plain - true)) > 0.05  # the strip: ~2 % of the volume
     assert np.max(np.abs(weighted - true)) < 0.02
 
 
@@ -149,21 +162,25 @@ def _apparent(top, model, x, y):
     return T - model.rise_on_slope(np.hypot(gx, gy)), T
 
 
-def _saddle4(x, y):                     # sample 4's top: a steep saddle with a flat corner
+def _saddle4(x, y):  # sample 4's top: a steep saddle with a flat corner
     u, v = (x - 45) / 10, (y - 45) / 10
-    return 22.32 + 45 * (u * v ** 3 - u ** 3 * v)
+    return 22.32 + 45 * (u * v**3 - u**3 * v)
 
 
-@pytest.mark.parametrize("top,extent", [
-    (lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2), (20.0, 80.0)),    # a dome, slopes to 0.6
-    (_saddle4, (45.0, 55.0)),                                                       # slopes 0 .. 12
-])
+@pytest.mark.parametrize(
+    "top,extent",
+    [
+        (lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2), (20.0, 80.0)),  # a dome, slopes to 0.6
+        (_saddle4, (45.0, 55.0)),  # slopes 0 .. 12
+    ],
+)
 def test_top_from_the_apparent_surface_is_the_top(top, extent):
     """Exact apparent surfaces give back the top. On sample 4's saddle plain Gauss-Newton
     (the meniscus switched on at once) grows a 2.6 mm bump in the flat corner, and the
     old iteration (the rise from the fit's slope, refitted) ran away there."""
     from appliance.surface.gridfit import Lattice
     from appliance.surface.meniscus import top_from_apparent
+
     model = MeniscusModel(2.7, 0.0)
     x = np.linspace(*extent, 61)
     A, T = _apparent(top, model, x, x)
@@ -171,8 +188,8 @@ def test_top_from_the_apparent_surface_is_the_top(top, extent):
     got = top_from_apparent(Lattice(x, x), A, footprint, model)
     err = np.abs(got - T)
     inner = np.zeros(A.shape, bool)
-    inner[3:-3, 3:-3] = True                 # the outline's nodes are left to the smoothness
-    assert np.abs(T - A).max() > 1.0         # the rise is there to take out
+    inner[3:-3, 3:-3] = True  # the outline's nodes are left to the smoothness
+    assert np.abs(T - A).max() > 1.0  # the rise is there to take out
     # (measured: mean 0.0049 / 0.0036 mm, all nodes 0.0059 / 0.0081; the largest, 0.26 /
     # 0.12 mm, at the critical points, where the rise is a cone - |grad| grows linearly
     # from them - and smoothed. The solve stops after three fine steps, which rendered
@@ -187,6 +204,7 @@ def test_the_apparent_surface_at_the_rim_is_not_trusted():
     (the equation carries an error at a rim the top rises to inwards, over ~l_c)."""
     from appliance.surface.gridfit import Lattice
     from appliance.surface.meniscus import top_from_apparent
+
     model = MeniscusModel(2.7, 0.0)
     x = np.linspace(0.0, 20.0, 41)
     A, T = _apparent(lambda X, Y: 30.0 - 0.7 * X, model, x, x)
@@ -205,10 +223,11 @@ def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it
     def ring(a):
         t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
         return np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
+
     levels = (40.0, 39.0, 38.0, 37.0, 36.0)
     slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
     z = np.array([39.5, 36.5])
-    first = np.array([4, 4])                  # both came out in the 36 mm frame
+    first = np.array([4, 4])  # both came out in the 36 mm frame
     rise = MeniscusModel(2.7, 0.0).rise(np.linspace(0.0, np.pi / 2, 91)).max()
     # no meniscus: under at 37, two levels of slack (BRACKET_SLACK_LEVELS) -> at most 39
     assert list(_bracket(z, first, slices)) == [39.0, 36.5]
@@ -224,8 +243,9 @@ def test_meniscus_calibration_measures_how_much_the_contact_lines_bend_counts(cu
     (2.3 mm, 35 deg, its rise bent by kappa) and the first's (2.7 mm, 0, straight) come
     back with their curvature weight, 1 and 0 (measured 0.9992 and 3e-7)."""
     sphere = surfaces.get("sphere")
-    lines = meniscus_waterlines(sphere, np.arange(29.0, 2.0, -2.0), lc, np.radians(theta), resolution_mm=0.4,
-                                curved=curved)
+    lines = meniscus_waterlines(
+        sphere, np.arange(29.0, 2.0, -2.0), lc, np.radians(theta), resolution_mm=0.4, curved=curved
+    )
     m = calibrate_meniscus(lines, sphere)
     assert abs(m.capillary_length_mm - lc) < 0.01
     assert abs(np.degrees(m.contact_angle_rad) - theta) < 0.1
@@ -236,18 +256,23 @@ def test_the_correction_takes_out_the_second_inks_bent_meniscus():
     """A dome (its contact lines bend round the part) and a bowl (round the ink) under the
     second ink: the straight-line correction is 0.10 and 0.04 mm out, the bent one 0.012
     and 0.009 (measured, 33 x 33 nodes, nodes within 25 mm of the axis)."""
-    top = {"dome": lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2),
-           "bowl": lambda x, y: 4 + 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)}
+    top = {
+        "dome": lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2),
+        "bowl": lambda x, y: 4 + 0.01 * ((x - 50) ** 2 + (y - 50) ** 2),
+    }
     g = GridSpec((10.0, 90.0, 10.0, 90.0), n=(33, 33))
     X, Y = np.meshgrid(*g.axes())
     inner = np.hypot(X - 50, Y - 50) < 25
     for name, f in top.items():
         part = Surface(name, name, (10.0, 90.0, 10.0, 90.0), (Tier(disc_sdf(50, 50, 40), f),))
-        lines = meniscus_waterlines(part, np.arange(20.5, 2.0, -1.0), resolution_mm=0.3, curved=True,
-                                    **SECOND)
+        lines = meniscus_waterlines(
+            part, np.arange(20.5, 2.0, -1.0), resolution_mm=0.3, curved=True, **SECOND
+        )
         errs = []
         for weight in (0.0, 1.0):
-            model = MeniscusModel(SECOND["capillary_length_mm"], SECOND["contact_angle_rad"], curvature=weight)
+            model = MeniscusModel(
+                SECOND["capillary_length_mm"], SECOND["contact_angle_rad"], curvature=weight
+            )
             z = reconstruct(lines, g, ReconstructOptions(meniscus=model)).heightmap.z
             errs.append(np.nanmean(np.abs(z - part.height(X, Y))[inner]))
         straight, bent = errs
@@ -258,8 +283,10 @@ def test_the_correction_takes_out_the_second_inks_bent_meniscus():
 
 def _hill_on_a_flat_face():
     """A hill (10 mm, sigma 6 mm) on a flat face 6 mm high, a disc of radius 30 mm."""
-    top = lambda x, y: 6.0 + 10.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / (2 * 6.0 ** 2))   # noqa: E731
-    return Surface("hill", "a hill on a flat face", (20.0, 80.0, 20.0, 80.0), (Tier(disc_sdf(50, 50, 30), top),))
+    top = lambda x, y: 6.0 + 10.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / (2 * 6.0**2))  # noqa: E731
+    return Surface(
+        "hill", "a hill on a flat face", (20.0, 80.0, 20.0, 80.0), (Tier(disc_sdf(50, 50, 30), top),)
+    )
 
 
 @pytest.mark.parametrize("phase,placed", [(0.0, 0.017), (0.4, 0.417)])
@@ -285,6 +312,7 @@ def test_a_flat_face_under_a_depression_is_placed_in_the_middle_of_its_bracket(p
 def test_the_first_ink_wets_flat_faces_and_keeps_its_correction():
     """The first ink commissions to ~0 deg: no depression, nothing placed or re-marked."""
     from appliance.surface.meniscus import depression_depth
+
     assert depression_depth(MeniscusModel(2.704, np.radians(0.04))) == 0.0
     assert abs(depression_depth(MeniscusModel(**SECOND)) - 1.383) < 0.001
 

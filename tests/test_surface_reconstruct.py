@@ -1,4 +1,5 @@
 """Surface room: first exposure, topology, walls, degenerate input, the grid, the mesh."""
+
 import struct
 
 import numpy as np
@@ -14,11 +15,19 @@ from appliance.surface.stl import heightmap_to_stl
 from appliance.vision.types import Waterline
 
 # a paraboloid dome on a disc: z = 20 - 0.01 r^2 (exact answer everywhere)
-DOME = Surface("dome", "paraboloid", (10.0, 90.0, 10.0, 90.0),
-               (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),))
+DOME = Surface(
+    "dome",
+    "paraboloid",
+    (10.0, 90.0, 10.0, 90.0),
+    (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),),
+)
 # a block with a tilted flat top: walls all round, top from 10 to 14 mm
-WEDGE = Surface("wedge", "tilted block", (0.0, 40.0, 0.0, 30.0),
-                (Tier(rect_sdf(0, 40, 0, 30), lambda x, y: 10 + 0.1 * x),))
+WEDGE = Surface(
+    "wedge",
+    "tilted block",
+    (0.0, 40.0, 0.0, 30.0),
+    (Tier(rect_sdf(0, 40, 0, 30), lambda x, y: 10 + 0.1 * x),),
+)
 
 
 def _errors(surface, rec, margin=0.0):
@@ -67,11 +76,13 @@ def test_islands_that_merge_and_a_hole():
 
     ring = surfaces.get("ring")
     # levels off the crest's height (20 mm): a flat ridge exactly at a frame's level is a known weak case
-    rec = reconstruct(ideal_waterlines(ring, np.arange(20.5, 0.0, -1.0), 0.2), GridSpec(ring.bounds, n=(46, 46)))
+    rec = reconstruct(
+        ideal_waterlines(ring, np.arange(20.5, 0.0, -1.0), 0.2), GridSpec(ring.bounds, n=(46, 46))
+    )
     X, Y = rec.heightmap.grid()
     r = np.hypot(X - 50, Y - 50)
-    assert np.all(np.isnan(rec.heightmap.z[r < 13]))            # the hole goes down to the base
-    band = (r > 20) & (r < 40)      # 5 mm clear of the walls: the rims are the weak part
+    assert np.all(np.isnan(rec.heightmap.z[r < 13]))  # the hole goes down to the base
+    band = (r > 20) & (r < 40)  # 5 mm clear of the walls: the rims are the weak part
     e = np.abs(rec.heightmap.z - ring.height(X, Y))
     flank = band & (np.abs(r - 30) > 3)
     assert np.nanmean(e[flank]) < 0.01
@@ -83,9 +94,9 @@ def test_walls_are_found_and_kept_out_of_the_fit():
     lines = ideal_waterlines(WEDGE, [15.0, 13.5, 12.5, 11.5, 10.5, 9.0, 7.0, 5.0], 0.1)
     slices, _ = check_waterlines(lines)
     mark_walls(slices, 0.03)
-    low = slices[-1]                       # 5 mm: the block's whole outline is wall
+    low = slices[-1]  # 5 mm: the block's whole outline is wall
     assert low.wall.mean() > 0.99
-    mid = slices[2]                        # 12.5 mm: the line x = 25 on the top, walls elsewhere
+    mid = slices[2]  # 12.5 mm: the line x = 25 on the top, walls elsewhere
     on_top = np.abs(mid.P[:, 0] - 25.0) < 1e-6
     assert on_top.any() and not mid.wall[on_top & (mid.P[:, 1] > 1) & (mid.P[:, 1] < 29)].any()
     assert mid.wall[mid.P[:, 0] > 25.5].all()
@@ -105,9 +116,15 @@ def _seen_from(camera, surface, lines):
     for w in lines:
         loops = []
         for lp in w.loops:
-            inward = lp + 1e-3 * (np.array([20.0, 15.0]) - lp) / np.linalg.norm(np.array([20.0, 15.0]) - lp, axis=1)[:, None]
-            on_wall = ~surface.inside(lp[:, 0] + 2e-3 * np.sign(lp[:, 0] - 20.0), lp[:, 1]) | \
-                ~surface.inside(lp[:, 0], lp[:, 1] + 2e-3 * np.sign(lp[:, 1] - 15.0))
+            inward = (
+                lp
+                + 1e-3
+                * (np.array([20.0, 15.0]) - lp)
+                / np.linalg.norm(np.array([20.0, 15.0]) - lp, axis=1)[:, None]
+            )
+            on_wall = ~surface.inside(lp[:, 0] + 2e-3 * np.sign(lp[:, 0] - 20.0), lp[:, 1]) | ~surface.inside(
+                lp[:, 0], lp[:, 1] + 2e-3 * np.sign(lp[:, 1] - 15.0)
+            )
             h = np.where(on_wall, np.maximum(surface.height(*inward.T) - w.level_mm, 0.0), 0.0)
             loops.append(C + (lp - C) * (H / (H - h))[:, None])
         seen.append(Waterline(w.level_mm, loops))
@@ -121,7 +138,7 @@ def test_walls_seen_by_their_raised_edges_are_put_back():
     levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
     seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
     P = np.vstack([w.points for w in seen])
-    assert P[:, 0].max() > 41.5                               # the far wall looks 1.5+ mm further out
+    assert P[:, 0].max() > 41.5  # the far wall looks 1.5+ mm further out
     naive = reconstruct(seen, GridSpec(None, n=(41, 31)))
     rec = reconstruct(seen, GridSpec(None, n=(41, 31)), ReconstructOptions(perspective=camera))
     xmin, xmax, ymin, ymax = rec.diagnostics["bounds"]
@@ -137,6 +154,7 @@ def _wedge_put_back(glitch):
     """The wedge 60 mm off the camera's foot seen at 15, 14 .. 5 mm, `glitch(seen)` done to
     its waterlines, then walls found and put back."""
     from appliance.surface.slices import unproject_rims
+
     camera = Perspective((-20.0, 45.0), 300.0)
     levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
     seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
@@ -151,9 +169,11 @@ def test_a_rim_seen_a_pixel_off_in_one_frame_does_not_move_the_frames_below():
     (sample 4's rim had three such frames) breaks the chain of edges there. The frames
     below continue the edge seen two levels up, so they keep its height and go back to
     the wall; had they started afresh they would stand ~0.7 mm off it."""
+
     def glitch(seen):
-        for lp in seen[4].loops:                            # the 11 mm frame
+        for lp in seen[4].loops:  # the 11 mm frame
             lp[lp[:, 0] > 40.0, 0] += 0.055
+
     put_back = _wedge_put_back(glitch)
     below = [s.P[:, 0].max() for s in put_back[5:]]
     # measured: 40.10 mm (the bracket's middle, before any fit narrows it); 40.71 when
@@ -169,10 +189,11 @@ def test_a_few_rim_points_a_pixel_off_take_their_neighbours_edge():
     run = []
 
     def glitch(seen):
-        lp = seen[4].loops[0]                               # the 11 mm frame
+        lp = seen[4].loops[0]  # the 11 mm frame
         far = np.flatnonzero(lp[:, 0] > 40.0)
-        run.extend(far[len(far) // 2: len(far) // 2 + 3])
+        run.extend(far[len(far) // 2 : len(far) // 2 + 3])
         lp[run, 0] += 0.055
+
     put_back = _wedge_put_back(glitch)
     P = put_back[4].P[run]
     # measured: 40.16 mm (the bracket's middle: no fit narrows it here); 40.56 when the
@@ -186,10 +207,12 @@ def test_an_edge_continues_the_one_that_showed_first():
     10 mm frame's is 0.02 mm off and matches both it and the 12 mm frame's true edge. It
     continues the edge that showed first, else it (and every frame below) would carry
     the glitch's bracket, a level step high, and stand outside the wall."""
+
     def glitch(seen):
-        for k, off in ((4, 0.05), (5, 0.02)):              # the 11 and 10 mm frames
+        for k, off in ((4, 0.05), (5, 0.02)):  # the 11 and 10 mm frames
             for lp in seen[k].loops:
                 lp[lp[:, 0] > 40.0, 0] += off
+
     put_back = _wedge_put_back(glitch)
     below = [s.P[:, 0].max() for s in put_back[5:]]
     # measured: 40.12 mm (the bracket's middle); 40.53 when the nearer frame's match wins
@@ -202,17 +225,18 @@ def test_the_outline_where_the_lowest_frame_lost_part_of_the_part():
     (bounds and footprint area) comes from every frame's walls, not the lowest alone."""
     from appliance.surface.gridfit import Lattice, area_weights
     from appliance.surface.slices import make_slice, outline_bounds
+
     lines = ideal_waterlines(WEDGE, [15.0, 13.5, 12.5, 11.5, 10.5, 9.0, 7.0, 5.0], 0.1)
     slices, _ = check_waterlines(lines)
     mark_walls(slices, 0.03)
     lp = slices[-1].loops[0]
-    cut = make_slice(slices[-1].level, [lp[lp[:, 1] < 26.0]])        # a chord at y ~ 26
+    cut = make_slice(slices[-1].level, [lp[lp[:, 1] < 26.0]])  # a chord at y ~ 26
     cut.wall = np.ones(len(cut.P), bool)
     slices = slices[:-1] + [cut]
     assert outline_bounds(slices)[3] == pytest.approx(30.0, abs=0.01)
     lat = Lattice(np.linspace(-1, 41, 85), np.linspace(-1, 31, 65))
     area = area_weights(lat, slices).sum() * lat.hx * lat.hy
-    assert area == pytest.approx(1200.0, rel=2e-3)                 # the lowest loop alone: 1040
+    assert area == pytest.approx(1200.0, rel=2e-3)  # the lowest loop alone: 1040
     assert area_weights(lat, [cut]).sum() * lat.hx * lat.hy < 1060.0
     # a higher frame's level-curve point beyond the wall does not move it
     on_top = np.flatnonzero(~slices[2].wall)
@@ -227,6 +251,7 @@ def test_the_rim_height_is_the_surface_continued_from_inside():
     from two nodes in and continued, a plane with its outer nodes 2 mm low is exact."""
     from appliance.surface.gridfit import Lattice
     from appliance.surface.reconstruct import _rim_height
+
     lat = Lattice(np.linspace(0, 10, 51), np.linspace(0, 8, 41))
     X, Y = np.meshgrid(lat.x, lat.y)
     plane = 20 + 0.5 * X - 0.25 * Y

@@ -1,5 +1,6 @@
 """The virtual bench's parts: the dissertation samples against their printed appendices,
 and the signed distance to the waterline that the renderer and the accuracy tests rely on."""
+
 import numpy as np
 import pytest
 
@@ -21,11 +22,14 @@ def test_sample3_reproduces_appendix_d():
 def test_sample2_reproduces_appendix_c():
     xs = [0, 2.040816, 4.081633, 6.122449, 8.163265]
     assert diss("sample2", xs, [4.081633] * 5) == pytest.approx(
-        [-17.31, -17.31, -17.31, -17.3102, -17.3107], abs=6e-5)
+        [-17.31, -17.31, -17.31, -17.3102, -17.3107], abs=6e-5
+    )
 
 
 def test_sample1_reproduces_appendix_b_corner():
-    assert diss("sample1", [0, 2.040857], [0, 0]) == pytest.approx([-32.4225, -32.2794], abs=5e-3)  # a fit, exact to ~3 um (docs/method.md)
+    assert diss("sample1", [0, 2.040857], [0, 0]) == pytest.approx(
+        [-32.4225, -32.2794], abs=5e-3
+    )  # a fit, exact to ~3 um (docs/method.md)
 
 
 @pytest.mark.parametrize("name", list(surfaces.SURFACES))

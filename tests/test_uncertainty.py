@@ -1,5 +1,6 @@
 """The per-cell uncertainty map: what each cell says about itself, in the csv, the report
 and the G-code header; old x,y,z files keep working."""
+
 import os
 import re
 import subprocess
@@ -18,18 +19,29 @@ from appliance.sim.surfaces import Surface, Tier, disc_sdf
 from appliance.surface.base import stand_on_base
 from appliance.surface.heightmap import HeightMap
 from appliance.surface.reconstruct import GridSpec, reconstruct
-from appliance.surface.uncertainty import (CLAMPED, EXTRAPOLATED, _inradius, SOURCES, header_notes,
-                                           low_confidence_regions, source_code)
+from appliance.surface.uncertainty import (
+    CLAMPED,
+    EXTRAPOLATED,
+    _inradius,
+    SOURCES,
+    header_notes,
+    low_confidence_regions,
+    source_code,
+)
 from cam_helpers import grid_map
 
 # a paraboloid dome on a disc, 20 mm at its top (50, 50)
-DOME = Surface("dome", "paraboloid", (10.0, 90.0, 10.0, 90.0),
-               (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),))
+DOME = Surface(
+    "dome",
+    "paraboloid",
+    (10.0, 90.0, 10.0, 90.0),
+    (Tier(disc_sdf(50, 50, 40), lambda x, y: 20 - 0.01 * ((x - 50) ** 2 + (y - 50) ** 2)),),
+)
 GRID = GridSpec((10, 90, 10, 90), n=(41, 41))
 
 
 def dome_map(step_mm):
-    levels = np.arange(20.0 - step_mm / 2, 1.0, -step_mm)     # the top lies between two frames
+    levels = np.arange(20.0 - step_mm / 2, 1.0, -step_mm)  # the top lies between two frames
     return reconstruct(ideal_waterlines(DOME, levels, resolution_mm=0.2), GRID).heightmap
 
 
@@ -49,7 +61,7 @@ def test_every_cell_on_the_part_has_a_source_and_an_uncertainty(dome):
 
 
 def test_the_top_above_the_highest_frame_is_extrapolated_and_less_sure(dome):
-    j, i = 20, 20                                   # (50, 50): 0.5 mm above the top frame
+    j, i = 20, 20  # (50, 50): 0.5 mm above the top frame
     assert dome.source[j, i] == EXTRAPOLATED
     assert dome.sigma[j, i] > 3 * np.median(dome.sigma[dome.on_part])
 
@@ -94,7 +106,7 @@ def test_a_filled_gap_says_so():
     hm.z[5, 5] = np.nan
     fixed, fix = stand_on_base(hm)
     assert fix.filled_cells == 1 and SOURCES[fixed.source[5, 5]] == "filled"
-    assert fixed.sigma[5, 5] > 0.01                 # no better known than the heights around it
+    assert fixed.sigma[5, 5] > 0.01  # no better known than the heights around it
 
 
 def test_the_csv_carries_source_and_uncertainty_after_x_y_z(tmp_path, dome):
@@ -120,13 +132,17 @@ def test_an_old_three_column_csv_still_loads_and_mills(tmp_path):
     assert "low confidence" not in (tmp_path / "old.gcode").read_text()
 
 
-@pytest.mark.parametrize("line, says", [
-    ("1,2,3,wobbly,0.1", "unknown source 'wobbly'"),
-    ("1,2,3,seen,-0.1", "uncertainty_mm must be a finite number >= 0"),
-    ("1,2,3,seen", "has 4 values, the header names 5"),
-])
+@pytest.mark.parametrize(
+    "line, says",
+    [
+        ("1,2,3,wobbly,0.1", "unknown source 'wobbly'"),
+        ("1,2,3,seen,-0.1", "uncertainty_mm must be a finite number >= 0"),
+        ("1,2,3,seen", "has 4 values, the header names 5"),
+    ],
+)
 def test_bad_extra_columns_are_named(tmp_path, line, says):
     from appliance.errors import InkSliceError
+
     path = tmp_path / "bad.csv"
     path.write_text("x,y,z,source,uncertainty_mm\n0,0,1,seen,0.01\n" + line + "\n")
     with pytest.raises(InkSliceError, match=re.escape(says)):
@@ -156,15 +172,22 @@ def test_the_gcode_header_lists_the_low_confidence_region_and_stays_valid(tmp_pa
     hm, patch = _unsure_block()
     text = finishing_gcode(hm, FinishSettings(parse_cutter("ball6"), scallop=0.05)).text
     head = [line for line in text.splitlines() if line.startswith("(")]
-    assert any("low confidence 1: X 11.5..16.5 Y 3.5..7.5 mm" in line and "mostly wall" in line for line in head)
+    assert any(
+        "low confidence 1: X 11.5..16.5 Y 3.5..7.5 mm" in line and "mostly wall" in line for line in head
+    )
     assert any(f"{100 * patch.sum() / patch.size:.1f} % of the part in 1 region" in line for line in head)
     assert not any("low confidence" in line for line in text.splitlines() if not line.startswith("("))
-    parse_gcode(text, "header")                       # still our own parser's G-code
+    parse_gcode(text, "header")  # still our own parser's G-code
     rs274 = "/usr/bin/rs274"
     if os.path.exists(rs274):
         (tmp_path / "p.ngc").write_text(text)
-        r = subprocess.run([rs274, "-g", str(tmp_path / "p.ngc"), str(tmp_path / "out.txt")],
-                           stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+        r = subprocess.run(
+            [rs274, "-g", str(tmp_path / "p.ngc"), str(tmp_path / "out.txt")],
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -178,8 +201,9 @@ def test_a_sure_map_says_so_and_a_map_without_uncertainty_says_nothing():
 def test_cells_under_an_occluding_face_are_labelled_occluded_and_a_step_unsure():
     from appliance.surface.reconstruct import _occluded_cells
     from appliance.surface.slices import make_slice
+
     src = np.full((4, 5), source_code("interpolated"), np.int8)
-    src[0, 0] = -1                                  # off the part stays off
+    src[0, 0] = -1  # off the part stays off
     sig = np.full((4, 5), 0.01)
     hidden = np.zeros((4, 5), bool)
     hidden[:2, :2] = True
@@ -187,4 +211,4 @@ def test_cells_under_an_occluding_face_are_labelled_occluded_and_a_step_unsure()
     src2, sig2 = _occluded_cells(src, sig, hidden, slices)
     assert [SOURCES[k] for k in src2[:2, :2].ravel() if k >= 0] == ["occluded"] * 3 and src2[0, 0] == -1
     assert sig2[1, 1] == pytest.approx(1 / np.sqrt(12)) and sig2[3, 4] == 0.01
-    assert _occluded_cells(src, sig, 7, slices)[0] is src      # a count, not a mask: nothing to mark
+    assert _occluded_cells(src, sig, 7, slices)[0] is src  # a count, not a mask: nothing to mark

@@ -4,6 +4,7 @@ The renderer team's sim/boards.py will render these on the virtual bench; until
 then this file draws its own: each pixel's ray (through the true K and lens
 distortion) meets the board plane, and the checker is anti-aliased analytically.
 """
+
 import json
 
 import cv2
@@ -13,24 +14,33 @@ import pytest
 from appliance.cli import main as cli_main
 from appliance.scanfile import CameraModel
 from appliance.vision import seed
-from appliance.vision.calibration import (Board, BoardPose, CalibrationError, calibrate, find_corners,
-                                          plane_points)
+from appliance.vision.calibration import (
+    Board,
+    BoardPose,
+    CalibrationError,
+    calibrate,
+    find_corners,
+    plane_points,
+)
 
 W, H = 800, 600
 K = np.array([[700.0, 0, 404.0], [0, 700.0, 297.0], [0, 0, 1]])
 DIST = np.array([-0.08, 0.05, 2e-4, -1e-4, 0.0])
 BOARD = Board(9, 6, 20.0)
 POSE = BoardPose(-60.0, 50.0, 0.0)
-CAMERA_C = np.array([10.0, -5.0, 300.0])          # camera centre over the liquid plane (mm)
+CAMERA_C = np.array([10.0, -5.0, 300.0])  # camera centre over the liquid plane (mm)
 MM_PER_PX = 300.0 / 700.0
 
 
 def _rot(ax, ay, az):
-    return cv2.Rodrigues(np.array([ax, 0, 0.0]))[0] @ cv2.Rodrigues(np.array([0, ay, 0.0]))[0] \
+    return (
+        cv2.Rodrigues(np.array([ax, 0, 0.0]))[0]
+        @ cv2.Rodrigues(np.array([0, ay, 0.0]))[0]
         @ cv2.Rodrigues(np.array([0, 0, az]))[0]
+    )
 
 
-R_DOWN = _rot(0.01, -0.008, 0.012) @ np.diag([1.0, -1.0, -1.0])    # plane -> camera, looking down
+R_DOWN = _rot(0.01, -0.008, 0.012) @ np.diag([1.0, -1.0, -1.0])  # plane -> camera, looking down
 
 
 def rays(K, dist, size):
@@ -50,9 +60,9 @@ def draw_board(R, t, to_board, rays_=None, size=(W, H), focal=700.0, board=BOARD
     n = R[:, 2]
     s = (n @ t) / (rays_ @ n)
     X = rays_ * s[:, None] - t
-    p = X @ R                              # R^T (X - t)
+    p = X @ R  # R^T (X - t)
     bx, by = to_board(p[:, 0], p[:, 1])
-    pix = np.abs(s) / focal                # mm per pixel on the board, roughly
+    pix = np.abs(s) / focal  # mm per pixel on the board, roughly
     sq = board.square_mm
     gx = np.clip(np.sin(np.pi * bx / sq) * sq / np.pi / pix, -1, 1)
     gy = np.clip(np.sin(np.pi * by / sq) * sq / np.pi / pix, -1, 1)
@@ -68,6 +78,7 @@ def pose_to_board(pose):
     def to_board(x, y):
         d = np.column_stack([x - pose.x0, y - pose.y0])
         return d @ along, d @ down
+
     return to_board
 
 
@@ -106,8 +117,13 @@ def views():
 def field_error_mm(cam_json):
     """Max distance (mm) between where the calibration and the truth put each pixel on the plane."""
     truth = true_camera()
-    est = CameraModel(cam_json["width"], cam_json["height"], np.array(cam_json["homography"]),
-                      np.array(cam_json["K"]), np.array(cam_json["dist"]))
+    est = CameraModel(
+        cam_json["width"],
+        cam_json["height"],
+        np.array(cam_json["homography"]),
+        np.array(cam_json["K"]),
+        np.array(cam_json["dist"]),
+    )
     u, v = np.meshgrid(np.linspace(20, W - 20, 25), np.linspace(20, H - 20, 19))
     uv = np.column_stack([u.ravel(), v.ravel()])
     return np.abs(seed.pixels_to_mm(uv, est) - seed.pixels_to_mm(uv, truth)).max()
@@ -133,8 +149,10 @@ def test_rendered_boards_recover_the_plane_within_20_microns(views):
     # This small test camera sees 0.43 mm per pixel; the bench's sees 0.079. The
     # target (0.02 mm on the bench = 0.25 px) is checked in pixels of the field.
     err_px = err / MM_PER_PX
-    print(f"calibration: max field error {err * 1000:.1f} um = {err_px:.3f} px "
-          f"= {err_px * 0.079 * 1000:.1f} um at the bench's 0.079 mm/px")
+    print(
+        f"calibration: max field error {err * 1000:.1f} um = {err_px:.3f} px "
+        f"= {err_px * 0.079 * 1000:.1f} um at the bench's 0.079 mm/px"
+    )
     assert err_px * 0.079 < 0.02
 
 
@@ -161,8 +179,19 @@ def _write(folder, views):
 def test_calibrate_command_writes_the_camera_block_and_keeps_the_previous(tmp_path, views, monkeypatch):
     monkeypatch.setenv("INKSLICE_DATA", str(tmp_path / "data"))
     paths = _write(tmp_path, views)
-    args = ["calibrate", *paths, "--plane", str(tmp_path / "plane.png"), "--pattern", "9x6",
-            "--square-mm", "20", "--board-origin", "-60", "50"]
+    args = [
+        "calibrate",
+        *paths,
+        "--plane",
+        str(tmp_path / "plane.png"),
+        "--pattern",
+        "9x6",
+        "--square-mm",
+        "20",
+        "--board-origin",
+        "-60",
+        "50",
+    ]
     assert cli_main(args) == 0
     out = tmp_path / "data" / "calibration.json"
     first = json.loads(out.read_text())
@@ -175,8 +204,22 @@ def test_calibrate_command_writes_the_camera_block_and_keeps_the_previous(tmp_pa
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((H, W), 128, np.uint8))
     before = out.read_bytes(), (tmp_path / "data" / "calibration.prev.json").read_bytes()
-    assert cli_main(["calibrate", *paths[:3], str(blank), "--plane", str(tmp_path / "plane.png"),
-                     "--pattern", "9x6", "--square-mm", "20"]) == 2
+    assert (
+        cli_main(
+            [
+                "calibrate",
+                *paths[:3],
+                str(blank),
+                "--plane",
+                str(tmp_path / "plane.png"),
+                "--pattern",
+                "9x6",
+                "--square-mm",
+                "20",
+            ]
+        )
+        == 2
+    )
     assert (out.read_bytes(), (tmp_path / "data" / "calibration.prev.json").read_bytes()) == before
 
 
@@ -188,6 +231,7 @@ def test_a_rendered_frame_measures_as_well_with_our_calibration_as_with_the_true
     from appliance.sim.fakes import small_rig
     from appliance.sim.render import Effects, render_frame
     from appliance.vision.pipeline import WaterlineExtractor
+
     rig = small_rig(640, 480)
     size, Kr, dr = (640, 480), rig.K(), rig.dist_coeffs()
     r = rays(Kr, dr, size)
@@ -199,14 +243,23 @@ def test_a_rendered_frame_measures_as_well_with_our_calibration_as_with_the_true
             R = _rot(*rng.uniform(-0.3, 0.3, 3))
             z = 330.0
             centre = np.array([cx * z * 320 / Kr[0, 0], cy * z * 240 / Kr[0, 0], z])
-            views.append(draw_board(R, centre - R @ np.array([40.0, 25.0, 0.0]), lambda x, y: (x, y),
-                                    r, size, Kr[0, 0], board))
+            views.append(
+                draw_board(
+                    R, centre - R @ np.array([40.0, 25.0, 0.0]), lambda x, y: (x, y), r, size, Kr[0, 0], board
+                )
+            )
     pose = BoardPose(10.0, 80.0, 0.0)
     Rc = rig.rotation()
     plane = draw_board(Rc, -Rc @ rig.centre, pose_to_board(pose), r, size, Kr[0, 0], board)
     cam_json, _ = calibrate(views, plane, board, pose)
-    ours = CameraModel(640, 480, np.array(cam_json["homography"]), np.array(cam_json["K"]),
-                       np.array(cam_json["dist"]), cam_json["height_mm"])
+    ours = CameraModel(
+        640,
+        480,
+        np.array(cam_json["homography"]),
+        np.array(cam_json["K"]),
+        np.array(cam_json["dist"]),
+        cam_json["height_mm"],
+    )
     truth = rig.camera_model(distorted=True)
     surf = surfaces.get("sample1")
     frame = render_frame(surf, 25.0, rig, Effects(lens_distortion=True), np.random.default_rng(0))
@@ -215,8 +268,10 @@ def test_a_rendered_frame_measures_as_well_with_our_calibration_as_with_the_true
     for name, cam in (("truth", truth), ("ours", ours)):
         pts = WaterlineExtractor(cam).extract(frame, 25.0).points
         e = np.abs(surf.level_sdf(pts[:, 0], pts[:, 1], 25.0)) / mm_px
-        out[name] = float(np.sqrt(np.mean(e ** 2)))
-    print(f"rendered frame RMS: true calibration {out['truth']:.3f} px, ours {out['ours']:.3f} px "
-          f"({mm_px:.3f} mm/px)")
+        out[name] = float(np.sqrt(np.mean(e**2)))
+    print(
+        f"rendered frame RMS: true calibration {out['truth']:.3f} px, ours {out['ours']:.3f} px "
+        f"({mm_px:.3f} mm/px)"
+    )
     assert out["truth"] < 0.1
     assert out["ours"] < out["truth"] + 0.05

@@ -1,4 +1,5 @@
 """WaterlineExtractor on synthetic frames with known waterlines."""
+
 import cv2
 import numpy as np
 import pytest
@@ -23,8 +24,8 @@ def test_disc_is_found_to_a_tenth_of_a_pixel_and_runs_ccw():
     assert len(wl.loops) == 1
     loop = wl.loops[0]
     err = radial_error(loop, 161.3, 117.8, 70.4)
-    assert len(loop) > 0.9 * 2 * np.pi * 70          # about one point per boundary pixel
-    assert np.sqrt(np.mean(err ** 2)) < 0.1
+    assert len(loop) > 0.9 * 2 * np.pi * 70  # about one point per boundary pixel
+    assert np.sqrt(np.mean(err**2)) < 0.1
     assert np.abs(err).max() < 0.3
     assert signed_area(loop) > 0
 
@@ -34,8 +35,8 @@ def test_ring_has_an_outer_ccw_loop_and_a_cw_hole():
     wl = WaterlineExtractor(pixel_camera(W, H)).extract(draw(ring(u, v, 160, 120, 30.2, 90.7)), 5.0)
     areas = sorted(signed_area(lp) for lp in wl.loops)
     assert len(areas) == 2
-    assert areas[0] == pytest.approx(-np.pi * 30.2 ** 2, rel=0.01)
-    assert areas[1] == pytest.approx(np.pi * 90.7 ** 2, rel=0.01)
+    assert areas[0] == pytest.approx(-np.pi * 30.2**2, rel=0.01)
+    assert areas[1] == pytest.approx(np.pi * 90.7**2, rel=0.01)
     for lp in wl.loops:
         r = 30.2 if signed_area(lp) < 0 else 90.7
         assert np.sqrt(np.mean(radial_error(lp, 160, 120, r) ** 2)) < 0.1
@@ -70,15 +71,15 @@ def test_points_are_undistorted_not_the_frame():
     # for each distorted pixel, where is it in the ideal image?
     ideal = cv2.undistortPoints(np.column_stack([u.ravel(), v.ravel()]).reshape(-1, 1, 2), K, dist, P=K)
     iu, iv = ideal[:, 0, 0].reshape(H, W), ideal[:, 0, 1].reshape(H, W)
-    frame = draw(disc(iu, iv, 150, 125, 80))       # ramp slightly off 1 px in distorted px: fine
+    frame = draw(disc(iu, iv, 150, 125, 80))  # ramp slightly off 1 px in distorted px: fine
     cam = pixel_camera(W, H)
     plain = WaterlineExtractor(cam).extract(frame, 0.0)
     cam.K, cam.dist = K, dist
     fixed = WaterlineExtractor(cam).extract(frame, 0.0)
     err_plain = np.abs(radial_error(plain.loops[0], 150, 125, 80))
     err_fixed = np.abs(radial_error(fixed.loops[0], 150, 125, 80))
-    assert err_plain.max() > 1.0                   # distortion is visible...
-    assert np.sqrt(np.mean(err_fixed ** 2)) < 0.15  # ...and gone
+    assert err_plain.max() > 1.0  # distortion is visible...
+    assert np.sqrt(np.mean(err_fixed**2)) < 0.15  # ...and gone
 
 
 def test_band_mode_follows_a_shrinking_disc_like_a_full_read():
@@ -117,7 +118,7 @@ def test_salt_and_pepper_and_small_glare_specks_do_not_bend_or_split_the_line():
     u, v = grid(W, H)
     rng = np.random.default_rng(3)
     frame = draw(disc(u, v, 160, 120, 70))
-    for _ in range(12):                               # bright specks on the ink
+    for _ in range(12):  # bright specks on the ink
         x, y = rng.integers(0, W), rng.integers(0, H)
         if np.hypot(x - 160, y - 120) > 80:
             cv2.circle(frame, (int(x), int(y)), 2, (255, 255, 255), -1)
@@ -128,28 +129,31 @@ def test_salt_and_pepper_and_small_glare_specks_do_not_bend_or_split_the_line():
     wl = WaterlineExtractor(pixel_camera(W, H)).extract(frame, 1.0)
     assert len(wl.loops) == 1
     err = radial_error(wl.loops[0], 160, 120, 70)
-    assert np.sqrt(np.mean(err ** 2)) < 0.25
+    assert np.sqrt(np.mean(err**2)) < 0.25
     assert len(wl.loops[0]) > 0.8 * 2 * np.pi * 70
 
 
 def test_glare_touching_the_waterline_is_not_taken_as_part():
     u, v = grid(W, H)
     frame = draw(disc(u, v, 160, 120, 70))
-    cv2.circle(frame, (160 + 73, 120), 4, (255, 255, 255), -1)   # a highlight on the ink at the edge
+    cv2.circle(frame, (160 + 73, 120), 4, (255, 255, 255), -1)  # a highlight on the ink at the edge
     wl = WaterlineExtractor(pixel_camera(W, H)).extract(frame, 1.0)
     err = radial_error(wl.loops[0], 160, 120, 70)
     assert np.abs(err).max() < 0.5
 
 
-@pytest.mark.parametrize("make, error", [
-    (lambda: draw(np.full((H, W), -50.0)), NoPartError),
-    (lambda: draw(np.full((H, W), 50.0)), AllPartError),
-    (lambda: draw(disc(*grid(W, H), 160, 120, 50))[: H // 2], FrameError),
-    (lambda: draw(disc(*grid(W + 8, H), 160, 120, 50)), FrameError),
-    (lambda: np.zeros((H, W, 3), np.uint16), FrameError),
-    (lambda: np.zeros((H, W, 5), np.uint8), FrameError),
-    (lambda: "not an image", FrameError),
-])
+@pytest.mark.parametrize(
+    "make, error",
+    [
+        (lambda: draw(np.full((H, W), -50.0)), NoPartError),
+        (lambda: draw(np.full((H, W), 50.0)), AllPartError),
+        (lambda: draw(disc(*grid(W, H), 160, 120, 50))[: H // 2], FrameError),
+        (lambda: draw(disc(*grid(W + 8, H), 160, 120, 50)), FrameError),
+        (lambda: np.zeros((H, W, 3), np.uint16), FrameError),
+        (lambda: np.zeros((H, W, 5), np.uint8), FrameError),
+        (lambda: "not an image", FrameError),
+    ],
+)
 def test_bad_frames_give_clear_errors(make, error):
     ex = WaterlineExtractor(pixel_camera(W, H))
     with pytest.raises(error) as info:
@@ -181,7 +185,7 @@ def test_all_ink_can_be_an_empty_waterline_for_the_top_of_a_scan():
     ex = WaterlineExtractor(pixel_camera(W, H), no_part="empty")
     wl = ex.extract(draw(np.full((H, W), -50.0)), 30.0)
     assert wl.level_mm == 30.0 and wl.loops == []
-    with pytest.raises(FrameError):                      # bad frames still raise
+    with pytest.raises(FrameError):  # bad frames still raise
         ex.extract(draw(np.full((H, W), -50.0))[:10], 29.0)
     assert len(ex.extract(draw(disc(u, v, 160, 120, 30)), 28.0).loops) == 1
 

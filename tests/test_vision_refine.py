@@ -1,14 +1,15 @@
 """Going back into a level step in which a face came out at once (vision/refine.py)."""
+
 import numpy as np
 from types import SimpleNamespace
 
 from appliance.vision.refine import face_bracket, mask_pixel_mm, next_refinement, surfaced_faces
 
-PX = 0.5       # mm per mask pixel
+PX = 0.5  # mm per mask pixel
 
 
 def disc(cx, cy, r, shape=(200, 200)):
-    y, x = np.mgrid[:shape[0], :shape[1]]
+    y, x = np.mgrid[: shape[0], : shape[1]]
     return (x - cx) ** 2 + (y - cy) ** 2 <= r * r
 
 
@@ -26,9 +27,9 @@ def bisect(upper, lower, faces, appears_below, resolution=0.1):
 
 def test_a_wide_piece_out_at_once_is_a_face_a_band_of_descending_waterline_is_not():
     before = disc(100, 100, 20)
-    band = disc(100, 100, 24)                          # the waterline moved 2 mm outwards all round
+    band = disc(100, 100, 24)  # the waterline moved 2 mm outwards all round
     assert surfaced_faces(before, band, PX) == []
-    with_face = band | disc(160, 100, 12)              # and a 12 mm wide plateau came out beside it
+    with_face = band | disc(160, 100, 12)  # and a 12 mm wide plateau came out beside it
     faces = surfaced_faces(before, with_face, PX)
     assert len(faces) == 1 and faces[0][100, 160] and not faces[0][100, 100]
 
@@ -51,7 +52,7 @@ def test_one_frame_narrows_every_face_it_falls_between():
     for face, height in ((a, 7.9), (b, 7.1)):
         lo, hi = face_bracket(face, 8.0, 7.0, seen)
         assert lo < height <= hi and hi - lo <= 0.1
-    assert len(seen) == 7                              # 4 each, the first one shared
+    assert len(seen) == 7  # 4 each, the first one shared
 
 
 def test_a_face_counts_out_when_most_of_it_shows():

@@ -3,6 +3,7 @@
 The truth is Surface.level_sdf: the exact signed distance (mm) from the level
 curve, so each point's error is |level_sdf| at its mm position.
 """
+
 import numpy as np
 import pytest
 
@@ -28,7 +29,7 @@ def measure(name, level, effects, seed_=0):
 
 
 def rms(e):
-    return float(np.sqrt(np.mean(e ** 2)))
+    return float(np.sqrt(np.mean(e**2)))
 
 
 def test_clean_dome_to_a_tenth_of_a_pixel_and_better_than_canny():
@@ -75,7 +76,7 @@ def test_a_short_rendered_scan_in_band_mode_matches_full_reads():
             assert min(abs(signed_area(lp) - af) for af in areas_full) < 0.01 * abs(signed_area(lp))
         ea = np.abs(surf.level_sdf(a.points[:, 0], a.points[:, 1], level)) / MM_PER_PX
         assert rms(ea) < 0.25
-    assert len(a.loops) == 2                   # both peaks by the end
+    assert len(a.loops) == 2  # both peaks by the end
     assert banded.last_mode == "band"
 
 
@@ -87,11 +88,12 @@ def test_a_bright_face_that_comes_out_late_is_tracked_like_a_full_read(effects):
     in (it once kept the first frame's glare cut and lost half the outline from there on),
     and a 10 mm part must still get its channel and colour test (0.05 % of the frame)."""
     from appliance.sim.rig import Rig
+
     rig = Rig()
     surf = surfaces.get("sample4")
     cam = rig.camera_model(distorted=PRESETS[effects].lens_distortion)
     tracked = WaterlineExtractor(cam, no_part="empty")
-    for k, level in enumerate(np.arange(36.0, 15.0, -1.0)):      # the scan's 1 mm steps
+    for k, level in enumerate(np.arange(36.0, 15.0, -1.0)):  # the scan's 1 mm steps
         frame = render_frame(surf, level, rig, PRESETS[effects], np.random.default_rng(k))
         a = tracked.extract(frame, level)
         if level % 3:
@@ -106,6 +108,7 @@ def test_a_bright_face_that_comes_out_late_is_tracked_like_a_full_read(effects):
 def test_the_top_of_a_scan_is_ink_and_glare_only_and_says_so():
     """Above the part only ink, highlights and dust show: no island may be made of them."""
     from appliance.vision.pipeline import NoPartError
+
     surf = surfaces.get("sample1")
     frame = render_frame(surf, 38.0, RIG, PRESETS["realistic"], np.random.default_rng(0))
     cam = RIG.camera_model(distorted=True)
@@ -117,6 +120,7 @@ def test_the_top_of_a_scan_is_ink_and_glare_only_and_says_so():
 def test_a_clipped_highlight_touching_the_part_does_not_bulge_it():
     # (seed chosen so that a highlight with a clipped white core sits on the waterline)
     from appliance.sim.scanrender import scan_levels
+
     surf = surfaces.get("sample1")
     k = scan_levels(surf, 1.0).index(20.0)
     wl, err, _, _ = measure("sample1", 20.0, PRESETS["realistic"], seed_=k)

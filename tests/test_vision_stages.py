@@ -1,11 +1,11 @@
 """Each stage of the frame pipeline on its own, with known answers."""
+
 import cv2
 import numpy as np
 import pytest
 
 from appliance.vision.band import TileGrid
-from appliance.vision.frames import (FrameError, best_channel, check_frame, hue_split, otsu_split,
-                                     towards_ink)
+from appliance.vision.frames import FrameError, best_channel, check_frame, hue_split, otsu_split, towards_ink
 from appliance.vision.subpixel import bumps, refine, sample_q8
 from test_vision_synth import INK, PART, draw, grid
 
@@ -14,7 +14,7 @@ def test_otsu_split_finds_the_two_classes_and_ignores_clipped_glare():
     hist = np.zeros(256)
     hist[20] = 7000
     hist[200] = 3000
-    hist[255] = 5000                       # clipped glare: left out
+    hist[255] = 5000  # clipped glare: left out
     s = otsu_split(hist)
     assert 20 < s.threshold <= 200
     assert s.ink == pytest.approx(20) and s.part == pytest.approx(200)
@@ -25,8 +25,8 @@ def test_otsu_split_finds_the_two_classes_and_ignores_clipped_glare():
 
 def test_red_is_the_channel_for_dark_blue_ink_even_under_big_highlights():
     u, v = grid(200, 150)
-    img = draw(10.0 - np.hypot(u - 100, v - 75))          # a small part
-    glare = np.exp(-((u - 40) ** 2 + (v - 40) ** 2) / (2 * 30 ** 2))[..., None] * np.array([150, 145, 142])
+    img = draw(10.0 - np.hypot(u - 100, v - 75))  # a small part
+    glare = np.exp(-((u - 40) ** 2 + (v - 40) ** 2) / (2 * 30**2))[..., None] * np.array([150, 145, 142])
     img = np.clip(img + glare, 0, 255).astype(np.uint8)
     assert best_channel(img) == 2
 
@@ -38,7 +38,7 @@ def test_hue_cut_sits_between_blue_ink_and_the_grey_part():
     hue = hue_split(img, 2, s)
     d_ink, d_part = INK[0] - INK[2], max(PART[0] - PART[2], 0)
     assert hue.other == 0 and d_part < hue.cut < d_ink
-    assert hue_split(img[:, :, 2], 2, s) is None           # gray frames: no colour test
+    assert hue_split(img[:, :, 2], 2, s) is None  # gray frames: no colour test
 
 
 def test_check_frame_names_the_problem():
@@ -53,7 +53,7 @@ def test_check_frame_names_the_problem():
 
 
 def test_bilinear_q8_samples_are_exact_on_a_ramp():
-    img = np.tile(np.arange(0, 250, 10, dtype=np.uint8), (5, 1))      # 10 grey levels per pixel
+    img = np.tile(np.arange(0, 250, 10, dtype=np.uint8), (5, 1))  # 10 grey levels per pixel
     x = np.array([[0.0, 0.5, 3.25, 7.75]], np.float32)
     y = np.full_like(x, 2.0)
     np.testing.assert_allclose(sample_q8(img, x, y) / 256.0, 10 * x, atol=0.05)
@@ -64,7 +64,7 @@ def test_straight_edge_found_to_a_few_hundredths_of_a_pixel(angle):
     u, v = grid(120, 100)
     a = np.radians(angle)
     n = np.array([np.cos(a), np.sin(a)])
-    c = 60.3 * n[0] + 50.0 * n[1] + 0.37                      # edge line: n . p = c
+    c = 60.3 * n[0] + 50.0 * n[1] + 0.37  # edge line: n . p = c
     # a 2-px ramp (as the renderer draws): both pixels astride the edge are on it
     img = cv2.medianBlur(draw((c - (u * n[0] + v * n[1])) / 2, gray=True), 3)
     binary = (img >= 100).astype(np.uint8) * 255
@@ -74,7 +74,7 @@ def test_straight_edge_found_to_a_few_hundredths_of_a_pixel(angle):
     inner = (pts[:, 0] > 8) & (pts[:, 0] < 112) & (pts[:, 1] > 8) & (pts[:, 1] < 92)  # off the frame's edge
     dist = pts[inner] @ n - c
     assert inner.sum() > 50
-    assert np.sqrt(np.mean(dist ** 2)) < 0.05
+    assert np.sqrt(np.mean(dist**2)) < 0.05
 
 
 def test_a_speck_on_the_line_is_a_bump_and_a_corner_is_not():
@@ -85,8 +85,14 @@ def test_a_speck_on_the_line_is_a_bump_and_a_corner_is_not():
     flagged = np.nonzero(bumps(bumped))[0]
     assert set(range(301, 305)) <= set(flagged) and flagged.min() >= 296 and flagged.max() <= 309
     side = np.arange(0, 100, 1.0)
-    square = np.vstack([np.column_stack([side, np.zeros(100)]), np.column_stack([np.full(100, 100.0), side]),
-                        np.column_stack([100 - side, np.full(100, 100.0)]), np.column_stack([np.zeros(100), 100 - side])])
+    square = np.vstack(
+        [
+            np.column_stack([side, np.zeros(100)]),
+            np.column_stack([np.full(100, 100.0), side]),
+            np.column_stack([100 - side, np.full(100, 100.0)]),
+            np.column_stack([np.zeros(100), 100 - side]),
+        ]
+    )
     assert not bumps(square).any()
 
 
@@ -99,12 +105,12 @@ def test_band_tiles_gathered_filtered_and_scattered_match_the_whole_frame():
     g.scatter(cv2.medianBlur(g.gather(img, ty, tx), 3), out, ty, tx)
     whole = cv2.medianBlur(img, 3)
     for y, x in zip(ty, tx):
-        sl = np.s_[1 + 16 * y:17 + 16 * y, 1 + 16 * x:17 + 16 * x]
+        sl = np.s_[1 + 16 * y : 17 + 16 * y, 1 + 16 * x : 17 + 16 * x]
         np.testing.assert_array_equal(out[sl], whole[sl])
-    p = np.array([[40.0, 40.0]])                  # tiles start at 1 + 16 k: this is in tile (2, 2)
+    p = np.array([[40.0, 40.0]])  # tiles start at 1 + 16 k: this is in tile (2, 2)
     mask = np.zeros(g.shape, bool)
-    g.mark(mask, p, 5, thin=False)                # [35, 45] stays in tile 2
+    g.mark(mask, p, 5, thin=False)  # [35, 45] stays in tile 2
     assert mask.sum() == 1 and mask[2, 2]
-    g.mark(mask, p, 10, thin=False)               # [30, 50] reaches tiles 1..3
+    g.mark(mask, p, 10, thin=False)  # [30, 50] reaches tiles 1..3
     assert mask.sum() == 9 and mask[1:4, 1:4].all()
     assert g.all_marked(mask, p, 10) and not g.all_marked(mask, p, 30)

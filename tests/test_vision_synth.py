@@ -4,11 +4,12 @@ A frame is drawn from a signed distance d(u, v) in pixels (> 0 on the part):
 each pixel's part coverage is a linear ramp clip(0.5 + d), so the 50 % grey
 crossing lies exactly on d = 0. Colours: dark-blue ink, a light grey part.
 """
+
 import numpy as np
 
 from appliance.scanfile import CameraModel
 
-INK = np.array([90.0, 30.0, 12.0])        # BGR: dark blue
+INK = np.array([90.0, 30.0, 12.0])  # BGR: dark blue
 PART = np.array([200.0, 205.0, 210.0])
 
 

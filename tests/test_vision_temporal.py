@@ -5,6 +5,7 @@ one. process.extract_waterlines reads each frame with the next lower frames besi
 a pixel counts as part only where they show part too: a blob seen in one or two frames,
 then gone, is glare or flotsam, whatever it looks like in its own frame.
 """
+
 import cv2
 import numpy as np
 
@@ -34,8 +35,13 @@ def frame(level, blob=False):
     img = np.clip(np.rint(ink + cover[..., None] * (part - ink)), 0, 255).astype(np.uint8)
     if blob:
         x_mm = CENTRE + radius(level) + 1.0
-        cv2.circle(img, (round(x_mm / MM_PER_PX), round(H - CENTRE / MM_PER_PX)), round(1.5 / MM_PER_PX),
-                   (215, 215, 215), -1)
+        cv2.circle(
+            img,
+            (round(x_mm / MM_PER_PX), round(H - CENTRE / MM_PER_PX)),
+            round(1.5 / MM_PER_PX),
+            (215, 215, 215),
+            -1,
+        )
     return img
 
 
@@ -55,11 +61,11 @@ def write_scan(folder, blobs):
 
 
 def test_a_blob_in_one_or_two_frames_does_not_become_part(tmp_path):
-    blobs = (17, 13, 11)                       # once alone, then in two frames running
+    blobs = (17, 13, 11)  # once alone, then in two frames running
     scan = write_scan(tmp_path, blobs)
     waterlines = extract_waterlines(scan)
     assert [wl.level_mm for wl in waterlines] == list(LEVELS)
-    for wl in waterlines:             # within a pixel (0.25 mm): cut back to what the lower frames show
+    for wl in waterlines:  # within a pixel (0.25 mm): cut back to what the lower frames show
         assert radial_error_mm(wl).max() < MM_PER_PX, wl.level_mm
     # read on its own, each of those frames does take the blob for part
     for level in blobs:
@@ -85,12 +91,13 @@ def test_a_blob_that_stays_is_not_judged_by_this_rule():
     assert radial_error_mm(wl).max() > 1.0
 
 
-
-BIG_W, BIG_H, BIG_MM = 2048, 1536, 0.08      # the bench's frame: a sliver is a speck of it
+BIG_W, BIG_H, BIG_MM = 2048, 1536, 0.08  # the bench's frame: a sliver is a speck of it
 
 
 def big_camera():
-    return CameraModel(BIG_W, BIG_H, np.array([[BIG_MM, 0, 0], [0, -BIG_MM, BIG_H * BIG_MM], [0, 0, 1]], float))
+    return CameraModel(
+        BIG_W, BIG_H, np.array([[BIG_MM, 0, 0], [0, -BIG_MM, BIG_H * BIG_MM], [0, 0, 1]], float)
+    )
 
 
 def ridge_frame(level, crest=20.3):
@@ -118,4 +125,4 @@ def test_a_top_first_showing_as_a_sliver_is_read_with_what_the_frames_below_taug
     assert [len(wl.loops) for wl in waterlines] == [0, 1, 1, 1, 1]
     sliver = waterlines[1].loops[0]
     sides = np.abs(np.abs(sliver[:, 1] - 60) - 0.3)[np.abs(sliver[:, 0] - 80) < 3]
-    assert len(sides) > 100 and sides.max() < 0.05            # its sides 0.3 mm either side of the crest
+    assert len(sides) > 100 and sides.max() < 0.05  # its sides 0.3 mm either side of the crest

@@ -1,4 +1,5 @@
 """The JSON API against the fake bench: scans, jobs, downloads, settings, live view, docs."""
+
 import io
 import json
 import re
@@ -16,7 +17,7 @@ def client(tmp_path):
     app, svc = make_app(tmp_path)
     c = app.test_client()
     csrf = login(c, app.config["FIRST_RUN_PASSWORD"])
-    c.environ_base["HTTP_X_CSRF_TOKEN"] = csrf          # every request of this client carries it
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = csrf  # every request of this client carries it
     yield c, svc, app
     svc.close()
 
@@ -30,34 +31,40 @@ def test_openapi_describes_exactly_the_api_routes(client):
     for rule in app.url_map.iter_rules():
         if not rule.rule.startswith("/api/") or rule.endpoint == "pages.api_docs":
             continue
-        path = re.sub(r"<(?:\w+:)?(\w+)>", r"{\1}", rule.rule[len("/api"):])
+        path = re.sub(r"<(?:\w+:)?(\w+)>", r"{\1}", rule.rule[len("/api") :])
         for m in rule.methods - {"HEAD", "OPTIONS"}:
             if m == "POST" and rule.endpoint == "api.patch_settings":
-                continue            # POST is an alias of PATCH for HTML forms; documented as PATCH
+                continue  # POST is an alias of PATCH for HTML forms; documented as PATCH
             served.add((m, path))
-    assert served == documented, (served ^ documented)
+    assert served == documented, served ^ documented
 
 
 def test_a_scan_from_start_to_downloads(client):
     c, svc, app = client
     assert c.get("/api/state").get_json()["state"] == "idle"
-    svc.home_s = 0.5            # long enough for the second start below to meet a running scan
+    svc.home_s = 0.5  # long enough for the second start below to meet a running scan
     r = c.post("/api/scan", json={"level_step_mm": 1.0})
     assert r.status_code == 201
     job_id = r.get_json()["job_id"]
-    assert c.post("/api/scan", json={}).status_code == 409          # one at a time
+    assert c.post("/api/scan", json={}).status_code == 409  # one at a time
     st = wait_state(c, {"done"})
     assert st["job_id"] == job_id and st["levels_done"] == st["levels_total"] == 21
     jobs = c.get("/api/jobs").get_json()["jobs"]
     assert jobs[0]["id"] == job_id
     info = c.get(f"/api/jobs/{job_id}").get_json()
-    assert {"toolpath.gcode", "surface.stl", "heightmap.csv", "report.json", "error.png"} <= set(info["outputs"])
+    assert {"toolpath.gcode", "surface.stl", "heightmap.csv", "report.json", "error.png"} <= set(
+        info["outputs"]
+    )
     for name in info["outputs"]:
         r = c.get(f"/api/jobs/{job_id}/files/{name}")
         assert r.status_code == 200
         assert r.data == svc.job_file(job_id, name).read_bytes(), name
         assert r.headers["Content-Disposition"].startswith("attachment")
-    assert c.get(f"/api/jobs/{job_id}/files/error.png?inline=1").headers["Content-Disposition"].startswith("inline")
+    assert (
+        c.get(f"/api/jobs/{job_id}/files/error.png?inline=1")
+        .headers["Content-Disposition"]
+        .startswith("inline")
+    )
     z = zipfile.ZipFile(io.BytesIO(c.get(f"/api/jobs/{job_id}/archive.zip").data))
     assert sorted(n.split("/", 1)[1] for n in z.namelist()) == sorted(info["outputs"] + ["job.json"])
     assert z.read(f"{job_id}/toolpath.gcode") == svc.job_file(job_id, "toolpath.gcode").read_bytes()
@@ -80,7 +87,7 @@ def test_cancel_and_resume(tmp_path):
     assert c.post("/api/jobs/19990101-000000-0000/resume").status_code == 404
     assert c.post(f"/api/jobs/{job_id}/resume").status_code == 201
     st = wait_state(c, {"scanning"})
-    assert st["levels_done"] >= done_at_cancel          # resumed, not restarted
+    assert st["levels_done"] >= done_at_cancel  # resumed, not restarted
     c.post("/api/scan/cancel")
     svc.close()
 
@@ -111,11 +118,12 @@ def test_live_view_frame_and_heightmap_and_sse(client):
     assert c.get("/api/frame.jpg", headers={"If-None-Match": r.headers["ETag"]}).status_code == 304
     hm = c.get("/api/heightmap/live").get_json()
     from appliance.web.fake import dome
+
     seen = 0
     for j, y in enumerate(hm["y"]):
         for i, x in enumerate(hm["x"]):
             z = hm["z"][j][i]
-            if z is not None:       # each cell holds the highest level at which it stood above the ink
+            if z is not None:  # each cell holds the highest level at which it stood above the ink
                 seen += 1
                 assert 0 <= float(dome(x, y)) - z < 0.5 + 1e-9
     assert seen > 100
@@ -133,12 +141,12 @@ def test_calibration_steps(client):
     c, svc, app = client
     cal = c.get("/api/calibration").get_json()
     assert [s["id"] for s in cal["steps"]] == ["home", "target", "detect", "accept"] and cal["step"] == 0
-    assert c.post("/api/calibration/detect").status_code == 400        # out of order
+    assert c.post("/api/calibration/detect").status_code == 400  # out of order
     c.post("/api/calibration/home")
     c.post("/api/calibration/target")
     cal = c.post("/api/calibration/detect").get_json()
     assert cal["detected"]["dots"] == 49
-    assert c.get("/api/frame.jpg").status_code == 200                  # the preview
+    assert c.get("/api/frame.jpg").status_code == 200  # the preview
 
 
 def test_usb_export_switched_off_in_the_web_hides_the_sticks_and_refuses_a_copy(tmp_path):
@@ -155,6 +163,7 @@ def test_usb_export_switched_off_in_the_web_hides_the_sticks_and_refuses_a_copy(
 
 
 # -- the ETA -----------------------------------------------------------------------------
+
 
 class Clock:
     def __init__(self):
@@ -176,7 +185,7 @@ def test_eta_converges_on_a_steady_scan_and_counts_down_between_levels():
     e.update(st(0))
     shown = []
     for i in range(1, 60):
-        clk.t += 2.0                   # a level every 2 s
+        clk.t += 2.0  # a level every 2 s
         shown.append(e.update(st(i)))
         # asking often between levels only counts down, it does not re-estimate
         clk.t += 1.0
@@ -194,11 +203,11 @@ def test_eta_does_not_jump_on_one_slow_level():
     for i in range(1, 30):
         clk.t += 2.0
         before = e.update(st(i))
-    clk.t += 30.0                      # one level takes 15 x longer (a re-focus, a bubble)
+    clk.t += 30.0  # one level takes 15 x longer (a re-focus, a bubble)
     after = e.update(st(30))
     counted = before - 30.0
     assert after - counted <= max(3.0, 0.1 * counted) + 0.1
-    assert after < before              # it never goes back up above where it was
+    assert after < before  # it never goes back up above where it was
 
 
 def test_eta_resets_for_a_new_job_and_is_zero_when_done():
@@ -222,8 +231,8 @@ def test_live_streams_are_capped_and_the_rest_get_503(tmp_path):
         assert next(iter(r.response)).startswith(b"retry:")
     third = c.get("/api/events")
     assert third.status_code == 503 and "poll" in third.get_json()["error"]
-    assert c.get("/api/state").status_code == 200       # everything else still answers
-    open_streams[0].close()                            # a stream that ends frees its slot
+    assert c.get("/api/state").status_code == 200  # everything else still answers
+    open_streams[0].close()  # a stream that ends frees its slot
     again = c.get("/api/events", buffered=False)
     assert again.status_code == 200
     again.close()

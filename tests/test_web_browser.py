@@ -5,6 +5,7 @@ open the job's report and 3D view, download the G-code and compare it byte
 for byte with the job's file, export it to a temporary "stick". Screenshots
 of every page go to tests/artifacts/web/.
 """
+
 import os
 import shutil
 import time
@@ -15,20 +16,22 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.webdriver.chrome.service import Service          # noqa: E402
-from selenium.webdriver.common.by import By                    # noqa: E402
-from selenium.webdriver.support.ui import WebDriverWait        # noqa: E402
+from selenium.webdriver.chrome.service import Service  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 
-from appliance.hw.usb import UsbExporter                        # noqa: E402
-from appliance.web.demo import start                            # noqa: E402
-from appliance.web.fake import FakeBenchService                 # noqa: E402
+from appliance.hw.usb import UsbExporter  # noqa: E402
+from appliance.web.demo import start  # noqa: E402
+from appliance.web.fake import FakeBenchService  # noqa: E402
 
 ART = Path(__file__).parent / "artifacts" / "web"
 CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-    pytest.skip("Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
-                allow_module_level=True)
+    pytest.skip(
+        "Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
+        allow_module_level=True,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -39,8 +42,12 @@ def box(tmp_path_factory):
     stick.mkdir(parents=True)
     mounts = tmp / "mounts"
     mounts.write_text("")
-    usb = UsbExporter(mounts_file=mounts, roots=(str(media),), sys_root=tmp / "nosys",
-                      unmount=lambda s: mounts.write_text(""))           # what the box's stick unit does
+    usb = UsbExporter(
+        mounts_file=mounts,
+        roots=(str(media),),
+        sys_root=tmp / "nosys",
+        unmount=lambda s: mounts.write_text(""),
+    )  # what the box's stick unit does
     svc = FakeBenchService(tmp / "bench", level_s=0.08, home_s=0.3, process_s=0.3, frame_px=240, usb=usb)
     run = start(svc, tmp / "data")
     ART.mkdir(parents=True, exist_ok=True)
@@ -57,17 +64,34 @@ def chromium_options(kind, tmp):
     os.environ["SE_AVOID_STATS"] = "true"
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
-    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu", "--no-first-run",
-              "--disable-background-networking", "--disable-component-update", "--disable-sync",
-              "--enable-unsafe-swiftshader", f"--user-data-dir={tmp / ('profile-' + kind)}"):
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--disable-gpu",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--enable-unsafe-swiftshader",
+        f"--user-data-dir={tmp / ('profile-' + kind)}",
+    ):
         opts.add_argument(a)
     size = SIZES[kind]
     if kind == "phone":
-        opts.add_experimental_option("mobileEmulation", {
-            "deviceMetrics": {"width": size["width"], "height": size["height"], "pixelRatio": size["ratio"],
-                              "touch": True},
-            "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
-                         "Chrome/120.0 Mobile Safari/537.36"})
+        opts.add_experimental_option(
+            "mobileEmulation",
+            {
+                "deviceMetrics": {
+                    "width": size["width"],
+                    "height": size["height"],
+                    "pixelRatio": size["ratio"],
+                    "touch": True,
+                },
+                "userAgent": "Mozilla/5.0 (Linux; Android 14; Pixel 8) AppleWebKit/537.36 (KHTML, like Gecko) "
+                "Chrome/120.0 Mobile Safari/537.36",
+            },
+        )
     else:
         opts.add_argument(f"--window-size={size['width']},{size['height']}")
     return opts
@@ -77,8 +101,9 @@ def make_driver(kind, tmp):
     opts = chromium_options(kind, tmp)
     downloads = tmp / f"downloads-{kind}"
     downloads.mkdir()
-    opts.add_experimental_option("prefs", {"download.default_directory": str(downloads),
-                                           "download.prompt_for_download": False})
+    opts.add_experimental_option(
+        "prefs", {"download.default_directory": str(downloads), "download.prompt_for_download": False}
+    )
     d = webdriver.Chrome(service=Service(DRIVER), options=opts)
     d.execute_cdp_cmd("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
     return d, downloads
@@ -103,7 +128,7 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         # -- login (the dashboard sends us there first)
         d.get(box["url"] + "/")
         wait(d, lambda: "/login" in d.current_url, what="redirect to login")
-        if kind == "phone":     # our pages set the viewport meta, so the layout is the phone's width
+        if kind == "phone":  # our pages set the viewport meta, so the layout is the phone's width
             assert d.execute_script("return [window.innerWidth, window.devicePixelRatio]") == [390, 3]
         d.find_element(By.ID, "password").send_keys("wrong password")
         d.find_element(By.ID, "login-button").click()
@@ -139,8 +164,13 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         assert len(seen) >= 4 and seen == sorted(seen), seen
         assert "levels" in d.find_element(By.ID, "levels").text
         wait(d, lambda: "left" in d.find_element(By.ID, "eta").text, what="an ETA")
-        wait(d, lambda: d.execute_script("const i=document.getElementById('frame');return i.complete && i.naturalWidth"),
-             what="camera frame shown")
+        wait(
+            d,
+            lambda: d.execute_script(
+                "const i=document.getElementById('frame');return i.complete && i.naturalWidth"
+            ),
+            what="camera frame shown",
+        )
         wait(d, lambda: "Heights" in d.find_element(By.ID, "livemap-note").text, what="growing height map")
         shot(d, kind, "dashboard-scanning")
         wait(d, lambda: d.find_element(By.ID, "state").text.lower() == "done", timeout=40, what="scan done")
@@ -154,11 +184,18 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         link.click()
         wait(d, lambda: d.find_elements(By.ID, "report"), what="job page")
         assert job_id in d.find_element(By.TAG_NAME, "h1").text
-        rows = {r.find_element(By.TAG_NAME, "summary").text: r.find_element(By.TAG_NAME, "td").text
-                for r in d.find_elements(By.CSS_SELECTOR, "table.stats tr")}
+        rows = {
+            r.find_element(By.TAG_NAME, "summary").text: r.find_element(By.TAG_NAME, "td").text
+            for r in d.find_elements(By.CSS_SELECTOR, "table.stats tr")
+        }
         assert "rms_mm" in rows and rows["levels"] == "41"
-        wait(d, lambda: d.execute_script("const i=document.querySelector('img.errimg');return i.complete && i.naturalWidth > 0"),
-             what="error picture")
+        wait(
+            d,
+            lambda: d.execute_script(
+                "const i=document.querySelector('img.errimg');return i.complete && i.naturalWidth > 0"
+            ),
+            what="error picture",
+        )
         canvas = d.find_element(By.ID, "view3d")
         wait(d, lambda: canvas.get_attribute("data-ready") in ("1", "error"), what="3D view")
         assert canvas.get_attribute("data-ready") == "1", d.find_element(By.ID, "view-info").text
@@ -174,10 +211,13 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
                 const p = x.getImageData(0, 0, 64, 64).data; const s = new Set();
                 for (let i = 0; i < p.length; i += 4) s.add((p[i] >> 3) + ',' + (p[i+1] >> 3) + ',' + (p[i+2] >> 3));
                 return [s.size, c.toDataURL().length];""")
+
         n_colours, url_len = colours()
         assert n_colours > 20, n_colours
         before = d.execute_script("return document.getElementById('view3d').toDataURL()")
-        webdriver.ActionChains(d).move_to_element(canvas).click_and_hold().move_by_offset(60, 20).release().perform()
+        webdriver.ActionChains(d).move_to_element(canvas).click_and_hold().move_by_offset(
+            60, 20
+        ).release().perform()
         time.sleep(0.3)
         after = d.execute_script("return document.getElementById('view3d').toDataURL()")
         assert after != before, "dragging must turn the view"
@@ -189,9 +229,11 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
         a = d.find_element(By.CSS_SELECTOR, 'a[data-file="toolpath.gcode"]')
         d.execute_script("arguments[0].scrollIntoView()", a)
         a.click()
-        target = downloads / a.get_attribute("download")            # named for the job
+        target = downloads / a.get_attribute("download")  # named for the job
         assert target.name.endswith(f"-{job_id.split('-')[1]}-toolpath.gcode"), target.name
-        wait(d, lambda: target.exists() and not list(downloads.glob("*.crdownload")), what="download finished")
+        wait(
+            d, lambda: target.exists() and not list(downloads.glob("*.crdownload")), what="download finished"
+        )
         assert target.read_bytes() == box["svc"].job_file(job_id, "toolpath.gcode").read_bytes()
 
         # -- USB: the button appears only when a stick is plugged in
@@ -204,28 +246,38 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
             d.execute_script("arguments[0].scrollIntoView()", usb)
             assert "STICK" in d.find_element(By.ID, "usb-stick").text
             d.find_element(By.ID, "usb-copy").click()
-            wait(d, lambda: "unmounted: safe to remove" in d.find_element(By.ID, "usb-result").text,
-                 what="USB copy")
+            wait(
+                d,
+                lambda: "unmounted: safe to remove" in d.find_element(By.ID, "usb-result").text,
+                what="USB copy",
+            )
             shot(d, kind, "job-usb")
             copied = box["stick"] / "inkslice" / f"{job_id}-toolpath.gcode"
             assert copied.read_bytes() == box["svc"].job_file(job_id, "toolpath.gcode").read_bytes()
         finally:
             box["mounts"].write_text("")
         # the copy unmounted the stick: the button goes, the outcome stays to be read
-        wait(d, lambda: not d.find_element(By.ID, "usb-copy").is_displayed(), timeout=10,
-             what="the copy button hides when the stick is gone")
+        wait(
+            d,
+            lambda: not d.find_element(By.ID, "usb-copy").is_displayed(),
+            timeout=10,
+            what="the copy button hides when the stick is gone",
+        )
         assert usb.is_displayed() and "safe to remove" in d.find_element(By.ID, "usb-result").text
 
         # -- settings: a bad value is refused naming the key, a good one saved
-        d.get(box["url"] + "/settings#group-cam")          # the group chip's link opens the CAM group
+        d.get(box["url"] + "/settings#group-cam")  # the group chip's link opens the CAM group
         field = d.find_element(By.NAME, "cutter_diameter_mm")
         field.clear()
         field.send_keys("-1")
         d.find_element(By.CSS_SELECTOR, "#settings-form button[type=submit]").click()
-        wait(d, lambda: "must be at least 0.1" in d.find_element(By.ID, "err-cutter_diameter_mm").text,
-             what="refusal beside the field")
+        wait(
+            d,
+            lambda: "must be at least 0.1" in d.find_element(By.ID, "err-cutter_diameter_mm").text,
+            what="refusal beside the field",
+        )
         assert "Cutter diameter" in d.find_element(By.ID, "settings-result").text
-        good = 3.175 if box["svc"].settings()["cutter_diameter_mm"] != 3.175 else 4.0   # phone, then desktop
+        good = 3.175 if box["svc"].settings()["cutter_diameter_mm"] != 3.175 else 4.0  # phone, then desktop
         field.clear()
         field.send_keys(str(good))
         d.find_element(By.CSS_SELECTOR, "#settings-form button[type=submit]").click()
@@ -243,8 +295,12 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
             wait(d, lambda: do.text != label, what="next step")
             if "detect" in label:
                 wait(d, lambda: "dots 49" in d.find_element(By.ID, "cal-detected").text, what="detections")
-                wait(d, lambda: d.execute_script(
-                    "const i=document.getElementById('cal-frame');return i.complete && i.naturalWidth > 0"))
+                wait(
+                    d,
+                    lambda: d.execute_script(
+                        "const i=document.getElementById('cal-frame');return i.complete && i.naturalWidth > 0"
+                    ),
+                )
                 shot(d, kind, "calibration")
         d.get(box["url"] + "/jobs")
         assert job_id in d.find_element(By.ID, "jobs").text
@@ -261,11 +317,16 @@ def test_scan_report_download_and_usb_in_a_browser(box, kind, tmp_path):
             assert sw <= iw, (path, sw, iw)
         # expected refusals: the wrong password (401) and the negative cutter (400); anything else
         # (a script error, a 404 asset, a CSP violation) fails the test
-        expected = ("/login - Failed to load resource: the server responded with a status of 401",
-                    "/api/settings - Failed to load resource: the server responded with a status of 400",
-                    "favicon.ico")
-        errors = [e["message"] for e in d.get_log("browser")
-                  if e["level"] == "SEVERE" and not any(x in e["message"] for x in expected)]
+        expected = (
+            "/login - Failed to load resource: the server responded with a status of 401",
+            "/api/settings - Failed to load resource: the server responded with a status of 400",
+            "favicon.ico",
+        )
+        errors = [
+            e["message"]
+            for e in d.get_log("browser")
+            if e["level"] == "SEVERE" and not any(x in e["message"] for x in expected)
+        ]
         assert not errors, errors
     finally:
         d.quit()

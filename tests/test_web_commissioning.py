@@ -5,6 +5,7 @@ One run goes through every step; another cancels at each step and then starts a 
 dashboard, which the bench must take (no step may keep the bench). Screenshots go to
 tests/artifacts/web/phone-commission-*.png.
 """
+
 import os
 import shutil
 import time
@@ -14,23 +15,29 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.webdriver.common.by import By                    # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
 
-from appliance.daemon.service import BenchService               # noqa: E402
-from appliance.web.demo import start                            # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait   # noqa: E402
-from test_web_real_service import light_processor               # noqa: E402
+from appliance.daemon.service import BenchService  # noqa: E402
+from appliance.web.demo import start  # noqa: E402
+from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
+from test_web_real_service import light_processor  # noqa: E402
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
 
 # a short scan: the dashboard's Start takes the bench, the test stops it again
-SHORT_SCAN = {"levels_to_mm": 28.0, "levels_from_mm": 22.0, "level_step_mm": 2.0, "settle_s": 0.0}  # above the cone
+SHORT_SCAN = {
+    "levels_to_mm": 28.0,
+    "levels_from_mm": 22.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+}  # above the cone
 
 
 @pytest.fixture(scope="module")
 def factory():
     from appliance.sim.fakes import SimulatedBenchFactory, small_rig
+
     f = SimulatedBenchFactory("cone", small_rig(320, 240))
     yield f
     f.close()
@@ -87,13 +94,21 @@ def bench_takes_a_scan(d, url):
     btn.click()
     wait(d, lambda: d.find_element(By.ID, "confirm").is_displayed(), what="start confirmation")
     d.find_element(By.ID, "confirm-start").click()
-    wait(d, lambda: btn.text == "Stop scan" or d.find_element(By.ID, "action-error").is_displayed(),
-         timeout=30, what="scan started")
+    wait(
+        d,
+        lambda: btn.text == "Stop scan" or d.find_element(By.ID, "action-error").is_displayed(),
+        timeout=30,
+        what="scan started",
+    )
     assert btn.text == "Stop scan", d.find_element(By.ID, "action-error").text
     btn.click()
     btn.click()
-    wait(d, lambda: d.find_element(By.ID, "state").text.lower() in ("cancelled", "done"), timeout=60,
-         what="scan stopped")
+    wait(
+        d,
+        lambda: d.find_element(By.ID, "state").text.lower() in ("cancelled", "done"),
+        timeout=60,
+        what="scan stopped",
+    )
 
 
 def test_the_calibration_can_be_cancelled_at_each_step_and_the_bench_then_scans(box, phone):
@@ -106,8 +121,15 @@ def test_the_calibration_can_be_cancelled_at_each_step_and_the_bench_then_scans(
         for step in steps[:n]:
             do.click()
             # detect finds no board on the virtual camera unless it shows one: either way the step ends
-            wait(d, lambda: not do.get_attribute("disabled") and "Working" not in
-                 d.find_element(By.ID, "cal-result").text, timeout=60, what=f"step {step} ends")
+            wait(
+                d,
+                lambda: (
+                    not do.get_attribute("disabled")
+                    and "Working" not in d.find_element(By.ID, "cal-result").text
+                ),
+                timeout=60,
+                what=f"step {step} ends",
+            )
         assert "holds the bench" in d.find_element(By.ID, "cal-hold").text
         readable_on_a_phone(d, f"calibration after {steps[n - 1]}")
         shot(d, "phone", f"calibration-held-{steps[n - 1]}")
@@ -123,9 +145,16 @@ def test_the_calibration_can_be_cancelled_at_each_step_and_the_bench_then_scans(
     for step in ("home", "target", "detect"):
         wait(d, lambda: do.text.endswith(step) and do.is_enabled(), timeout=60, what=f"step {step}")
         do.click()
-    wait(d, lambda: "corners 54" in d.find_element(By.ID, "cal-detected").text, timeout=60, what="board found")
-    wait(d, lambda: d.execute_script(
-        "const i=document.getElementById('cal-frame');return i.complete && i.naturalWidth > 0"), what="preview")
+    wait(
+        d, lambda: "corners 54" in d.find_element(By.ID, "cal-detected").text, timeout=60, what="board found"
+    )
+    wait(
+        d,
+        lambda: d.execute_script(
+            "const i=document.getElementById('cal-frame');return i.complete && i.naturalWidth > 0"
+        ),
+        what="preview",
+    )
     shot(d, "phone", "calibration-detected")
     wait(d, lambda: do.text.endswith("accept") and do.is_enabled(), what="accept")
     do.click()
@@ -175,7 +204,7 @@ def note(d):
 def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     d = phone
     open_commissioning(d, box)
-    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"          # the sequence starts here
+    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"  # the sequence starts here
     assert "100 x 70 mm" in d.find_element(By.ID, "cm-board-size").text
     for link in ("cm-board-pdf", "cm-board-png"):
         href = d.find_element(By.ID, link).get_attribute("href")
@@ -199,8 +228,13 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     for n in (1, 2, 3):
         press(d, "Take a tilted view", timeout=60)
         wait(d, lambda: can_press(d, f"Take a tilted view ({n} taken)"), timeout=60, what=f"view {n}")
-    wait(d, lambda: d.execute_script(
-        "const i=document.getElementById('cm-frame');return i.complete && i.naturalWidth > 0"), what="preview")
+    wait(
+        d,
+        lambda: d.execute_script(
+            "const i=document.getElementById('cm-frame');return i.complete && i.naturalWidth > 0"
+        ),
+        what="preview",
+    )
     press(d, "Measure the flat board")
     wait(d, lambda: can_press(d, "Accept and store"), timeout=120, what="plane measured")
     d.execute_script("document.getElementById('cm-step').scrollIntoView()")
@@ -222,7 +256,12 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     assert ball.get_attribute("value") == "25.4"
     press(d, "Start: the ball goes on the base")
     press(d, "Scan the ball")
-    wait(d, lambda: "Reference scan:" in d.find_element(By.ID, "cm-busy").text, timeout=60, what="scan progress")
+    wait(
+        d,
+        lambda: "Reference scan:" in d.find_element(By.ID, "cm-busy").text,
+        timeout=60,
+        what="scan progress",
+    )
     d.execute_script("document.getElementById('cm-step').scrollIntoView()")
     shot(d, "phone", "commission-3-scanning")
     press(d, "Accept and store", timeout=600)
@@ -233,7 +272,7 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     assert ref.startswith(f"This box measures the 25.4 mm ball to {err:.2f} mm"), ref
     assert statuses(box) == {"level_zero": "done", "camera": "done", "tank": "done", "meniscus": "done"}
     results = d.find_element(By.ID, "cm-results").text
-    assert results.count(" UTC") == 4, results                         # every result with its date
+    assert results.count(" UTC") == 4, results  # every result with its date
     assert d.find_element(By.ID, "cm-step-title").text == "This box is commissioned"
     d.execute_script("window.scrollTo(0, 0)")
     readable_on_a_phone(d, "commissioned")
@@ -242,16 +281,22 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     # one file out, the ink changed, the same file back in
     downloads = box["tmp"] / "downloads-phone"
     d.find_element(By.ID, "cm-export").click()
-    wait(d, lambda: list(downloads.glob("inkslice-commissioning-*.json"))
-         and not list(downloads.glob("*.crdownload")), what="export downloaded")
+    wait(
+        d,
+        lambda: (
+            list(downloads.glob("inkslice-commissioning-*.json")) and not list(downloads.glob("*.crdownload"))
+        ),
+        what="export downloaded",
+    )
     exported = next(downloads.glob("inkslice-commissioning-*.json"))
     import json
+
     doc = json.loads(exported.read_text())
     assert doc["format"] == "inkslice.commissioning/1" and set(doc["results"]) == set(statuses(box))
     press(d, "The ink was changed")
     wait(d, lambda: "Ink change recorded" in d.find_element(By.ID, "cm-files-note").text, what="ink change")
     assert statuses(box) == {"level_zero": "stale", "camera": "done", "tank": "done", "meniscus": "stale"}
-    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"        # the sequence starts over there
+    assert d.find_element(By.ID, "cm-step-title").text == "Level zero"  # the sequence starts over there
     assert "Ink last changed" in d.find_element(By.ID, "cm-ink").text
     assert len(d.find_elements(By.CSS_SELECTOR, "#cm-results .b-stale")) == 2
     d.execute_script("window.scrollTo(0, 0)")
@@ -271,8 +316,12 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
         press(d, "Cancel")
         wait(d, lambda: note(d).startswith(f"{title} cancelled"), timeout=60, what=f"{step} cancelled")
         assert active(box) is None and "The bench is free" in note(d)
-        assert box["svc"].commissioning()["steps"][["level_zero", "camera", "tank", "meniscus"].index(step)]["status"] \
-            == "missing"                                             # nothing was stored
+        assert (
+            box["svc"].commissioning()["steps"][["level_zero", "camera", "tank", "meniscus"].index(step)][
+                "status"
+            ]
+            == "missing"
+        )  # nothing was stored
         bench_takes_a_scan(d, box["url"])
         open_commissioning(d, box)
 
@@ -296,12 +345,14 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     wait(d, lambda: can_press(d, "Take a tilted view (1 taken)"), timeout=60, what="one view")
     d.get(box["url"] + "/")
     press(d, "Start scan")
-    press(d, "Start now")                                     # the confirmation
+    press(d, "Start now")  # the confirmation
     wait(d, lambda: d.find_element(By.ID, "action-fix").is_displayed(), what="refusal with a link")
     assert "'camera' holds the bench" in d.find_element(By.ID, "action-error").text
     shot(d, "phone", "commission-held-dashboard")
     d.find_element(By.CSS_SELECTOR, "#action-fix a").click()
-    wait(d, lambda: d.find_element(By.ID, "cm-step-title").text == "Camera lens and liquid plane", what="back")
+    wait(
+        d, lambda: d.find_element(By.ID, "cm-step-title").text == "Camera lens and liquid plane", what="back"
+    )
     assert "holding the bench" in d.find_element(By.ID, "cm-step-count").text
     cancel_then_scan("camera", "Camera lens and liquid plane")
 
@@ -309,7 +360,7 @@ def test_a_cancel_at_each_commissioning_step_gives_the_bench_back(box, phone):
     go_to("Tank area")
     d.find_element(By.ID, "cm-in-width_mm").clear()
     d.find_element(By.ID, "cm-in-width_mm").send_keys("-120")
-    press(d, "Save the tank area")                                 # refused, naming the field
+    press(d, "Save the tank area")  # refused, naming the field
     wait(d, lambda: "width_mm" in d.find_element(By.ID, "cm-error").text, what="refusal shown")
     assert d.find_element(By.ID, "cm-error").is_displayed() and statuses(box)["tank"] == "missing"
     cancel_then_scan("tank", "Tank area")

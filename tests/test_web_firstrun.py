@@ -1,4 +1,5 @@
 """The first-run password reaches the bench's display (fake) through the daemon, until the first login."""
+
 import os
 import stat
 import time
@@ -80,4 +81,4 @@ def test_the_hand_over_file(tmp_path):
     assert p.pending() == "mnop-qrst-uvwx"
     assert firstrun.done(tmp_path) is True and p.pending() is None
     assert firstrun.done(tmp_path) is False
-    assert [f.name for f in tmp_path.iterdir()] == []       # no temporary file left
+    assert [f.name for f in tmp_path.iterdir()] == []  # no temporary file left

@@ -1,4 +1,5 @@
 """The web UI on the daemon team's real BenchService (fake devices), in-process and over its socket."""
+
 import io
 import json
 import zipfile
@@ -13,8 +14,14 @@ from appliance.web import create_app
 from appliance.hw.usb import UsbExporter
 from web_helpers import login, wait_state
 
-SCAN = {"name": "cone", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
-        "level_step_mm": 2.0, "settle_s": 0.0}
+SCAN = {
+    "name": "cone",
+    "surface": "cone",
+    "levels_to_mm": 24.0,
+    "levels_from_mm": 6.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.0,
+}
 
 
 def light_processor(scan_folder, out_folder, options, stop=None):
@@ -22,36 +29,49 @@ def light_processor(scan_folder, out_folder, options, stop=None):
     tests run the real pipeline), and the pipeline's cost must not set this test's pace.
     It writes what process_scan writes, shaped the same way, from the real scan folder."""
     from appliance.atomicio import write_bytes, write_json, write_text
+
     frames = json.loads((Path(scan_folder) / "scan.json").read_text())["frames"]
     out = Path(out_folder)
-    rows = ["x,y,z"] + [f"{x}.0000,{y}.0000,{min(x, y, 4 - x, 4 - y) * 1.5:.4f}" for x in range(5) for y in range(5)]
+    rows = ["x,y,z"] + [
+        f"{x}.0000,{y}.0000,{min(x, y, 4 - x, 4 - y) * 1.5:.4f}" for x in range(5) for y in range(5)
+    ]
     write_text(out / "heightmap.csv", "\n".join(rows) + "\n")
-    write_text(out / "toolpath.gcode", "G21 G90\nF800\n" + "".join(f"G1 X{x} Y0 Z1\n" for x in range(5)) + "M2\n")
-    write_json(out / "report.json", {"statistics": {"inkslice:fit": {"n": len(frames), "Ea": 0.0722, "sigma": 0.144}}})
+    write_text(
+        out / "toolpath.gcode", "G21 G90\nF800\n" + "".join(f"G1 X{x} Y0 Z1\n" for x in range(5)) + "M2\n"
+    )
+    write_json(
+        out / "report.json",
+        {"statistics": {"inkslice:fit": {"n": len(frames), "Ea": 0.0722, "sigma": 0.144}}},
+    )
     write_text(out / "report.md", "# report\n")
     write_bytes(out / "error_inkslice_fit.png", Path(scan_folder, frames[0]["file"]).read_bytes())
-    return {"outputs": ["error_inkslice_fit.png", "heightmap.csv", "report.json", "report.md", "toolpath.gcode"]}
+    return {
+        "outputs": ["error_inkslice_fit.png", "heightmap.csv", "report.json", "report.md", "toolpath.gcode"]
+    }
 
 
 class ChessboardBench(FakeBench):
     """The fake bench with the printed calibration board on its base: the camera sees a
     9 x 6 chessboard of 10 mm squares at 4 px/mm, its first inner corner at pixel (150, 130)."""
+
     PX_PER_MM, ORIGIN = 4.0, (150.0, 130.0)
 
     def __init__(self, surface, **kw):
         from appliance.sim.fakes import small_rig
-        super().__init__(surface, rig=small_rig(640, 480), **kw)    # the frames' size: the camera model's
+
+        super().__init__(surface, rig=small_rig(640, 480), **kw)  # the frames' size: the camera model's
 
     def open(self, settings, params):
         import numpy as np
+
         devices = super().open(settings, params)
         img = np.full((480, 640, 3), 255, np.uint8)
         s, (u0, v0) = 10 * self.PX_PER_MM, self.ORIGIN
-        for j in range(-1, 6):                  # 10 x 7 squares around 9 x 6 inner corners
+        for j in range(-1, 6):  # 10 x 7 squares around 9 x 6 inner corners
             for i in range(-1, 9):
                 if (i + j) % 2 == 0:
                     x, y = int(u0 + i * s), int(v0 + j * s)
-                    img[y:y + int(s), x:x + int(s)] = 0
+                    img[y : y + int(s), x : x + int(s)] = 0
 
         class Board:
             def capture(self):
@@ -59,26 +79,35 @@ class ChessboardBench(FakeBench):
 
             def close(self):
                 pass
+
         devices.camera = Board()
         return devices
 
 
 def on_bench(cls):
     """Run the test on this device factory instead of the plain FakeBench."""
+
     def mark(test):
         test.bench = cls
         return test
+
     return mark
 
 
 @pytest.fixture(params=["in-process", "socket"])
 def web(tmp_path, request):
     factory = getattr(request.function, "bench", FakeBench)("cone")
-    mounts = tmp_path / "mounts"                # no stick plugged in until a test writes one here
+    mounts = tmp_path / "mounts"  # no stick plugged in until a test writes one here
     mounts.write_text("")
-    usb = UsbExporter(mounts_file=mounts, roots=(str(tmp_path / "media"),), sys_root=tmp_path / "nosys",
-                      unmount=lambda s: mounts.write_text(""))     # what the box's stick unit does
-    svc = BenchService(tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.05, usb=usb)
+    usb = UsbExporter(
+        mounts_file=mounts,
+        roots=(str(tmp_path / "media"),),
+        sys_root=tmp_path / "nosys",
+        unmount=lambda s: mounts.write_text(""),
+    )  # what the box's stick unit does
+    svc = BenchService(
+        tmp_path / "daemon", factory, processor=light_processor, panel_interval_s=0.05, usb=usb
+    )
     server = client = None
     target = svc
     if request.param == "socket":
@@ -116,8 +145,13 @@ def test_the_daemon_copies_a_jobs_file_to_the_usb_stick_the_web_asks_for(web, tm
     r = c.post(f"/api/jobs/{job_id}/usb", json={"file": "report.md", "stick": "sdb1"})
     assert r.status_code == 200, r.get_json()
     res = r.get_json()
-    assert res["safe_to_remove"] and res["verified"] and res["unmounted"] and res["name"] == f"{job_id}-report.md"
-    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}     # unmounted after the copy
+    assert (
+        res["safe_to_remove"]
+        and res["verified"]
+        and res["unmounted"]
+        and res["name"] == f"{job_id}-report.md"
+    )
+    assert c.get("/api/usb").get_json() == {"available": False, "sticks": []}  # unmounted after the copy
     assert (stick / "inkslice" / res["name"]).read_bytes() == svc.job_file(job_id, "report.md").read_bytes()
     assert c.post(f"/api/jobs/{job_id}/usb", json={"file": "../daemon.sock"}).status_code in (400, 404)
 
@@ -165,7 +199,7 @@ def test_a_scan_through_the_web_on_the_real_service(web):
 
 def test_the_live_height_map_grows_during_a_scan(web):
     c, svc = web
-    assert c.get("/api/heightmap/live").status_code == 204          # no scan yet
+    assert c.get("/api/heightmap/live").status_code == 204  # no scan yet
     r = c.post("/api/scan", json={**SCAN, "settle_s": 0.15})
     assert r.status_code == 201
     counts = []
@@ -185,7 +219,7 @@ def test_the_live_height_map_grows_during_a_scan(web):
     assert counts == sorted(counts) and counts[0] < counts[-1] == len(known)
     # the first level (24) is above the tip (23.2); the tip is a cell or two wide by 20
     assert max(known) in (22.0, 20.0) and min(known) == 6.0
-    assert any(v is None for row in hm["z"] for v in row)            # the base around the cone
+    assert any(v is None for row in hm["z"] for v in row)  # the base around the cone
 
 
 @on_bench(ChessboardBench)
@@ -203,17 +237,25 @@ def test_guided_calibration_on_the_daemon(web):
     cal = c.post("/api/calibration/detect").get_json()
     d = cal["detected"]
     assert d["corners"] == 54 and d["plane_rms_mm"] < 0.05 and abs(d["mm_per_px"] - 0.25) < 0.002, d
-    r = c.get("/api/frame.jpg")                                    # the preview with the corners drawn
+    r = c.get("/api/frame.jpg")  # the preview with the corners drawn
     assert r.status_code == 200 and r.data[:2] == b"\xff\xd8"
-    assert c.post("/api/calibration/accept").get_json() == {**cal, "step": 0, "detected": None,
-                                                          "holds_bench": False}
+    assert c.post("/api/calibration/accept").get_json() == {
+        **cal,
+        "step": 0,
+        "detected": None,
+        "holds_bench": False,
+    }
     cam = svc.store.calibrations()[0]["camera"]
     import numpy as np
+
     H = np.asarray(cam["homography"])
     # OpenCV puts pixel centres at integers: the corner drawn at column 150 lies at u = 149.5;
     # the board lies at the jig, its first corner at (10, 75) mm on the base
-    for (u, v), want in (((149.5, 129.5), (10, 75)), ((149.5 + 40 * 8, 129.5), (90, 75)),
-                         ((149.5, 129.5 + 40 * 5), (10, 25))):
+    for (u, v), want in (
+        ((149.5, 129.5), (10, 75)),
+        ((149.5 + 40 * 8, 129.5), (90, 75)),
+        ((149.5, 129.5 + 40 * 5), (10, 25)),
+    ):
         p = H @ [u, v, 1]
         assert np.allclose(p[:2] / p[2], want, atol=0.1), (u, v, p[:2] / p[2])
     assert (cam["width"], cam["height"]) == (640, 480)
@@ -225,6 +267,7 @@ def test_guided_calibration_on_the_daemon(web):
 
 class SlowChessboardBench(ChessboardBench):
     """The board bench whose stage travels at 10 s per 100 mm: homing from mid-travel takes 4 s."""
+
     def __init__(self, surface):
         super().__init__(surface, faults={"stage": {"seconds_per_mm": 0.1}})
 
@@ -251,7 +294,7 @@ def test_the_calibration_can_be_cancelled_at_every_step(web):
             assert r.status_code == 400 and "cancel" in r.get_json()["error"], r.get_json()
         cal = c.post("/api/calibration/cancel").get_json()
         assert cal["step"] == 0 and cal["holds_bench"] is False and cal["detected"] is None, (n_done, cal)
-        assert svc.store.calibrations() == []           # nothing half-done was stored
+        assert svc.store.calibrations() == []  # nothing half-done was stored
         assert svc.factory.last is None or svc.factory.last.light.on is False
         scan_then_cancel(c)
     # after all that, the full sequence still works from "home"
@@ -264,14 +307,16 @@ def test_the_calibration_can_be_cancelled_at_every_step(web):
 def test_cancel_stops_a_step_that_is_still_running(web):
     import threading
     import time
+
     c, svc = web
     outcome = {}
 
     def home():
         try:
             outcome["home"] = svc.calibrate("home")
-        except Exception as e:                          # the interrupted homing ends with the stage's error
+        except Exception as e:  # the interrupted homing ends with the stage's error
             outcome["home"] = e
+
     t = threading.Thread(target=home)
     t.start()
     while not (svc.factory.last and "home" in svc.factory.last.stage.calls):
@@ -310,8 +355,11 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     jobs_dir = svc.store.jobs_dir
 
     def post(body):
-        return c.post("/api/uploads/scan", data={"file": (io.BytesIO(body), "scan.zip")},
-                      content_type="multipart/form-data")
+        return c.post(
+            "/api/uploads/scan",
+            data={"file": (io.BytesIO(body), "scan.zip")},
+            content_type="multipart/form-data",
+        )
 
     def nothing_left(n_jobs):
         assert len(svc.jobs()) == n_jobs
@@ -321,17 +369,23 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     # refused by the daemon's own checks, after the web's zip checks passed
     import cv2
     import numpy as np
+
     ok, small_png = cv2.imencode(".png", np.zeros((10, 10, 3), np.uint8))
     bad = {
         "no camera": scan_folder_zip(folder, edit=lambda d: {k: v for k, v in d.items() if k != "camera"}),
         "singular homography": scan_folder_zip(
-            folder, edit=lambda d: {**d, "camera": {**d["camera"], "homography": [[0] * 3] * 3}}),
+            folder, edit=lambda d: {**d, "camera": {**d["camera"], "homography": [[0] * 3] * 3}}
+        ),
         "wrong frame size": scan_folder_zip(
-            folder, edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/small.png", "level_mm": 1.0}]},
-            extra={"frames/small.png": small_png.tobytes()}),
+            folder,
+            edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/small.png", "level_mm": 1.0}]},
+            extra={"frames/small.png": small_png.tobytes()},
+        ),
         "not an image": scan_folder_zip(
-            folder, edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/x.png", "level_mm": 1.0}]},
-            extra={"frames/x.png": b"#!/bin/sh\nrm -rf /\n"}),
+            folder,
+            edit=lambda d: {**d, "frames": d["frames"] + [{"file": "frames/x.png", "level_mm": 1.0}]},
+            extra={"frames/x.png": b"#!/bin/sh\nrm -rf /\n"},
+        ),
         "units": scan_folder_zip(folder, edit=lambda d: {**d, "units": "inch"}),
     }
     for case, body in bad.items():
@@ -350,7 +404,9 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
     assert info["status"] == "done" and info["params"]["imported"] and info["levels_done"] == frames >= 10
     assert "toolpath.gcode" in info["outputs"]
     copied = svc.store.job_dir(job_id) / "scan"
-    assert sorted(p.name for p in (copied / "frames").iterdir()) == sorted(p.name for p in (folder / "frames").iterdir())
+    assert sorted(p.name for p in (copied / "frames").iterdir()) == sorted(
+        p.name for p in (folder / "frames").iterdir()
+    )
     assert json.loads((copied / "scan.json").read_text()) == json.loads((folder / "scan.json").read_text())
     nothing_left(2)
 
@@ -367,11 +423,15 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
 def test_the_bench_buttons_news_reach_the_dashboard(web):
     c, svc = web
     assert c.get("/api/state").get_json()["notice"] is None
-    svc.export_latest_gcode()                   # what the long press runs (no job finished yet)
+    svc.export_latest_gcode()  # what the long press runs (no job finished yet)
     import time
-    time.sleep(0.2)                             # the web caches the state for 0.1 s
+
+    time.sleep(0.2)  # the web caches the state for 0.1 s
     n = c.get("/api/state").get_json()["notice"]
-    assert n["code"] == "no_gcode" and n["text"] == "USB export: no finished job with G-code to copy" \
+    assert (
+        n["code"] == "no_gcode"
+        and n["text"] == "USB export: no finished job with G-code to copy"
         and not n["ok"]
+    )
     assert 0 <= n["age_s"] < 5 and "lines" not in n
     assert 'id="notice"' in c.get("/").get_data(as_text=True)

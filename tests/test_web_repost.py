@@ -1,6 +1,7 @@
 """Re-posting from the phone: a finished job's page makes a program for another
 dialect from the job's height map (no rescan), twice, and both download byte for
 byte as the job's files."""
+
 import os
 import time
 from pathlib import Path
@@ -10,12 +11,12 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.webdriver.common.by import By                    # noqa: E402
-from selenium.webdriver.support.ui import Select               # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import Select  # noqa: E402
 
-from appliance.web.demo import start                            # noqa: E402
-from appliance.web.fake import FakeBenchService                 # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait   # noqa: E402
+from appliance.web.demo import start  # noqa: E402
+from appliance.web.fake import FakeBenchService  # noqa: E402
+from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
@@ -42,7 +43,7 @@ def _repost(d, dialect):
     Select(form.find_element(By.NAME, "dialect")).select_by_value(dialect)
     sc = form.find_element(By.NAME, "scallop_mm")
     sc.clear()
-    sc.send_keys("0.3")                 # coarse: the test is about the round trip, not the finish
+    sc.send_keys("0.3")  # coarse: the test is about the round trip, not the finish
     d.find_element(By.ID, "repost-go").click()
 
 
@@ -61,8 +62,12 @@ def test_a_finished_job_is_posted_again_for_two_dialects_and_both_download(finis
         for dialect in ("grbl", "fanuc"):
             name = f"{job_id}-finish-ball6-{dialect}.nc"
             _repost(d, dialect)
-            wait(d, lambda: d.find_elements(By.CSS_SELECTOR, f'a[data-file="{name}"]'), timeout=300,
-                 what=f"the {dialect} program among the downloads")
+            wait(
+                d,
+                lambda: d.find_elements(By.CSS_SELECTOR, f'a[data-file="{name}"]'),
+                timeout=300,
+                what=f"the {dialect} program among the downloads",
+            )
             names[dialect] = name
         shot(d, "phone", "job-reposted")
         for dialect, name in names.items():
@@ -71,12 +76,18 @@ def test_a_finished_job_is_posted_again_for_two_dialects_and_both_download(finis
             link.click()
             want = box["svc"].job_file(job_id, name).read_bytes()
             saved = link.get_attribute("download")
-            wait(d, lambda: (downloads / saved).is_file() and (downloads / saved).read_bytes() == want,
-                 timeout=30, what=f"{dialect} download")
-        got = {n: (downloads / d.find_element(By.CSS_SELECTOR, f'a[data-file="{n}"]').get_attribute("download"))
-               for n in names.values()}
-        assert "%" in got[names["fanuc"]].read_text().splitlines()[0]          # Fanuc's tape marks
-        assert "M0" in got[names["grbl"]].read_text().splitlines()[:8]         # GRBL: pause for the tool
+            wait(
+                d,
+                lambda: (downloads / saved).is_file() and (downloads / saved).read_bytes() == want,
+                timeout=30,
+                what=f"{dialect} download",
+            )
+        got = {
+            n: (downloads / d.find_element(By.CSS_SELECTOR, f'a[data-file="{n}"]').get_attribute("download"))
+            for n in names.values()
+        }
+        assert "%" in got[names["fanuc"]].read_text().splitlines()[0]  # Fanuc's tape marks
+        assert "M0" in got[names["grbl"]].read_text().splitlines()[:8]  # GRBL: pause for the tool
         assert f"{names['grbl'][:-3]}.preview.json" in box["svc"].job(job_id)["outputs"]
     finally:
         d.quit()

@@ -14,6 +14,7 @@ All screens are checked before the test fails, so one run lists every fault of e
 
 A new screen is one more Screen(...) in SCREENS: a name, its path, and what "ready" means.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,16 +30,16 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.common.exceptions import WebDriverException      # noqa: E402
-from selenium.webdriver.chrome.service import Service          # noqa: E402
-from selenium.webdriver.common.by import By                    # noqa: E402
-from selenium.webdriver.support.ui import WebDriverWait        # noqa: E402
+from selenium.common.exceptions import WebDriverException  # noqa: E402
+from selenium.webdriver.chrome.service import Service  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 
-from appliance.daemon.service import BenchService               # noqa: E402
-from appliance.sim.fakes import FakeBench                       # noqa: E402
-from appliance.web.demo import start                            # noqa: E402
-from test_web_browser import SIZES, chromium_options            # noqa: E402
-from test_web_real_service import light_processor               # noqa: E402
+from appliance.daemon.service import BenchService  # noqa: E402
+from appliance.sim.fakes import FakeBench  # noqa: E402
+from appliance.web.demo import start  # noqa: E402
+from test_web_browser import SIZES, chromium_options  # noqa: E402
+from test_web_real_service import light_processor  # noqa: E402
 
 HERE = Path(__file__).parent
 ART = HERE / "artifacts" / "web"
@@ -46,14 +47,24 @@ AXE = HERE / "a11y" / "node_modules" / "axe-core" / "axe.min.js"
 CHECKS = (HERE / "screen_checks.js").read_text()
 CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 # a scan slow enough to be seen scanning (settle_s per level), quick enough for a test
-SCAN = {"name": "cone on the bench", "surface": "cone", "levels_to_mm": 24.0, "levels_from_mm": 6.0,
-        "level_step_mm": 2.0, "settle_s": 0.5}
+SCAN = {
+    "name": "cone on the bench",
+    "surface": "cone",
+    "levels_to_mm": 24.0,
+    "levels_from_mm": 6.0,
+    "level_step_mm": 2.0,
+    "settle_s": 0.5,
+}
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-    pytest.skip("Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
-                allow_module_level=True)
+    pytest.skip(
+        "Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
+        allow_module_level=True,
+    )
 if not AXE.is_file():
-    pytest.skip("axe-core not installed in tests/a11y (scripts/setup.sh --test installs it)", allow_module_level=True)
+    pytest.skip(
+        "axe-core not installed in tests/a11y (scripts/setup.sh --test installs it)", allow_module_level=True
+    )
 
 
 def wait(d, cond, timeout=20, what=""):
@@ -61,8 +72,9 @@ def wait(d, cond, timeout=20, what=""):
 
 
 def loaded_img(d, css):
-    return d.execute_script(f"const i=document.querySelector({json.dumps(css)});"
-                            "return !!i && i.complete && i.naturalWidth > 0")
+    return d.execute_script(
+        f"const i=document.querySelector({json.dumps(css)});return !!i && i.complete && i.naturalWidth > 0"
+    )
 
 
 def state_of(box):
@@ -71,14 +83,15 @@ def state_of(box):
 
 # -- the screens -------------------------------------------------------------------------------
 
+
 @dataclass
 class Screen:
     name: str
     path: Callable[[dict], str] | str
-    ready: Callable = lambda d, box: True           # waits until the screen shows its data
-    before: Callable = lambda d, box: None          # puts the bench in the state the screen shows
+    ready: Callable = lambda d, box: True  # waits until the screen shows its data
+    before: Callable = lambda d, box: None  # puts the bench in the state the screen shows
     after: Callable = lambda d, box: None
-    console_ok: tuple = ()                          # console messages this screen expects (a refusal)
+    console_ok: tuple = ()  # console messages this screen expects (a refusal)
     logged_in: bool = True
     extra: dict = field(default_factory=dict)
 
@@ -106,7 +119,7 @@ def _previewing(d, box):
 def _jogging(d, box):
     """The panel's buttons move the stage: home, lift the base 1 mm, then go to a level."""
     _previewing(d, box)
-    status = lambda: d.find_element(By.ID, "machine-status").text       # noqa: E731
+    status = lambda: d.find_element(By.ID, "machine-status").text  # noqa: E731
     d.find_element(By.ID, "home").click()
     wait(d, lambda: "Ink level 60.00 mm" in status(), what="homed")
     d.find_element(By.CSS_SELECTOR, '.jogb[data-mm="1"]').click()
@@ -121,11 +134,13 @@ def _jogging(d, box):
 def _live_job(d, box):
     """A running job's page follows the job: it reloads itself, done, when the job ends."""
     assert d.find_element(By.ID, "job-live").is_displayed()
+
     def done_shown():
-        try:                        # the page reloads itself: an element may go stale under us
+        try:  # the page reloads itself: an element may go stale under us
             return d.find_element(By.ID, "job-status").text.lower() == "done"
         except WebDriverException:
             return False
+
     wait(d, done_shown, timeout=60, what="the job page updates itself to done")
     wait(d, lambda: d.find_elements(By.ID, "report"), what="the report after the reload")
 
@@ -147,9 +162,12 @@ def _playing(d):
     wait(d, lambda: canvas.get_attribute("data-ready") == "1", what="3D view")
     assert int(canvas.get_attribute("data-cuts")) > 0 and canvas.get_attribute("data-rapids") is not None
     d.execute_script("arguments[0].scrollIntoView({block: 'center'})", d.find_element(By.ID, "play"))
-    d.find_element(By.ID, "play").click()                    # from the end it starts again at 0
-    wait(d, lambda: 0 < float(d.find_element(By.ID, "playback").get_attribute("value")) < 1000,
-         what="the program playing")
+    d.find_element(By.ID, "play").click()  # from the end it starts again at 0
+    wait(
+        d,
+        lambda: 0 < float(d.find_element(By.ID, "playback").get_attribute("value")) < 1000,
+        what="the program playing",
+    )
     assert d.find_element(By.ID, "play").text == "Pause"
 
 
@@ -160,12 +178,17 @@ def _refused_setting(d, box):
     box_.clear()
     box_.send_keys("-1")
     d.find_element(By.ID, "settings-save").click()
-    wait(d, lambda: d.find_element(By.ID, "err-level_step_mm").text == "must be positive, got -1",
-         what="the refusal beside its field")
+    wait(
+        d,
+        lambda: d.find_element(By.ID, "err-level_step_mm").text == "must be positive, got -1",
+        what="the refusal beside its field",
+    )
     assert "Not saved" in d.find_element(By.ID, "settings-result").text
-    good = 1.0 if box["svc"].settings()["level_step_mm"] != 1.0 else 0.75    # the phone's run, then the desktop's
+    good = (
+        1.0 if box["svc"].settings()["level_step_mm"] != 1.0 else 0.75
+    )  # the phone's run, then the desktop's
     box_.clear()
-    box_.send_keys(str(good))                           # a good value: the bar says it is stored
+    box_.send_keys(str(good))  # a good value: the bar says it is stored
     d.find_element(By.ID, "settings-save").click()
     wait(d, lambda: d.find_element(By.ID, "settings-result").text.startswith("Saved at"), what="saved state")
     assert "saved" in d.find_element(By.ID, "savebar").get_attribute("class")
@@ -174,41 +197,96 @@ def _refused_setting(d, box):
 
 
 SCREENS = [
-    Screen("login", "/login", logged_in=False,
-           ready=lambda d, box: d.find_element(By.ID, "password")),
+    Screen("login", "/login", logged_in=False, ready=lambda d, box: d.find_element(By.ID, "password")),
     Screen("bench-idle", "/", ready=_previewing),
     Screen("bench-panel-moved", "/", ready=_jogging),
-    Screen("bench-confirm-start", "/", ready=_confirming,
-           after=lambda d, box: d.find_element(By.ID, "confirm-back").click()),
-    Screen("bench-scanning", "/", before=_scanning, after=_scan_done,
-           ready=lambda d, box: (_bench_ready(d, box),
-                                 wait(d, lambda: loaded_img(d, "#frame"), what="a camera frame"))),
-    Screen("bench-done", "/", ready=lambda d, box: wait(d, lambda: d.find_element(By.ID, "state").text.lower()
-                                                        == "done", what="done shown")),
-    Screen("jobs", "/jobs", ready=lambda d, box: wait(d, lambda: loaded_img(d, "img.thumb"), what="thumbnails")),
-    Screen("job", lambda box: f"/jobs/{box['job_id']}",
-           ready=lambda d, box: (wait(d, lambda: loaded_img(d, "img.errimg"), what="error picture"),
-                                 wait(d, lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready")
-                                      in ("1", "error"), what="3D view"))),
-    Screen("job-live", lambda box: f"/jobs/{box['svc'].state()['job_id']}", before=_scanning,
-           ready=_live_job, after=_scan_done),
+    Screen(
+        "bench-confirm-start",
+        "/",
+        ready=_confirming,
+        after=lambda d, box: d.find_element(By.ID, "confirm-back").click(),
+    ),
+    Screen(
+        "bench-scanning",
+        "/",
+        before=_scanning,
+        after=_scan_done,
+        ready=lambda d, box: (
+            _bench_ready(d, box),
+            wait(d, lambda: loaded_img(d, "#frame"), what="a camera frame"),
+        ),
+    ),
+    Screen(
+        "bench-done",
+        "/",
+        ready=lambda d, box: wait(
+            d, lambda: d.find_element(By.ID, "state").text.lower() == "done", what="done shown"
+        ),
+    ),
+    Screen(
+        "jobs", "/jobs", ready=lambda d, box: wait(d, lambda: loaded_img(d, "img.thumb"), what="thumbnails")
+    ),
+    Screen(
+        "job",
+        lambda box: f"/jobs/{box['job_id']}",
+        ready=lambda d, box: (
+            wait(d, lambda: loaded_img(d, "img.errimg"), what="error picture"),
+            wait(
+                d,
+                lambda: d.find_element(By.ID, "view3d").get_attribute("data-ready") in ("1", "error"),
+                what="3D view",
+            ),
+        ),
+    ),
+    Screen(
+        "job-live",
+        lambda box: f"/jobs/{box['svc'].state()['job_id']}",
+        before=_scanning,
+        ready=_live_job,
+        after=_scan_done,
+    ),
     Screen("job-delete", lambda box: f"/jobs/{box['job_id']}", ready=_deleting),
     Screen("job-playback", lambda box: f"/jobs/{box['job_id']}", ready=lambda d, box: _playing(d)),
     Screen("settings", "/settings", ready=lambda d, box: d.find_element(By.ID, "settings-form")),
-    Screen("settings-refused", "/settings", ready=lambda d, box: _refused_setting(d, box),
-           console_ok=("api/settings - Failed to load resource: the server responded with a status of 400",)),
-    Screen("system", "/system", ready=lambda d, box: wait(
-        d, lambda: d.find_element(By.ID, "log-text").text not in ("", "…"), what="the log shown")),
-    Screen("commission", "/commission", ready=lambda d, box: wait(
-        d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning step")),
-    Screen("calibration", "/calibration", ready=lambda d, box: wait(
-        d, lambda: d.find_element(By.ID, "cal-do").text.startswith("Do step"), what="calibration steps")),
-    Screen("api-docs", "/api/docs", ready=lambda d, box: wait(
-        d, lambda: len(d.find_elements(By.CSS_SELECTOR, ".api-op")) > 15, what="API docs")),
+    Screen(
+        "settings-refused",
+        "/settings",
+        ready=lambda d, box: _refused_setting(d, box),
+        console_ok=("api/settings - Failed to load resource: the server responded with a status of 400",),
+    ),
+    Screen(
+        "system",
+        "/system",
+        ready=lambda d, box: wait(
+            d, lambda: d.find_element(By.ID, "log-text").text not in ("", "…"), what="the log shown"
+        ),
+    ),
+    Screen(
+        "commission",
+        "/commission",
+        ready=lambda d, box: wait(
+            d, lambda: d.find_element(By.ID, "cm-step-title").text not in ("", "…"), what="commissioning step"
+        ),
+    ),
+    Screen(
+        "calibration",
+        "/calibration",
+        ready=lambda d, box: wait(
+            d, lambda: d.find_element(By.ID, "cal-do").text.startswith("Do step"), what="calibration steps"
+        ),
+    ),
+    Screen(
+        "api-docs",
+        "/api/docs",
+        ready=lambda d, box: wait(
+            d, lambda: len(d.find_elements(By.CSS_SELECTOR, ".api-op")) > 15, what="API docs"
+        ),
+    ),
 ]
 
 
 # -- the box and the browsers --------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def box(tmp_path_factory):
@@ -230,6 +308,7 @@ def make_driver(kind, tmp):
 def full_shot(d, kind, name) -> Path:
     """The whole page, not just the window: Chromium renders beyond the viewport for the capture."""
     import base64
+
     path = ART / f"screen-{kind}-{name}.png"
     got = d.execute_cdp_cmd("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": True})
     path.write_bytes(base64.b64decode(got["data"]))
@@ -247,13 +326,19 @@ def axe_violations(d) -> list[str]:
             id: v.id, impact: v.impact, help: v.help,
             nodes: v.nodes.slice(0, 4).map(n => n.target.join(' '))}))), e => done([{id: 'axe-error',
             impact: 'critical', help: String(e), nodes: []}]));""")
-    return [f"{v['id']} ({v['impact']}): {v['help']} at {', '.join(v['nodes'])}"
-            for v in res if v["impact"] in ("serious", "critical")]
+    return [
+        f"{v['id']} ({v['impact']}): {v['help']} at {', '.join(v['nodes'])}"
+        for v in res
+        if v["impact"] in ("serious", "critical")
+    ]
 
 
 def console_errors(d, allowed) -> list[str]:
-    return [e["message"] for e in d.get_log("browser")
-            if e["level"] == "SEVERE" and not any(a in e["message"] for a in allowed)]
+    return [
+        e["message"]
+        for e in d.get_log("browser")
+        if e["level"] == "SEVERE" and not any(a in e["message"] for a in allowed)
+    ]
 
 
 def log_in(d, box):
@@ -268,7 +353,7 @@ def check_screen(d, kind, screen: Screen, box) -> list[str]:
     path = screen.path(box) if callable(screen.path) else screen.path
     d.get(box["url"] + path)
     screen.ready(d, box)
-    time.sleep(0.3)                                 # late layout (images, fonts) settles
+    time.sleep(0.3)  # late layout (images, fonts) settles
     full_shot(d, kind, screen.name)
     found = d.execute_script(CHECKS)
     faults = [f"overflow: {x}" for x in found["overflow"]]
@@ -285,7 +370,7 @@ def test_every_screen_fits_is_labelled_and_passes_axe(box, kind, tmp_path):
     d = make_driver(kind, tmp_path)
     try:
         d.get(box["url"] + "/login")
-        if kind == "phone":         # the layout is the phone's width at its pixel ratio
+        if kind == "phone":  # the layout is the phone's width at its pixel ratio
             assert d.execute_script("return [window.innerWidth, window.devicePixelRatio]") == [390, 3]
         faults, seen, logged_in = [], [], False
         for screen in SCREENS:
@@ -306,8 +391,9 @@ def test_dark_mode_follows_the_phone_and_every_screen_still_passes_axe(box, tmp_
     keep their contrast: axe finds nothing serious on any screen."""
     d = make_driver("phone", tmp_path)
     try:
-        d.execute_cdp_cmd("Emulation.setEmulatedMedia",
-                          {"features": [{"name": "prefers-color-scheme", "value": "dark"}]})
+        d.execute_cdp_cmd(
+            "Emulation.setEmulatedMedia", {"features": [{"name": "prefers-color-scheme", "value": "dark"}]}
+        )
         log_in(d, box)
         faults = []
         paths = ["/", "/jobs", "/settings", "/system", "/commission", "/calibration", "/api/docs"]
@@ -317,7 +403,7 @@ def test_dark_mode_follows_the_phone_and_every_screen_still_passes_axe(box, tmp_
             d.get(box["url"] + path)
             time.sleep(0.5)
             background = d.execute_script("return getComputedStyle(document.body).backgroundColor")
-            rgb = [int(v) for v in background[background.index("(") + 1:-1].split(",")[:3]]
+            rgb = [int(v) for v in background[background.index("(") + 1 : -1].split(",")[:3]]
             if sum(rgb) > 3 * 60:
                 faults.append(f"{path}: the page stayed light ({background})")
             faults += [f"{path}: axe: {v}" for v in axe_violations(d)]

@@ -1,4 +1,5 @@
 """Access control of the web UI: login, CSRF, tokens, rate limit, traversal, uploads."""
+
 import io
 import json
 import os
@@ -10,8 +11,13 @@ import pytest
 from web_helpers import csrf_of, login, make_app, wait_state
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}
-SAMPLE = {"job_id": "20260101-000000-abcd", "name": "toolpath.gcode", "step": "home", "token_id": "0123abcd",
-          "action": "start"}
+SAMPLE = {
+    "job_id": "20260101-000000-abcd",
+    "name": "toolpath.gcode",
+    "step": "home",
+    "token_id": "0123abcd",
+    "action": "start",
+}
 
 
 @pytest.fixture
@@ -35,10 +41,20 @@ def unsafe_routes(app):
 def test_the_app_has_the_state_changing_routes_we_think(env):
     app, _, _ = env
     got = {(m, e) for m, _, e in unsafe_routes(app)}
-    for want in [("POST", "api.start_scan"), ("POST", "api.cancel_scan"), ("PATCH", "api.patch_settings"),
-                 ("POST", "api.usb_export"), ("POST", "api.upload_scan"), ("DELETE", "api.revoke_token"),
-                 ("POST", "api.calibrate"), ("POST", "api.commission"), ("POST", "api.commissioning_import"),
-                 ("POST", "api.commissioning_ink_changed"), ("POST", "pages.login"), ("POST", "pages.logout")]:
+    for want in [
+        ("POST", "api.start_scan"),
+        ("POST", "api.cancel_scan"),
+        ("PATCH", "api.patch_settings"),
+        ("POST", "api.usb_export"),
+        ("POST", "api.upload_scan"),
+        ("DELETE", "api.revoke_token"),
+        ("POST", "api.calibrate"),
+        ("POST", "api.commission"),
+        ("POST", "api.commissioning_import"),
+        ("POST", "api.commissioning_ink_changed"),
+        ("POST", "pages.login"),
+        ("POST", "pages.logout"),
+    ]:
         assert want in got
 
 
@@ -47,10 +63,10 @@ def test_every_state_changing_route_refuses_without_session_or_token(env):
     c = app.test_client()
     for method, url, endpoint in unsafe_routes(app):
         if endpoint == "pages.login":
-            continue        # public by nature; its CSRF check is tested below
+            continue  # public by nature; its CSRF check is tested below
         r = c.open(url, method=method, json={})
         assert r.status_code == 401, (method, url, r.status_code)
-    assert svc.state()["state"] == "idle"           # nothing was started
+    assert svc.state()["state"] == "idle"  # nothing was started
 
 
 def test_every_state_changing_route_refuses_a_session_without_csrf(env):
@@ -82,7 +98,7 @@ def test_bearer_token_works_without_csrf_and_revoked_or_bogus_tokens_do_not(env)
     r = c.post("/api/tokens", json={"name": "ci script"}, headers={"X-CSRF-Token": csrf})
     assert r.status_code == 201
     token, tid = r.get_json()["token"], r.get_json()["id"]
-    s = app.test_client()           # no cookies at all
+    s = app.test_client()  # no cookies at all
     auth = {"Authorization": f"Bearer {token}"}
     assert s.get("/api/state", headers=auth).status_code == 200
     assert s.post("/api/scan", json={}, headers=auth).status_code == 201
@@ -96,18 +112,29 @@ def test_bearer_token_works_without_csrf_and_revoked_or_bogus_tokens_do_not(env)
     # a token cannot mint tokens or change the password (those need a person at a browser)
     r2 = c.post("/api/tokens", json={"name": "b"}, headers={"X-CSRF-Token": csrf}).get_json()["token"]
     assert s.post("/api/tokens", json={}, headers={"Authorization": f"Bearer {r2}"}).status_code == 403
-    assert s.post("/api/password", json={"current": pw, "new": "x" * 12},
-                  headers={"Authorization": f"Bearer {r2}"}).status_code == 403
+    assert (
+        s.post(
+            "/api/password", json={"current": pw, "new": "x" * 12}, headers={"Authorization": f"Bearer {r2}"}
+        ).status_code
+        == 403
+    )
 
 
 def test_camera_and_live_stream_are_behind_the_login(env):
     app, svc, pw = env
     c = app.test_client()
-    for path in ("/api/frame.jpg", "/api/events", "/api/state", "/api/heightmap/live", "/api/jobs", "/api/settings"):
+    for path in (
+        "/api/frame.jpg",
+        "/api/events",
+        "/api/state",
+        "/api/heightmap/live",
+        "/api/jobs",
+        "/api/settings",
+    ):
         assert c.get(path).status_code == 401, path
     assert c.get("/").status_code == 302 and "/login" in c.get("/").headers["Location"]
     login(c, pw)
-    assert c.get("/api/frame.jpg").status_code == 204      # logged in, but no frame yet
+    assert c.get("/api/frame.jpg").status_code == 204  # logged in, but no frame yet
     # public: login page, health, the API description
     anon = app.test_client()
     for path in ("/login", "/api/health", "/api/openapi.json", "/static/app.css"):
@@ -119,7 +146,11 @@ def test_login_is_rate_limited_per_address(env):
     c = app.test_client()
     for i in range(5):
         tok = csrf_of(c)
-        r = c.post("/login", data={"password": f"guess{i}", "csrf_token": tok}, environ_base={"REMOTE_ADDR": "10.9.9.9"})
+        r = c.post(
+            "/login",
+            data={"password": f"guess{i}", "csrf_token": tok},
+            environ_base={"REMOTE_ADDR": "10.9.9.9"},
+        )
         assert r.status_code == 401
     tok = csrf_of(c)
     r = c.post("/login", data={"password": pw, "csrf_token": tok}, environ_base={"REMOTE_ADDR": "10.9.9.9"})
@@ -127,12 +158,13 @@ def test_login_is_rate_limited_per_address(env):
     assert int(r.headers["Retry-After"]) > 0
     assert c.get("/api/state").status_code == 401
     other = app.test_client()
-    login(other, pw, addr="10.9.9.10")          # another address is not locked out
+    login(other, pw, addr="10.9.9.10")  # another address is not locked out
     assert other.get("/api/state").status_code == 200
 
 
 def test_limiter_window_expires():
     from appliance.web.auth import LoginLimiter
+
     now = [0.0]
     lim = LoginLimiter(attempts=3, window_s=60, clock=lambda: now[0])
     for _ in range(3):
@@ -182,11 +214,26 @@ def test_password_change_logs_out_other_sessions(env):
     a, b = app.test_client(), app.test_client()
     ca = login(a, pw)
     login(b, pw, addr="127.0.0.2")
-    assert a.post("/api/password", json={"current": "nope-nope", "new": "a-new-password"},
-                  headers={"X-CSRF-Token": ca}).status_code == 403
-    assert a.post("/api/password", json={"current": pw, "new": "short"}, headers={"X-CSRF-Token": ca}).status_code == 400
-    assert a.post("/api/password", json={"current": pw, "new": "a-new-password"},
-                  headers={"X-CSRF-Token": ca}).status_code == 200
+    assert (
+        a.post(
+            "/api/password",
+            json={"current": "nope-nope", "new": "a-new-password"},
+            headers={"X-CSRF-Token": ca},
+        ).status_code
+        == 403
+    )
+    assert (
+        a.post(
+            "/api/password", json={"current": pw, "new": "short"}, headers={"X-CSRF-Token": ca}
+        ).status_code
+        == 400
+    )
+    assert (
+        a.post(
+            "/api/password", json={"current": pw, "new": "a-new-password"}, headers={"X-CSRF-Token": ca}
+        ).status_code
+        == 200
+    )
     assert a.get("/api/state").status_code == 200
     assert b.get("/api/state").status_code == 401
     fresh = app.test_client()
@@ -204,8 +251,16 @@ def test_login_never_redirects_off_the_box(env):
         assert r.status_code == 302 and r.headers["Location"] in ("/", "http://localhost/"), target
 
 
-TRAVERSALS = ["../../../../etc/passwd", "..%2f..%2f..%2fsecret.txt", "..", "%2e%2e", "..%5csecret.txt",
-              ".hidden", "a/../../secret.txt", "%2e%2e%2f%2e%2e%2fsecret.txt"]
+TRAVERSALS = [
+    "../../../../etc/passwd",
+    "..%2f..%2f..%2fsecret.txt",
+    "..",
+    "%2e%2e",
+    "..%5csecret.txt",
+    ".hidden",
+    "a/../../secret.txt",
+    "%2e%2e%2f%2e%2e%2fsecret.txt",
+]
 
 
 def test_dot_dot_in_any_path_parameter_is_refused(env, tmp_path):
@@ -219,15 +274,25 @@ def test_dot_dot_in_any_path_parameter_is_refused(env, tmp_path):
     (tmp_path / "bench" / "jobs" / "secret.txt").write_text(secret)
     urls = []
     for bad in TRAVERSALS:
-        urls += [f"/api/jobs/{job_id}/files/{bad}", f"/api/jobs/{bad}", f"/api/jobs/{bad}/files/toolpath.gcode",
-                 f"/api/jobs/{bad}/archive.zip", f"/jobs/{bad}", f"/static/{bad}"]
+        urls += [
+            f"/api/jobs/{job_id}/files/{bad}",
+            f"/api/jobs/{bad}",
+            f"/api/jobs/{bad}/files/toolpath.gcode",
+            f"/api/jobs/{bad}/archive.zip",
+            f"/jobs/{bad}",
+            f"/static/{bad}",
+        ]
     for url in urls:
         r = c.get(url)
         assert r.status_code in (400, 404), (url, r.status_code)
         assert secret.encode() not in r.data and b"root:" not in r.data, url
     for bad in TRAVERSALS:
-        for method, url in (("POST", f"/api/jobs/{bad}/resume"), ("POST", f"/api/jobs/{bad}/usb"),
-                            ("POST", f"/api/calibration/{bad}"), ("DELETE", f"/api/tokens/{bad}")):
+        for method, url in (
+            ("POST", f"/api/jobs/{bad}/resume"),
+            ("POST", f"/api/jobs/{bad}/usb"),
+            ("POST", f"/api/calibration/{bad}"),
+            ("DELETE", f"/api/tokens/{bad}"),
+        ):
             r = c.open(url, method=method, json={}, headers={"X-CSRF-Token": csrf})
             assert r.status_code in (400, 404, 405), (method, url, r.status_code)
     # the USB export's file name goes through the same checks
@@ -237,21 +302,31 @@ def test_dot_dot_in_any_path_parameter_is_refused(env, tmp_path):
 
 # -- uploads -------------------------------------------------------------------------------
 
+
 def png_header(width, height):
     """A PNG's signature and IHDR: all the web reads of a frame before unpacking it."""
     import struct
     import zlib
+
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
-            + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)))
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + struct.pack(">I", 13)
+        + b"IHDR"
+        + ihdr
+        + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+    )
 
 
 def scan_zip(frames=2, prefix="", extra=None, scan=None):
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as z:
-        doc = scan or {"format": "inkslice.scan/1", "units": "mm",
-                       "camera": {"width": 4, "height": 4, "homography": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
-                       "frames": [{"file": f"frames/{i:04d}.png", "level_mm": i * 0.5} for i in range(frames)]}
+        doc = scan or {
+            "format": "inkslice.scan/1",
+            "units": "mm",
+            "camera": {"width": 4, "height": 4, "homography": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+            "frames": [{"file": f"frames/{i:04d}.png", "level_mm": i * 0.5} for i in range(frames)],
+        }
         z.writestr(prefix + "scan.json", json.dumps(doc))
         for i in range(frames):
             z.writestr(f"{prefix}frames/{i:04d}.png", png_header(4, 4))
@@ -269,8 +344,12 @@ def test_uploads_valid_ones_become_jobs(tmp_path):
     app, svc = make_app(tmp_path, max_upload_bytes=64 * 1024, max_unzipped_bytes=256 * 1024)
     c = app.test_client()
     csrf = login(c, app.config["FIRST_RUN_PASSWORD"])
-    r = c.post("/api/uploads/scan", data={"file": (io.BytesIO(scan_zip(prefix="myscan/")), "scan.zip")},
-               headers={"X-CSRF-Token": csrf}, content_type="multipart/form-data")
+    r = c.post(
+        "/api/uploads/scan",
+        data={"file": (io.BytesIO(scan_zip(prefix="myscan/")), "scan.zip")},
+        headers={"X-CSRF-Token": csrf},
+        content_type="multipart/form-data",
+    )
     assert r.status_code == 201, r.get_json()
     job_id = r.get_json()["job_id"]
     assert svc.job(job_id)["status"] == "done"
@@ -280,8 +359,21 @@ def test_uploads_valid_ones_become_jobs(tmp_path):
     svc.close()
 
 
-@pytest.mark.parametrize("case", ["oversized", "not-a-zip", "truncated", "dotdot", "absolute", "bomb",
-                                  "no-scan-json", "bad-json", "missing-frame", "symlink"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "oversized",
+        "not-a-zip",
+        "truncated",
+        "dotdot",
+        "absolute",
+        "bomb",
+        "no-scan-json",
+        "bad-json",
+        "missing-frame",
+        "symlink",
+    ],
+)
 def test_uploads_bad_ones_are_refused_and_leave_nothing(tmp_path, case):
     app, svc = make_app(tmp_path, max_upload_bytes=64 * 1024, max_unzipped_bytes=256 * 1024)
     c = app.test_client()
@@ -301,7 +393,7 @@ def test_uploads_bad_ones_are_refused_and_leave_nothing(tmp_path, case):
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("scan.json", json.dumps({"frames": [{"file": "frames/0000.png", "level_mm": 0}]}))
-            z.writestr("frames/0000.png", b"\0" * (2 * 1024 * 1024))     # 2 MiB of zeros packs to ~2 KB
+            z.writestr("frames/0000.png", b"\0" * (2 * 1024 * 1024))  # 2 MiB of zeros packs to ~2 KB
         body, want = buf.getvalue(), 400
         assert len(body) < 64 * 1024
     elif case == "no-scan-json":
@@ -325,8 +417,12 @@ def test_uploads_bad_ones_are_refused_and_leave_nothing(tmp_path, case):
             z.writestr(info, "/etc/passwd")
         body, want = buf.getvalue(), 400
     jobs_before = len(svc.jobs())
-    r = c.post("/api/uploads/scan", data={"file": (io.BytesIO(body), "scan.zip")},
-               headers={"X-CSRF-Token": csrf}, content_type="multipart/form-data")
+    r = c.post(
+        "/api/uploads/scan",
+        data={"file": (io.BytesIO(body), "scan.zip")},
+        headers={"X-CSRF-Token": csrf},
+        content_type="multipart/form-data",
+    )
     assert r.status_code == want, (case, r.status_code, r.get_data(as_text=True))
     assert "error" in r.get_json()
     assert uploads_left(tmp_path) == [], case

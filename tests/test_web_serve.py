@@ -1,4 +1,5 @@
 """`inkslice serve --fake` as a real process: prints the URL and the first-run password, serves over HTTP."""
+
 import http.cookiejar
 import re
 import subprocess
@@ -11,9 +12,25 @@ import pytest
 
 
 def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "appliance.cli", "serve", "--fake", "--host", "127.0.0.1",
-                             "--port", "0", "--data", str(tmp_path), "--no-usb"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "appliance.cli",
+            "serve",
+            "--fake",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--data",
+            str(tmp_path),
+            "--no-usb",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         url_line = proc.stdout.readline()
         pw_line = proc.stdout.readline()
@@ -35,10 +52,18 @@ def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
         proc.terminate()
         proc.wait(timeout=10)
     # a second start on the same data folder makes no new password
-    out = subprocess.run([sys.executable, "-c", "from appliance.web.app import create_app;"
-                          "from appliance.web.fake import FakeBenchService as F;"
-                          f"a=create_app(F({str(tmp_path / 'x')!r}),{{'data_dir':{str(tmp_path)!r},'usb':None}});"
-                          "print(a.config['FIRST_RUN_PASSWORD'])"], capture_output=True, text=True)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from appliance.web.app import create_app;"
+            "from appliance.web.fake import FakeBenchService as F;"
+            f"a=create_app(F({str(tmp_path / 'x')!r}),{{'data_dir':{str(tmp_path)!r},'usb':None}});"
+            "print(a.config['FIRST_RUN_PASSWORD'])",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert out.stdout.strip() == "None", out.stderr
 
 
@@ -49,6 +74,7 @@ def test_a_closed_live_stream_frees_its_slot_under_waitress(tmp_path):
     from appliance.web.auth import Credentials
     from appliance.web.demo import start
     from appliance.web.fake import FakeBenchService
+
     svc = FakeBenchService(tmp_path / "bench")
     run = start(svc, tmp_path / "data", config={"usb": None, "max_streams": 1})
     token = Credentials(tmp_path / "data" / "web").create_token("t")[1]
@@ -63,10 +89,10 @@ def test_a_closed_live_stream_frees_its_slot_under_waitress(tmp_path):
         c1, r1 = open_stream()
         assert r1.status == 200 and r1.readline().startswith(b"retry:")
         c2, r2 = open_stream()
-        assert r2.status == 503             # the one slot is taken
+        assert r2.status == 503  # the one slot is taken
         c2.close()
         r1.close()
-        c1.close()                          # the phone goes away mid-stream
+        c1.close()  # the phone goes away mid-stream
         end = time.monotonic() + 5
         while True:
             c3, r3 = open_stream()

@@ -1,5 +1,6 @@
 """The box tells a webhook when a job finishes or fails, and a backup of settings and calibration
 taken on one data folder restores the same settings and calibration on another."""
+
 import json
 import threading
 from http.server import BaseHTTPRequestHandler, HTTPServer
@@ -21,8 +22,13 @@ def receiver():
     class Handler(BaseHTTPRequestHandler):
         def do_POST(self):
             body = self.rfile.read(int(self.headers["Content-Length"]))
-            got.append({"auth": self.headers.get("Authorization"), "type": self.headers.get("Content-Type"),
-                        "body": json.loads(body)})
+            got.append(
+                {
+                    "auth": self.headers.get("Authorization"),
+                    "type": self.headers.get("Content-Type"),
+                    "body": json.loads(body),
+                }
+            )
             self.send_response(204)
             self.end_headers()
 
@@ -37,6 +43,7 @@ def receiver():
 
 def wait_for(got, n, timeout=10.0):
     import time
+
     end = time.monotonic() + timeout
     while len(got) < n and time.monotonic() < end:
         time.sleep(0.02)
@@ -51,6 +58,7 @@ def test_a_webhook_receives_finished_and_failed_events(tmp_path, receiver):
         if outcome["fail"]:
             raise InkSliceError(scan, "no waterline found in any frame")
         from appliance.daemon.processing import in_process
+
         return in_process(scan, out, options, stop)
 
     svc, _ = service(tmp_path, processor=processor)
@@ -77,11 +85,12 @@ def test_a_webhook_receives_finished_and_failed_events(tmp_path, receiver):
 def test_no_webhook_address_sends_nothing_and_a_dead_receiver_fails_no_job(tmp_path):
     svc, _ = service(tmp_path)
     try:
-        assert svc.webhook.send("finished", None, "x") is False         # the default: no address
+        assert svc.webhook.send("finished", None, "x") is False  # the default: no address
         svc.update_settings({"webhook_url": "http://127.0.0.1:9/nobody-listens"})
         job = wait_final(svc, svc.start_scan(SCAN))
         assert job["status"] == "done"
         import time
+
         end = time.monotonic() + 10
         while svc.webhook.last() is None and time.monotonic() < end:
             time.sleep(0.05)
@@ -92,7 +101,9 @@ def test_no_webhook_address_sends_nothing_and_a_dead_receiver_fails_no_job(tmp_p
 
 def calibrate(store):
     """A commissioned box's history: level zero, the tank, an ink change, the meniscus."""
-    store.add_calibration({"kind": "level_zero", "method": "guided", "result": {"level_at_home_mm": 57.25}}, when=1e9)
+    store.add_calibration(
+        {"kind": "level_zero", "method": "guided", "result": {"level_at_home_mm": 57.25}}, when=1e9
+    )
     store.add_calibration({"kind": "tank", "method": "typed", "result": {"area_mm2": 22500.0}}, when=1e9 + 10)
     store.add_calibration({"kind": "ink_changed"}, when=1e9 + 20)
     store.add_calibration({"kind": "meniscus", "method": "ball", "result": {"a": 1.5}}, when=1e9 + 30)
@@ -103,17 +114,20 @@ def test_a_backup_restored_on_another_data_folder_gives_the_same_settings_and_ca
     two, _ = service(tmp_path / "two")
     try:
         calibrate(one.store)
-        one.update_settings({"level_at_home_mm": 57.25, "dialect": "fanuc", "grid": 80, "webhook_url": "https://x/y"})
-        two.update_settings({"grid": 12})                           # whatever was there goes
+        one.update_settings(
+            {"level_at_home_mm": 57.25, "dialect": "fanuc", "grid": 80, "webhook_url": "https://x/y"}
+        )
+        two.update_settings({"grid": 12})  # whatever was there goes
         two.store.add_calibration({"kind": "tank", "method": "typed", "result": {"area_mm2": 1.0}})
-        doc = json.loads(json.dumps(one.backup()))                  # as a downloaded file carries it
+        doc = json.loads(json.dumps(one.backup()))  # as a downloaded file carries it
         assert two.restore(doc) == {"settings": len(S.DEFAULTS), "calibration": 4}
         assert two.settings() == one.settings()
         assert two.store.calibrations() == one.store.calibrations()
         assert in_force(two.store) == in_force(one.store)
         assert two.export_commissioning()["results"] == one.export_commissioning()["results"]
-        assert [s["status"] for s in two.commissioning()["steps"]] == \
-            [s["status"] for s in one.commissioning()["steps"]]
+        assert [s["status"] for s in two.commissioning()["steps"]] == [
+            s["status"] for s in one.commissioning()["steps"]
+        ]
     finally:
         one.close()
         two.close()
@@ -125,9 +139,11 @@ def test_a_bad_backup_is_refused_and_changes_nothing(tmp_path):
         calibrate(svc.store)
         before = (svc.settings(), svc.store.calibrations())
         good = svc.backup()
-        for bad, says in [({"format": "x"}, "not an InkSlice backup"),
-                          ({**good, "settings": {**good["settings"], "grid": 1}}, "grid: must be a whole number"),
-                          ({**good, "calibration": [{"kind": "tank"}]}, "calibration record 0 has no date")]:
+        for bad, says in [
+            ({"format": "x"}, "not an InkSlice backup"),
+            ({**good, "settings": {**good["settings"], "grid": 1}}, "grid: must be a whole number"),
+            ({**good, "calibration": [{"kind": "tank"}]}, "calibration record 0 has no date"),
+        ]:
             with pytest.raises(SettingError) as e:
                 svc.restore(bad)
             assert says in str(e.value)
@@ -151,6 +167,7 @@ def test_the_cli_backs_up_and_restores_a_data_folder(tmp_path, capsys):
 def test_the_settings_page_test_button_reaches_the_receiver_through_the_web(tmp_path, receiver):
     from appliance.web import create_app
     from web_helpers import login
+
     url, got = receiver
     svc, _ = service(tmp_path)
     try:
@@ -158,7 +175,10 @@ def test_the_settings_page_test_button_reaches_the_receiver_through_the_web(tmp_
         app.config["TESTING"] = True
         c = app.test_client()
         h = {"X-CSRF-Token": login(c, app.config["FIRST_RUN_PASSWORD"])}
-        assert c.post("/api/webhook/test", headers=h).get_json() == {"ok": False, "problem": "no webhook address is set"}
+        assert c.post("/api/webhook/test", headers=h).get_json() == {
+            "ok": False,
+            "problem": "no webhook address is set",
+        }
         c.patch("/api/settings", json={"webhook_url": url}, headers=h)
         assert c.post("/api/webhook/test", headers=h).get_json() == {"ok": True, "problem": ""}
         assert got[-1]["body"]["event"] == "test" and got[-1]["auth"] is None

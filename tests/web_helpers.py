@@ -1,4 +1,5 @@
 """Shared bits for the web tests: an app on a FakeBenchService, logged-in clients."""
+
 import re
 import time
 
@@ -9,8 +10,9 @@ CSRF_RE = re.compile(r'name="csrf-token" content="([^"]+)"')
 
 
 def make_app(tmp_path, fast=True, **config):
-    svc = FakeBenchService(tmp_path / "bench", level_s=0.01 if fast else 0.15, home_s=0.01, process_s=0.01,
-                           frame_px=96)
+    svc = FakeBenchService(
+        tmp_path / "bench", level_s=0.01 if fast else 0.15, home_s=0.01, process_s=0.01, frame_px=96
+    )
     cfg = {"data_dir": str(tmp_path / "data")}
     cfg.update(config)
     app = create_app(svc, cfg)
@@ -24,7 +26,9 @@ def csrf_of(client, path="/login"):
 
 def login(client, password, addr="127.0.0.1"):
     tok = csrf_of(client)
-    r = client.post("/login", data={"password": password, "csrf_token": tok}, environ_base={"REMOTE_ADDR": addr})
+    r = client.post(
+        "/login", data={"password": password, "csrf_token": tok}, environ_base={"REMOTE_ADDR": addr}
+    )
     assert r.status_code == 302, r.get_data(as_text=True)
     return csrf_of(client, "/")
 

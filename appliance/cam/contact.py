@@ -22,6 +22,7 @@ Every value tried is Z(p + u) - h(|u|) for a real offset |u| <= R, so it is a
 lower bound of the true tip: taking the max with the lattice answer can only
 move the tip towards the true one, never above it (no scallop added).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -29,7 +30,7 @@ import numpy as np
 from .cutters import Cutter
 from .sampling import Sampler
 
-STEEP = 0.8          # |grad Z| above which a tip is polished (~39 degrees)
+STEEP = 0.8  # |grad Z| above which a tip is polished (~39 degrees)
 _K = np.arange(-2, 3)
 _PU, _PV = [a.ravel() for a in np.meshgrid(_K, _K)]
 
@@ -71,7 +72,7 @@ def polish_rim(sampler: Sampler, cutter: Cutter, x, y, tip, chunk=20_000):
     R = cutter.radius
     ang = 2 * np.pi * np.arange(_RIM) / _RIM
     for s in range(0, x.size, chunk):
-        px, py = x[s:s + chunk, None], y[s:s + chunk, None]
+        px, py = x[s : s + chunk, None], y[s : s + chunk, None]
         f = sampler.z(px + R * np.cos(ang), py + R * np.sin(ang))
         j = np.argmax(f, axis=1)
         r = np.arange(f.shape[0])
@@ -84,7 +85,7 @@ def polish_rim(sampler: Sampler, cutter: Cutter, x, y, tip, chunk=20_000):
             best = np.maximum(best, f[r, j])
             th = a[r, j]
             step /= 4
-        out[s:s + chunk] = np.maximum(out[s:s + chunk], best)
+        out[s : s + chunk] = np.maximum(out[s : s + chunk], best)
     return out.reshape(shape)
 
 
@@ -133,7 +134,7 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
             cx, cy = ox[r, j], oy[r, j]
             best = np.maximum(best, fb)
             sp /= 4
-        out[idx[k0]] = np.maximum(best[:k0.size], best[k0.size:])
+        out[idx[k0]] = np.maximum(best[: k0.size], best[k0.size :])
     return out.reshape(shape)
 
 

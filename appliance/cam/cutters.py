@@ -23,6 +23,7 @@ Named cutters (`--cutter ball6`, `flat3`, `bull6r1`) make the command line
 short; the default finishing cutter is a 6 mm ball, the cutter most sculptured
 surfaces are finished with.
 """
+
 from __future__ import annotations
 
 import re
@@ -48,8 +49,11 @@ class Cutter:
         if not np.isfinite(self.diameter) or self.diameter <= 0:
             raise SettingError("cutter", f"diameter must be > 0 mm, got {self.diameter}")
         if not (0 <= self.corner_radius <= self.radius + 1e-12):
-            raise SettingError("cutter", f"corner radius must be between 0 and the radius "
-                                         f"{self.radius:g} mm, got {self.corner_radius}")
+            raise SettingError(
+                "cutter",
+                f"corner radius must be between 0 and the radius "
+                f"{self.radius:g} mm, got {self.corner_radius}",
+            )
         if not np.isfinite(self.flute_length) or self.flute_length <= 0:
             raise SettingError("cutter", f"flute length must be > 0 mm, got {self.flute_length}")
         if int(self.flutes) < 1:
@@ -75,8 +79,7 @@ class Cutter:
         return f"{self.kind}{d}"
 
     def describe(self) -> str:
-        return (f"{self.kind} D{self.diameter:.3f} CR{self.corner_radius:.3f} "
-                f"FL{self.flute_length:.1f}")
+        return f"{self.kind} D{self.diameter:.3f} CR{self.corner_radius:.3f} FL{self.flute_length:.1f}"
 
     def profile(self, r):
         """Height of the lower surface above the tip at radial distance r (mm).
@@ -100,8 +103,7 @@ class Cutter:
         Its lower surface is the true cutter's, offset outward by `leave`, and
         its tip is `leave` below the true tip.
         """
-        return Cutter(self.diameter + 2 * leave, self.corner_radius + leave,
-                      self.flute_length, self.flutes)
+        return Cutter(self.diameter + 2 * leave, self.corner_radius + leave, self.flute_length, self.flutes)
 
 
 _NAME = re.compile(r"^(ball|flat|bull)(\d+(?:\.\d+)?)(?:r(\d+(?:\.\d+)?))?$")
@@ -111,8 +113,11 @@ def parse_cutter(text: str, flute_length: float | None = None, flutes: int = 2) 
     """`ball6`, `flat3`, `bull6r1` (diameter in mm, corner radius after r)."""
     m = _NAME.match(str(text).strip().lower())
     if not m:
-        raise SettingError("--cutter", f"{text!r} is not a cutter name; use e.g. ball6, flat3 or bull6r1 "
-                                       "(diameter in mm, bull corner radius after r)")
+        raise SettingError(
+            "--cutter",
+            f"{text!r} is not a cutter name; use e.g. ball6, flat3 or bull6r1 "
+            "(diameter in mm, bull corner radius after r)",
+        )
     kind, d, rc = m.group(1), float(m.group(2)), m.group(3)
     if kind == "ball":
         if rc is not None:
@@ -124,10 +129,14 @@ def parse_cutter(text: str, flute_length: float | None = None, flutes: int = 2) 
         corner = 0.0
     else:
         if rc is None:
-            raise SettingError("--cutter", f"{text!r}: a bull-nose cutter needs a corner radius, e.g. bull6r1")
+            raise SettingError(
+                "--cutter", f"{text!r}: a bull-nose cutter needs a corner radius, e.g. bull6r1"
+            )
         corner = float(rc)
         if corner <= 0 or corner >= d / 2:
-            raise SettingError("--cutter", f"{text!r}: bull-nose corner radius must be between 0 and "
-                                           f"{d / 2:g} mm (exclusive)")
+            raise SettingError(
+                "--cutter",
+                f"{text!r}: bull-nose corner radius must be between 0 and {d / 2:g} mm (exclusive)",
+            )
     fl = DEFAULT_FLUTE_FACTOR * d if flute_length is None else float(flute_length)
     return Cutter(d, corner, fl, flutes)

@@ -5,14 +5,53 @@ output in the tests; GRBL and Fanuc controllers are not available, so these
 checkers encode their documented rules (and the traps listed in
 docs/method.md). Each returns a list of problems, "line N: what", empty when clean.
 """
+
 from __future__ import annotations
 
 import re
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 
-GRBL_G = {0, 1, 2, 3, 4, 10, 17, 18, 19, 20, 21, 28, 28.1, 30, 30.1, 38.2, 38.3, 38.4, 38.5, 40, 43.1,
-          49, 53, 54, 55, 56, 57, 58, 59, 61, 80, 90, 91, 91.1, 92, 92.1, 93, 94}
+GRBL_G = {
+    0,
+    1,
+    2,
+    3,
+    4,
+    10,
+    17,
+    18,
+    19,
+    20,
+    21,
+    28,
+    28.1,
+    30,
+    30.1,
+    38.2,
+    38.3,
+    38.4,
+    38.5,
+    40,
+    43.1,
+    49,
+    53,
+    54,
+    55,
+    56,
+    57,
+    58,
+    59,
+    61,
+    80,
+    90,
+    91,
+    91.1,
+    92,
+    92.1,
+    93,
+    94,
+}
 GRBL_M = {0, 1, 2, 3, 4, 5, 7, 8, 9, 30}
 GRBL_LETTERS = set("GMFSTXYZIJKLNPR")
 

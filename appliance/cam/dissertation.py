@@ -10,6 +10,7 @@ positions, so any real cutter gouges concave regions. appliance.cam's
 finishing programs exist to fix that; this one is here so the difference can
 be measured (inkslice verify).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,9 @@ import numpy as np
 from ..surface.heightmap import HeightMap
 
 
-def dissertation_gcode(hm: HeightMap, stock_top: float | None = None,
-                       spindle: int = 1500, feed: int = 1500) -> str:
+def dissertation_gcode(
+    hm: HeightMap, stock_top: float | None = None, spindle: int = 1500, feed: int = 1500
+) -> str:
     top = float(np.nanmax(hm.z)) if stock_top is None else float(stock_top)
     lines = ["G90 G21", f"M03 S{spindle}"]
     first = True

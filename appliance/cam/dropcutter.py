@@ -31,6 +31,7 @@ How we make it fast and exact enough
 Lines may run in any direction (e1 = (cos a, sin a)); the disc is rotation
 invariant, so nothing else changes.
 """
+
 from __future__ import annotations
 
 import functools
@@ -43,10 +44,10 @@ from .cutters import Cutter
 from .sampling import Sampler
 from .segments import min_over_segment
 
-DEFAULT_RESOLUTION = 0.1          # mm, spacing of the offset lattice and of toolpath points
-_SLAB_BUDGET = 750_000            # slab elements per chunk: reading the map there takes ~15 arrays
-                                  # of its size (3 M elements were 370 MB of a finishing plan)
-_CACHE_ELEMENTS = 65_536          # float32 elements of one slice operation's arrays (256 kB: in L2)
+DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath points
+_SLAB_BUDGET = 750_000  # slab elements per chunk: reading the map there takes ~15 arrays
+# of its size (3 M elements were 370 MB of a finishing plan)
+_CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 
 @functools.lru_cache(maxsize=16)
@@ -64,8 +65,15 @@ def _offsets(cutter: Cutter, d: float):
     return groups, m
 
 
-def drop_lines(sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: float = DEFAULT_RESOLUTION,
-               stride: int = 1):
+def drop_lines(
+    sampler: Sampler,
+    cutter: Cutter,
+    origins,
+    direction,
+    n: int,
+    d: float = DEFAULT_RESOLUTION,
+    stride: int = 1,
+):
     """Tip heights at o_l + i d e1 (i = 0..n-1, every `stride`-th) for each origin o_l.
 
     Shape (L, len(range(0, n, stride))). The offset lattice keeps spacing d
@@ -91,14 +99,14 @@ def drop_lines(sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: 
     ox = c[None, :] * e1[0] + b[:, None] * e2[0]
     oy = c[None, :] * e1[1] + b[:, None] * e2[1]
     for s in range(0, L, chunk):
-        o = origins[s:s + chunk]
+        o = origins[s : s + chunk]
         if axis is None:
             slab = sampler.z(o[:, 0, None, None] + ox[None], o[:, 1, None, None] + oy[None])
             table, index = slab.reshape(-1, slab.shape[-1]), np.arange(slab.shape[0] * slab.shape[1])
             index = index.reshape(slab.shape[:2])
         else:
             table, index = _axis_rows(sampler, o, axis, b, c)
-        out[s:s + chunk] = _dilate_slab(table, index, groups, m, n, stride)
+        out[s : s + chunk] = _dilate_slab(table, index, groups, m, n, stride)
     if sampler.edges is not None:
         along = d * np.arange(0, n, stride)
         px = origins[:, 0, None] + along[None, :] * e1[0]
@@ -156,8 +164,9 @@ def _patches(a, b, size):
     lo = np.minimum(a[order, :2], b[order, :2])
     hi = np.maximum(a[order, :2], b[order, :2])
     z = np.maximum(a[order, 2], b[order, 2])
-    box = np.column_stack([np.minimum.reduceat(lo, first), np.maximum.reduceat(hi, first),
-                           np.maximum.reduceat(z, first)])
+    box = np.column_stack(
+        [np.minimum.reduceat(lo, first), np.maximum.reduceat(hi, first), np.maximum.reduceat(z, first)]
+    )
     return order, first, count, box
 
 
@@ -320,11 +329,11 @@ def _dilate_slab(table, index, groups, m, n, stride=1):
         row = z[index[:, m]] if b == 0 else np.maximum(z[index[:, m + b]], z[index[:, m - b]])
         for a, h in zip(avals.tolist(), hvals.tolist()):
             if a < 0:
-                continue          # folded into +a: h is symmetric in a as well
+                continue  # folded into +a: h is symmetric in a as well
             if a == 0:
-                np.subtract(row[:, m:m + n:stride], np.float32(h), out=tmp)
+                np.subtract(row[:, m : m + n : stride], np.float32(h), out=tmp)
             else:
-                np.maximum(row[:, m + a:m + a + n:stride], row[:, m - a:m - a + n:stride], out=tmp)
+                np.maximum(row[:, m + a : m + a + n : stride], row[:, m - a : m - a + n : stride], out=tmp)
                 np.subtract(tmp, np.float32(h), out=tmp)
             np.maximum(res, tmp, out=res)
     return res.astype(np.float64) + ref
@@ -345,7 +354,7 @@ def _dilate_columns(table, index, groups, m, n):
     # rows b and -b folded: F[:, b] = max(row m + b, row m - b)
     F = np.empty((L, m + 1, N), np.float32)
     F[:, 0] = z[index[:, m]]
-    np.maximum(z[index[:, m + 1:]], z[index[:, m - 1::-1][:, :m]], out=F[:, 1:])
+    np.maximum(z[index[:, m + 1 :]], z[index[:, m - 1 :: -1][:, :m]], out=F[:, 1:])
     H = _profile_table(groups, m)
     res = np.full((L, n), -np.inf, np.float32)
     for a in range(m + 1):
@@ -354,9 +363,9 @@ def _dilate_columns(table, index, groups, m, n):
             continue
         col = (F[:, live] - H[a, live][None, :, None]).max(axis=1)
         if a == 0:
-            np.maximum(res, col[:, m:m + n], out=res)
+            np.maximum(res, col[:, m : m + n], out=res)
         else:
-            np.maximum(res, np.maximum(col[:, m + a:m + a + n], col[:, m - a:m - a + n]), out=res)
+            np.maximum(res, np.maximum(col[:, m + a : m + a + n], col[:, m - a : m - a + n]), out=res)
     return res.astype(np.float64) + ref
 
 

@@ -18,6 +18,7 @@ handbook; they err on the slow side. `--feed`, `--plunge-feed` and
 | wood      | 300      | 0.008  | 0.4    |
 | foam      | 300      | 0.015  | 0.5    |
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,12 +41,18 @@ DEFAULT_MAX_RPM = 24000.0
 @dataclass(frozen=True)
 class Conditions:
     rpm: float
-    feed: float        # mm/min, cutting
-    plunge: float      # mm/min, downward into unknown stock
+    feed: float  # mm/min, cutting
+    plunge: float  # mm/min, downward into unknown stock
 
 
-def conditions(cutter: Cutter, material: str = DEFAULT_MATERIAL, max_rpm: float = DEFAULT_MAX_RPM,
-               feed: float | None = None, plunge: float | None = None, rpm: float | None = None) -> Conditions:
+def conditions(
+    cutter: Cutter,
+    material: str = DEFAULT_MATERIAL,
+    max_rpm: float = DEFAULT_MAX_RPM,
+    feed: float | None = None,
+    plunge: float | None = None,
+    rpm: float | None = None,
+) -> Conditions:
     if material not in MATERIALS:
         raise SettingError("material", f"unknown material {material!r}; known: {', '.join(MATERIALS)}")
     vc, k, pf = MATERIALS[material]

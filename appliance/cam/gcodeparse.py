@@ -14,6 +14,7 @@ several tools changes them with `Tn M6` and applies the tool-length offset
 with `G43 Hn` (program Z is then the tool tip, as it is for one tool): each
 move carries the number of the tool in the spindle (0 before the first change).
 """
+
 from __future__ import annotations
 
 import re
@@ -30,19 +31,19 @@ _IGNORED_M = {0, 1, 3, 4, 5, 6, 7, 8, 9}
 
 @dataclass
 class Parsed:
-    kind: np.ndarray        # 0 rapid, 1 feed
-    xyz: np.ndarray         # (n, 3) end points; NaN for an axis never set yet
-    feed: np.ndarray        # mm/min at each move (NaN for rapids)
-    line: np.ndarray        # source line number of each move
+    kind: np.ndarray  # 0 rapid, 1 feed
+    xyz: np.ndarray  # (n, 3) end points; NaN for an axis never set yet
+    feed: np.ndarray  # mm/min at each move (NaN for rapids)
+    line: np.ndarray  # source line number of each move
     comments: list = field(default_factory=list)
-    tool: np.ndarray | None = None      # tool number in the spindle at each move (0: never changed)
+    tool: np.ndarray | None = None  # tool number in the spindle at each move (0: never changed)
 
     def meta(self, key):
         """Value of a header comment `key: value` (case-insensitive), or None."""
         k = key.lower() + ":"
         for c in self.comments:
             if c.lower().startswith(k):
-                return c[len(k):].strip()
+                return c[len(k) :].strip()
         return None
 
 
@@ -76,14 +77,14 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
             raise InkSliceError(where, f"line {no}: cannot read {rest!r} in {raw.strip()!r}")
         axes = {}
         motion = None
-        for letter, val in words:           # T before M6 wherever it stands on the line
+        for letter, val in words:  # T before M6 wherever it stands on the line
             if letter.upper() == "T":
                 selected = int(float(val))
         for letter, val in words:
             L = letter.upper()
             v = float(val)
             if L in "NOSTH":
-                continue        # H: the tool-length offset's number (G43 Hn)
+                continue  # H: the tool-length offset's number (G43 Hn)
             if L == "G":
                 g = int(round(v * 10)) / 10
                 if g in (0, 1):
@@ -97,7 +98,9 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
                 elif g == 21:
                     scale = 1.0
                 elif g in (2, 3):
-                    raise InkSliceError(where, f"line {no}: arcs (G{int(g)}) are not supported by the verifier")
+                    raise InkSliceError(
+                        where, f"line {no}: arcs (G{int(g)}) are not supported by the verifier"
+                    )
                 elif g in _IGNORED_G or g in (43, 64):
                     pass
                 else:
@@ -119,7 +122,7 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
             elif L in "XYZ":
                 axes["XYZ".index(L)] = v * scale
             elif L == "P":
-                continue        # G64 P tolerance
+                continue  # G64 P tolerance
             else:
                 raise InkSliceError(where, f"line {no}: unsupported word {letter}{val}")
         if motion is not None:
@@ -143,5 +146,11 @@ def parse_gcode(text: str, where="G-code") -> Parsed:
             tools.append(spindle)
     if not kinds:
         raise InkSliceError(where, "has no moves")
-    return Parsed(np.array(kinds), np.array(pts, float), np.array(feeds, float), np.array(lines), comments,
-                  np.array(tools, int))
+    return Parsed(
+        np.array(kinds),
+        np.array(pts, float),
+        np.array(feeds, float),
+        np.array(lines),
+        comments,
+        np.array(tools, int),
+    )

@@ -5,6 +5,7 @@ summary out. `verify_gcode`: G-code text and height map in, a verification
 report (and its deviation map) out. No files: the command modules read and
 write them.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -40,8 +41,11 @@ def check_work(hm: HeightMap, resolution: float, setting: str):
     wx, wy = float(hm.x[-1] - hm.x[0]), float(hm.y[-1] - hm.y[0])
     cells = (wx / resolution + 1) * (wy / resolution + 1)
     if cells > MAX_WORK_CELLS:
-        raise SettingError(setting, f"{resolution:g} mm over a {wx:.1f} x {wy:.1f} mm part is a lattice of "
-                                    f"{cells:.3g} cells, more than {MAX_WORK_CELLS:.3g}: use a coarser {setting}")
+        raise SettingError(
+            setting,
+            f"{resolution:g} mm over a {wx:.1f} x {wy:.1f} mm part is a lattice of "
+            f"{cells:.3g} cells, more than {MAX_WORK_CELLS:.3g}: use a coarser {setting}",
+        )
 
 
 @dataclass
@@ -64,9 +68,21 @@ def finishing_gcode(hm: HeightMap, settings: FinishSettings, *, dialect=DEFAULT_
     return finishing_gcodes(hm, settings, (dialect,), **kw)[dialect]
 
 
-def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, material=DEFAULT_MATERIAL,
-                     feed=None, plunge=None, rpm=None, clearance=DEFAULT_CLEARANCE, z_offset=0.0,
-                     machine: Machine = Machine(), stock_top=None, uncertain_mm=DEFAULT_UNCERTAIN_MM) -> dict:
+def finishing_gcodes(
+    hm: HeightMap,
+    settings: FinishSettings,
+    dialects,
+    *,
+    material=DEFAULT_MATERIAL,
+    feed=None,
+    plunge=None,
+    rpm=None,
+    clearance=DEFAULT_CLEARANCE,
+    z_offset=0.0,
+    machine: Machine = Machine(),
+    stock_top=None,
+    uncertain_mm=DEFAULT_UNCERTAIN_MM,
+) -> dict:
     """One finishing plan written in several dialects: {dialect: Job}. A map that carries
     its uncertainty has its low-confidence regions (over `uncertain_mm`) named in the header."""
     check_heightmap(hm)
@@ -84,27 +100,64 @@ def finishing_gcodes(hm: HeightMap, settings: FinishSettings, dialects, *, mater
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     fin = finishing(sampler, settings)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
-    target = (f"scallop {settings.scallop:g} mm" if settings.stepover is None
-              else f"stepover {settings.stepover:g} mm")
-    notes = [f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
-             f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"]
+    target = (
+        f"scallop {settings.scallop:g} mm"
+        if settings.stepover is None
+        else f"stepover {settings.stepover:g} mm"
+    )
+    notes = [
+        f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
+        f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"
+    ]
     notes += header_notes(hm, uncertain_mm)
     so = fin.stepovers
     for d in ours:
-        prog, text, rt, slowed = _post(hm, fin.runs, settings.cutter, cond, top, "InkSlice finishing program",
-                                       d, clearance, z_offset, machine, settings.chord, notes)
-        jobs[d] = Job(text, rt, {"passes": int(len(fin.passes)), "runs": len(fin.runs),
-                                 "points": int(sum(len(r) for r in fin.runs)),
-                                 "stepover_min": float(so.min()) if so.size else 0.0,
-                                 "stepover_max": float(so.max()) if so.size else 0.0,
-                                 "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
-                                 "slowed_moves": slowed, "lines": text.count("\n")})
+        prog, text, rt, slowed = _post(
+            hm,
+            fin.runs,
+            settings.cutter,
+            cond,
+            top,
+            "InkSlice finishing program",
+            d,
+            clearance,
+            z_offset,
+            machine,
+            settings.chord,
+            notes,
+        )
+        jobs[d] = Job(
+            text,
+            rt,
+            {
+                "passes": int(len(fin.passes)),
+                "runs": len(fin.runs),
+                "points": int(sum(len(r) for r in fin.runs)),
+                "stepover_min": float(so.min()) if so.size else 0.0,
+                "stepover_max": float(so.max()) if so.size else 0.0,
+                "feed": cond.feed,
+                "plunge": cond.plunge,
+                "rpm": cond.rpm,
+                "slowed_moves": slowed,
+                "lines": text.count("\n"),
+            },
+        )
     return jobs
 
 
-def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_MATERIAL, feed=None,
-                   plunge=None, rpm=None, dialect=DEFAULT_DIALECT, clearance=DEFAULT_CLEARANCE,
-                   z_offset=0.0, machine: Machine = Machine()) -> Job:
+def roughing_gcode(
+    hm: HeightMap,
+    settings: RoughSettings,
+    *,
+    material=DEFAULT_MATERIAL,
+    feed=None,
+    plunge=None,
+    rpm=None,
+    dialect=DEFAULT_DIALECT,
+    clearance=DEFAULT_CLEARANCE,
+    z_offset=0.0,
+    machine: Machine = Machine(),
+) -> Job:
     check_heightmap(hm)
     if dialect == "dissertation":
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
@@ -114,13 +167,36 @@ def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, material=DEFAULT_M
     check_frame(clearance, z_offset)
     sampler = Sampler(hm, edge_step=settings.resolution / 2)
     runs = roughing(sampler, settings)
-    notes = [f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
-             f"stepover {settings.stepover_mm:g} mm, stock to leave {settings.leave:g} mm"]
-    prog, text, rt, slowed = _post(hm, runs, settings.cutter, cond, settings.stock_top,
-                                   "InkSlice roughing program", dialect, clearance, z_offset, machine,
-                                   settings.chord, notes)
-    return Job(text, rt, {"runs": len(runs), "feed": cond.feed, "plunge": cond.plunge, "rpm": cond.rpm,
-                          "slowed_moves": slowed, "lines": text.count("\n")})
+    notes = [
+        f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
+        f"stepover {settings.stepover_mm:g} mm, stock to leave {settings.leave:g} mm"
+    ]
+    prog, text, rt, slowed = _post(
+        hm,
+        runs,
+        settings.cutter,
+        cond,
+        settings.stock_top,
+        "InkSlice roughing program",
+        dialect,
+        clearance,
+        z_offset,
+        machine,
+        settings.chord,
+        notes,
+    )
+    return Job(
+        text,
+        rt,
+        {
+            "runs": len(runs),
+            "feed": cond.feed,
+            "plunge": cond.plunge,
+            "rpm": cond.rpm,
+            "slowed_moves": slowed,
+            "lines": text.count("\n"),
+        },
+    )
 
 
 def cutter_from_program(parsed, default=None) -> Cutter:
@@ -139,16 +215,30 @@ def cutter_from_program(parsed, default=None) -> Cutter:
     return parse_cutter(default) if isinstance(default, str) else default
 
 
-def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resolution=0.1,
-                 reach_tol=REACH_TOL, edge_band=0.5, uncut_tol=0.1, where="G-code"):
+def verify_gcode(
+    text: str,
+    hm: HeightMap,
+    *,
+    cutter=None,
+    z_zero=None,
+    resolution=0.1,
+    reach_tol=REACH_TOL,
+    edge_band=0.5,
+    uncut_tol=0.1,
+    where="G-code",
+):
     """Simulate `text` over a flat block and compare with `hm`. Returns (Report, summary dict).
 
     z_zero: object height of program Z0 (None: from our header, else 0). The
     block's top is the part's top + 1 mm, or the program's safe height if lower.
     """
     check_heightmap(hm)
-    for name, v, least in (("resolution", resolution, None), ("reach tolerance", reach_tol, None),
-                           ("edge band", edge_band, 0.0), ("uncut tolerance", uncut_tol, 0.0)):
+    for name, v, least in (
+        ("resolution", resolution, None),
+        ("reach tolerance", reach_tol, None),
+        ("edge band", edge_band, 0.0),
+        ("uncut tolerance", uncut_tol, 0.0),
+    ):
         if not np.isfinite(v) or (v <= 0 if least is None else v < least):
             raise SettingError(name, f"must be {'> 0' if least is None else '>= 0'} mm, got {v}")
     check_work(hm, resolution, "resolution")
@@ -160,12 +250,16 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
     if cutter is not None and not isinstance(cutter, Cutter):
         cutter = parse_cutter(cutter)
     from .operations import tool_cutters
+
     tools = tool_cutters(parsed) if cutter is None else {}
     if tools:
         missing = sorted(set(parsed.tool.tolist()) - set(tools) - {0})
         if missing or (parsed.tool == 0).all():
-            raise InkSliceError(where, f"changes to tool {missing[0] if missing else 0}, which its header "
-                                       "does not describe (inkslice tool n: ...)")
+            raise InkSliceError(
+                where,
+                f"changes to tool {missing[0] if missing else 0}, which its header "
+                "does not describe (inkslice tool n: ...)",
+            )
         # the report's reach is the smallest tool's: what the whole job could cut
         cut = min(tools.values(), key=lambda c: c.radius)
     else:
@@ -186,7 +280,7 @@ def verify_gcode(text: str, hm: HeightMap, *, cutter=None, z_zero=None, resoluti
     else:
         sim = simulate(parsed, cut, stock, z_zero)
     rep = report(sampler, cut, sim, reach_tol, edge_band, uncut_tol)
-    desc = (", ".join(f"T{n} {c.describe()}" for n, c in sorted(tools.items())) if tools else cut.describe())
+    desc = ", ".join(f"T{n} {c.describe()}" for n, c in sorted(tools.items())) if tools else cut.describe()
     return rep, {"cutter": desc, "moves": sim.moves, "z_zero": z_zero}
 
 
@@ -195,6 +289,7 @@ def simulate_tools(parsed, tools: dict, stock, z_zero):
     the spindle (moves before the first change, the retract to the safe height, with the first)."""
     from .gcodeparse import Parsed
     from .millsim import SimResult
+
     tool = parsed.tool.copy()
     first = int(tool[tool > 0][0])
     tool[tool == 0] = first
@@ -203,7 +298,7 @@ def simulate_tools(parsed, tools: dict, stock, z_zero):
     for ax in range(3):
         col = xyz[:, ax]
         known = np.flatnonzero(~np.isnan(col))
-        col[:known[0]] = col[known[0]]
+        col[: known[0]] = col[known[0]]
         idx = np.where(~np.isnan(col), np.arange(col.size), 0)
         np.maximum.accumulate(idx, out=idx)
         xyz[:, ax] = col[idx]

@@ -14,6 +14,7 @@ offset. The default envelope is a small bench mill with the work zero at the
 base's front-left corner: X -10..310, Y -10..210, Z -5..150 mm; X/Y move at
 up to 3000 mm/min, Z at 1000 mm/min, rapids at 3000 mm/min.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -71,10 +72,12 @@ def check_envelope(prog: Program, machine: Machine):
         if bad.size:
             k = int(bad[0])
             over = max(lo - v[bad].min(), v[bad].max() - hi)
-            raise SettingError("machine travel",
-                               f"the program leaves the {name} travel {lo:g}..{hi:g} mm by {over:.3f} mm "
-                               f"({bad.size} moves, first: move {k + 1} to {name}{v[k]:.3f}); "
-                               "move the work offset or use a machine with more travel")
+            raise SettingError(
+                "machine travel",
+                f"the program leaves the {name} travel {lo:g}..{hi:g} mm by {over:.3f} mm "
+                f"({bad.size} moves, first: move {k + 1} to {name}{v[k]:.3f}); "
+                "move the work offset or use a machine with more travel",
+            )
 
 
 def limit_feeds(prog: Program, machine: Machine, start=None) -> int:

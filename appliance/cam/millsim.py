@@ -28,6 +28,7 @@ What is reported (all in mm, vertical):
   counted separately as unreachable area;
 * uncut area: part cells left more than `uncut_tol` above the design.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,7 +41,6 @@ from .gcodeparse import Parsed
 from .opening import REACH_TOL, Opening
 from .sampling import Sampler
 from .segments import min_over_segment
-
 
 
 # a rapid that lowers the stock by more than this is reported as a crash (grazing
@@ -88,7 +88,7 @@ def sweep(stock: Stock, cutter: Cutter, A, B) -> float:
 @dataclass
 class SimResult:
     stock: Stock
-    crashes: int            # rapids that cut
+    crashes: int  # rapids that cut
     first_crash_line: int | None
     moves: int
 
@@ -108,7 +108,7 @@ def simulate(parsed: Parsed, cutter: Cutter, stock: Stock, z_zero: float = 0.0) 
         known = np.flatnonzero(~np.isnan(col))
         if known.size == 0:
             raise ValueError("program never sets " + "XYZ"[ax])
-        col[:known[0]] = col[known[0]]
+        col[: known[0]] = col[known[0]]
     starts = np.vstack([xyz[:1], xyz[:-1]])
     crashes, first = 0, None
     k, n = 0, len(xyz)
@@ -151,7 +151,9 @@ def sweep_many(stock: Stock, cutter: Cutter, A, B, budget=3_000_000):
             ci, cj = i0[seg] + li, j0[seg] + lj
             a = A[seg]
             w = B[seg] - a
-            val = min_over_segment(cutter, xs[ci] - a[:, 0], ys[cj] - a[:, 1], w[:, 0], w[:, 1], w[:, 2], a[:, 2])
+            val = min_over_segment(
+                cutter, xs[ci] - a[:, 0], ys[cj] - a[:, 1], w[:, 0], w[:, 1], w[:, 2], a[:, 2]
+            )
             fin = np.isfinite(val)
             np.minimum.at(flat, cj[fin] * nxs + ci[fin], val[fin])
         s = e
@@ -176,18 +178,27 @@ class Report:
     measured: np.ndarray
 
     def lines(self):
-        out = [f"gouge (deepest cut below the design): {self.gouge:.4f} mm at x={self.gouge_at[0]:.2f} y={self.gouge_at[1]:.2f}",
-               f"scallop: max {self.scallop_max:.4f} mm at x={self.scallop_at[0]:.2f} y={self.scallop_at[1]:.2f}, "
-               f"mean {self.scallop_mean:.4f} mm over {self.measured_area:.0f} mm^2 the cutter can reach",
-               f"unreachable by the cutter (excluded): {self.unreachable_area:.1f} mm^2",
-               f"uncut area: {self.uncut_area:.1f} mm^2 ({100 * self.uncut_fraction:.2f} % of {self.part_area:.0f} mm^2)",
-               f"rapids that cut stock: {self.crashes}" + (f" (first at line {self.first_crash_line})"
-                                                          if self.crashes else "")]
+        out = [
+            f"gouge (deepest cut below the design): {self.gouge:.4f} mm at x={self.gouge_at[0]:.2f} y={self.gouge_at[1]:.2f}",
+            f"scallop: max {self.scallop_max:.4f} mm at x={self.scallop_at[0]:.2f} y={self.scallop_at[1]:.2f}, "
+            f"mean {self.scallop_mean:.4f} mm over {self.measured_area:.0f} mm^2 the cutter can reach",
+            f"unreachable by the cutter (excluded): {self.unreachable_area:.1f} mm^2",
+            f"uncut area: {self.uncut_area:.1f} mm^2 ({100 * self.uncut_fraction:.2f} % of {self.part_area:.0f} mm^2)",
+            f"rapids that cut stock: {self.crashes}"
+            + (f" (first at line {self.first_crash_line})" if self.crashes else ""),
+        ]
         return out
 
 
-def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=REACH_TOL, edge_band=0.5,
-           uncut_tol=0.1, reach_resolution=0.0) -> Report:
+def report(
+    sampler: Sampler,
+    cutter: Cutter,
+    sim: SimResult,
+    reach_tol=REACH_TOL,
+    edge_band=0.5,
+    uncut_tol=0.1,
+    reach_resolution=0.0,
+) -> Report:
     st = sim.stock
     X, Y = np.meshgrid(st.xs, st.ys)
     design = sampler.z(X, Y)
@@ -211,10 +222,23 @@ def report(sampler: Sampler, cutter: Cutter, sim: SimResult, reach_tol=REACH_TOL
     smax = float(sc[ks]) if measured.any() else float("nan")
     smean = float(np.mean(np.maximum(above[measured], 0))) if measured.any() else float("nan")
     uncut = part & (dev > uncut_tol)
-    return Report(gouge, (float(X[k]), float(Y[k])), smax, smean, (float(X[ks]), float(Y[ks])),
-                  float(uncut.sum() * cell), float(uncut.sum() / max(part.sum(), 1)),
-                  float((part & ~reach).sum() * cell), float(part.sum() * cell), float(measured.sum() * cell),
-                  sim.crashes, sim.first_crash_line, dev, part, measured)
+    return Report(
+        gouge,
+        (float(X[k]), float(Y[k])),
+        smax,
+        smean,
+        (float(X[ks]), float(Y[ks])),
+        float(uncut.sum() * cell),
+        float(uncut.sum() / max(part.sum(), 1)),
+        float((part & ~reach).sum() * cell),
+        float(part.sum() * cell),
+        float(measured.sum() * cell),
+        sim.crashes,
+        sim.first_crash_line,
+        dev,
+        part,
+        measured,
+    )
 
 
 def deviation_png(rep: Report, scallop_scale: float = 0.02, max_px: int = 1000) -> bytes:
@@ -224,6 +248,7 @@ def deviation_png(rep: Report, scallop_scale: float = 0.02, max_px: int = 1000) 
     North (+y) is up.
     """
     import cv2
+
     dev, part = rep.deviation, rep.part
     h, w = dev.shape
     img = np.zeros((h, w, 3), np.float64)
@@ -245,7 +270,15 @@ def deviation_png(rep: Report, scallop_scale: float = 0.02, max_px: int = 1000) 
     img = img[::s, ::s]
     bar = np.full((48, img.shape[1], 3), 255, np.uint8)
     txt = f"gouge {rep.gouge:.4f}  scallop max {rep.scallop_max:.4f} mm  blue=+{scallop_scale:g} red=-{scallop_scale / 4:g}"
-    cv2.putText(bar, txt, (6, 30), cv2.FONT_HERSHEY_SIMPLEX, max(0.3, min(0.6, img.shape[1] / 1400)),
-                (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(
+        bar,
+        txt,
+        (6, 30),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        max(0.3, min(0.6, img.shape[1] / 1400)),
+        (0, 0, 0),
+        1,
+        cv2.LINE_AA,
+    )
     ok, buf = cv2.imencode(".png", np.vstack([img, bar]))
     return buf.tobytes()

@@ -12,6 +12,7 @@ The verification (millsim.report) and the stepover planner (zigzag.py) read
 the same opening through the same functions, so the planner holds the
 scallop the verification measures, not an approximation of it.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,7 +25,7 @@ from .cutters import Cutter
 from .dropcutter import _CACHE_ELEMENTS, _offsets, drop_grid
 from .sampling import Sampler
 
-REACH_TOL = 0.005       # mm: a cell is reachable when the opening is within this of the design
+REACH_TOL = 0.005  # mm: a cell is reachable when the opening is within this of the design
 
 
 def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
@@ -39,7 +40,9 @@ def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
     xs = x0 + d * np.arange(nx)
     for j0, j1 in _bands(ny, nx):
         X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
-        tip[j0:j1] = polish(sampler, cutter, X, Y, drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d), d)
+        tip[j0:j1] = polish(
+            sampler, cutter, X, Y, drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d), d
+        )
     out = _erode(tip, cutter, d)
     if cutter.kind == "flat":
         np.minimum(out, _rim_minimum(tip, cutter.radius / d), out=out)
@@ -69,30 +72,31 @@ def _erode(tip, cutter, d):
     time: 1.1 -> 0.5 s).
     """
     groups, m = _offsets(cutter, d)
-    quarter = [(b, [(a, np.float32(h)) for a, h in zip(av.tolist(), hv.tolist()) if a >= 0])
-               for b, av, hv in groups]
+    quarter = [
+        (b, [(a, np.float32(h)) for a, h in zip(av.tolist(), hv.tolist()) if a >= 0]) for b, av, hv in groups
+    ]
     ny, nx = tip.shape
     finite = np.isfinite(tip)
     ref = float(np.min(tip[finite])) if finite.any() else 0.0
     pad = np.full((ny + 2 * m, nx + 2 * m), np.inf, np.float32)
-    pad[m:m + ny, m:m + nx] = tip - ref
+    pad[m : m + ny, m : m + nx] = tip - ref
     out = np.full(tip.shape, np.inf, np.float32)
     band = max(1, _CACHE_ELEMENTS // max(nx, 1))
     tmp = np.empty((band, nx), np.float32)
     rows = np.empty((band, nx + 2 * m), np.float32)
     for j0 in range(0, ny, band):
         j1 = min(j0 + band, ny)
-        o, t, rw = out[j0:j1], tmp[:j1 - j0], rows[:j1 - j0]
+        o, t, rw = out[j0:j1], tmp[: j1 - j0], rows[: j1 - j0]
         for b, offsets in quarter:
             if b == 0:
-                rw[...] = pad[m + j0:m + j1]
+                rw[...] = pad[m + j0 : m + j1]
             else:
-                np.minimum(pad[m + j0 + b:m + j1 + b], pad[m + j0 - b:m + j1 - b], out=rw)
+                np.minimum(pad[m + j0 + b : m + j1 + b], pad[m + j0 - b : m + j1 - b], out=rw)
             for a, h in offsets:
                 if a == 0:
-                    np.add(rw[:, m:m + nx], h, out=t)
+                    np.add(rw[:, m : m + nx], h, out=t)
                 else:
-                    np.minimum(rw[:, m + a:m + a + nx], rw[:, m - a:m - a + nx], out=t)
+                    np.minimum(rw[:, m + a : m + a + nx], rw[:, m - a : m - a + nx], out=t)
                     np.add(t, h, out=t)
                 np.minimum(o, t, out=o)
     return out.astype(np.float64) + ref
@@ -126,9 +130,9 @@ def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000, rows=None)
     idx = near[np.hypot(gx[near], gy[near]) > STEEP]
     R = cutter.radius
     for s in range(0, idx.size, chunk):
-        k = idx[s:s + chunk]
+        k = idx[s : s + chunk]
         ux, uy = plane_contact(cutter, gx[k], gy[k])
-        cx, cy = -ux, -uy                   # cell to axis: downhill of the contact
+        cx, cy = -ux, -uy  # cell to axis: downhill of the contact
         px, py = X.ravel()[k], Y.ravel()[k]
         best = flat_out[k]
         sp = d
@@ -139,7 +143,9 @@ def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000, rows=None)
             fi = (px[:, None] + ox - lx0) / d
             fj = (py[:, None] + oy - ly0) / d
             inside = (r <= R) & (fi >= 0) & (fi <= nx - 1) & (fj >= 0) & (fj <= ny - 1)
-            t = ndimage.map_coordinates(tip, [fj.ravel(), fi.ravel()], order=1, mode="nearest").reshape(fi.shape)
+            t = ndimage.map_coordinates(tip, [fj.ravel(), fi.ravel()], order=1, mode="nearest").reshape(
+                fi.shape
+            )
             f = np.where(inside, t + cutter.profile(np.minimum(r, R)), np.inf)
             j = np.argmin(f, axis=1)
             rows = np.arange(k.size)
@@ -170,7 +176,7 @@ def _rim_minimum(tip, r, chunk=8):
     out = np.full(tip.shape, np.inf)
     ang = 2 * np.pi * np.arange(_RIM) / _RIM
     for k in range(0, _RIM, chunk):
-        for th in ang[k:k + chunk]:
+        for th in ang[k : k + chunk]:
             fi, fj = I + r * np.cos(th), J + r * np.sin(th)
             inside = (fi >= 0) & (fi <= nx - 1) & (fj >= 0) & (fj <= ny - 1)
             val = ndimage.map_coordinates(tip, [fj, fi], order=1, mode="nearest")
@@ -181,6 +187,7 @@ def _rim_minimum(tip, r, chunk=8):
 @dataclass
 class Opening:
     """An opening on a lattice, read anywhere by bilinear interpolation."""
+
     cutter: Cutter
     x0: float
     y0: float
@@ -203,8 +210,9 @@ class Opening:
 
     def at(self, X, Y):
         X, Y = np.asarray(X, float), np.asarray(Y, float)
-        return ndimage.map_coordinates(self.z, [(Y - self.y0) / self.d, (X - self.x0) / self.d],
-                                       order=1, mode="nearest")
+        return ndimage.map_coordinates(
+            self.z, [(Y - self.y0) / self.d, (X - self.x0) / self.d], order=1, mode="nearest"
+        )
 
     def above(self, stock, design, X, Y, reach_tol=REACH_TOL):
         """(stock above the opening's residue, reachable) at points (X, Y) with heights `design`.
@@ -224,7 +232,7 @@ class Opening:
         """Like above(), with the opening already read at the points (`op`)."""
         reach = op - design
         rc = self.cutter.corner_radius
-        slack = self.d ** 2 / (4 * rc) if rc > 0 else np.inf
+        slack = self.d**2 / (4 * rc) if rc > 0 else np.inf
         residue = np.clip(reach - slack, 0.0, reach_tol)
         return stock - design - residue, reach <= reach_tol
 
@@ -241,8 +249,12 @@ def _side_ends(tip, r):
     ny, nx = tip.shape
     out = np.full(tip.shape, np.inf)
     J, I = np.mgrid[0:ny, 0:nx].astype(float)
-    for line, dist, along, n in ((tip[:, 0], I, J, ny), (tip[:, -1], nx - 1 - I, J, ny),
-                                 (tip[0, :], J, I, nx), (tip[-1, :], ny - 1 - J, I, nx)):
+    for line, dist, along, n in (
+        (tip[:, 0], I, J, ny),
+        (tip[:, -1], nx - 1 - I, J, ny),
+        (tip[0, :], J, I, nx),
+        (tip[-1, :], ny - 1 - J, I, nx),
+    ):
         w = np.sqrt(np.maximum(r * r - dist * dist, 0.0))
         near = dist <= r
         for sign in (-1.0, 1.0):

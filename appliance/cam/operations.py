@@ -31,6 +31,7 @@ File names carry the job, operation, tool and dialect:
 `<job>-finish-ball6-grbl.nc`; a program of several operations joins them:
 `<job>-rough-flat6-finish-ball6-rest-ball2-linuxcnc.nc`.
 """
+
 from __future__ import annotations
 
 import re
@@ -54,7 +55,7 @@ from .zigzag import FinishSettings, finishing
 OPERATION_KINDS = ("rough", "finish", "rest")
 STRATEGIES = ("zigzag", "steep")
 DEFAULT_OPERATIONS = "rough T1, finish T2 steep, rest T3"
-ROUGH_ABOVE_PART = 2.0       # mm: the raw block's top above the part's, unless given
+ROUGH_ABOVE_PART = 2.0  # mm: the raw block's top above the part's, unless given
 
 
 @dataclass(frozen=True)
@@ -77,20 +78,33 @@ def parse_operations(text: str, tools: dict) -> list:
     for part in [p.strip() for p in str(text).split(",") if p.strip()]:
         m = _OP.match(part)
         if not m:
-            raise SettingError("operations", f"{part!r}: write each as KIND Tn [zigzag|steep], KIND one of "
-                                             f"{', '.join(OPERATION_KINDS)}, e.g. 'rough T1, finish T2, rest T3'")
+            raise SettingError(
+                "operations",
+                f"{part!r}: write each as KIND Tn [zigzag|steep], KIND one of "
+                f"{', '.join(OPERATION_KINDS)}, e.g. 'rough T1, finish T2, rest T3'",
+            )
         kind, n, strategy = m.group(1).lower(), int(m.group(2)), (m.group(3) or "zigzag").lower()
         if n not in tools:
-            raise SettingError("operations", f"{part!r}: tool {n} is not in the tool table "
-                                             f"(tools {', '.join(str(k) for k in sorted(tools))})")
+            raise SettingError(
+                "operations",
+                f"{part!r}: tool {n} is not in the tool table "
+                f"(tools {', '.join(str(k) for k in sorted(tools))})",
+            )
         if kind == "rest":
             before = [o for o in ops if o.kind in ("finish", "rest")]
             if not before:
                 raise SettingError("operations", f"{part!r}: rest machining needs a finish before it")
             if tools[n].cutter.radius >= before[-1].tool.cutter.radius:
-                raise SettingError("operations", f"{part!r}: the rest tool {tools[n].name} must be smaller than "
-                                                 f"{before[-1].tool.name} before it")
-        ops.append(Operation(kind, tools[n], strategy if kind == "finish" else ("steep" if kind == "rest" else "zigzag")))
+                raise SettingError(
+                    "operations",
+                    f"{part!r}: the rest tool {tools[n].name} must be smaller than "
+                    f"{before[-1].tool.name} before it",
+                )
+        ops.append(
+            Operation(
+                kind, tools[n], strategy if kind == "finish" else ("steep" if kind == "rest" else "zigzag")
+            )
+        )
     if not ops:
         raise SettingError("operations", "no operations given")
     return ops
@@ -103,8 +117,15 @@ class Planned:
     notes: list = field(default_factory=list)
 
 
-def plan_operations(hm: HeightMap, ops: list, *, scallop: float = 0.05, steep_deg: float = DEFAULT_STEEP_DEG,
-                    stock_top: float | None = None, resolution: float = 0.1) -> tuple:
+def plan_operations(
+    hm: HeightMap,
+    ops: list,
+    *,
+    scallop: float = 0.05,
+    steep_deg: float = DEFAULT_STEEP_DEG,
+    stock_top: float | None = None,
+    resolution: float = 0.1,
+) -> tuple:
     """(list of Planned, stock top): every operation's tool-tip runs."""
     check_heightmap(hm)
     sampler = Sampler(hm, edge_step=resolution / 2)
@@ -116,8 +137,10 @@ def plan_operations(hm: HeightMap, ops: list, *, scallop: float = 0.05, steep_de
         if op.kind == "rough":
             rs = RoughSettings(c, top)
             runs = roughing(sampler, rs)
-            notes = [f"{_tn(op.tool)}roughing from Z {top:g}, step-down {rs.stepdown:g} mm, stepover "
-                     f"{rs.stepover_mm:g} mm, stock to leave {rs.leave:g} mm"]
+            notes = [
+                f"{_tn(op.tool)}roughing from Z {top:g}, step-down {rs.stepdown:g} mm, stepover "
+                f"{rs.stepover_mm:g} mm, stock to leave {rs.leave:g} mm"
+            ]
         elif op.kind == "finish" and op.strategy == "zigzag":
             fin = finishing(sampler, FinishSettings(c, scallop=scallop, resolution=res))
             runs = fin.runs
@@ -136,9 +159,9 @@ def plan_operations(hm: HeightMap, ops: list, *, scallop: float = 0.05, steep_de
 
 @dataclass
 class Posted:
-    name: str                  # file name
+    name: str  # file name
     text: str
-    programs: list             # [(Tool, Program)] in order, for the preview
+    programs: list  # [(Tool, Program)] in order, for the preview
     runtime_s: float
 
 
@@ -162,9 +185,19 @@ def _safe(name):
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).strip("._") or "job"
 
 
-def post_operations(planned: list, stock_top: float, dialect: str, *, job: str = "job",
-                    material: str = DEFAULT_MATERIAL, clearance: float = DEFAULT_CLEARANCE, z_offset: float = 0.0,
-                    machine: Machine = Machine(), chord: float = 0.002, hm: HeightMap | None = None) -> list:
+def post_operations(
+    planned: list,
+    stock_top: float,
+    dialect: str,
+    *,
+    job: str = "job",
+    material: str = DEFAULT_MATERIAL,
+    clearance: float = DEFAULT_CLEARANCE,
+    z_offset: float = 0.0,
+    machine: Machine = Machine(),
+    chord: float = 0.002,
+    hm: HeightMap | None = None,
+) -> list:
     """[Posted]: one program for a tool-changing controller, one file per tool for GRBL."""
     if dialect == "dissertation":
         if hm is None:
@@ -173,7 +206,7 @@ def post_operations(planned: list, stock_top: float, dialect: str, *, job: str =
         return [Posted(f"{_safe(job)}-finish-dissertation.nc", text, [], float("nan"))]
     d = get_dialect(dialect)
     check_frame(clearance, z_offset)
-    sections = []          # (tools' ops, [(Tool, Program, runtime)])
+    sections = []  # (tools' ops, [(Tool, Program, runtime)])
     for group in _groups(planned):
         tool = group[0].op.tool
         cond = tool.conditions(material)
@@ -181,8 +214,9 @@ def post_operations(planned: list, stock_top: float, dialect: str, *, job: str =
         for p in group:
             if not p.runs:
                 continue
-            prog = build_program(p.runs, tool.cutter, cond, stock_top, f"{p.op.kind} T{tool.number}",
-                                 clearance, z_offset)
+            prog = build_program(
+                p.runs, tool.cutter, cond, stock_top, f"{p.op.kind} T{tool.number}", clearance, z_offset
+            )
             check_envelope(prog, machine)
             limit_feeds(prog, machine)
             progs.append((tool, prog, prog.runtime(machine.rapid)))
@@ -198,17 +232,21 @@ def post_operations(planned: list, stock_top: float, dialect: str, *, job: str =
 
 
 def _head(progs, runtime, z_offset, safe_z):
-    return [f"Z frame: program Z = height above the base top + {z_offset:.3f} mm work offset",
-            f"inkslice z_offset: {z_offset:.4f}", f"safe Z {safe_z:.3f}",
-            f"estimated run time {runtime / 60:.1f} min"]
+    return [
+        f"Z frame: program Z = height above the base top + {z_offset:.3f} mm work offset",
+        f"inkslice z_offset: {z_offset:.4f}",
+        f"safe Z {safe_z:.3f}",
+        f"estimated run time {runtime / 60:.1f} min",
+    ]
 
 
 def _post_section(d, ops, progs, notes, chord, job, pause):
     """GRBL: one tool's file, opening with the tool to put in and an M0 pause."""
     tool, first, _ = progs[0]
     runtime = sum(rt for _, _, rt in progs)
-    out = comment_lines(d, f"tool change: put in {_tn(tool)}{tool.cutter.describe()}, touch off Z, "
-                           "then resume") + ["M0"]
+    out = comment_lines(
+        d, f"tool change: put in {_tn(tool)}{tool.cutter.describe()}, touch off Z, then resume"
+    ) + ["M0"]
     out += comment_lines(d, f"InkSlice {' + '.join(o.kind for o in ops)} with {_tn(tool)}{tool.name}")
     for h in header_lines(first, runtime, notes)[1:]:
         out += comment_lines(d, h)
@@ -227,14 +265,20 @@ def _post_changer(d, sections, chord, job):
     runtime = sum(rt for _, _, rt in progs)
     first = progs[0][1]
     safe = max(p.safe_z for _, p, _ in progs)
-    out = comment_lines(d, "InkSlice job: " + ", ".join(f"{o.kind} {_tn(o.tool)}{o.tool.name}" for o in all_ops))
+    out = comment_lines(
+        d, "InkSlice job: " + ", ".join(f"{o.kind} {_tn(o.tool)}{o.tool.name}" for o in all_ops)
+    )
     seen = set()
     for t, _, _ in progs:
         if t.number not in seen:
             seen.add(t.number)
             # a cutter not from the tool table (number 0) is the only one: no change, as before
-            out += comment_lines(d, f"inkslice tool {t.number}: {t.cutter.describe()}" if t.number
-                                 else f"inkslice cutter: {t.cutter.describe()}")
+            out += comment_lines(
+                d,
+                f"inkslice tool {t.number}: {t.cutter.describe()}"
+                if t.number
+                else f"inkslice cutter: {t.cutter.describe()}",
+            )
     for h in _head(progs, runtime, first.z_offset, safe):
         out += comment_lines(d, h)
     for _, _, notes in sections:
@@ -251,7 +295,9 @@ def _post_changer(d, sections, chord, job):
             out += motion_lines(prog, d)
         out.append("M5")
     out += (["G49"] if any(t.number for t, _, _ in progs) else []) + ["M30"]
-    return Posted(file_name(job, all_ops, d.name), finish_lines(d, out), [(t, p) for t, p, _ in progs], runtime)
+    return Posted(
+        file_name(job, all_ops, d.name), finish_lines(d, out), [(t, p) for t, p, _ in progs], runtime
+    )
 
 
 def _tn(tool):
@@ -261,6 +307,7 @@ def _tn(tool):
 def tool_cutters(parsed) -> dict:
     """{tool number: Cutter} from a job program's `inkslice tool n:` header lines."""
     from .cutters import Cutter
+
     out = {}
     for c in parsed.comments:
         m = re.match(r"inkslice tool (\d+):\s*(\w+)\s+D([\d.]+)\s+CR([\d.]+)\s+FL([\d.]+)", c, re.I)

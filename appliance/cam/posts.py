@@ -21,6 +21,7 @@ The dissertation's own format is not a dialect of a Program (it has no
 cutter compensation at all): see dissertation.py; the toolpath command
 offers it as `--dialect dissertation` for comparison.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -35,17 +36,18 @@ from .program import FEED, RAPID, Program
 class Dialect:
     name: str
     decimals: int
-    numbers: bool          # N words
-    percent: bool          # % first and last line
-    program_number: bool   # O0001
-    start: tuple           # modal set-up lines
+    numbers: bool  # N words
+    percent: bool  # % first and last line
+    program_number: bool  # O0001
+    start: tuple  # modal set-up lines
     upper_comments: bool
-    comment_width: int     # wrap comments to this many characters
+    comment_width: int  # wrap comments to this many characters
 
 
 DIALECTS = {
-    "linuxcnc": Dialect("linuxcnc", 4, False, False, False,
-                        ("G21 G90 G17 G94 G40 G49 G80", "G64 P{chord}"), False, 200),
+    "linuxcnc": Dialect(
+        "linuxcnc", 4, False, False, False, ("G21 G90 G17 G94 G40 G49 G80", "G64 P{chord}"), False, 200
+    ),
     "grbl": Dialect("grbl", 3, False, False, False, ("G21 G90 G17 G94",), False, 70),
     "mach3": Dialect("mach3", 4, True, False, False, ("G21 G90 G17 G94 G40 G49 G80", "G64"), False, 200),
     "fanuc": Dialect("fanuc", 3, True, True, True, ("G21 G90 G17 G94 G40 G49 G80", "G54"), True, 60),
@@ -58,7 +60,9 @@ def get_dialect(name) -> Dialect:
     try:
         return DIALECTS[name]
     except KeyError:
-        raise SettingError("dialect", f"unknown dialect {name!r}; known: {', '.join(DIALECT_NAMES)}") from None
+        raise SettingError(
+            "dialect", f"unknown dialect {name!r}; known: {', '.join(DIALECT_NAMES)}"
+        ) from None
 
 
 def _num(v, dec):
@@ -83,12 +87,14 @@ def _wrap(text, width):
 
 def header_lines(prog: Program, runtime_s: float, extra=()):
     c = prog.cutter
-    return [prog.title,
-            f"inkslice cutter: {c.describe()}",
-            f"Z frame: program Z = height above the base top + {prog.z_offset:.3f} mm work offset",
-            f"inkslice z_offset: {prog.z_offset:.4f}",
-            f"safe Z {prog.safe_z:.3f}, spindle {prog.rpm:.0f} rpm",
-            f"estimated run time {runtime_s / 60:.1f} min"] + list(extra)
+    return [
+        prog.title,
+        f"inkslice cutter: {c.describe()}",
+        f"Z frame: program Z = height above the base top + {prog.z_offset:.3f} mm work offset",
+        f"inkslice z_offset: {prog.z_offset:.4f}",
+        f"safe Z {prog.safe_z:.3f}, spindle {prog.rpm:.0f} rpm",
+        f"estimated run time {runtime_s / 60:.1f} min",
+    ] + list(extra)
 
 
 def render(prog: Program, dialect: str, runtime_s: float, chord: float = 0.002, extra_notes=()) -> str:
@@ -126,7 +132,7 @@ def motion_lines(prog: Program, d: Dialect) -> list:
         for ax, name in enumerate("XYZ"):
             v = prog.xyz[k, ax]
             if k == 0 and ax < 2:
-                continue            # the opening retract moves Z only
+                continue  # the opening retract moves Z only
             s = _num(v, dec)
             if s != last[ax]:
                 words.append(name + s)
@@ -137,7 +143,7 @@ def motion_lines(prog: Program, d: Dialect) -> list:
                 words.append("F" + f)
                 last_f = f
         if len(words) == (1 if g != last_g else 0) and words[:1] == [g]:
-            words = []              # a move to where we already are
+            words = []  # a move to where we already are
         if not words:
             continue
         last_g = g if words[0] in ("G0", "G1") else last_g

@@ -16,6 +16,7 @@ digits each). Tool changes are marked where they happen:
 `decode` turns a path back into points in mm (the tests use it; the page's
 script does the same sum).
 """
+
 from __future__ import annotations
 
 import json
@@ -25,7 +26,7 @@ import numpy as np
 from .program import RAPID
 
 FORMAT = "inkslice-preview/1"
-SCALE = 100.0          # units per mm
+SCALE = 100.0  # units per mm
 
 
 def preview(programs) -> dict:
@@ -51,11 +52,18 @@ def preview(programs) -> dict:
             pts = np.vstack([start[None, :], xyz[a:b]])
             q = np.rint(pts * SCALE).astype(np.int64)
             d = np.vstack([q[:1], np.diff(q, axis=0)])
-            paths.append({"tool": number, "kind": "rapid" if kind[a] == RAPID else "feed",
-                          "d": d.ravel().tolist()})
+            paths.append(
+                {"tool": number, "kind": "rapid" if kind[a] == RAPID else "feed", "d": d.ravel().tolist()}
+            )
         prev = xyz[-1]
-    return {"format": FORMAT, "units": "0.01 mm", "tools": tools, "paths": paths, "changes": changes,
-            "bounds": [np.round(lo, 3).tolist(), np.round(hi, 3).tolist()]}
+    return {
+        "format": FORMAT,
+        "units": "0.01 mm",
+        "tools": tools,
+        "paths": paths,
+        "changes": changes,
+        "bounds": [np.round(lo, 3).tolist(), np.round(hi, 3).tolist()],
+    }
 
 
 def preview_json(programs) -> str:

@@ -17,6 +17,7 @@ moves that are safe on a real mill the first time:
 Program Z = object z + `z_offset` (the work offset: where the base top is in
 the work coordinate system); every header states it.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -28,19 +29,19 @@ from .cutters import Cutter
 from .feeds import Conditions
 
 RAPID, FEED = 0, 1
-DEFAULT_CLEARANCE = 5.0      # mm above the stock top
+DEFAULT_CLEARANCE = 5.0  # mm above the stock top
 
 
 @dataclass
 class Program:
-    kind: np.ndarray          # (n,) RAPID or FEED
-    xyz: np.ndarray           # (n, 3) end point of each move, program frame
-    feed: np.ndarray          # (n,) mm/min (NaN for rapids)
+    kind: np.ndarray  # (n,) RAPID or FEED
+    xyz: np.ndarray  # (n, 3) end point of each move, program frame
+    feed: np.ndarray  # (n,) mm/min (NaN for rapids)
     rpm: float
     cutter: Cutter
     title: str
     z_offset: float
-    safe_z: float             # program frame
+    safe_z: float  # program frame
     notes: list = field(default_factory=list)
 
     def runtime(self, rapid_rate: float, start=None) -> float:
@@ -64,8 +65,15 @@ def check_frame(clearance, z_offset):
         raise SettingError("z offset", f"must be a number of mm, got {z_offset}")
 
 
-def build_program(runs, cutter: Cutter, cond: Conditions, stock_top: float, title: str,
-                  clearance: float = DEFAULT_CLEARANCE, z_offset: float = 0.0) -> Program:
+def build_program(
+    runs,
+    cutter: Cutter,
+    cond: Conditions,
+    stock_top: float,
+    title: str,
+    clearance: float = DEFAULT_CLEARANCE,
+    z_offset: float = 0.0,
+) -> Program:
     check_frame(clearance, z_offset)
     runs = [np.asarray(r, float) for r in runs if len(r)]
     if not runs:
@@ -80,7 +88,7 @@ def build_program(runs, cutter: Cutter, cond: Conditions, stock_top: float, titl
         feeds.append(f)
 
     first = runs[0][0]
-    add(RAPID, (np.nan, np.nan, safe))               # straight up, XY unchanged
+    add(RAPID, (np.nan, np.nan, safe))  # straight up, XY unchanged
     for r in runs:
         add(RAPID, (r[0, 0], r[0, 1], safe))
         add(FEED, tuple(r[0]), cond.plunge)
@@ -91,6 +99,14 @@ def build_program(runs, cutter: Cutter, cond: Conditions, stock_top: float, titl
     xyz[:, 2] += z_offset
     # the first move keeps the controller's XY: fill with the first run's XY for bookkeeping
     xyz[0, :2] = first[:2]
-    prog = Program(np.array(kinds), xyz, np.array(feeds, float), cond.rpm, cutter, title,
-                   float(z_offset), safe + z_offset)
+    prog = Program(
+        np.array(kinds),
+        xyz,
+        np.array(feeds, float),
+        cond.rpm,
+        cutter,
+        title,
+        float(z_offset),
+        safe + z_offset,
+    )
     return prog

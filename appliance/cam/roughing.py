@@ -22,6 +22,7 @@ inside the stock to leave (0.3 mm by default).
 A flat end mill of 6 mm is the default roughing cutter; the step-over is 40 %
 of its diameter and the step-down 1 mm (wax, wood; use less in aluminium).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,14 +54,19 @@ class RoughSettings:
         if not np.isfinite(self.stepdown) or self.stepdown <= 0:
             raise SettingError("step-down", f"must be > 0 mm, got {self.stepdown}")
         if self.stepdown > self.cutter.flute_length:
-            raise SettingError("step-down", f"{self.stepdown:g} mm is deeper than the flute length "
-                                            f"{self.cutter.flute_length:g} mm")
+            raise SettingError(
+                "step-down",
+                f"{self.stepdown:g} mm is deeper than the flute length {self.cutter.flute_length:g} mm",
+            )
         so = self.stepover_mm
         if not np.isfinite(so) or so <= 0:
             raise SettingError("stepover", f"must be > 0 mm, got {so}")
         if so >= self.cutter.diameter:
-            raise SettingError("stepover", f"{so:g} mm is not less than the cutter diameter "
-                                           f"{self.cutter.diameter:g} mm: ridges would be left standing")
+            raise SettingError(
+                "stepover",
+                f"{so:g} mm is not less than the cutter diameter "
+                f"{self.cutter.diameter:g} mm: ridges would be left standing",
+            )
         if not np.isfinite(self.leave) or self.leave < 0:
             raise SettingError("stock to leave", f"must be >= 0 mm, got {self.leave}")
         if not np.isfinite(self.resolution) or self.resolution <= 0:
@@ -84,16 +90,21 @@ def roughing(sampler: Sampler, st: RoughSettings):
     grown = st.cutter.offset(st.leave) if st.leave > 0 else st.cutter
     origins = np.column_stack([np.full(ys.size, x0), ys])
     from .dropcutter import drop_lines
+
     tip = drop_lines(sampler, grown, origins, (1.0, 0.0), nx, d) + st.leave
     top = float(st.stock_top)
     if top < float(tip.max()) - 1e-9:
-        raise SettingError("stock top", f"{top:.3f} mm is below the part plus stock to leave "
-                                        f"({tip.max():.3f} mm)")
+        raise SettingError(
+            "stock top", f"{top:.3f} mm is below the part plus stock to leave ({tip.max():.3f} mm)"
+        )
     depth = top - float(tip.min())
     if depth > st.cutter.flute_length:
-        raise SettingError("cutter", f"flute length {st.cutter.flute_length:g} mm is shorter than the "
-                                     f"depth to rough ({depth:.1f} mm from the stock top)")
-    left = np.full(tip.shape, top)          # what the previous level left under each point
+        raise SettingError(
+            "cutter",
+            f"flute length {st.cutter.flute_length:g} mm is shorter than the "
+            f"depth to rough ({depth:.1f} mm from the stock top)",
+        )
+    left = np.full(tip.shape, top)  # what the previous level left under each point
     runs = []
     level = top
     while True:

@@ -23,6 +23,7 @@ heights from the part's side, plus every side inside the part steeper than
 their own right (segments.py). Steep *facets* are still only seen on the
 lattice: on very steep surfaces use a finer resolution (sample 4 gets 0.02 mm).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -51,9 +52,12 @@ def check_heightmap(hm: HeightMap, where="height map"):
     holes = interior_holes(on)
     if holes.any():
         j, i = np.argwhere(holes)[0]
-        raise InkSliceError(where, f"has {int(holes.sum())} cells with no height inside the part "
-                                   f"(first at x={hm.x[i]:.2f}, y={hm.y[j]:.2f} mm): fill the holes "
-                                   "(re-scan or interpolate) first")
+        raise InkSliceError(
+            where,
+            f"has {int(holes.sum())} cells with no height inside the part "
+            f"(first at x={hm.x[i]:.2f}, y={hm.y[j]:.2f} mm): fill the holes "
+            "(re-scan or interpolate) first",
+        )
 
 
 class Sampler:
@@ -73,8 +77,9 @@ class Sampler:
         self.cell_on = cell_on
         f = lambda a: np.where(cell_on, a, floor)
         self._g00, self._g10, self._g01, self._g11 = f(z00), f(z10), f(z01), f(z11)
-        self._z00, self._z10, self._z01, self._z11 = (g.ravel() for g in
-                                                      (self._g00, self._g10, self._g01, self._g11))
+        self._z00, self._z10, self._z01, self._z11 = (
+            g.ravel() for g in (self._g00, self._g10, self._g01, self._g11)
+        )
         # distance (mm) from each cell to the nearest on-part cell, for margins
         step = min(self.dx, self.dy)
         self._dist = ndimage.distance_transform_edt(~cell_on, sampling=(self.dy, self.dx))
@@ -99,8 +104,9 @@ class Sampler:
         k = j * (self.nx - 1) + i
         z00, z10, z01, z11 = self._z00[k], self._z10[k], self._z01[k], self._z11[k]
         upper = u >= v
-        out = np.where(upper, z00 + u * (z10 - z00) + v * (z11 - z10),
-                       z00 + v * (z01 - z00) + u * (z11 - z01))
+        out = np.where(
+            upper, z00 + u * (z10 - z00) + v * (z11 - z10), z00 + v * (z01 - z00) + u * (z11 - z01)
+        )
         return np.where(inside, out, self.floor)
 
     def z_grid(self, xs, ys):
@@ -111,11 +117,13 @@ class Sampler:
         _, v, _, j, in_y = self._cell(np.full(ys.shape, self.x0), ys)
         # rows first, then columns: two plain takes are ~8x faster than one
         # broadcast fancy index (which was most of a planner's candidate pass)
-        z00, z10, z01, z11 = (g.take(j, axis=0).take(i, axis=1)
-                              for g in (self._g00, self._g10, self._g01, self._g11))
+        z00, z10, z01, z11 = (
+            g.take(j, axis=0).take(i, axis=1) for g in (self._g00, self._g10, self._g01, self._g11)
+        )
         U, V = u[None, :], v[:, None]
-        out = np.where(U >= V, z00 + U * (z10 - z00) + V * (z11 - z10),
-                       z00 + V * (z01 - z00) + U * (z11 - z01))
+        out = np.where(
+            U >= V, z00 + U * (z10 - z00) + V * (z11 - z10), z00 + V * (z01 - z00) + U * (z11 - z01)
+        )
         return np.where(in_y[:, None] & in_x[None, :], out, self.floor)
 
     def on_part(self, x, y):
@@ -157,12 +165,26 @@ class Sampler:
         jj, ii = np.nonzero(self.cell_on)
         # (neighbour offset, start node offset, end node offset) per side of a cell;
         # along a side the triangles interpolate linearly between its two nodes
-        for (dj, di), (a, b) in (((-1, 0), ((0, 0), (0, 1))), ((1, 0), ((1, 0), (1, 1))),
-                                 ((0, -1), ((0, 0), (1, 0))), ((0, 1), ((0, 1), (1, 1)))):
+        for (dj, di), (a, b) in (
+            ((-1, 0), ((0, 0), (0, 1))),
+            ((1, 0), ((1, 0), (1, 1))),
+            ((0, -1), ((0, 0), (1, 0))),
+            ((0, 1), ((0, 1), (1, 1))),
+        ):
             side = ~on[jj + 1 + dj, ii + 1 + di]
             j, i = jj[side], ii[side]
-            segs.append(np.column_stack([X[i + a[1]], Y[j + a[0]], z[j + a[0], i + a[1]],
-                                         X[i + b[1]], Y[j + b[0]], z[j + b[0], i + b[1]]]))
+            segs.append(
+                np.column_stack(
+                    [
+                        X[i + a[1]],
+                        Y[j + a[0]],
+                        z[j + a[0], i + a[1]],
+                        X[i + b[1]],
+                        Y[j + b[0]],
+                        z[j + b[0], i + b[1]],
+                    ]
+                )
+            )
         # steep sides inside the part too: a wall between two lattice rows is a
         # cliff for the lattice just like the outer edge (slope above 1, 45 deg)
         zz = np.where(np.isfinite(self.hm.z), self.hm.z, np.nan)
@@ -198,7 +220,9 @@ class Sampler:
         on = self.cell_on
         # the cliff where the part meets the floor, inside the lattice and at its border
         cliff = on != ndimage.binary_erosion(on, np.ones((3, 3), bool), border_value=0)
-        cliff |= ndimage.binary_dilation(cliff, np.ones((3, 3), bool)) | (~on & ndimage.binary_dilation(on, np.ones((3, 3), bool)))
+        cliff |= ndimage.binary_dilation(cliff, np.ones((3, 3), bool)) | (
+            ~on & ndimage.binary_dilation(on, np.ones((3, 3), bool))
+        )
         bx = np.where(cliff, np.inf, bx)
         size = 2 * cells + 1
         bx = ndimage.maximum_filter(bx, size=size, mode="nearest")
@@ -209,8 +233,12 @@ class Sampler:
     def bounds(self):
         """(xmin, xmax, ymin, ymax) of the footprint's cells."""
         jj, ii = np.nonzero(self.cell_on)
-        return (self.x0 + self.dx * ii.min(), self.x0 + self.dx * (ii.max() + 1),
-                self.y0 + self.dy * jj.min(), self.y0 + self.dy * (jj.max() + 1))
+        return (
+            self.x0 + self.dx * ii.min(),
+            self.x0 + self.dx * (ii.max() + 1),
+            self.y0 + self.dy * jj.min(),
+            self.y0 + self.dy * (jj.max() + 1),
+        )
 
     @property
     def z_max(self):

@@ -32,6 +32,7 @@ two passes the stock is min(tip_a + g(y - y_a), tip_b + g(y_b - y)), and the
 scallop is that minus the design surface. Measured vertically, as the
 verification measures it.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -39,7 +40,6 @@ from functools import lru_cache
 import numpy as np
 
 from .cutters import Cutter
-
 
 
 def ball_scallop(radius, stepover):
@@ -84,7 +84,7 @@ def swept_offset(cutter: Cutter, dy, slope):
     return np.where(reach, g, np.inf)
 
 
-_TABLE = 1025     # nodes per axis of the bull-nose table
+_TABLE = 1025  # nodes per axis of the bull-nose table
 
 
 def _bull_swept(cutter, dy, t):
@@ -106,8 +106,12 @@ def _bull_swept(cutter, dy, t):
     i = np.minimum(fi.astype(int), _TABLE - 2)
     j = np.minimum(fj.astype(int), _TABLE - 2)
     u, w = fi - i, fj - j
-    val = ((1 - u) * (1 - w) * G[i, j] + u * (1 - w) * G[i + 1, j]
-           + (1 - u) * w * G[i, j + 1] + u * w * G[i + 1, j + 1])
+    val = (
+        (1 - u) * (1 - w) * G[i, j]
+        + u * (1 - w) * G[i + 1, j]
+        + (1 - u) * w * G[i, j + 1]
+        + u * w * G[i + 1, j + 1]
+    )
     return val / np.cos(th)
 
 
@@ -132,9 +136,14 @@ def _bull_swept_exact(R, rc, dy, cos_t, sin_t, iters=30):
     for _ in range(iters):
         v = 0.5 * (lo + hi)
         w = dy - v
-        up = sin_t * v * np.sqrt(np.maximum(rc * rc - w * w, 0.0)) > w * np.sqrt(np.maximum(a * a - v * v, 0.0))
+        up = sin_t * v * np.sqrt(np.maximum(rc * rc - w * w, 0.0)) > w * np.sqrt(
+            np.maximum(a * a - v * v, 0.0)
+        )
         hi = np.where(up, v, hi)
         lo = np.where(up, lo, v)
     v = 0.5 * (lo + hi)
-    return rc * cos_t - sin_t * np.sqrt(np.maximum(a * a - v * v, 0.0)) \
+    return (
+        rc * cos_t
+        - sin_t * np.sqrt(np.maximum(a * a - v * v, 0.0))
         - np.sqrt(np.maximum(rc * rc - (dy - v) ** 2, 0.0))
+    )

@@ -22,6 +22,7 @@ at an end of the interval for a flat end (h = 0 inside), and by a
 golden-section search (20 steps, 7e-5 of the interval; the function is flat at
 its minimum, so the error in height is second order) for a bull nose.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -43,7 +44,7 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     Ws = np.where(still, 1.0, W2)
     tm = np.where(still, 0.0, (dx * wx + dy * wy) / Ws)
     dperp2 = np.maximum(dx * dx + dy * dy - tm * tm * W2, 0.0)
-    ok = dperp2 <= R * R + 1e-9          # rounding must not drop a cell at exactly the rim
+    ok = dperp2 <= R * R + 1e-9  # rounding must not drop a cell at exactly the rim
     delta = np.where(still, np.inf, np.sqrt(np.maximum(R * R - dperp2, 0.0) / Ws))
     lo = np.maximum(tm - delta, 0.0)
     hi = np.minimum(tm + delta, 1.0)

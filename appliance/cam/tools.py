@@ -20,6 +20,7 @@ settings keep it as one line of text a phone can edit (`tool_table`):
 (D diameter, CR corner radius, FL flute length, all mm; per material F feed
 and P plunge in mm/min, S spindle rpm), read by `parse_tool_text`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -34,7 +35,7 @@ from .feeds import MATERIALS, Conditions, conditions
 
 TOOL_TYPES = ("flat", "ball", "bull")
 FEED_KEYS = ("feed_mm_min", "plunge_mm_min", "rpm")
-MAX_TOOL_NUMBER = 99          # Fanuc's and LinuxCNC's usual pocket range
+MAX_TOOL_NUMBER = 99  # Fanuc's and LinuxCNC's usual pocket range
 
 # A bench mill's small set: a flat end mill to rough, a 6 mm ball to finish, a
 # 2 mm ball for what the 6 mm cannot reach.
@@ -78,7 +79,9 @@ def _number(entry, key, where, positive=True):
 
 def parse_tool(entry: dict, where="tool_table") -> Tool:
     if not isinstance(entry, dict):
-        raise SettingError(where, f"a tool must be an object with number, type, diameter_mm, ..., got {entry!r}")
+        raise SettingError(
+            where, f"a tool must be an object with number, type, diameter_mm, ..., got {entry!r}"
+        )
     known = {"number", "type", "diameter_mm", "corner_radius_mm", "flute_length_mm", "flutes", "feeds"}
     extra = sorted(set(entry) - known)
     if extra:
@@ -98,13 +101,16 @@ def parse_tool(entry: dict, where="tool_table") -> Tool:
     else:
         rc = _number(entry, "corner_radius_mm", where)
         if rc >= d / 2:
-            raise SettingError(where, f"a bull nose's corner radius must be less than the radius {d / 2:g} mm")
+            raise SettingError(
+                where, f"a bull nose's corner radius must be less than the radius {d / 2:g} mm"
+            )
     if kind != "bull" and "corner_radius_mm" in entry:
         given = _number(entry, "corner_radius_mm", where, positive=False)
         if abs(given - rc) > 1e-9:
-            raise SettingError(where, f"a {kind} cutter of {d:g} mm has corner radius {rc:g} mm, got {given:g}")
-    fl = (_number(entry, "flute_length_mm", where) if "flute_length_mm" in entry
-          else DEFAULT_FLUTE_FACTOR * d)
+            raise SettingError(
+                where, f"a {kind} cutter of {d:g} mm has corner radius {rc:g} mm, got {given:g}"
+            )
+    fl = _number(entry, "flute_length_mm", where) if "flute_length_mm" in entry else DEFAULT_FLUTE_FACTOR * d
     flutes = entry.get("flutes", 2)
     if isinstance(flutes, bool) or not isinstance(flutes, int) or flutes < 1:
         raise SettingError(where, f"flutes must be a whole number >= 1, got {flutes!r}")
@@ -117,7 +123,9 @@ def parse_tool(entry: dict, where="tool_table") -> Tool:
         raise SettingError(where, f"feeds must be an object of material: figures, got {feeds!r}")
     for material, figs in feeds.items():
         if material not in MATERIALS:
-            raise SettingError(where, f"feeds for unknown material {material!r} (known: {', '.join(MATERIALS)})")
+            raise SettingError(
+                where, f"feeds for unknown material {material!r} (known: {', '.join(MATERIALS)})"
+            )
         if not isinstance(figs, dict) or set(figs) - set(FEED_KEYS):
             raise SettingError(where, f"feeds for {material} must be an object of {', '.join(FEED_KEYS)}")
         for k in figs:
@@ -139,8 +147,11 @@ def parse_tool_table(entries) -> dict:
 
 
 DEFAULT_TOOL_TEXT = "T1 flat D6 FL48; T2 ball D6 FL48; T3 ball D2 FL16"
-_TEXT_TOOL = re.compile(r"T(\d+)\s+(flat|ball|bull)\s+D(\d+(?:\.\d*)?)(?:\s+CR(\d+(?:\.\d*)?))?"
-                        r"(?:\s+FL(\d+(?:\.\d*)?))?((?:\s+[a-z]+:[^\s;]+)*)", re.I)
+_TEXT_TOOL = re.compile(
+    r"T(\d+)\s+(flat|ball|bull)\s+D(\d+(?:\.\d*)?)(?:\s+CR(\d+(?:\.\d*)?))?"
+    r"(?:\s+FL(\d+(?:\.\d*)?))?((?:\s+[a-z]+:[^\s;]+)*)",
+    re.I,
+)
 _TEXT_FEED = re.compile(r"([a-z]+):((?:[FPS]\d+(?:\.\d*)?/?)+)", re.I)
 
 
@@ -150,9 +161,12 @@ def parse_tool_text(text: str) -> dict:
     for part in [p.strip() for p in str(text).split(";") if p.strip()]:
         m = _TEXT_TOOL.fullmatch(part)
         if not m:
-            raise SettingError("tool_table", f"{part!r}: write a tool as 'T2 ball D6 FL48' (T number, type flat, "
-                                             "ball or bull, D diameter, CR corner radius for a bull nose, FL flute "
-                                             "length, mm), then material:F900/P300/S12000 if it has its own feeds")
+            raise SettingError(
+                "tool_table",
+                f"{part!r}: write a tool as 'T2 ball D6 FL48' (T number, type flat, "
+                "ball or bull, D diameter, CR corner radius for a bull nose, FL flute "
+                "length, mm), then material:F900/P300/S12000 if it has its own feeds",
+            )
         e = {"number": int(m.group(1)), "type": m.group(2).lower(), "diameter_mm": float(m.group(3))}
         if m.group(4):
             e["corner_radius_mm"] = float(m.group(4))
@@ -161,7 +175,9 @@ def parse_tool_text(text: str) -> dict:
         feeds = {}
         for fm in _TEXT_FEED.finditer(m.group(6) or ""):
             names = {"F": "feed_mm_min", "P": "plunge_mm_min", "S": "rpm"}
-            feeds[fm.group(1).lower()] = {names[w[0].upper()]: float(w[1:]) for w in fm.group(2).split("/") if w}
+            feeds[fm.group(1).lower()] = {
+                names[w[0].upper()]: float(w[1:]) for w in fm.group(2).split("/") if w
+            }
         if feeds:
             e["feeds"] = feeds
         entries.append(e)
@@ -171,8 +187,13 @@ def parse_tool_text(text: str) -> dict:
 def tool_entry(tool: Tool) -> dict:
     """The settings form of a tool (inverse of parse_tool)."""
     c = tool.cutter
-    e = {"number": tool.number, "type": c.kind, "diameter_mm": c.diameter, "corner_radius_mm": c.corner_radius,
-         "flute_length_mm": c.flute_length}
+    e = {
+        "number": tool.number,
+        "type": c.kind,
+        "diameter_mm": c.diameter,
+        "corner_radius_mm": c.corner_radius,
+        "flute_length_mm": c.flute_length,
+    }
     if c.flutes != 2:
         e["flutes"] = c.flutes
     if tool.feeds:

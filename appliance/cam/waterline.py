@@ -39,6 +39,7 @@ larger's opening (opening.py: what it could reach at all) stands more than
 `rest_tol` above the design, grown by the small cutter's radius so it rides
 in from cut surface; inside that region, steep and shallow as above.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -49,12 +50,21 @@ from scipy import ndimage
 from ..errors import SettingError
 from .cutters import Cutter
 from .scallop import ball_stepover, flat_stepover
-from .zigzag import _frame, _true_runs, check_fits, drop_lines, drop_points, reduce_polyline, refine, refine_tolerance
+from .zigzag import (
+    _frame,
+    _true_runs,
+    check_fits,
+    drop_lines,
+    drop_points,
+    reduce_polyline,
+    refine,
+    refine_tolerance,
+)
 
 DEFAULT_STEEP_DEG = 50.0
 DEFAULT_OVERLAP_DEG = 5.0
 MAX_WALL_DEG = 87.0
-SEAM_DEG = 15.0              # how far past its limit the zig-zag's overlap band may climb          # walls steeper than this are held as if they were this steep
+SEAM_DEG = 15.0  # how far past its limit the zig-zag's overlap band may climb          # walls steeper than this are held as if they were this steep
 
 
 @dataclass
@@ -71,31 +81,48 @@ class SteepSettings:
 
     def __post_init__(self):
         if self.chord is None:
-            self.chord = min(0.002, self.scallop / 20) if np.isfinite(self.scallop) and self.scallop > 0 else 0.002
+            self.chord = (
+                min(0.002, self.scallop / 20) if np.isfinite(self.scallop) and self.scallop > 0 else 0.002
+            )
         if self.blend is None:
             self.blend = self.cutter.radius / 2
 
     def check(self):
         R = self.cutter.radius
         if not (np.isfinite(self.scallop) and 0 < self.scallop < R):
-            raise SettingError("scallop", f"must be > 0 mm and less than the cutter radius {R:g} mm, got {self.scallop}")
+            raise SettingError(
+                "scallop", f"must be > 0 mm and less than the cutter radius {R:g} mm, got {self.scallop}"
+            )
         if not (np.isfinite(self.threshold_deg) and 5 <= self.threshold_deg <= 85):
-            raise SettingError("steep_angle_deg", f"must be between 5 and 85 degrees, got {self.threshold_deg}")
-        if not (np.isfinite(self.overlap_deg) and 0 <= self.overlap_deg < min(self.threshold_deg, 90 - self.threshold_deg)):
-            raise SettingError("steep overlap", f"must be >= 0 and leave both regions, got {self.overlap_deg}")
-        for name, v in (("resolution", self.resolution), ("grid", self.grid), ("chord tolerance", self.chord)):
+            raise SettingError(
+                "steep_angle_deg", f"must be between 5 and 85 degrees, got {self.threshold_deg}"
+            )
+        if not (
+            np.isfinite(self.overlap_deg)
+            and 0 <= self.overlap_deg < min(self.threshold_deg, 90 - self.threshold_deg)
+        ):
+            raise SettingError(
+                "steep overlap", f"must be >= 0 and leave both regions, got {self.overlap_deg}"
+            )
+        for name, v in (
+            ("resolution", self.resolution),
+            ("grid", self.grid),
+            ("chord tolerance", self.chord),
+        ):
             if not (np.isfinite(v) and v > 0):
                 raise SettingError(name, f"must be > 0 mm, got {v}")
         if self.resolution > R / 3:
-            raise SettingError("resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius {R:g} mm")
+            raise SettingError(
+                "resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius {R:g} mm"
+            )
 
 
 @dataclass
 class TipField:
     xs: np.ndarray
     ys: np.ndarray
-    tip: np.ndarray           # (ny, nx) drop-cutter heights; NaN where the axis is off the part
-    slope_deg: np.ndarray     # (ny, nx)
+    tip: np.ndarray  # (ny, nx) drop-cutter heights; NaN where the axis is off the part
+    slope_deg: np.ndarray  # (ny, nx)
 
     @property
     def g(self):
@@ -113,7 +140,7 @@ class TipField:
 
 @dataclass
 class SteepPlan:
-    runs: list                               # tool-tip polylines, cutting order
+    runs: list  # tool-tip polylines, cutting order
     waterline_runs: int = 0
     zigzag_runs: int = 0
     levels: int = 0
@@ -146,13 +173,16 @@ def regions(field: TipField, st: SteepSettings, within=None):
     # the zig-zag's band reaches into the walls only up to 15 degrees past its own limit: a pass
     # climbing an 84-degree wall stands on the drop-cutter's least accurate contacts (benches/steep.py
     # measured 0.038 mm gouges there with the band unbounded)
-    shallow = on & ndimage.binary_dilation(field.slope_deg < st.threshold_deg + st.overlap_deg, disc) \
+    shallow = (
+        on
+        & ndimage.binary_dilation(field.slope_deg < st.threshold_deg + st.overlap_deg, disc)
         & (field.slope_deg < st.threshold_deg + st.overlap_deg + SEAM_DEG)
+    )
     return steep, shallow
 
 
 def _disc(r):
-    J, I = np.mgrid[-r:r + 1, -r:r + 1]
+    J, I = np.mgrid[-r : r + 1, -r : r + 1]
     return I * I + J * J <= r * r
 
 
@@ -169,17 +199,37 @@ def shallow_stepover(cutter: Cutter, scallop: float, slope_deg: float) -> float:
         # a flat bottom's riser on a slope m is m x stepover
         return float(max(scallop / np.tan(np.radians(slope_deg)), 0.05))
     a = cutter.radius - cutter.corner_radius
-    return float(min(2 * a + ball_stepover(cutter.corner_radius, min(scallop, cutter.corner_radius), slope_deg),
-                     flat_stepover(cutter, scallop)))
+    return float(
+        min(
+            2 * a + ball_stepover(cutter.corner_radius, min(scallop, cutter.corner_radius), slope_deg),
+            flat_stepover(cutter, scallop),
+        )
+    )
 
 
 # -- marching squares ------------------------------------------------------------
 
 # corner bits: 1 (j, i), 2 (j, i+1), 4 (j+1, i+1), 8 (j+1, i); edges: 0 bottom, 1 right, 2 top, 3 left
-_SEGMENTS = {1: [(3, 0)], 2: [(0, 1)], 3: [(3, 1)], 4: [(1, 2)], 6: [(0, 2)], 7: [(3, 2)], 8: [(2, 3)],
-             9: [(0, 2)], 11: [(1, 2)], 12: [(1, 3)], 13: [(0, 1)], 14: [(3, 0)]}
-_SADDLE = {(5, True): [(0, 1), (2, 3)], (5, False): [(3, 0), (1, 2)],
-           (10, True): [(3, 0), (1, 2)], (10, False): [(0, 1), (2, 3)]}
+_SEGMENTS = {
+    1: [(3, 0)],
+    2: [(0, 1)],
+    3: [(3, 1)],
+    4: [(1, 2)],
+    6: [(0, 2)],
+    7: [(3, 2)],
+    8: [(2, 3)],
+    9: [(0, 2)],
+    11: [(1, 2)],
+    12: [(1, 3)],
+    13: [(0, 1)],
+    14: [(3, 0)],
+}
+_SADDLE = {
+    (5, True): [(0, 1), (2, 3)],
+    (5, False): [(3, 0), (1, 2)],
+    (10, True): [(3, 0), (1, 2)],
+    (10, False): [(0, 1), (2, 3)],
+}
 
 
 def contours(field: TipField, level: float) -> list:
@@ -232,7 +282,7 @@ def contours(field: TipField, level: float) -> list:
             continue
         used[s0] = True
         chain = list(segs[s0])
-        for forward in (True, False):           # grow from both ends
+        for forward in (True, False):  # grow from both ends
             while True:
                 tail = chain[-1] if forward else chain[0]
                 nxt = [s for s in ends[tail] if not used[s]]
@@ -276,9 +326,9 @@ def _split(line, inside):
     if inside.all():
         return [line]
     if closed and inside.any():
-        k = int(np.flatnonzero(~inside)[0])     # start the loop outside, so no piece is cut in two
-        line = np.vstack([line[k:-1], line[:k + 1]])
-        inside = np.concatenate([inside[k:-1], inside[:k + 1]])
+        k = int(np.flatnonzero(~inside)[0])  # start the loop outside, so no piece is cut in two
+        line = np.vstack([line[k:-1], line[: k + 1]])
+        inside = np.concatenate([inside[k:-1], inside[: k + 1]])
     return [line[a:b] for a, b in _true_runs(inside) if b - a >= 2]
 
 
@@ -300,7 +350,7 @@ def _drop_runs(sampler, st: SteepSettings, lines):
     z = drop_points(sampler, st.cutter, pts[:, 0], pts[:, 1], st.resolution)
     runs, k = [], 0
     for ln in lines:
-        runs.append(np.column_stack([ln, z[k:k + len(ln)]]))
+        runs.append(np.column_stack([ln, z[k : k + len(ln)]]))
         k += len(ln)
     tol = refine_tolerance(st.chord)
     runs = refine(sampler, st.cutter, runs, tol, 0.0, st.resolution)
@@ -331,7 +381,7 @@ def waterlines(sampler, st: SteepSettings, field: TipField, steep):
             for piece in _split(ln, field.lookup(steep, ln[:, 0], ln[:, 1])):
                 if np.sum(np.hypot(*np.diff(piece, axis=0).T)) >= 2 * st.resolution:
                     pieces.append(_resample(_orient(field, piece), st.resolution))
-        while pieces:               # nearest piece next; a closed loop starts where it is nearest
+        while pieces:  # nearest piece next; a closed loop starts where it is nearest
             if at is None:
                 k = 0
             else:
@@ -339,7 +389,7 @@ def waterlines(sampler, st: SteepSettings, field: TipField, steep):
             p = pieces.pop(k)
             if at is not None and len(p) > 2 and np.allclose(p[0], p[-1], atol=1e-6):
                 m = int(np.argmin(np.hypot(*(p - at).T)))
-                p = np.vstack([p[m:-1], p[:m + 1]])
+                p = np.vstack([p[m:-1], p[: m + 1]])
             out.append(p)
             at = p[-1]
     return out, len(levels), dz
@@ -357,7 +407,9 @@ def raster(sampler, st: SteepSettings, field: TipField, shallow, stepover):
     out = []
     for p, s in enumerate(passes):
         pts = along[:, None] * e1[None, :] + s * e2[None, :]
-        keep = field.lookup(shallow, pts[:, 0], pts[:, 1]) & (sampler.part_distance(pts[:, 0], pts[:, 1]) <= 1e-9)
+        keep = field.lookup(shallow, pts[:, 0], pts[:, 1]) & (
+            sampler.part_distance(pts[:, 0], pts[:, 1]) <= 1e-9
+        )
         pieces = [pts[a:b] for a, b in _true_runs(keep) if b - a >= 2]
         if p % 2 == 1:
             pieces = [q[::-1] for q in pieces[::-1]]
@@ -377,9 +429,11 @@ def plan(sampler, st: SteepSettings, within=None, field: TipField | None = None)
     runs = _drop_runs(sampler, st, zz + wl)
     on = np.isfinite(field.tip) if within is None else np.isfinite(field.tip) & within
     frac = float(steep.sum() / max(on.sum(), 1))
-    notes = [f"steep and shallow at {st.threshold_deg:g} deg (overlap {st.overlap_deg:g} deg, "
-             f"{st.blend:g} mm): {len(zz)} zig-zag runs {so:.3f} mm apart, {len(wl)} waterline runs "
-             f"on {nlev} levels {dz:.3f} mm apart, scallop {st.scallop:g} mm"]
+    notes = [
+        f"steep and shallow at {st.threshold_deg:g} deg (overlap {st.overlap_deg:g} deg, "
+        f"{st.blend:g} mm): {len(zz)} zig-zag runs {so:.3f} mm apart, {len(wl)} waterline runs "
+        f"on {nlev} levels {dz:.3f} mm apart, scallop {st.scallop:g} mm"
+    ]
     return SteepPlan(runs, len(wl), len(zz), nlev, dz, so, frac, notes)
 
 
@@ -387,6 +441,7 @@ def rest_region(sampler, field: TipField, larger: Cutter, smaller: Cutter, rest_
     """Lattice mask of the axis positions for the smaller cutter: within its radius of
     where the larger one's opening stands more than rest_tol above the design."""
     from .opening import Opening
+
     x0, x1, y0, y1 = sampler.bounds
     op = Opening.over(sampler, larger, field.g, x0, y0, x1, y1)
     X, Y = np.meshgrid(field.xs, field.ys)
@@ -399,13 +454,17 @@ def rest_region(sampler, field: TipField, larger: Cutter, smaller: Cutter, rest_
 def plan_rest(sampler, st: SteepSettings, larger: Cutter, rest_tol: float | None = None) -> SteepPlan:
     """Rest machining with st.cutter after `larger`: steep and shallow, only where `larger` could not reach."""
     if st.cutter.radius >= larger.radius:
-        raise SettingError("rest", f"the rest tool ({st.cutter.name}) must be smaller than the tool before it "
-                                   f"({larger.name})")
+        raise SettingError(
+            "rest",
+            f"the rest tool ({st.cutter.name}) must be smaller than the tool before it ({larger.name})",
+        )
     tol = st.scallop if rest_tol is None else rest_tol
     st.check()
     field = tip_field(sampler, st.cutter, st.grid)
     within = rest_region(sampler, field, larger, st.cutter, tol)
     p = plan(sampler, st, within, field) if within.any() else SteepPlan([], notes=[])
-    p.notes = [f"rest machining after {larger.name}: where it stays more than {tol:g} mm above the design "
-               f"({within.mean() * 100:.1f} % of the part's box)"] + p.notes
+    p.notes = [
+        f"rest machining after {larger.name}: where it stays more than {tol:g} mm above the design "
+        f"({within.mean() * 100:.1f} % of the part's box)"
+    ] + p.notes
     return p

@@ -49,6 +49,7 @@ A move above the tips it replaces adds to the scallop, one below them cuts
 in: the default tolerance is 0.002 mm or a twentieth of the requested
 scallop, whichever is smaller (0.0005 mm for the default 0.01 mm).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -61,6 +62,7 @@ from .cutters import Cutter
 from .contact import polish
 from .opening import Opening
 from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
+
 
 def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
     """The lattice drop-cutter, polished on steep faces (contact.py) so a tip is never
@@ -79,17 +81,19 @@ def drop_points(sampler, cutter, x, y, d=DEFAULT_RESOLUTION):
     x = np.asarray(x, float).ravel()
     y = np.asarray(y, float).ravel()
     return drop_lines(sampler, cutter, np.column_stack([x, y]), (1.0, 0.0), 1, d)[:, 0]
+
+
 from .sampling import Sampler
 from .scallop import ball_stepover, flat_stepover
 from .segments import min_over_segment
 
-DEFAULT_SCALLOP = 0.01      # mm
-DEFAULT_CHORD = 0.002       # mm
-PLAN_SPACING = 0.3          # mm between the points the planner measures along a pass
-_ROW = 0.05                 # mm between the rows of the planner's cross-sections
-_BALL_ROW = 0.1             # for a ball: its envelope is a circle across the cusp, which the
-                            # quadratic through three rows 0.1 apart gives within 1e-5 mm
-_CROSS = 15                 # cross-sections measured between two passes
+DEFAULT_SCALLOP = 0.01  # mm
+DEFAULT_CHORD = 0.002  # mm
+PLAN_SPACING = 0.3  # mm between the points the planner measures along a pass
+_ROW = 0.05  # mm between the rows of the planner's cross-sections
+_BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which the
+# quadratic through three rows 0.1 apart gives within 1e-5 mm
+_CROSS = 15  # cross-sections measured between two passes
 
 
 @dataclass
@@ -116,36 +120,47 @@ class FinishSettings:
             if not np.isfinite(self.stepover) or self.stepover <= 0:
                 raise SettingError("stepover", f"must be > 0 mm, got {self.stepover}")
             if self.stepover >= self.cutter.diameter:
-                raise SettingError("stepover", f"{self.stepover:g} mm is not less than the cutter "
-                                               f"diameter {self.cutter.diameter:g} mm: strips would be left uncut")
+                raise SettingError(
+                    "stepover",
+                    f"{self.stepover:g} mm is not less than the cutter "
+                    f"diameter {self.cutter.diameter:g} mm: strips would be left uncut",
+                )
         else:
             if self.scallop is None or not np.isfinite(self.scallop) or self.scallop <= 0:
                 raise SettingError("scallop", f"must be > 0 mm, got {self.scallop}")
             if self.scallop >= R:
-                raise SettingError("scallop", f"{self.scallop:g} mm is not less than the cutter radius {R:g} mm")
+                raise SettingError(
+                    "scallop", f"{self.scallop:g} mm is not less than the cutter radius {R:g} mm"
+                )
         if not np.isfinite(self.resolution) or self.resolution <= 0:
             raise SettingError("resolution", f"must be > 0 mm, got {self.resolution}")
         if not np.isfinite(self.angle):
             raise SettingError("angle", f"must be a number of degrees, got {self.angle}")
         if self.resolution > R / 3:
-            raise SettingError("resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius "
-                                             f"{R:g} mm (at most {R / 3:.3g} mm)")
+            raise SettingError(
+                "resolution",
+                f"{self.resolution:g} mm is too coarse for a cutter of radius "
+                f"{R:g} mm (at most {R / 3:.3g} mm)",
+            )
         if not np.isfinite(self.chord) or self.chord <= 0:
             raise SettingError("chord tolerance", f"must be > 0 mm, got {self.chord}")
         if not np.isfinite(self.margin) or self.margin < 0:
             raise SettingError("margin", f"must be >= 0 mm, got {self.margin}")
         if self.margin > R:
-            raise SettingError("margin", f"{self.margin:g} mm is more than the cutter radius {R:g} mm: "
-                                         "the cutter would drop off the part's edge to the base")
+            raise SettingError(
+                "margin",
+                f"{self.margin:g} mm is more than the cutter radius {R:g} mm: "
+                "the cutter would drop off the part's edge to the base",
+            )
         if not np.isfinite(self.leave) or self.leave < 0:
             raise SettingError("stock to leave", f"must be >= 0 mm, got {self.leave}")
 
 
 @dataclass
 class Finish:
-    runs: list            # list of (k, 3) arrays of tool-tip positions, cutting order
-    linked: list          # linked[i]: run i is joined to run i-1 without a retract
-    passes: np.ndarray    # across-position of every pass (mm)
+    runs: list  # list of (k, 3) arrays of tool-tip positions, cutting order
+    linked: list  # linked[i]: run i is joined to run i-1 without a retract
+    passes: np.ndarray  # across-position of every pass (mm)
     stepovers: np.ndarray
 
 
@@ -153,8 +168,11 @@ def check_fits(sampler: Sampler, cutter: Cutter):
     x0, x1, y0, y1 = sampler.bounds
     w = min(x1 - x0, y1 - y0)
     if cutter.diameter > w:
-        raise SettingError("cutter", f"diameter {cutter.diameter:g} mm is larger than the part "
-                                     f"({x1 - x0:.1f} x {y1 - y0:.1f} mm): choose a smaller cutter")
+        raise SettingError(
+            "cutter",
+            f"diameter {cutter.diameter:g} mm is larger than the part "
+            f"({x1 - x0:.1f} x {y1 - y0:.1f} mm): choose a smaller cutter",
+        )
 
 
 def _frame(sampler: Sampler, angle_deg, margin):
@@ -203,12 +221,13 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
         keep = sampler.part_distance(pts[:, 0], pts[:, 1]) <= st.margin + 1e-9
         xyz = np.column_stack([pts, tips[k]])
         mid = np.column_stack([(along[:-1] + 0.5 * d)[:, None] * e1[None, :] + s * e2[None, :], mids[k]])
-        pass_runs = [_insert_mids(xyz[a:b], mid[a:b - 1], tol) for a, b in _true_runs(keep)]
+        pass_runs = [_insert_mids(xyz[a:b], mid[a : b - 1], tol) for a, b in _true_runs(keep)]
         if k % 2 == 1:
             pass_runs = [(r[::-1], len(r) - 2 - c) for r, c in pass_runs[::-1]]
         ordered.extend(pass_runs)
-    ordered = refine(sampler, drop_cutter, [r for r, _ in ordered], tol, st.leave, d,
-                     cand=[np.sort(c) for _, c in ordered])
+    ordered = refine(
+        sampler, drop_cutter, [r for r, _ in ordered], tol, st.leave, d, cand=[np.sort(c) for _, c in ordered]
+    )
     links = _links(sampler, drop_cutter, st, ordered, passes)
     runs, keeps, linked = [], [], []
     for i, r in enumerate(ordered):
@@ -270,8 +289,8 @@ def refine(sampler, cutter, runs, tol, leave, d, max_levels=12, cand=None):
         cand = [np.zeros(0, int) for _ in runs]
         pos = 0
         for (i, c), m in zip(which, mids):
-            up = up_all[pos:pos + len(c)]
-            zz = z[pos:pos + len(c)]
+            up = up_all[pos : pos + len(c)]
+            zz = z[pos : pos + len(c)]
             pos += len(c)
             if not up.any():
                 continue
@@ -299,8 +318,7 @@ def _links(sampler, cutter, st, runs, passes):
     the ~200 links of a program cost about as much as one pass.
     """
     d = st.resolution
-    limit = min(2.0 * (np.max(np.diff(passes)) if passes.size > 1 else st.cutter.radius),
-                st.cutter.diameter)
+    limit = min(2.0 * (np.max(np.diff(passes)) if passes.size > 1 else st.cutter.radius), st.cutter.diameter)
     out = [None] * max(len(runs) - 1, 0)
     groups = {}
     for i in range(len(runs) - 1):
@@ -312,7 +330,7 @@ def _links(sampler, cutter, st, runs, passes):
             out[i] = np.empty((0, 3))
             continue
         e = (q[:2] - p[:2]) / gap
-        k = int(np.ceil(gap / d - 1e-9))          # points p + j d e, j = 1..k-1, then q
+        k = int(np.ceil(gap / d - 1e-9))  # points p + j d e, j = 1..k-1, then q
         xy = p[None, :2] + d * np.arange(1, k)[:, None] * e[None, :]
         if len(xy) and np.any(sampler.part_distance(xy[:, 0], xy[:, 1]) > st.margin + 1e-9):
             continue
@@ -329,7 +347,7 @@ def _links(sampler, cutter, st, runs, passes):
         z = drop_lines(sampler, cutter, origins, e, n - 1, d) + st.leave
         for row, (i, p, k) in enumerate(items):
             xy = origins[row][None, :] + d * np.arange(k - 1)[:, None] * e[None, :]
-            out[i] = np.column_stack([xy, z[row, :k - 1]])
+            out[i] = np.column_stack([xy, z[row, : k - 1]])
     # a link runs across the passes, where the tip height may be concave: refine it
     # together with its end points, then keep only its inner points
     todo = [i for i, l in enumerate(out) if l is not None]
@@ -356,10 +374,11 @@ class _PassProbe:
         spacing = PLAN_SPACING if st.cutter.kind != "flat" else min(PLAN_SPACING, st.cutter.radius / 10)
         self.stride = max(1, int(round(spacing / st.resolution)))
         self._grids = {}
-        self._measured = {}      # (across, row step) -> (first row, envelope) of candidates measured
+        self._measured = {}  # (across, row step) -> (first row, envelope) of candidates measured
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
-        self.row = min(_BALL_ROW if st.cutter.kind == "ball" else _ROW,
-                       flat_stepover(st.cutter, st.scallop) / 8)
+        self.row = min(
+            _BALL_ROW if st.cutter.kind == "ball" else _ROW, flat_stepover(st.cutter, st.scallop) / 8
+        )
         idx = np.arange(0, n, self.stride)
         # every point within 1.5 R of the passes' ends: there the cutter reaches the
         # strip beside the part's edge only from positions to the side, and the cusps
@@ -384,7 +403,9 @@ class _PassProbe:
         full = drop_lines(self.sampler, self.st.cutter, o[None, :], self.e1, self.n, self.st.resolution)[0]
         # positions off the part (beyond the margin) are not in the program
         t = self.st.resolution * np.arange(self.n)
-        gone = self.sampler.part_distance(o[0] + t * self.e1[0], o[1] + t * self.e1[1]) > self.st.margin + 1e-9
+        gone = (
+            self.sampler.part_distance(o[0] + t * self.e1[0], o[1] + t * self.e1[1]) > self.st.margin + 1e-9
+        )
         return s, np.where(gone, np.inf, full)
 
     def envelope(self, p, dy, cols):
@@ -417,7 +438,7 @@ class _PassProbe:
         env = np.full(np.broadcast_shapes(dy.shape, (1, at.size)), np.inf)
         # the flat bottom: a plain window minimum of the tips (h = 0 there), one
         # minimum filter per distinct window width
-        w_flat = np.floor(np.sqrt(np.maximum(a_flat ** 2 - dy ** 2, 0.0)) / d + 1e-9).astype(int)
+        w_flat = np.floor(np.sqrt(np.maximum(a_flat**2 - dy**2, 0.0)) / d + 1e-9).astype(int)
         w_flat = np.where(dy <= a_flat, w_flat, -1)
         for w in np.unique(w_flat[w_flat >= 0]):
             lowest = ndimage.minimum_filter1d(full, 2 * w + 1, axis=1, mode="constant", cval=np.inf)[pid, at]
@@ -459,7 +480,7 @@ class _PassProbe:
         ks = np.arange(-m, m + 1)
         shape = np.broadcast_shapes(dy.shape, (1, at.size))
         env = np.full(shape, np.inf)
-        best = np.zeros(shape, int)            # k of the lowest position
+        best = np.zeros(shape, int)  # k of the lowest position
         w_all = np.floor(np.sqrt(np.maximum(R * R - dy * dy, 0.0)) / d + 1e-9)
         kk = np.abs(ks).reshape((-1,) + (1,) * dy.ndim)
         ring = (kk > w_flat[None]) & (kk <= w_all[None]) & (dy <= R)[None]
@@ -469,23 +490,23 @@ class _PassProbe:
             # (the tips), in row chunks of `budget` elements, single precision
             # relative to the lowest tip (the loop over positions it replaces was
             # half of a finishing plan's time)
-            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]]                    # (k, cols)
+            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]]  # (k, cols)
             fin = np.isfinite(tips)
             ref = float(tips[fin].min()) if fin.any() else 0.0
             t32 = (tips - ref).astype(np.float32)
-            h32 = np.where(ring[:, :, 0], H[:, :, 0], np.inf).T.astype(np.float32)    # (rows, k)
-            t32 = np.ascontiguousarray(t32.T)                                        # (cols, k)
+            h32 = np.where(ring[:, :, 0], H[:, :, 0], np.inf).T.astype(np.float32)  # (rows, k)
+            t32 = np.ascontiguousarray(t32.T)  # (cols, k)
             live = np.flatnonzero(np.isfinite(h32).any(axis=1))
             step = max(1, budget // max(t32.size, 1))
             for r0 in range(0, live.size, step):
-                r = live[r0:r0 + step]
-                cand = h32[r][:, None, :] + t32[None, :, :]         # positions innermost: fast argmin
+                r = live[r0 : r0 + step]
+                cand = h32[r][:, None, :] + t32[None, :, :]  # positions innermost: fast argmin
                 j = np.argmin(cand, axis=2)
                 low = np.take_along_axis(cand, j[:, :, None], axis=2)[:, :, 0]
                 env[r] = np.where(np.isfinite(low), low.astype(np.float64) + ref, np.inf)
                 best[r] = ks[j]
         else:
-            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]          # (k, 1, cols)
+            tips = pad[pid[None, :], at[None, :] + m + ks[:, None]][:, None, :]  # (k, 1, cols)
             step = max(1, budget // max(env.size, 1))
             for k0 in range(0, ks.size, step):
                 sl = slice(k0, k0 + step)
@@ -529,7 +550,7 @@ class _PassProbe:
         the planner jump, 0.49 mm left). Powers of two keep the rows on a few global
         grids, so the placed passes merged on them serve many candidates."""
         level = max(0, int(np.ceil(np.log2(self.row * 8 / max(gap, 1e-3)) - 1e-9)))
-        return self.row / 2 ** level
+        return self.row / 2**level
 
     def _placed(self, step, done):
         """The placed passes merged on the row grid of spacing `step`, up to date with `done`."""
@@ -545,8 +566,10 @@ class _PassProbe:
         return grid
 
     def points(self, s):
-        return (self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
-                self.along[None, :] * self.e1[1] + np.asarray(s)[:, None] * self.e2[1])
+        return (
+            self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
+            self.along[None, :] * self.e1[1] + np.asarray(s)[:, None] * self.e2[1],
+        )
 
     def scallop(self, done, b):
         """Largest scallop the candidate pass b leaves against the passes already placed.
@@ -575,7 +598,7 @@ class _PassProbe:
         # the pass placed next is one of these candidates: its rows are merged from here
         self._measured[(b[0], step)] = (k0, env_b)
         stock = np.minimum(placed, env_b)
-        who = np.where(env_b < placed, len(done), owner)      # which pass leaves the stock there
+        who = np.where(env_b < placed, len(done), owner)  # which pass leaves the stock there
         # a pass touches where it comes nearest the opened design, the surface the
         # cutter can reach at all: beside sample 4's 81-degree faces down to its
         # edge no position comes within 0.004 mm of the design itself, and a ball's
@@ -603,7 +626,9 @@ class _PassProbe:
             # sample 3's corner (x 99, y 0; slopes 0.83 across, 0.15 along, downhill to
             # both) only positions 2.6 mm in reach the edge row, the first pass stood
             # 0.40 above it whatever the step, and the planner crawled at its 0.01 minimum
-            touch = (gap_a.min(axis=0) <= 0.3 * self.st.scallop) & (gap_b.min(axis=0) <= 0.3 * self.st.scallop)
+            touch = (gap_a.min(axis=0) <= 0.3 * self.st.scallop) & (
+                gap_b.min(axis=0) <= 0.3 * self.st.scallop
+            )
             inside = touch[None, :] & on
         # The rows between the contacts: positions between a and b touch there,
         # later passes touch beyond b's contact, so the rows beyond are not b's to
@@ -644,7 +669,6 @@ class _PassProbe:
         above, reach = self.opening.above(fine, Zf, Xf, Yf)
         fine = np.where(onf & reach, above, -np.inf)
         return max(coarse, float(np.max(fine)))
-
 
     def _cusp_of_two(self, fine, owners, nb, r, nrows, env_a, env_b, cols_ok):
         """Fill `fine` (17 rows x columns) where the cusp lies between the last pass and
@@ -704,12 +728,12 @@ class _PlacedRows:
 
     def __init__(self, probe, step):
         self.probe, self.step = probe, step
-        self.k0, self.n = 0, 0                # rows k0 .. k0 + n - 1 are held
+        self.k0, self.n = 0, 0  # rows k0 .. k0 + n - 1 are held
         ncol = probe.along.size
         self.Z, self.op, self.stock = (np.empty((0, ncol)) for _ in range(3))
         self.on = np.empty((0, ncol), bool)
         self.owner = np.empty((0, ncol), int)
-        self.merged = 0                       # passes of `done` merged so far
+        self.merged = 0  # passes of `done` merged so far
         self.last = (0, np.empty((0, ncol)))  # (first row, envelope) of the last merged pass
 
     def top_y(self):
@@ -728,7 +752,8 @@ class _PlacedRows:
         if k1 > self.k0 + self.n:
             new = self._new_rows(self.k0 + self.n, k1)
             self.Z, self.on, self.op, self.stock, self.owner = (
-                np.concatenate([o, n]) for o, n in zip(self._arrays(), new))
+                np.concatenate([o, n]) for o, n in zip(self._arrays(), new)
+            )
             self.n = k1 - self.k0
         if k0 > self.k0:
             cut = k0 - self.k0
@@ -757,7 +782,7 @@ class _PlacedRows:
             ys = self.step * np.arange(j0, j1)
             known = self.probe._measured.get((p[0], self.step))
             if known is not None and known[0] <= j0 and known[0] + known[1].shape[0] >= j1:
-                env = known[1][j0 - known[0]:j1 - known[0]]
+                env = known[1][j0 - known[0] : j1 - known[0]]
             else:
                 env = self.probe.envelope(p, (ys - p[0])[:, None], np.arange(self.probe.along.size))
             sl = slice(j0 - self.k0, j1 - self.k0)
@@ -776,7 +801,7 @@ class _PlacedRows:
         last = np.full((k1 - k0, env.shape[1]), np.inf)
         a, b = max(k0, j0), min(k1, j0 + env.shape[0])
         if a < b:
-            last[a - k0:b - k0] = env[a - j0:b - j0]
+            last[a - k0 : b - k0] = env[a - j0 : b - j0]
         return self.Z[sl], self.on[sl], self.op[sl], self.stock[sl], self.owner[sl], last
 
 
@@ -791,8 +816,9 @@ def _plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
     # a flat bottom on a slope m leaves a staircase of risers m x s whatever its
     # diameter, so the floor is 2 % of the ball-like stepover, not of the flat one
     # (0.108 mm for a 6 mm flat end held 0.06 where 0.05 was asked on a 0.4 slope)
-    s_min = max(0.02 * min(flat_stepover(st.cutter, h), ball_stepover(st.cutter.radius, h)),
-                st.resolution / 10)
+    s_min = max(
+        0.02 * min(flat_stepover(st.cutter, h), ball_stepover(st.cutter.radius, h)), st.resolution / 10
+    )
     guess = flat_stepover(st.cutter, h)
     done = [probe.pass_at(s0)]
     passes = [s0]

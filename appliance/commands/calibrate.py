@@ -15,6 +15,7 @@ into every scan.json.
 
 The previous file is kept as *.prev.json; on any error nothing is written.
 """
+
 from __future__ import annotations
 
 import json
@@ -47,13 +48,27 @@ def add_arguments(p):
     p.add_argument("--plane", help="image of the board lying on the liquid plane")
     p.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     p.add_argument("--square-mm", type=float, help="side of a board square, mm")
-    p.add_argument("--board-origin", nargs=2, type=float, default=(0.0, 0.0), metavar=("X", "Y"),
-                   help="object-frame mm of the inner corner seen nearest the image's top-left")
-    p.add_argument("--board-angle", type=float, default=0.0,
-                   help="direction of the board's rows in the object frame, degrees from +x (default 0)")
+    p.add_argument(
+        "--board-origin",
+        nargs=2,
+        type=float,
+        default=(0.0, 0.0),
+        metavar=("X", "Y"),
+        help="object-frame mm of the inner corner seen nearest the image's top-left",
+    )
+    p.add_argument(
+        "--board-angle",
+        type=float,
+        default=0.0,
+        help="direction of the board's rows in the object frame, degrees from +x (default 0)",
+    )
     p.add_argument("--out", default=None, help=f"where to write the camera block (default {default_out()})")
-    p.add_argument("--reference", choices=("ball", "sphere", "cone"), default=None,
-                   help="meniscus calibration from a scan of this reference part (give --scan)")
+    p.add_argument(
+        "--reference",
+        choices=("ball", "sphere", "cone"),
+        default=None,
+        help="meniscus calibration from a scan of this reference part (give --scan)",
+    )
     p.add_argument("--diameter", type=float, default=25.4, help="with --reference ball: its diameter, mm")
     p.add_argument("--scan", default=None, help="with --reference: the reference part's scan folder")
 
@@ -84,7 +99,9 @@ def run(args):
     if args.reference is not None:
         return run_reference(args)
     if len(args.images) < 3 or not args.plane or not args.square_mm:
-        raise SettingError("calibrate", "the camera needs 3 or more board images, --plane IMAGE and --square-mm")
+        raise SettingError(
+            "calibrate", "the camera needs 3 or more board images, --plane IMAGE and --square-mm"
+        )
     board = _board(args)
     pose = BoardPose(args.board_origin[0], args.board_origin[1], args.board_angle)
     boards = [_read(p) for p in args.images]
@@ -95,9 +112,13 @@ def run(args):
         atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())
     atomicio.write_text(out, json.dumps(camera, indent=2) + "\n")
     print(f"calibration written to {out}")
-    print(f"  lens: {report['images']} images, corner reprojection RMS {report['reprojection_rms_px']:.3f} px")
-    print(f"  liquid plane: corner RMS {report['plane_rms_mm'] * 1000:.1f} um"
-          + (f", camera {camera['height_mm']:.1f} mm above the liquid" if "height_mm" in camera else ""))
+    print(
+        f"  lens: {report['images']} images, corner reprojection RMS {report['reprojection_rms_px']:.3f} px"
+    )
+    print(
+        f"  liquid plane: corner RMS {report['plane_rms_mm'] * 1000:.1f} um"
+        + (f", camera {camera['height_mm']:.1f} mm above the liquid" if "height_mm" in camera else "")
+    )
     return 0
 
 
@@ -106,6 +127,7 @@ def run_reference(args):
     from ..process import extract_waterlines
     from ..scanfile import load_scan
     from ..surface.reference import Ball, fit_meniscus
+
     if not args.scan:
         raise SettingError("--scan", "--reference needs the reference part's scan folder")
     if args.reference == "ball":
@@ -113,7 +135,8 @@ def run_reference(args):
             raise SettingError("--diameter", f"a reference ball of {args.diameter} mm: use 1 to 100 mm")
         part = Ball(args.diameter)
     else:
-        from ..sim import surfaces                  # the virtual bench's own reference parts
+        from ..sim import surfaces  # the virtual bench's own reference parts
+
         part = surfaces.get(args.reference)
     scan = load_scan(args.scan)
     model, part = fit_meniscus(scan, part, extract_waterlines(scan))
@@ -121,7 +144,9 @@ def run_reference(args):
     if out.is_file():
         atomicio.write_bytes(out.with_name(out.stem + ".prev" + out.suffix), out.read_bytes())
     atomicio.write_text(out, json.dumps(meniscus_json(model), indent=2) + "\n")
-    print(f"meniscus written to {out}: capillary length {model.capillary_length_mm:.3f} mm, "
-          f"contact angle {math.degrees(model.contact_angle_rad):.2f} deg, "
-          f"contact line curvature weight {model.curvature:.2f}")
+    print(
+        f"meniscus written to {out}: capillary length {model.capillary_length_mm:.3f} mm, "
+        f"contact angle {math.degrees(model.contact_angle_rad):.2f} deg, "
+        f"contact line curvature weight {model.curvature:.2f}"
+    )
     return 0

@@ -5,6 +5,7 @@ installed copy: the build goes to a cache folder, never into site-packages.
 Flashing goes through the board's bootloader with avrdude; stop the daemon
 first, it holds the serial port.
 """
+
 from __future__ import annotations
 
 NAME = "firmware"
@@ -13,15 +14,20 @@ HELP = "build the stage controller's firmware, or flash it over USB serial (avrd
 
 
 def add_arguments(p):
-    p.add_argument("action", choices=("build", "flash"), help="build: the HEX only; flash: build, then write it")
+    p.add_argument(
+        "action", choices=("build", "flash"), help="build: the HEX only; flash: build, then write it"
+    )
     p.add_argument("--port", default="/dev/inkslice-stage", help="the controller's serial port (flash)")
-    p.add_argument("--programmer", default="arduino", help="avrdude programmer (default arduino: the bootloader)")
+    p.add_argument(
+        "--programmer", default="arduino", help="avrdude programmer (default arduino: the bootloader)"
+    )
     p.add_argument("--baud", type=int, default=115200, help="bootloader speed (old Nano bootloaders: 57600)")
     p.add_argument("--dry-run", action="store_true", help="flash: build and print the avrdude command only")
 
 
 def run(args):
     from .. import firmware
+
     if args.action == "build":
         out = firmware.build(("firmware",))
         print(out / firmware.HEX)

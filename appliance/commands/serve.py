@@ -5,6 +5,7 @@ By default it talks to the running daemon over its Unix socket
 its own, less privileged service. --fake serves the web room's simulated
 bench instead (UI work, demos without the daemon).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,33 +18,50 @@ HELP = "serve the web UI (phone/desktop) with waitress"
 def add_arguments(p):
     p.add_argument("--host", default="0.0.0.0", help="address to listen on (default: all, for the LAN)")
     p.add_argument("--port", type=int, default=8080)
-    p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice); "
-                                                "the web keeps its password hash in DATA/web/")
+    p.add_argument(
+        "--data",
+        default=None,
+        help="data folder (default $INKSLICE_DATA or /var/lib/inkslice); "
+        "the web keeps its password hash in DATA/web/",
+    )
     p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
-    p.add_argument("--https", action="store_true",
-                   help="mark the session cookie Secure (use when a TLS proxy fronts the box)")
-    p.add_argument("--fake", action="store_true",
-                   help="serve the simulated FakeBenchService instead of the daemon (UI work, demos)")
+    p.add_argument(
+        "--https",
+        action="store_true",
+        help="mark the session cookie Secure (use when a TLS proxy fronts the box)",
+    )
+    p.add_argument(
+        "--fake",
+        action="store_true",
+        help="serve the simulated FakeBenchService instead of the daemon (UI work, demos)",
+    )
     p.add_argument("--no-usb", action="store_true", help="hide USB stick export")
-    p.add_argument("--new-password", action="store_true",
-                   help="replace the admin password by a fresh generated one and print it (demo; "
-                        "logs every session out)")
+    p.add_argument(
+        "--new-password",
+        action="store_true",
+        help="replace the admin password by a fresh generated one and print it (demo; "
+        "logs every session out)",
+    )
 
 
 def run(args):
     from ..daemon.main import data_dir
     from ..web.demo import serve
+
     data = data_dir(args.data)
     import logging
     from ..logfiles import log_to_file
+
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    log_to_file(data, "web")                         # the system page shows the last lines
+    log_to_file(data, "web")  # the system page shows the last lines
     if args.fake:
         from ..web.fake import FakeBenchService
+
         service = FakeBenchService(Path(data) / "fake-bench", level_s=0.5)
     else:
         from ..daemon.rpc import BenchClient
         from ..errors import DeviceError
+
         sock = Path(args.socket or Path(data) / "daemon.sock")
         if not sock.exists():
             raise DeviceError(sock, "no daemon socket here; start `inkslice daemon` first (or use --fake)")

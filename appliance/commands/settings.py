@@ -5,6 +5,7 @@ and otherwise opens the data folder's store itself; either way the values are pa
 web's JSON carries them (settings.parse_text) and checked by settings.validate, so the CLI, the web
 form and the daemon refuse a bad value with the same sentence.
 """
+
 from __future__ import annotations
 
 import json
@@ -19,10 +20,15 @@ HELP = "show or change the box's settings (inkslice settings set level_step_mm=0
 
 
 def add_arguments(p):
-    p.add_argument("action", choices=("show", "set", "schema", "backup", "restore"),
-                   help="show: every setting; set KEY=VALUE ...; schema: types, units, ranges, help (JSON); "
-                        "backup -o FILE: settings and calibration; restore FILE")
-    p.add_argument("items", nargs="*", metavar="KEY=VALUE | FILE", help="for set: the changes; for restore: the file")
+    p.add_argument(
+        "action",
+        choices=("show", "set", "schema", "backup", "restore"),
+        help="show: every setting; set KEY=VALUE ...; schema: types, units, ranges, help (JSON); "
+        "backup -o FILE: settings and calibration; restore FILE",
+    )
+    p.add_argument(
+        "items", nargs="*", metavar="KEY=VALUE | FILE", help="for set: the changes; for restore: the file"
+    )
     p.add_argument("-o", "--out", default=None, help="backup: the file to write (default: stdout)")
     p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice)")
     p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
@@ -33,24 +39,29 @@ class _Offline:
 
     def __init__(self, data):
         from ..daemon.store import Store
+
         self.store = Store(data)
 
     def settings(self):
         from ..daemon import settings as S
+
         return S.full(self.store.load_settings())
 
     def update_settings(self, changes):
         from ..daemon import settings as S
+
         new = S.validate(self.settings(), changes)
         self.store.save_settings({k: new[k] for k in changes})
         return new
 
     def backup(self):
         from ..daemon.backup import backup
+
         return backup(self.store)
 
     def restore(self, doc):
         from ..daemon.backup import restore
+
         return restore(self.store, doc)
 
     def close(self):
@@ -59,10 +70,12 @@ class _Offline:
 
 def _service(args):
     from ..daemon.main import data_dir
+
     data = data_dir(args.data)
     sock = Path(args.socket or data / "daemon.sock")
     if sock.exists():
         from ..daemon.rpc import BenchClient
+
         return BenchClient(sock)
     if not data.is_dir():
         raise SettingError("--data", f"{data} is not a data folder (no daemon socket there either)")
@@ -71,6 +84,7 @@ def _service(args):
 
 def parse_changes(items) -> dict:
     from ..daemon import settings as S
+
     changes = {}
     for item in items:
         key, sep, text = item.partition("=")
@@ -84,11 +98,12 @@ def parse_changes(items) -> dict:
 
 def run(args):
     from ..daemon import settings as S
+
     if args.action == "schema":
         print(json.dumps(S.schema_json(), indent=2))
         return 0
     if args.action == "set":
-        changes = parse_changes(args.items)     # before any connection: a typo needs no daemon
+        changes = parse_changes(args.items)  # before any connection: a typo needs no daemon
     if args.action == "restore":
         if len(args.items) != 1:
             raise SettingError("settings restore", "name one backup file")
@@ -108,6 +123,7 @@ def run(args):
             text = json.dumps(service.backup(), indent=2) + "\n"
             if args.out:
                 from .. import atomicio
+
                 atomicio.check_output_file(args.out, "-o")
                 atomicio.write_text(args.out, text)
                 print(f"{args.out}: settings and calibration backed up")
@@ -123,6 +139,7 @@ def run(args):
 
 def _show(settings):
     from ..daemon import settings as S
+
     for gid, title in S.GROUPS:
         rows = [s for s in S.SCHEMA if s.group == gid]
         if not rows:

@@ -9,6 +9,7 @@ the settings and calibration it used).
 A restore is checked whole before anything is written (every setting through settings.validate,
 every record a dated object), then the settings and the history are replaced.
 """
+
 from __future__ import annotations
 
 import math
@@ -22,14 +23,19 @@ FORMAT = "inkslice-backup/1"
 
 
 def backup(store) -> dict:
-    return {"format": FORMAT, "version": __version__, "made": time.time(),
-            "settings": S.full(store.load_settings()), "calibration": store.calibrations()}
+    return {
+        "format": FORMAT,
+        "version": __version__,
+        "made": time.time(),
+        "settings": S.full(store.load_settings()),
+        "calibration": store.calibrations(),
+    }
 
 
 def check(doc) -> tuple[dict, list[dict]]:
     """(settings, calibration records) of a backup document, or SettingError naming what is wrong."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise SettingError("backup", f"not an InkSlice backup (want \"format\": \"{FORMAT}\")")
+        raise SettingError("backup", f'not an InkSlice backup (want "format": "{FORMAT}")')
     stored = doc.get("settings")
     if not isinstance(stored, dict):
         raise SettingError("backup", "its settings are missing")
@@ -50,6 +56,10 @@ def restore(store, doc) -> dict:
     settings, records = check(doc)
     store.save_settings(settings)
     store.replace_calibrations(records)
-    store.event(None, "restore", f"settings and {len(records)} calibration records restored from a backup "
-                                 f"made {time.strftime('%Y-%m-%d %H:%M', time.localtime(doc.get('made') or 0))}")
+    store.event(
+        None,
+        "restore",
+        f"settings and {len(records)} calibration records restored from a backup "
+        f"made {time.strftime('%Y-%m-%d %H:%M', time.localtime(doc.get('made') or 0))}",
+    )
     return {"settings": len(settings), "calibration": len(records)}

@@ -25,6 +25,7 @@ starts over at "home"). Steps must come in order; a failed step can be
 retried or cancelled. Errors are SettingError (wrong step) or the device's
 own error.
 """
+
 from __future__ import annotations
 
 import threading
@@ -40,12 +41,15 @@ from ..vision.printboard import PRINTED
 
 STEPS = (
     ("home", "Empty the base, then home the stage"),
-    ("target", "Lay the printed chessboard flat on the base, centred, its rows along the base's x side; "
-               "the stage raises it to the ink line"),
+    (
+        "target",
+        "Lay the printed chessboard flat on the base, centred, its rows along the base's x side; "
+        "the stage raises it to the ink line",
+    ),
     ("detect", "Capture a frame and find the board's corners"),
     ("accept", "Check the preview and accept the camera model"),
 )
-BOARD = PRINTED                         # 9 x 6 inner corners, 10 mm squares (vision/printboard.py)
+BOARD = PRINTED  # 9 x 6 inner corners, 10 mm squares (vision/printboard.py)
 # the printed board lies centred on the base, its rows along x: its first inner corner
 # (nearest the image's top-left) at (10, 75) mm, the squares' centre at the base's centre (50, 50)
 JIG = BoardPose(10.0, 75.0, 0.0)
@@ -54,13 +58,25 @@ POSE = JIG
 
 def board_details(board: Board = BOARD, pose: BoardPose = JIG) -> dict:
     """The board and where it lies, as a Placement's details (what the simulated bench renders)."""
-    return {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm,
-            "first_corner_mm": [pose.x0, pose.y0], "angle_deg": pose.angle_deg}
+    return {
+        "inner_corners": [board.cols, board.rows],
+        "square_mm": board.square_mm,
+        "first_corner_mm": [pose.x0, pose.y0],
+        "angle_deg": pose.angle_deg,
+    }
 
 
 class GuidedCalibration:
-    def __init__(self, open_devices, store, settings, show_frame, board: Board = BOARD, pose: BoardPose = POSE,
-                 operator=None):
+    def __init__(
+        self,
+        open_devices,
+        store,
+        settings,
+        show_frame,
+        board: Board = BOARD,
+        pose: BoardPose = POSE,
+        operator=None,
+    ):
         self.open_devices, self.store, self.settings = open_devices, store, settings
         self.show_frame, self.board, self.pose, self.operator = show_frame, board, pose, operator
         self.step = 0
@@ -74,8 +90,12 @@ class GuidedCalibration:
         return self.devices is not None
 
     def describe(self) -> dict:
-        return {"steps": [{"id": s, "text": t} for s, t in STEPS], "step": self.step,
-                "detected": dict(self.detected) if self.detected else None, "holds_bench": self.active}
+        return {
+            "steps": [{"id": s, "text": t} for s, t in STEPS],
+            "step": self.step,
+            "detected": dict(self.detected) if self.detected else None,
+            "holds_bench": self.active,
+        }
 
     def do(self, step: str) -> dict:
         ids = [s for s, _ in STEPS]
@@ -85,7 +105,7 @@ class GuidedCalibration:
         if step != want:
             raise SettingError("step", f"do step {want!r} first")
         getattr(self, "_" + step)()
-        if step != "accept":                # accept closes the bench and starts over at "home"
+        if step != "accept":  # accept closes the bench and starts over at "home"
             self.step += 1
         return self.describe()
 
@@ -96,7 +116,7 @@ class GuidedCalibration:
             try:
                 devices.stage.stop()
             except Exception:
-                pass                            # close() follows; the next step homes again
+                pass  # close() follows; the next step homes again
 
     def close(self):
         devices, self.devices = self.devices, None
@@ -133,20 +153,31 @@ class GuidedCalibration:
         dist = np.asarray(dist, float) if dist is not None else None
         Hm, height, rms_mm = plane_homography(frame, self.board, self.pose, K, dist, "calibration frame")
         h, w = frame.shape[:2]
-        self._camera = camera_json((w, h), Hm, K, dist, height if height is not None else lens.get("height_mm"))
+        self._camera = camera_json(
+            (w, h), Hm, K, dist, height if height is not None else lens.get("height_mm")
+        )
         # mm per pixel at the image centre, for the operator's sanity check
         c = np.array([[w / 2, h / 2, 1], [w / 2 + 1, h / 2, 1]]) @ Hm.T
         c = c[:, :2] / c[:, 2:]
-        self.detected = {"corners": self.board.cols * self.board.rows, "plane_rms_mm": round(rms_mm, 4),
-                         "mm_per_px": round(float(np.linalg.norm(c[1] - c[0])), 4),
-                         "lens": "from the stored calibration" if K is not None else "none (no lens model)"}
+        self.detected = {
+            "corners": self.board.cols * self.board.rows,
+            "plane_rms_mm": round(rms_mm, 4),
+            "mm_per_px": round(float(np.linalg.norm(c[1] - c[0])), 4),
+            "lens": "from the stored calibration" if K is not None else "none (no lens model)",
+        }
         self._preview(frame)
 
     def _accept(self):
         if self._camera is None:
             raise SettingError("step", "nothing detected to accept; do 'detect' again")
-        self.store.add_calibration({"camera": self._camera, "source": "guided",
-                                    "report": dict(self.detected or {}), "accepted": time.time()})
+        self.store.add_calibration(
+            {
+                "camera": self._camera,
+                "source": "guided",
+                "report": dict(self.detected or {}),
+                "accepted": time.time(),
+            }
+        )
         self.close()
 
     # -- helpers -------------------------------------------------------------------

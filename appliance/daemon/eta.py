@@ -13,6 +13,7 @@ learned one before a level is done) + the learned processing time; when processi
 learned processing time (the web's smoother counts it down with the clock). A box with no finished job yet knows no
 processing time: eta_processing_s is None and the estimate covers the scan only.
 """
+
 from __future__ import annotations
 
 import json
@@ -38,20 +39,35 @@ class JobTimes:
             jobs = doc.get("jobs", []) if isinstance(doc, dict) else []
         except (OSError, ValueError):
             return []
-        return [j for j in jobs if isinstance(j, dict) and _positive(j.get("levels"))
-                and _positive(j.get("scan_s"), zero=True) and _positive(j.get("process_s"), zero=True)]
+        return [
+            j
+            for j in jobs
+            if isinstance(j, dict)
+            and _positive(j.get("levels"))
+            and _positive(j.get("scan_s"), zero=True)
+            and _positive(j.get("process_s"), zero=True)
+        ]
 
     def record(self, job_id: str, levels: int, scan_s: float, process_s: float) -> None:
         """One finished job's times (a job that failed or was cancelled teaches nothing)."""
         if not levels or scan_s < 0 or process_s < 0:
             return
         with self._lock:
-            self._jobs = (self._jobs + [{"job": job_id, "levels": int(levels), "scan_s": round(scan_s, 2),
-                                         "process_s": round(process_s, 2)}])[-50:]
+            self._jobs = (
+                self._jobs
+                + [
+                    {
+                        "job": job_id,
+                        "levels": int(levels),
+                        "scan_s": round(scan_s, 2),
+                        "process_s": round(process_s, 2),
+                    }
+                ]
+            )[-50:]
             try:
                 write_text(self.path, json.dumps({"jobs": self._jobs}, indent=1) + "\n")
             except OSError:
-                pass                                # an estimate is worth no failed job
+                pass  # an estimate is worth no failed job
 
     def per_level_s(self) -> float | None:
         """Scanning seconds per level, learned; None before the first finished job."""

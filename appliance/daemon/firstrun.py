@@ -16,6 +16,7 @@ screen until somebody has logged in. The plain text lives only as long as
 nobody has logged in, readable only by the inkslice user, and is the same
 secret the display shows to anyone standing at the bench.
 """
+
 from __future__ import annotations
 
 import os
@@ -31,7 +32,7 @@ def hand_over(folder, password: str) -> Path:
     """Leave the password for the daemon's display (0600, written atomically)."""
     path = Path(folder) / FILE
     write_bytes(path, (password + "\n").encode())
-    os.chmod(path, 0o600)                       # mkstemp made it 0600 already; say so for the reader
+    os.chmod(path, 0o600)  # mkstemp made it 0600 already; say so for the reader
     return path
 
 

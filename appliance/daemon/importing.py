@@ -14,6 +14,7 @@ decoding every frame, keeps the check to milliseconds: a whole scan is decoded
 by processing anyway, which fails the job with a clear reason if a frame's
 body is corrupt.
 """
+
 from __future__ import annotations
 
 import os
@@ -26,7 +27,7 @@ from ..errors import ScanError
 from ..scanfile import Scan, image_header, load_scan, read_image_header  # noqa: F401 (the web's)
 
 MAX_FRAMES = 5000
-MAX_BYTES = 4 * 1024 ** 3
+MAX_BYTES = 4 * 1024**3
 
 
 def check(folder) -> Scan:
@@ -34,7 +35,9 @@ def check(folder) -> Scan:
     folder = Path(folder)
     scan = load_scan(folder)
     if len(scan.frames) > MAX_FRAMES:
-        raise ScanError(folder / "scan.json", f"{len(scan.frames)} frames; an import may have at most {MAX_FRAMES}")
+        raise ScanError(
+            folder / "scan.json", f"{len(scan.frames)} frames; an import may have at most {MAX_FRAMES}"
+        )
     root = folder.resolve()
     total = 0
     seen = set()
@@ -54,7 +57,9 @@ def check(folder) -> Scan:
             raise ScanError(folder, f"the frames add up to more than {MAX_BYTES} bytes")
         w, h, bits = image_header(path)
         if (w, h) != (scan.camera.width, scan.camera.height):
-            raise ScanError(path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}")
+            raise ScanError(
+                path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}"
+            )
         if bits != 8:
             raise ScanError(path, f"frame must be 8-bit, it has {bits} bits per sample")
     return scan

@@ -21,6 +21,7 @@ levels, whether each showed the part, and the `change` measured when each
 was taken, all kept in scan.json), so a resumed scan asks for exactly the
 levels an uninterrupted one would have.
 """
+
 from __future__ import annotations
 
 import math
@@ -36,9 +37,12 @@ class PartTooTall(InkSliceError):
     """The part stands out of the ink at the highest level the stage reaches."""
 
     def __init__(self, level_mm: float):
-        super().__init__("scan range", f"the part is taller than the range: it still stands out of the ink at "
-                                       f"{level_mm:g} mm, the highest level the stage reaches (lower the "
-                                       f"part on its base, or fill more ink and calibrate level zero again)")
+        super().__init__(
+            "scan range",
+            f"the part is taller than the range: it still stands out of the ink at "
+            f"{level_mm:g} mm, the highest level the stage reaches (lower the "
+            f"part on its base, or fill more ink and calibrate level zero again)",
+        )
 
 
 def waterline_change(before: np.ndarray | None, after: np.ndarray) -> float:
@@ -74,12 +78,12 @@ class LevelPlan:
         """(target level, step that led to it) after `frames`, or None when the scan is complete.
 
         Raises PartTooTall when the part stands out of the ink at the ceiling."""
-        frames = [f for f in frames if "refines" not in f.extra]   # a refined step's extra frames
+        frames = [f for f in frames if "refines" not in f.extra]  # a refined step's extra frames
         if not frames:
             return self.top, 0.0
         targets = [_target(f) for f in frames]
         if min(targets) <= self.bottom + EPS:
-            return None                             # the base is fully exposed: done
+            return None  # the base is fully exposed: done
         high = max(range(len(frames)), key=lambda i: (targets[i], -i))
         if frames[high].extra.get("shows_part"):
             if targets[high] >= self.ceiling - EPS:
@@ -97,7 +101,7 @@ class LevelPlan:
             passed = [t for t in targets if target - EPS <= t < level - EPS]
             if not passed:
                 return target, round(step, 6)
-            level = min(passed)                     # captured on the way up: carry on below it
+            level = min(passed)  # captured on the way up: carry on below it
 
     def estimate_total(self, frames: list) -> int:
         """Levels in the whole scan (exact for a fixed step with the range as set, else an estimate)."""
@@ -108,7 +112,7 @@ class LevelPlan:
         if nxt is None:
             return len(frames)
         target, step = nxt
-        if not frames or step == 0.0:               # the first frame, or a level above the range
+        if not frames or step == 0.0:  # the first frame, or a level above the range
             step = self.step
             target = max(target, self.top)
         if self.mode == "fixed":

@@ -12,6 +12,7 @@ coarse; processing builds the real height map.
 Shape of to_json(), as the web's live view expects:
     {"x": [mm...], "y": [mm...], "z": [[mm or None, ...] per y]}
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,10 +34,16 @@ class LiveMap:
         X, Y = np.meshgrid(self.xs, self.ys)
         uvw = np.stack([X, Y, np.ones_like(X)], axis=-1) @ np.linalg.inv(H).T
         with np.errstate(divide="ignore", invalid="ignore"):
-            self.u = uvw[..., 0] / uvw[..., 2] / w          # 0..1 across the image
+            self.u = uvw[..., 0] / uvw[..., 2] / w  # 0..1 across the image
             self.v = uvw[..., 1] / uvw[..., 2] / h
-        self.inside = np.isfinite(self.u) & np.isfinite(self.v) & (self.u >= 0) & (self.u < 1) \
-            & (self.v >= 0) & (self.v < 1)
+        self.inside = (
+            np.isfinite(self.u)
+            & np.isfinite(self.v)
+            & (self.u >= 0)
+            & (self.u < 1)
+            & (self.v >= 0)
+            & (self.v < 1)
+        )
         self.u = np.where(self.inside, self.u, 0.0)
         self.v = np.where(self.inside, self.v, 0.0)
         self.z = np.full((n, n), np.nan)
@@ -53,4 +60,8 @@ class LiveMap:
 
     def to_json(self) -> dict:
         z = [[None if not np.isfinite(v) else round(float(v), 3) for v in row] for row in self.z]
-        return {"x": [round(float(v), 3) for v in self.xs], "y": [round(float(v), 3) for v in self.ys], "z": z}
+        return {
+            "x": [round(float(v), 3) for v in self.xs],
+            "y": [round(float(v), 3) for v in self.ys],
+            "z": z,
+        }

@@ -4,6 +4,7 @@ and watchdog, and a clean stop on SIGTERM (scan cancelled, hardware safe).
 Logs go to stderr, which systemd sends to journald; under journald the
 timestamps are left out (the journal has its own).
 """
+
 from __future__ import annotations
 
 import logging
@@ -27,8 +28,11 @@ def data_dir(arg=None) -> Path:
 
 
 def setup_logging(level="INFO"):
-    fmt = "%(levelname)s %(name)s: %(message)s" if os.environ.get("JOURNAL_STREAM") \
+    fmt = (
+        "%(levelname)s %(name)s: %(message)s"
+        if os.environ.get("JOURNAL_STREAM")
         else "%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO), format=fmt, stream=sys.stderr)
 
 
@@ -43,8 +47,9 @@ def run(factory, data, socket_path=None, processor="child") -> int:
         signal.signal(sig, lambda *_: stop.set())
     if not callable(processor):
         processor = child_process if processor == "child" else in_process
-    service = BenchService(data, factory, processor=processor, disk_free_mb=factory.disk_free_mb,
-                           usb=factory.usb())          # the bench button's long press copies to a stick
+    service = BenchService(
+        data, factory, processor=processor, disk_free_mb=factory.disk_free_mb, usb=factory.usb()
+    )  # the bench button's long press copies to a stick
     server = rpc.serve(service, socket_path)
     if service.interrupted:
         log.warning("interrupted jobs found at start: %s", ", ".join(service.interrupted))
@@ -55,7 +60,7 @@ def run(factory, data, socket_path=None, processor="child") -> int:
     try:
         while not stop.wait(interval):
             if service.healthy():
-                notify("WATCHDOG=1")                # a hung service stops the pings: systemd restarts us
+                notify("WATCHDOG=1")  # a hung service stops the pings: systemd restarts us
             st = service.state()
             status = f"STATUS={st['state']} {st['levels_done']}/{st['levels_total']} {st['message']}"
             if status != last_status:

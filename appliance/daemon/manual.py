@@ -9,6 +9,7 @@ before it opens the devices itself.
 Levels are the ink's height above the base top, as in a scan: level = level_at_home_mm - stage
 position. "Up" lifts the base (the part rises out of the ink: the level falls).
 """
+
 from __future__ import annotations
 
 import logging
@@ -21,18 +22,25 @@ import cv2
 from ..errors import DeviceError, SettingError
 
 log = logging.getLogger("inkslice.manual")
-IDLE_S = 20.0               # the light goes off and the devices close this long after the last request
-FRAME_EVERY_S = 0.8         # a preview request newer than this reuses the last frame (many phones, one camera)
+IDLE_S = 20.0  # the light goes off and the devices close this long after the last request
+FRAME_EVERY_S = 0.8  # a preview request newer than this reuses the last frame (many phones, one camera)
 JOG_STEPS_MM = (0.1, 1.0, 10.0)
 
 
 class ManualSession:
-    def __init__(self, open_devices: Callable, settings: Callable, show_frame: Callable, report: Callable,
-                 idle_s: float = IDLE_S, clock=time.monotonic):
-        self._open_devices = open_devices       # () -> hw.devices.Devices
-        self._settings = settings               # () -> the daemon's settings
-        self._show_frame = show_frame           # (jpeg, info): the dashboard's latest frame
-        self._report = report                   # (status dict, hardware dict): into the daemon's state
+    def __init__(
+        self,
+        open_devices: Callable,
+        settings: Callable,
+        show_frame: Callable,
+        report: Callable,
+        idle_s: float = IDLE_S,
+        clock=time.monotonic,
+    ):
+        self._open_devices = open_devices  # () -> hw.devices.Devices
+        self._settings = settings  # () -> the daemon's settings
+        self._show_frame = show_frame  # (jpeg, info): the dashboard's latest frame
+        self._report = report  # (status dict, hardware dict): into the daemon's state
         self.idle_s = idle_s
         self.clock = clock
         self._lock = threading.RLock()
@@ -84,11 +92,20 @@ class ManualSession:
                 return {"open": False, "light": False, "homed": False, "level_mm": None}
             try:
                 st = dev.stage.status()
-            except Exception as e:                  # a stage that stopped answering: say so, carry on
-                return {"open": True, "light": dev.light is not None, "homed": False, "level_mm": None,
-                        "problem": str(e)}
-            return {"open": True, "light": dev.light is not None, "homed": bool(st.homed),
-                    "level_mm": round(self._at_home() - st.position_mm, 3) if st.homed else None}
+            except Exception as e:  # a stage that stopped answering: say so, carry on
+                return {
+                    "open": True,
+                    "light": dev.light is not None,
+                    "homed": False,
+                    "level_mm": None,
+                    "problem": str(e),
+                }
+            return {
+                "open": True,
+                "light": dev.light is not None,
+                "homed": bool(st.homed),
+                "level_mm": round(self._at_home() - st.position_mm, 3) if st.homed else None,
+            }
 
     @property
     def active(self) -> bool:
@@ -160,8 +177,11 @@ class ManualSession:
         lo, hi = dev.stage.travel_mm()
         if not lo - 1e-9 <= position_mm <= hi + 1e-9:
             at_home = self._at_home()
-            raise SettingError("stage", f"{what or 'that move'} is outside the travel: levels "
-                                        f"{at_home - hi:g} to {at_home - lo:g} mm")
+            raise SettingError(
+                "stage",
+                f"{what or 'that move'} is outside the travel: levels "
+                f"{at_home - hi:g} to {at_home - lo:g} mm",
+            )
         dev.stage.move_to(position_mm)
         self._capture(dev)
 

@@ -4,6 +4,7 @@ systemd's Type=notify waits for READY=1 before it calls the service started,
 and WatchdogSec= restarts the daemon if WATCHDOG=1 stops arriving (a hung
 main loop). Outside systemd NOTIFY_SOCKET is unset and these are no-ops.
 """
+
 from __future__ import annotations
 
 import os
@@ -14,7 +15,7 @@ def notify(*lines: str) -> bool:
     addr = os.environ.get("NOTIFY_SOCKET")
     if not addr:
         return False
-    if addr.startswith("@"):                       # abstract namespace
+    if addr.startswith("@"):  # abstract namespace
         addr = "\0" + addr[1:]
     with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC) as s:
         s.connect(addr)

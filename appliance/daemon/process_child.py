@@ -1,4 +1,5 @@
 """python -m appliance.daemon.process_child SCAN OUT OPTIONS_JSON (see processing.py)."""
+
 import errno
 import json
 import sys
@@ -10,6 +11,7 @@ def main(argv, truth_for=lambda scan_folder: None):
     """`truth_for(scan_folder)`: the part's ground truth for the statistics, or None (a real scan)."""
     scan, out, options = argv[0], argv[1], json.loads(argv[2])
     from ..process import process_scan
+
     try:
         result = process_scan(scan, out, truth=truth_for(scan), **options)
     except InkSliceError as e:
@@ -18,11 +20,17 @@ def main(argv, truth_for=lambda scan_folder: None):
     except OSError as e:
         if e.errno not in (errno.ENOSPC, errno.EDQUOT):
             raise
-        print(f"disk: full while writing the outputs ({e.strerror}); the scan is kept, "
-              "free some space and resume", file=sys.stderr)
+        print(
+            f"disk: full while writing the outputs ({e.strerror}); the scan is kept, "
+            "free some space and resume",
+            file=sys.stderr,
+        )
         return 2
-    print(json.dumps({"outputs": result["outputs"], "method": result.get("method"),
-                      "truth": result.get("truth")}))
+    print(
+        json.dumps(
+            {"outputs": result["outputs"], "method": result.get("method"), "truth": result.get("truth")}
+        )
+    )
     return 0
 
 

@@ -19,6 +19,7 @@ only what the daemon itself put there (JOB_OWN: the scan; a processor may add to
 so no output of an earlier run is left beside the new ones. A job ends `done`
 only with its finishing program (`checked_outputs`); otherwise `failed`.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -35,7 +36,7 @@ from typing import Callable
 from ..errors import Cancelled, InkSliceError
 
 
-JOB_OWN = ("scan",)                       # what a job folder holds besides the outputs
+JOB_OWN = ("scan",)  # what a job folder holds besides the outputs
 PROGRAM = "toolpath.gcode"
 
 
@@ -46,18 +47,24 @@ def checked_outputs(result: dict, job_dir) -> list[str]:
     if result.get("makes_program", True) is False:
         return outputs
     if PROGRAM not in outputs or not (Path(job_dir) / PROGRAM).is_file():
-        raise InkSliceError("processing", f"no finishing program ({PROGRAM}) was written; "
-                                          "the scan is kept, process it again")
+        raise InkSliceError(
+            "processing", f"no finishing program ({PROGRAM}) was written; the scan is kept, process it again"
+        )
     return outputs
 
 
 def options_for(settings: dict) -> dict:
     """The job's settings (settings.full) as process_scan's keyword arguments."""
-    options = {"grid_n": int(settings["grid"]),
-               "cam_options": {"cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
-                               "dialect": settings["dialect"], "scallop": float(settings["scallop_mm"])},
-               "keep": list(JOB_OWN)}
-    for key in ("pipeline", "method"):          # "" leaves process_scan's own default
+    options = {
+        "grid_n": int(settings["grid"]),
+        "cam_options": {
+            "cutter": f"{settings['cutter_type']}{settings['cutter_diameter_mm']:g}",
+            "dialect": settings["dialect"],
+            "scallop": float(settings["scallop_mm"]),
+        },
+        "keep": list(JOB_OWN),
+    }
+    for key in ("pipeline", "method"):  # "" leaves process_scan's own default
         if settings.get(key):
             options[key] = settings[key]
     return options
@@ -79,6 +86,7 @@ def in_process(scan_folder, out_folder, options, stop=None) -> dict:
     # imported here, not above: the processing code (scipy, the CAM) costs the daemon
     # some 40 MB it does not need when it processes in a child
     from ..process import process_scan
+
     return process_scan(scan_folder, out_folder, **options)
 
 
@@ -86,17 +94,29 @@ def _die_with_parent():
     """In the child, before exec: ask the kernel to SIGKILL it when the daemon dies,
     so a kill -9 of the daemon cannot leave an orphan writing into the job folder."""
     try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except OSError:
         pass
 
 
-def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0.2,
-                  module: str = "appliance.daemon.process_child") -> dict:
+def child_process(
+    scan_folder,
+    out_folder,
+    options,
+    stop=None,
+    poll_s: float = 0.2,
+    module: str = "appliance.daemon.process_child",
+) -> dict:
     """`module`: the child's main (process_child.py, or one that adds to it with the same protocol)."""
     cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, preexec_fn=_die_with_parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        proc = subprocess.Popen(
+            cmd,
+            stdout=out,
+            stderr=err,
+            preexec_fn=_die_with_parent,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
         while True:
             # wait4, not wait: it also gives the child's peak memory, which the job records
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -111,14 +131,17 @@ def child_process(scan_folder, out_folder, options, stop=None, poll_s: float = 0
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
-    peak_mb = usage.ru_maxrss / 1024                # Linux reports kB
+    peak_mb = usage.ru_maxrss / 1024  # Linux reports kB
     if rc == 0:
         return {**json.loads(stdout.strip().splitlines()[-1]), "peak_rss_mb": round(peak_mb, 1)}
     if rc == 2 and stderr.strip():
         where, _, problem = stderr.strip().splitlines()[-1].partition(": ")
         raise InkSliceError(where or "processing", problem or stderr.strip())
     if rc < 0:
-        raise InkSliceError("processing", f"the processing child was killed by signal {-rc} after reaching "
-                                          f"{peak_mb:.0f} MB (out of memory?); the scan is kept, process it again")
+        raise InkSliceError(
+            "processing",
+            f"the processing child was killed by signal {-rc} after reaching "
+            f"{peak_mb:.0f} MB (out of memory?); the scan is kept, process it again",
+        )
     tail = stderr.strip().splitlines()[-1] if stderr.strip() else "no message"
     raise InkSliceError("processing", f"failed with exit code {rc}: {tail}")

@@ -13,6 +13,7 @@ stray temporary the appliance writes on the data disk: those, the web's
 upload folders (DATA/web/uploads/.incoming-*, the web removes them at its
 start) and half-written files.
 """
+
 from __future__ import annotations
 
 import logging
@@ -77,17 +78,29 @@ def recover(store: Store) -> list[str]:
         scan_dir = store.job_dir(job["id"]) / "scan"
         try:
             frames = repair_scan_folder(scan_dir)
-        except InkSliceError as e:                  # cannot happen with atomic writes; say so if it does
-            store.update_job(job["id"], status="failed", interrupted=1, reason=f"interrupted, and the scan "
-                             f"folder is unreadable: {e}")
+        except InkSliceError as e:  # cannot happen with atomic writes; say so if it does
+            store.update_job(
+                job["id"],
+                status="failed",
+                interrupted=1,
+                reason=f"interrupted, and the scan folder is unreadable: {e}",
+            )
             found.append(job["id"])
             continue
         n = len(frames)
-        reason = (f"interrupted: the daemon stopped while {job['status']} (power loss, crash or kill) "
-                  f"with {n} level{'s' if n != 1 else ''} captured; resume to continue")
+        reason = (
+            f"interrupted: the daemon stopped while {job['status']} (power loss, crash or kill) "
+            f"with {n} level{'s' if n != 1 else ''} captured; resume to continue"
+        )
         try:
-            store.update_job(job["id"], status="failed", interrupted=1, reason=reason, levels_done=n,
-                             level_mm=frames[-1].level_mm if frames else None)
+            store.update_job(
+                job["id"],
+                status="failed",
+                interrupted=1,
+                reason=reason,
+                levels_done=n,
+                level_mm=frames[-1].level_mm if frames else None,
+            )
         except DiskFull as e:
             log.warning("job %s: %s", job["id"], e)
         store.event(job["id"], "interrupted", reason)
@@ -103,9 +116,11 @@ def audit(store: Store) -> list[str]:
         problems.append("database: integrity check failed")
     stray = stray_imports(store)
     if stray:
-        mib = sum(f.stat().st_size for d in stray for f in d.rglob("*") if f.is_file()) / 2 ** 20
-        problems.append(f"jobs: imports left half-copied (removed when the daemon starts), {mib:.1f} MiB: "
-                        f"{[d.name for d in stray]}")
+        mib = sum(f.stat().st_size for d in stray for f in d.rglob("*") if f.is_file()) / 2**20
+        problems.append(
+            f"jobs: imports left half-copied (removed when the daemon starts), {mib:.1f} MiB: "
+            f"{[d.name for d in stray]}"
+        )
     for job in store.list_jobs():
         jid, scan_dir = job["id"], store.job_dir(job["id"]) / "scan"
         temporaries = list(store.job_dir(jid).rglob(".*.tmp"))
@@ -122,7 +137,9 @@ def audit(store: Store) -> list[str]:
                 problems.append(f"{jid}: {e}")
                 continue
         if job["status"] not in ACTIVE and job["levels_done"] != len(frames):
-            problems.append(f"{jid}: the store says {job['levels_done']} levels, scan.json lists {len(frames)}")
+            problems.append(
+                f"{jid}: the store says {job['levels_done']} levels, scan.json lists {len(frames)}"
+            )
         for name in job["outputs"]:
             if not (store.job_dir(jid) / name).is_file():
                 problems.append(f"{jid}: output {name} is listed but missing")

@@ -12,6 +12,7 @@ plan takes far more memory than the daemon holds (processing.py explains why
 that must not be the daemon's), and the command already names a bad input in
 one line, which comes back here as the error.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,14 +33,20 @@ def check_options(options: dict) -> dict:
     from ..cam.cutters import parse_cutter
     from ..cam.feeds import DEFAULT_MATERIAL, MATERIALS
     from ..cam.posts import DIALECT_NAMES
+
     if not isinstance(options, dict):
         raise SettingError("post", "options must be an object")
     unknown = sorted(set(options) - set(OPTIONS))
     if unknown:
         raise SettingError(unknown[0], f"unknown option (known: {', '.join(OPTIONS)})")
-    out = {"dialect": options.get("dialect", "linuxcnc"), "cutter": str(options.get("cutter", "ball6")),
-           "material": options.get("material", DEFAULT_MATERIAL), "scallop_mm": options.get("scallop_mm", 0.05),
-           "steep": options.get("steep", False), "operations": options.get("operations", False)}
+    out = {
+        "dialect": options.get("dialect", "linuxcnc"),
+        "cutter": str(options.get("cutter", "ball6")),
+        "material": options.get("material", DEFAULT_MATERIAL),
+        "scallop_mm": options.get("scallop_mm", 0.05),
+        "steep": options.get("steep", False),
+        "operations": options.get("operations", False),
+    }
     if out["dialect"] not in DIALECT_NAMES:
         raise SettingError("dialect", f"must be one of {', '.join(DIALECT_NAMES)}, got {out['dialect']!r}")
     if out["material"] not in MATERIALS:
@@ -57,9 +64,23 @@ def check_options(options: dict) -> dict:
 def command(job_dir, job_name: str, settings: dict, options: dict) -> list:
     """The child's command line for these (checked) options and the job's settings."""
     o = options
-    cmd = [sys.executable, "-m", "appliance.cli", "toolpath", str(job_dir), "--job", job_name,
-           "--dialect", o["dialect"], "--material", o["material"], "--scallop", repr(float(o["scallop_mm"])),
-           "--steep-angle", repr(float(settings.get("steep_angle_deg", 50.0)))]
+    cmd = [
+        sys.executable,
+        "-m",
+        "appliance.cli",
+        "toolpath",
+        str(job_dir),
+        "--job",
+        job_name,
+        "--dialect",
+        o["dialect"],
+        "--material",
+        o["material"],
+        "--scallop",
+        repr(float(o["scallop_mm"])),
+        "--steep-angle",
+        repr(float(settings.get("steep_angle_deg", 50.0))),
+    ]
     if o["operations"]:
         cmd += ["--operations", settings["operations"], "--tools", settings["tool_table"]]
     else:
@@ -73,8 +94,14 @@ def repost(job_dir, job_name: str, settings: dict, options: dict) -> list:
     job_dir = Path(job_dir)
     if not (job_dir / "heightmap.csv").is_file():
         raise SettingError("job", "has no height map to post from (process its scan first)")
-    r = subprocess.run(command(job_dir, job_name, settings, options), capture_output=True, text=True,
-                       timeout=TIMEOUT_S, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdin=subprocess.DEVNULL)
+    r = subprocess.run(
+        command(job_dir, job_name, settings, options),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdin=subprocess.DEVNULL,
+    )
     if r.returncode != 0:
         last = (r.stderr.strip().splitlines() or ["the toolpath command failed"])[-1]
         problem = last.removeprefix("inkslice: error: ")

@@ -19,6 +19,7 @@ threads, not fifty. The listen backlog (BACKLOG) is still large, for clients
 that connect on their own (tests, scripts, several web workers): the default
 of 5 refused connections (EAGAIN) as soon as more than five arrived at once.
 """
+
 from __future__ import annotations
 
 import base64
@@ -34,22 +35,60 @@ from pathlib import Path
 from .. import errors
 
 log = logging.getLogger("inkslice.rpc")
-METHODS = ("state", "start_scan", "cancel", "resume", "jobs", "job", "job_file", "latest_frame",
-           "settings", "update_settings", "events",
-           "live_heightmap", "calibration", "calibrate", "import_scan",
-           "commissioning", "commission", "export_commissioning", "import_commissioning", "ink_changed",
-           "usb_sticks", "export_to_usb", "backup", "restore", "system",
-           "preview", "home_stage", "jog", "goto_level", "rename_job", "delete_job", "reprocess", "job_sizes",
-           "repost", "test_webhook")
-BACKLOG = 128                   # pending connections the kernel queues (Linux caps it at somaxconn)
-MAX_CONNECTIONS = 6             # a BenchClient's open connections (calls in flight) at most
-SLOW_CALLS = {"calibrate": 180.0, "cancel": 45.0, "import_scan": 120.0,    # s; homing, a copy,
-              "commission": 600.0,                                          # the search for level zero,
-              "export_to_usb": 180.0, "test_webhook": 30.0,                 # a copy, read back, unmount; a slow receiver
-              "home_stage": 90.0, "goto_level": 90.0, "jog": 60.0,          # the panel's moves
-              "repost": 900.0}                                              # a new program from a height map
-_ERRORS = {c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError,
-                                   errors.ScanError)}
+METHODS = (
+    "state",
+    "start_scan",
+    "cancel",
+    "resume",
+    "jobs",
+    "job",
+    "job_file",
+    "latest_frame",
+    "settings",
+    "update_settings",
+    "events",
+    "live_heightmap",
+    "calibration",
+    "calibrate",
+    "import_scan",
+    "commissioning",
+    "commission",
+    "export_commissioning",
+    "import_commissioning",
+    "ink_changed",
+    "usb_sticks",
+    "export_to_usb",
+    "backup",
+    "restore",
+    "system",
+    "preview",
+    "home_stage",
+    "jog",
+    "goto_level",
+    "rename_job",
+    "delete_job",
+    "reprocess",
+    "job_sizes",
+    "repost",
+    "test_webhook",
+)
+BACKLOG = 128  # pending connections the kernel queues (Linux caps it at somaxconn)
+MAX_CONNECTIONS = 6  # a BenchClient's open connections (calls in flight) at most
+SLOW_CALLS = {
+    "calibrate": 180.0,
+    "cancel": 45.0,
+    "import_scan": 120.0,  # s; homing, a copy,
+    "commission": 600.0,  # the search for level zero,
+    "export_to_usb": 180.0,
+    "test_webhook": 30.0,  # a copy, read back, unmount; a slow receiver
+    "home_stage": 90.0,
+    "goto_level": 90.0,
+    "jog": 60.0,  # the panel's moves
+    "repost": 900.0,
+}  # a new program from a height map
+_ERRORS = {
+    c.__name__: c for c in (errors.InkSliceError, errors.SettingError, errors.DeviceError, errors.ScanError)
+}
 
 
 def _encode(method, result):
@@ -66,7 +105,7 @@ class _Handler(socketserver.StreamRequestHandler):
         try:
             self._serve()
         except (BrokenPipeError, ConnectionResetError):
-            pass                                    # the client went away (e.g. left a subscription early)
+            pass  # the client went away (e.g. left a subscription early)
 
     def _serve(self):
         service = self.server.service
@@ -75,8 +114,12 @@ class _Handler(socketserver.StreamRequestHandler):
                 req = json.loads(raw)
                 method, args, kwargs = req["method"], req.get("args", []), req.get("kwargs", {})
             except (ValueError, KeyError, TypeError):
-                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "rpc",
-                                                   "problem": "malformed request"}})
+                self._send(
+                    {
+                        "ok": False,
+                        "error": {"type": "InkSliceError", "where": "rpc", "problem": "malformed request"},
+                    }
+                )
                 continue
             if method == "subscribe":
                 for state in service.subscribe(*args, **kwargs):
@@ -84,20 +127,37 @@ class _Handler(socketserver.StreamRequestHandler):
                 self._send({"end": True})
                 continue
             if method not in METHODS:
-                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "rpc",
-                                                   "problem": f"no method {method!r}"}})
+                self._send(
+                    {
+                        "ok": False,
+                        "error": {
+                            "type": "InkSliceError",
+                            "where": "rpc",
+                            "problem": f"no method {method!r}",
+                        },
+                    }
+                )
                 continue
             try:
                 result = getattr(service, method)(*args, **kwargs)
                 self._send({"ok": True, "result": _encode(method, result)})
             except errors.InkSliceError as e:
-                kind = next(c.__name__ for c in type(e).__mro__ if c.__name__ in _ERRORS)   # NoStick: DeviceError
-                self._send({"ok": False, "error": {"type": kind, "where": e.where,
-                                                   "problem": e.problem}})
+                kind = next(
+                    c.__name__ for c in type(e).__mro__ if c.__name__ in _ERRORS
+                )  # NoStick: DeviceError
+                self._send({"ok": False, "error": {"type": kind, "where": e.where, "problem": e.problem}})
             except Exception as e:
                 log.exception("rpc %s", method)
-                self._send({"ok": False, "error": {"type": "InkSliceError", "where": "daemon",
-                                                   "problem": f"internal error: {type(e).__name__}: {e}"}})
+                self._send(
+                    {
+                        "ok": False,
+                        "error": {
+                            "type": "InkSliceError",
+                            "where": "daemon",
+                            "problem": f"internal error: {type(e).__name__}: {e}",
+                        },
+                    }
+                )
 
     def _send(self, obj):
         self.wfile.write((json.dumps(obj) + "\n").encode())
@@ -113,9 +173,9 @@ def serve(service, path) -> _Server:
     """Start serving `service` on the Unix socket `path` in a background thread."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.unlink(missing_ok=True)                    # a stale socket from a killed daemon
+    path.unlink(missing_ok=True)  # a stale socket from a killed daemon
     server = _Server(str(path), _Handler)
-    os.chmod(path, 0o660)                           # the daemon's user and group (the web service)
+    os.chmod(path, 0o660)  # the daemon's user and group (the web service)
     server.service = service
     threading.Thread(target=server.serve_forever, name="inkslice-rpc", daemon=True).start()
     return server
@@ -142,9 +202,23 @@ class BenchClient:
     once, transparently, when the request had not reached the daemon or the
     method only reads.
     """
-    READ_ONLY = frozenset({"state", "jobs", "job", "job_file", "latest_frame", "settings", "events",
-                           "live_heightmap", "calibration", "commissioning", "export_commissioning",
-                           "usb_sticks"})
+
+    READ_ONLY = frozenset(
+        {
+            "state",
+            "jobs",
+            "job",
+            "job_file",
+            "latest_frame",
+            "settings",
+            "events",
+            "live_heightmap",
+            "calibration",
+            "commissioning",
+            "export_commissioning",
+            "usb_sticks",
+        }
+    )
 
     def __init__(self, path, timeout: float = 30.0, max_connections: int = MAX_CONNECTIONS):
         self.path, self.timeout = str(path), timeout
@@ -159,8 +233,9 @@ class BenchClient:
             s.connect(self.path)
         except OSError as e:
             s.close()
-            raise errors.DeviceError(f"daemon {self.path}", f"not reachable ({e.strerror or e}): "
-                                                             "is inkslice-daemon running?") from None
+            raise errors.DeviceError(
+                f"daemon {self.path}", f"not reachable ({e.strerror or e}): is inkslice-daemon running?"
+            ) from None
         return s
 
     def _exchange(self, conn, request: bytes):
@@ -180,8 +255,10 @@ class BenchClient:
         t0 = time.monotonic()
         timeout = max(self.timeout, SLOW_CALLS.get(method, 0.0))
         if not self._slots.acquire(timeout=self.timeout):
-            raise errors.DeviceError(f"daemon {self.path}", f"no free connection in {self.timeout:.0f} s "
-                                                             "(the daemon is not answering)")
+            raise errors.DeviceError(
+                f"daemon {self.path}",
+                f"no free connection in {self.timeout:.0f} s (the daemon is not answering)",
+            )
         try:
             with self._lock:
                 conn = self._idle.pop() if self._idle else None
@@ -192,14 +269,15 @@ class BenchClient:
             try:
                 line, undelivered = self._exchange(conn, request)
                 if not line and reused and (undelivered or method in self.READ_ONLY):
-                    conn.close()                    # a connection from before a daemon restart
+                    conn.close()  # a connection from before a daemon restart
                     conn = _Conn(self._connect(max(1.0, self.timeout - (time.monotonic() - t0))))
                     conn.sock.settimeout(timeout)
                     line, _ = self._exchange(conn, request)
             except TimeoutError:
-                conn.close()                        # a late reply would answer the next call: drop it
-                raise errors.DeviceError(f"daemon {self.path}",
-                                         f"no answer to {method} in {timeout:.0f} s") from None
+                conn.close()  # a late reply would answer the next call: drop it
+                raise errors.DeviceError(
+                    f"daemon {self.path}", f"no answer to {method} in {timeout:.0f} s"
+                ) from None
             except BaseException:
                 conn.close()
                 raise
@@ -216,39 +294,104 @@ class BenchClient:
             raise _ERRORS.get(e["type"], errors.InkSliceError)(e["where"], e["problem"])
         return reply["result"]
 
-    def state(self): return self._call("state")
-    def start_scan(self, params): return self._call("start_scan", params)
-    def cancel(self): return self._call("cancel")
-    def resume(self, job_id): return self._call("resume", job_id)
-    def jobs(self): return self._call("jobs")
-    def job(self, job_id): return self._call("job", job_id)
-    def job_file(self, job_id, name): return Path(self._call("job_file", job_id, name))
-    def settings(self): return self._call("settings")
-    def update_settings(self, changes): return self._call("update_settings", changes)
-    def events(self, job_id=None, limit=200): return self._call("events", job_id, limit)
-    def live_heightmap(self): return self._call("live_heightmap")
-    def calibration(self): return self._call("calibration")
-    def calibrate(self, step): return self._call("calibrate", step)
-    def import_scan(self, folder): return self._call("import_scan", str(folder))
-    def commissioning(self): return self._call("commissioning")
-    def commission(self, step, action, values=None): return self._call("commission", step, action, values)
-    def export_commissioning(self): return self._call("export_commissioning")
-    def import_commissioning(self, doc): return self._call("import_commissioning", doc)
-    def ink_changed(self): return self._call("ink_changed")
-    def usb_sticks(self): return self._call("usb_sticks")
-    def backup(self): return self._call("backup")
-    def restore(self, doc): return self._call("restore", doc)
-    def system(self): return self._call("system")
-    def test_webhook(self): return self._call("test_webhook")
-    def preview(self): return self._call("preview")
-    def home_stage(self): return self._call("home_stage")
-    def jog(self, mm): return self._call("jog", mm)
-    def goto_level(self, level_mm): return self._call("goto_level", level_mm)
-    def rename_job(self, job_id, name): return self._call("rename_job", job_id, name)
-    def delete_job(self, job_id): return self._call("delete_job", job_id)
-    def reprocess(self, job_id, changes=None): return self._call("reprocess", job_id, changes)
-    def repost(self, job_id, options=None): return self._call("repost", job_id, options)
-    def job_sizes(self): return self._call("job_sizes")
+    def state(self):
+        return self._call("state")
+
+    def start_scan(self, params):
+        return self._call("start_scan", params)
+
+    def cancel(self):
+        return self._call("cancel")
+
+    def resume(self, job_id):
+        return self._call("resume", job_id)
+
+    def jobs(self):
+        return self._call("jobs")
+
+    def job(self, job_id):
+        return self._call("job", job_id)
+
+    def job_file(self, job_id, name):
+        return Path(self._call("job_file", job_id, name))
+
+    def settings(self):
+        return self._call("settings")
+
+    def update_settings(self, changes):
+        return self._call("update_settings", changes)
+
+    def events(self, job_id=None, limit=200):
+        return self._call("events", job_id, limit)
+
+    def live_heightmap(self):
+        return self._call("live_heightmap")
+
+    def calibration(self):
+        return self._call("calibration")
+
+    def calibrate(self, step):
+        return self._call("calibrate", step)
+
+    def import_scan(self, folder):
+        return self._call("import_scan", str(folder))
+
+    def commissioning(self):
+        return self._call("commissioning")
+
+    def commission(self, step, action, values=None):
+        return self._call("commission", step, action, values)
+
+    def export_commissioning(self):
+        return self._call("export_commissioning")
+
+    def import_commissioning(self, doc):
+        return self._call("import_commissioning", doc)
+
+    def ink_changed(self):
+        return self._call("ink_changed")
+
+    def usb_sticks(self):
+        return self._call("usb_sticks")
+
+    def backup(self):
+        return self._call("backup")
+
+    def restore(self, doc):
+        return self._call("restore", doc)
+
+    def system(self):
+        return self._call("system")
+
+    def test_webhook(self):
+        return self._call("test_webhook")
+
+    def preview(self):
+        return self._call("preview")
+
+    def home_stage(self):
+        return self._call("home_stage")
+
+    def jog(self, mm):
+        return self._call("jog", mm)
+
+    def goto_level(self, level_mm):
+        return self._call("goto_level", level_mm)
+
+    def rename_job(self, job_id, name):
+        return self._call("rename_job", job_id, name)
+
+    def delete_job(self, job_id):
+        return self._call("delete_job", job_id)
+
+    def reprocess(self, job_id, changes=None):
+        return self._call("reprocess", job_id, changes)
+
+    def repost(self, job_id, options=None):
+        return self._call("repost", job_id, options)
+
+    def job_sizes(self):
+        return self._call("job_sizes")
 
     def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):
         return self._call("export_to_usb", job_id, name, stick, release)

@@ -18,6 +18,7 @@ failure or cancel the motor stopped (an emergency stop; the next scan or the
 resume re-homes anyway). A resumed job re-homes, then continues from the
 frames in its scan.json, with the settings it started with.
 """
+
 from __future__ import annotations
 
 import errno
@@ -33,7 +34,16 @@ import numpy as np
 
 from ..errors import Cancelled, DeviceError, InkSliceError
 from ..hw.devices import Devices
-from ..scanfile import CameraModel, FrameRef, Scan, _camera, load_scan, read_frame, write_frame, write_scan_json
+from ..scanfile import (
+    CameraModel,
+    FrameRef,
+    Scan,
+    _camera,
+    load_scan,
+    read_frame,
+    write_frame,
+    write_scan_json,
+)
 from ..vision.part import find_part
 from ..vision.refine import mask_pixel_mm, next_refinement, surfaced_faces
 from . import processing
@@ -60,8 +70,17 @@ def free_mb(path) -> float:
 class ScanRunner:
     """Runs one job in the calling thread; `report(**state)` publishes progress."""
 
-    def __init__(self, store, job_id: str, devices: Devices, processor: Callable, report: Callable,
-                 stop: threading.Event, on_frame: Callable | None = None, disk_free_mb: Callable = free_mb):
+    def __init__(
+        self,
+        store,
+        job_id: str,
+        devices: Devices,
+        processor: Callable,
+        report: Callable,
+        stop: threading.Event,
+        on_frame: Callable | None = None,
+        disk_free_mb: Callable = free_mb,
+    ):
         self.store, self.job_id, self.dev = store, job_id, devices
         self.processor, self.report, self.stop = processor, report, stop
         self.on_frame = on_frame or (lambda image, info: None)
@@ -71,8 +90,8 @@ class ScanRunner:
         self.params = job["params"]
         self.job_dir = store.job_dir(job_id)
         self.scan_dir = self.job_dir / "scan"
-        self.plan: LevelPlan | None = None         # made in run(), once the stage's travel is known
-        self._mask = None                          # the part in the last frame of the descent
+        self.plan: LevelPlan | None = None  # made in run(), once the stage's travel is known
+        self._mask = None  # the part in the last frame of the descent
         self._scan: Scan | None = None
         self._level_times: list[float] = []
 
@@ -97,7 +116,7 @@ class ScanRunner:
             return self._cancelled()
         except InkSliceError as e:
             self._make_safe()
-            if self.stop.is_set():                  # the stop we asked for interrupted a move
+            if self.stop.is_set():  # the stop we asked for interrupted a move
                 return self._cancelled()
             self._finish("failed", str(e))
             return "failed"
@@ -108,7 +127,7 @@ class ScanRunner:
             else:
                 self._finish("failed", f"file system: {e}")
             return "failed"
-        except Exception as e:                      # a bug must still end the job cleanly
+        except Exception as e:  # a bug must still end the job cleanly
             log.exception("scan %s crashed", self.job_id)
             self._make_safe()
             self._finish("failed", f"internal error: {type(e).__name__}: {e}")
@@ -123,7 +142,7 @@ class ScanRunner:
         fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
         if outputs is not None:
             fields["outputs"] = outputs
-        if self._scan is not None:                  # the row may lag scan.json if a write failed
+        if self._scan is not None:  # the row may lag scan.json if a write failed
             fields["levels_done"] = len(self._scan.frames)
         try:
             self.store.update_job(self.job_id, **fields)
@@ -158,16 +177,19 @@ class ScanRunner:
     # -- the scan folder --------------------------------------------------------
     def _open_scan(self) -> Scan:
         if (self.scan_dir / "scan.json").is_file():
-            scan = load_scan(self.scan_dir)         # a resume: continue from its frames
+            scan = load_scan(self.scan_dir)  # a resume: continue from its frames
             if scan.frames:
                 last = _descent(scan.frames)[-1]
                 self._mask = self._part_in(scan, last)
             return scan
         camera = self._calibrated_camera()
         self.scan_dir.mkdir(parents=True, exist_ok=True)
-        extra = {"job": self.job_id, "name": self.params.get("name", ""),
-                 "level_at_home_mm": self.settings["level_at_home_mm"]}
-        extra.update(scan_extra(self.store, self.settings))     # tank, meniscus, what was used and when
+        extra = {
+            "job": self.job_id,
+            "name": self.params.get("name", ""),
+            "level_at_home_mm": self.settings["level_at_home_mm"],
+        }
+        extra.update(scan_extra(self.store, self.settings))  # tank, meniscus, what was used and when
         # scan.json is written with the first frame: load_scan rejects an empty frame list
         return Scan(self.scan_dir, camera, [], extra)
 
@@ -194,11 +216,16 @@ class ScanRunner:
         if upper <= lower:
             return None
         below = self._mask if self._mask is not None else self._part_in(scan, descent[-1])
-        faces = surfaced_faces(self._part_in(scan, descent[-2]), below, mask_pixel_mm(scan.camera, below.shape))
+        faces = surfaced_faces(
+            self._part_in(scan, descent[-2]), below, mask_pixel_mm(scan.camera, below.shape)
+        )
         if not faces:
             return None
-        seen = [(_target_of(f), self._part_in(scan, f)) for f in scan.frames
-                if f.extra.get("refines") == [upper, lower]]
+        seen = [
+            (_target_of(f), self._part_in(scan, f))
+            for f in scan.frames
+            if f.extra.get("refines") == [upper, lower]
+        ]
         return upper, lower, faces, seen
 
     # -- motion and capture -----------------------------------------------------
@@ -219,8 +246,14 @@ class ScanRunner:
             t0 = time.monotonic()
             target, step = nxt
             total = self.plan.estimate_total(scan.frames)
-            self.report(state="scanning", level_mm=target, levels_done=len(scan.frames), levels_total=total,
-                        message=f"level {target:.3f} mm", eta_s=self._eta(len(scan.frames), total))
+            self.report(
+                state="scanning",
+                level_mm=target,
+                levels_done=len(scan.frames),
+                levels_total=total,
+                message=f"level {target:.3f} mm",
+                eta_s=self._eta(len(scan.frames), total),
+            )
             level = self._move_to_level(target)
             if self.stop.wait(self.settings["settle_s"]):
                 raise Cancelled()
@@ -231,12 +264,21 @@ class ScanRunner:
             before = None if rising or not previous else self._mask
             change = waterline_change(before, mask)
             self._mask = mask
-            extra = {"target_mm": target, "step_mm": step, "change": round(change, 6),
-                     "shows_part": bool(mask.any())}
+            extra = {
+                "target_mm": target,
+                "step_mm": step,
+                "change": round(change, 6),
+                "shows_part": bool(mask.any()),
+            }
             self._keep(scan, frame, level, mask, extra, t0)
             if before is not None:
-                self._refine(scan, _target_of(previous[0]), target, surfaced_faces(
-                    before, mask, mask_pixel_mm(scan.camera, mask.shape)), [])
+                self._refine(
+                    scan,
+                    _target_of(previous[0]),
+                    target,
+                    surfaced_faces(before, mask, mask_pixel_mm(scan.camera, mask.shape)),
+                    [],
+                )
 
     def _keep(self, scan: Scan, frame, level, mask, extra, t0):
         """Save one frame with its extra keys, publish it and the progress."""
@@ -246,8 +288,9 @@ class ScanRunner:
         self._level_times.append(time.monotonic() - t0)
         total = self.plan.estimate_total(scan.frames)
         self.store.update_job(self.job_id, levels_done=len(scan.frames), levels_total=total, level_mm=level)
-        self.report(levels_done=len(scan.frames), levels_total=total,
-                    eta_s=self._eta(len(scan.frames), total))
+        self.report(
+            levels_done=len(scan.frames), levels_total=total, eta_s=self._eta(len(scan.frames), total)
+        )
 
     def _refine(self, scan: Scan, upper: float, lower: float, faces, seen):
         """Faces came out at once between the levels `upper` and `lower`: go back into that
@@ -264,8 +307,12 @@ class ScanRunner:
             if target is None:
                 return
             t0 = time.monotonic()
-            self.report(state="scanning", level_mm=target, message=f"level {target:.3f} mm (a face came out "
-                        f"at once between {upper:g} and {lower:g} mm: refining)")
+            self.report(
+                state="scanning",
+                level_mm=target,
+                message=f"level {target:.3f} mm (a face came out "
+                f"at once between {upper:g} and {lower:g} mm: refining)",
+            )
             level = self._move_to_level(target)
             if self.stop.wait(self.settings["settle_s"] * (2 if target > here else 1)):
                 raise Cancelled()
@@ -273,8 +320,14 @@ class ScanRunner:
             frame = self._capture()
             mask = find_part(frame, scan.camera, level)
             seen.append((target, mask))
-            self._keep(scan, frame, level, mask, {"target_mm": target, "refines": [upper, lower],
-                                                  "shows_part": bool(mask.any())}, t0)
+            self._keep(
+                scan,
+                frame,
+                level,
+                mask,
+                {"target_mm": target, "refines": [upper, lower], "shows_part": bool(mask.any())},
+                t0,
+            )
 
     def _ceiling(self) -> float:
         """The highest level the stage reaches: the ink's level with the stage at the home end of its travel."""
@@ -286,8 +339,11 @@ class ScanRunner:
         self.dev.stage.move_to(at_home - target)
         st = self.dev.stage.status()
         if not st.homed or st.flags.get("fresh_boot"):
-            raise DeviceError("stage", "the controller was reset during the scan (position lost); "
-                                       "the frames so far are kept, resume to re-home and continue")
+            raise DeviceError(
+                "stage",
+                "the controller was reset during the scan (position lost); "
+                "the frames so far are kept, resume to re-home and continue",
+            )
         if st.state in ("alarm", "estop"):
             raise DeviceError("stage", f"the controller is in {st.state} ({st.flags.get('alarm', '')})")
         return round(at_home - st.position_mm, 6)
@@ -312,20 +368,26 @@ class ScanRunner:
         except Exception as e:
             log.warning("level sensor: %s", e)
             return {}
-        return {"sensor_level_mm": round(measured, 3), "sensor_minus_nominal_mm": round(measured - nominal, 3)}
+        return {
+            "sensor_level_mm": round(measured, 3),
+            "sensor_minus_nominal_mm": round(measured - nominal, 3),
+        }
 
     def _save_frame(self, scan: Scan, frame: np.ndarray, ref: FrameRef):
         need = float(self.settings["min_free_mb"])
         free = self.disk_free_mb(self.scan_dir)
         if free < need:
-            raise DeviceError("disk", f"nearly full: {free:.0f} MB free, scans stop below {need:.0f} MB; "
-                                      f"the {len(scan.frames)} frames so far are kept")
+            raise DeviceError(
+                "disk",
+                f"nearly full: {free:.0f} MB free, scans stop below {need:.0f} MB; "
+                f"the {len(scan.frames)} frames so far are kept",
+            )
         write_frame(self.scan_dir, ref.file, frame)
         scan.frames.append(ref)
         try:
             write_scan_json(scan)
         except BaseException:
-            scan.frames.pop()                       # scan.json on disk still lists the old frames
+            scan.frames.pop()  # scan.json on disk still lists the old frames
             raise
 
     def _eta(self, done, total):

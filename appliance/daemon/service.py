@@ -36,6 +36,7 @@ Device factories are injected so the same service drives
 the real bench, the simulated one (firmware under simavr + virtual camera)
 or the in-memory fakes: a device factory is a hw.base.BenchFactory.
 """
+
 from __future__ import annotations
 
 import copy
@@ -76,7 +77,7 @@ from .webhook import Webhook
 
 log = logging.getLogger("inkslice.service")
 STATES = ("idle", "homing", "scanning", "processing", "done", "failed", "cancelled")
-NOTICE_S = 30.0         # how long a front-panel notice (USB copy) holds the display
+NOTICE_S = 30.0  # how long a front-panel notice (USB copy) holds the display
 GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap")
 
 
@@ -98,24 +99,40 @@ def _box_uptime() -> float | None:
 
 
 class BenchService:
-    def __init__(self, data_dir, factory, processor: Callable = child_process,
-                 disk_free_mb: Callable = free_mb, panel_interval_s: float = 0.25, usb=None):
+    def __init__(
+        self,
+        data_dir,
+        factory,
+        processor: Callable = child_process,
+        disk_free_mb: Callable = free_mb,
+        panel_interval_s: float = 0.25,
+        usb=None,
+    ):
         self.data_dir = Path(data_dir)
         self.store = Store(self.data_dir)
         self.factory = factory
         self.processor = processor
         self.disk_free_mb = disk_free_mb
-        self.usb = usb                  # hw.usb.UsbExporter (sticks(), export()); None: no USB export
+        self.usb = usb  # hw.usb.UsbExporter (sticks(), export()); None: no USB export
         self._usb_thread: threading.Thread | None = None
-        self._shown_notice: tuple[float, list[str]] | None = None     # (until, lines) on the display
-        self._first_run = Pending(self.data_dir)    # the web's first-run password, until the first login
-        self._live: tuple[str, LiveMap] | None = None   # (job id, its height map so far)
+        self._shown_notice: tuple[float, list[str]] | None = None  # (until, lines) on the display
+        self._first_run = Pending(self.data_dir)  # the web's first-run password, until the first login
+        self._live: tuple[str, LiveMap] | None = None  # (job id, its height map so far)
         self._calibration: GuidedCalibration | None = None
         self._lock = threading.RLock()
-        self._state = {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0,
-                       "levels_total": 0, "eta_s": None, "eta_processing_s": None, "message": "ready",
-                       "hardware": {}, "notice": None,
-                       "manual": {"open": False, "light": False, "homed": False, "level_mm": None}}
+        self._state = {
+            "state": "idle",
+            "job_id": None,
+            "level_mm": None,
+            "levels_done": 0,
+            "levels_total": 0,
+            "eta_s": None,
+            "eta_processing_s": None,
+            "message": "ready",
+            "hardware": {},
+            "notice": None,
+            "manual": {"open": False, "light": False, "homed": False, "level_mm": None},
+        }
         self._subscribers: list[queue.Queue] = []
         self._frame = None
         self._job_settings = {}
@@ -128,18 +145,29 @@ class BenchService:
         self.interrupted = recover(self.store)
         if self.interrupted:
             last = self.store.get_job(self.interrupted[0])
-            self._state.update(state="failed", job_id=last["id"], message=last["reason"],
-                               levels_done=last["levels_done"], levels_total=last["levels_total"])
+            self._state.update(
+                state="failed",
+                job_id=last["id"],
+                message=last["reason"],
+                levels_done=last["levels_done"],
+                levels_total=last["levels_total"],
+            )
             if not self.settings()["auto_resume"]:
-                self.webhook.send("needs_attention", last, f"the scan was interrupted ({last['reason']}); "
-                                                           "resume it or start again")
+                self.webhook.send(
+                    "needs_attention",
+                    last,
+                    f"the scan was interrupted ({last['reason']}); resume it or start again",
+                )
         self._panel = self._open_panel()
         self._commissioning = Commissioning(self.store, self._commissioning_hooks())
         self._times = JobTimes(self.data_dir)
-        self._sizes: dict[str, tuple] = {}          # job id -> ((status, finished), bytes on disk)
-        self._manual = ManualSession(self._open_for_panel, self.settings, self._show_frame, self._manual_report)
-        self._panel_thread = threading.Thread(target=self._panel_loop, args=(panel_interval_s,),
-                                              name="inkslice-panel", daemon=True)
+        self._sizes: dict[str, tuple] = {}  # job id -> ((status, finished), bytes on disk)
+        self._manual = ManualSession(
+            self._open_for_panel, self.settings, self._show_frame, self._manual_report
+        )
+        self._panel_thread = threading.Thread(
+            target=self._panel_loop, args=(panel_interval_s,), name="inkslice-panel", daemon=True
+        )
         self._panel_thread.start()
         if self.interrupted and self.settings()["auto_resume"]:
             self.resume(self.interrupted[0])
@@ -159,7 +187,7 @@ class BenchService:
             self._refuse_if_busy()
             settings = S.validate(self.settings(), {k: v for k, v in params.items() if k in S.DEFAULTS})
             extras = {k: v for k, v in params.items() if k not in S.DEFAULTS}
-            extras = self.factory.check(extras) or extras     # may fill in defaults (the surface)
+            extras = self.factory.check(extras) or extras  # may fill in defaults (the surface)
             extras["name"] = str(params.get("name", ""))[:80]
             job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
             total = LevelPlan(settings).estimate_total([])
@@ -169,7 +197,7 @@ class BenchService:
 
     def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
         if self._calibration is not None and self._calibration.active:
-            self.cancel_calibration(wait_s)         # a calibration left half-way gives the bench back
+            self.cancel_calibration(wait_s)  # a calibration left half-way gives the bench back
         if self._commissioning.holds_bench:
             self._commissioning.cancel(wait_s=wait_s)
         with self._lock:
@@ -182,7 +210,7 @@ class BenchService:
             devices = self._devices
         if devices is not None and devices.stage is not None:
             try:
-                devices.stage.stop()                # preempts a long move or homing at once
+                devices.stage.stop()  # preempts a long move or homing at once
             except Exception as e:
                 log.warning("stop on cancel: %s", e)
         thread.join(timeout=wait_s)
@@ -192,13 +220,17 @@ class BenchService:
             self._refuse_if_busy()
             job = self.store.get_job(job_id)
             if job["status"] not in ("failed", "cancelled"):
-                raise SettingError("job", f"job {job_id} is {job['status']}; only a failed, cancelled or "
-                                          "interrupted scan can be resumed")
-            self.store.update_job(job_id, status="homing", reason="", interrupted=0, finished=None,
-                                  attempts=job["attempts"] + 1)
+                raise SettingError(
+                    "job",
+                    f"job {job_id} is {job['status']}; only a failed, cancelled or "
+                    "interrupted scan can be resumed",
+                )
+            self.store.update_job(
+                job_id, status="homing", reason="", interrupted=0, finished=None, attempts=job["attempts"] + 1
+            )
             self.store.event(job_id, "resumed", f"resumed (attempt {job['attempts'] + 1})")
             if job["params"].get("imported"):
-                self._launch_import(job_id)         # nothing to capture: process it again
+                self._launch_import(job_id)  # nothing to capture: process it again
             else:
                 self._launch(job_id, job["levels_total"], job["levels_done"])
             return job_id
@@ -211,7 +243,7 @@ class BenchService:
 
     def job_file(self, job_id: str, name: str) -> Path:
         """A file inside that job's folder (outputs, scan/scan.json, scan/frames/...); nothing else."""
-        self.store.get_job(job_id)                  # raises for an unknown job
+        self.store.get_job(job_id)  # raises for an unknown job
         folder = self.store.job_dir(job_id).resolve()
         try:
             path = (folder / str(name)).resolve()
@@ -268,16 +300,23 @@ class BenchService:
     def _guided(self) -> GuidedCalibration:
         with self._lock:
             if self._calibration is None:
+
                 def open_devices():
-                    self._manual.close()            # the panel's session gives the devices back
+                    self._manual.close()  # the panel's session gives the devices back
                     return self.factory.open(self.settings(), self._calibration_params())
-                self._calibration = GuidedCalibration(open_devices, self.store, self.settings(),
-                                                      show_frame=self._show_frame, operator=self._panel.operator,
-                                                      **self.factory.calibration_target)
+
+                self._calibration = GuidedCalibration(
+                    open_devices,
+                    self.store,
+                    self.settings(),
+                    show_frame=self._show_frame,
+                    operator=self._panel.operator,
+                    **self.factory.calibration_target,
+                )
             return self._calibration
 
     def _calibration_params(self) -> dict:
-        return self.factory.check({}) or {}         # the simulated bench fills in its part
+        return self.factory.check({}) or {}  # the simulated bench fills in its part
 
     def calibration(self) -> dict:
         return self._guided().describe()
@@ -291,12 +330,17 @@ class BenchService:
         cal = self._guided()
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
-                raise SettingError("calibration", f"a scan is running ({self._state['job_id']}); "
-                                                  "calibrate when it has finished")
-            if step == "home" and self._commissioning.holds_bench:     # one owner of the devices at a time
+                raise SettingError(
+                    "calibration",
+                    f"a scan is running ({self._state['job_id']}); calibrate when it has finished",
+                )
+            if step == "home" and self._commissioning.holds_bench:  # one owner of the devices at a time
                 busy = self._commissioning.session.step
-                raise SettingError("calibration", f"the commissioning step {busy!r} holds the bench; finish it or "
-                                                  f"cancel it first (POST /api/commissioning/{busy}/cancel)")
+                raise SettingError(
+                    "calibration",
+                    f"the commissioning step {busy!r} holds the bench; finish it or "
+                    f"cancel it first (POST /api/commissioning/{busy}/cancel)",
+                )
         if not cal.lock.acquire(blocking=False):
             raise SettingError("calibration", "a calibration step is already running")
         try:
@@ -308,7 +352,9 @@ class BenchService:
                 self._set(message=f"calibration: {step} failed: {e.problem}")
                 raise
             done = not cal.active
-            self._set(message="calibration stored" if done and step == "accept" else f"calibration: {step} done")
+            self._set(
+                message="calibration stored" if done and step == "accept" else f"calibration: {step} done"
+            )
             if step == "accept":
                 self.store.event(None, "calibrated", f"guided calibration stored: {cal.describe()}")
             return out
@@ -321,7 +367,7 @@ class BenchService:
         cal = self._calibration
         if cal is None:
             return self.calibration()
-        cal.interrupt()                             # a running step (homing, say) ends at once
+        cal.interrupt()  # a running step (homing, say) ends at once
         if not cal.lock.acquire(timeout=wait_s):
             raise SettingError("calibration", f"the running step did not stop within {wait_s:.0f} s")
         try:
@@ -358,20 +404,28 @@ class BenchService:
         return self._machine(self._manual.goto, level_mm)
 
     def _bench_taken(self) -> bool:
-        return bool((self._thread is not None and self._thread.is_alive())
-                    or (self._calibration is not None and self._calibration.active)
-                    or self._commissioning.holds_bench)
+        return bool(
+            (self._thread is not None and self._thread.is_alive())
+            or (self._calibration is not None and self._calibration.active)
+            or self._commissioning.holds_bench
+        )
 
     def _machine(self, action, *args) -> dict:
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
-                raise DeviceError("stage", f"a scan is running ({self._state['job_id']}); the panel's "
-                                           "controls wait until it has finished")
+                raise DeviceError(
+                    "stage",
+                    f"a scan is running ({self._state['job_id']}); the panel's "
+                    "controls wait until it has finished",
+                )
             if self._calibration is not None and self._calibration.active:
                 raise DeviceError("stage", "a guided calibration holds the bench; finish or cancel it first")
             if self._commissioning.holds_bench:
-                raise DeviceError("stage", f"the commissioning step {self._commissioning.session.step!r} "
-                                           "holds the bench; finish or cancel it first")
+                raise DeviceError(
+                    "stage",
+                    f"the commissioning step {self._commissioning.session.step!r} "
+                    "holds the bench; finish or cancel it first",
+                )
         try:
             return action(*args)
         except DeviceError as e:
@@ -407,14 +461,21 @@ class BenchService:
             job = self.store.get_job(job_id)
             ours = self._thread is not None and self._thread.is_alive() and self._state["job_id"] == job_id
             if ours and job["status"] not in ACTIVE:
-                self._thread.join(timeout=5)        # the job is over; its thread is closing up
-            if ours and self._thread.is_alive() or job["status"] in ACTIVE and self._state["job_id"] == job_id:
+                self._thread.join(timeout=5)  # the job is over; its thread is closing up
+            if (
+                ours
+                and self._thread.is_alive()
+                or job["status"] in ACTIVE
+                and self._state["job_id"] == job_id
+            ):
                 raise DeviceError("job", f"job {job_id} is {job['status']}; stop it first")
             self.store.delete_job(job_id)
             shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
             self._sizes.pop(job_id, None)
             if self._state["job_id"] == job_id:
-                self._set(job_id=None, state="idle", message="ready", levels_done=0, levels_total=0, eta_s=None)
+                self._set(
+                    job_id=None, state="idle", message="ready", levels_done=0, levels_total=0, eta_s=None
+                )
         log.info("job %s deleted", job_id)
 
     def reprocess(self, job_id: str, changes: dict | None = None) -> str:
@@ -432,8 +493,9 @@ class BenchService:
             if not (self.store.job_dir(job_id) / "scan" / "scan.json").is_file():
                 raise SettingError("job", f"job {job_id} kept no scan to process")
             settings = S.validate(S.full(job["settings"]), changes)
-            self.store.update_job(job_id, status="processing", settings=settings, reason="", finished=None,
-                                  interrupted=0)
+            self.store.update_job(
+                job_id, status="processing", settings=settings, reason="", finished=None, interrupted=0
+            )
             self.store.event(job_id, "reprocess", "processed again" + (f" with {changes}" if changes else ""))
             self._sizes.pop(job_id, None)
             self._launch_import(job_id)
@@ -443,6 +505,7 @@ class BenchService:
         """Post the job again from its height map for another cutter, material, scallop or dialect
         (repost.py; no rescan). Returns the new files' names, which join the job's outputs."""
         from . import repost as R
+
         with self._lock:
             job = self.store.get_job(job_id)
             if job["status"] in ACTIVE:
@@ -451,7 +514,9 @@ class BenchService:
         with self._lock:
             job = self.store.get_job(job_id)
             self.store.update_job(job_id, outputs=sorted(set(job.get("outputs") or []) | set(names)))
-            self.store.event(job_id, "reposted", "posted again: " + ", ".join(n for n in names if n.endswith(".nc")))
+            self.store.event(
+                job_id, "reposted", "posted again: " + ", ".join(n for n in names if n.endswith(".nc"))
+            )
             self._sizes.pop(job_id, None)
         return names
 
@@ -477,10 +542,15 @@ class BenchService:
         if action == "start" and step in ("level_zero", "camera"):
             with self._lock:
                 if self._thread is not None and self._thread.is_alive():
-                    raise SettingError("commissioning", f"a scan is running ({self._state['job_id']}); "
-                                                        "start this step when it has finished, or cancel it")
+                    raise SettingError(
+                        "commissioning",
+                        f"a scan is running ({self._state['job_id']}); "
+                        "start this step when it has finished, or cancel it",
+                    )
                 if self._calibration is not None and self._calibration.active:
-                    raise SettingError("commissioning", "a guided calibration holds the bench; cancel it first")
+                    raise SettingError(
+                        "commissioning", "a guided calibration holds the bench; cancel it first"
+                    )
         return self._commissioning.act(step, action, values)
 
     def export_commissioning(self) -> dict:
@@ -500,7 +570,7 @@ class BenchService:
 
             @staticmethod
             def open_devices():
-                service._manual.close()             # the panel's session gives the devices back
+                service._manual.close()  # the panel's session gives the devices back
                 return service.factory.open(service.settings(), {})
 
             settings = staticmethod(self.settings)
@@ -516,6 +586,7 @@ class BenchService:
             @staticmethod
             def cancel_scan():
                 service.cancel(reason="cancelled: the commissioning step was cancelled")
+
         return Hooks()
 
     def _start_reference_scan(self, changes: dict, params: dict) -> str:
@@ -542,9 +613,9 @@ class BenchService:
         """
         scan = importing.check(folder)
         with self._lock:
-            self._refuse_if_busy()                  # say so before copying a big folder
+            self._refuse_if_busy()  # say so before copying a big folder
         job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
-        importing.copy_into(scan, self.store.job_dir(job_id))     # outside the lock: it may take seconds
+        importing.copy_into(scan, self.store.job_dir(job_id))  # outside the lock: it may take seconds
         n = len(scan.frames)
         name = str(scan.extra.get("name") or "imported scan")[:80]
         with self._lock:
@@ -563,12 +634,21 @@ class BenchService:
         job = self.store.get_job(job_id)
         self._stop.clear()
         expected = self._times.processing_s(job["levels_total"])
-        self._set(state="processing", job_id=job_id, level_mm=None, levels_done=job["levels_total"],
-                  levels_total=job["levels_total"], eta_s=None if expected is None else round(expected, 1),
-                  eta_processing_s=expected, message="processing the scan again" if not job["params"].get(
-                      "imported") else "processing the imported scan")
-        self._thread = threading.Thread(target=self._run_import, args=(job_id,), name=f"import-{job_id}",
-                                        daemon=True)
+        self._set(
+            state="processing",
+            job_id=job_id,
+            level_mm=None,
+            levels_done=job["levels_total"],
+            levels_total=job["levels_total"],
+            eta_s=None if expected is None else round(expected, 1),
+            eta_processing_s=expected,
+            message="processing the scan again"
+            if not job["params"].get("imported")
+            else "processing the imported scan",
+        )
+        self._thread = threading.Thread(
+            target=self._run_import, args=(job_id,), name=f"import-{job_id}", daemon=True
+        )
         self._thread.start()
 
     def _run_import(self, job_id):
@@ -579,10 +659,14 @@ class BenchService:
             outputs = processing.run(self.processor, self.store, job_id, S.full(job["settings"]), self._stop)
             status, reason = "done", ""
         except Cancelled:
-            status, reason, outputs = "cancelled", getattr(self._stop, "reason", "cancelled by the operator"), None
+            status, reason, outputs = (
+                "cancelled",
+                getattr(self._stop, "reason", "cancelled by the operator"),
+                None,
+            )
         except InkSliceError as e:
             status, reason, outputs = "failed", str(e), None
-        except Exception as e:                      # a bug must still end the job cleanly
+        except Exception as e:  # a bug must still end the job cleanly
             log.exception("processing the imported job %s", job_id)
             status, reason, outputs = "failed", f"internal error: {type(e).__name__}: {e}", None
         fields = dict(status=status, reason=reason, finished=time.time(), interrupted=0)
@@ -591,17 +675,20 @@ class BenchService:
         try:
             self.store.update_job(job_id, **fields)
             self.store.event(job_id, status, reason or "imported scan processed")
-        except DiskFull as e:                       # held in memory, written when there is room
+        except DiskFull as e:  # held in memory, written when there is room
             log.warning("job %s: %s", job_id, e)
-        self._set(state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None)
+        self._set(
+            state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None
+        )
 
     # -- USB sticks: the daemon holds the exporter (hw/usb.py); the web asks it to copy --------
     def usb_sticks(self) -> list[dict]:
         """The USB sticks plugged in (hw.usb.Stick as JSON); none when USB export is off."""
         return [s.to_json() for s in self.usb.sticks()] if self.usb is not None else []
 
-    def export_to_usb(self, job_id: str, name: str = PROGRAM, stick: str | None = None,
-                      release: bool = True) -> dict:
+    def export_to_usb(
+        self, job_id: str, name: str = PROGRAM, stick: str | None = None, release: bool = True
+    ) -> dict:
         """Copy a file of a job onto a USB stick (`stick`: its id; None: the first), read back and
         verified; with `release` synced and unmounted after. Returns hw.usb.CopyResult as JSON."""
         if self.usb is None:
@@ -612,9 +699,13 @@ class BenchService:
     def latest_gcode(self) -> tuple[str, str] | None:
         """(job id, file name) of the newest finished job's finishing program (or, for a job
         without one, its first G-code file); None when no finished job has G-code."""
-        for job in self.store.list_jobs(("done",)):              # newest first
+        for job in self.store.list_jobs(("done",)):  # newest first
             outputs = job["outputs"]
-            name = PROGRAM if PROGRAM in outputs else next((n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
+            name = (
+                PROGRAM
+                if PROGRAM in outputs
+                else next((n for n in outputs if n.endswith(GCODE_SUFFIXES)), None)
+            )
             if name:
                 return job["id"], name
         return None
@@ -638,10 +729,10 @@ class BenchService:
             return self._notify(usb_notice("no_stick"))
         except InkSliceError as e:
             return self._notify(usb_notice("failed", problem=e.problem))
-        except Exception as e:                      # an unexpected bug must still reach the operator
+        except Exception as e:  # an unexpected bug must still reach the operator
             log.exception("USB export")
             return self._notify(usb_notice("failed", problem=f"{type(e).__name__}: {e}"))
-        if not result.safe_to_remove:               # copied and synced, but the unmount failed
+        if not result.safe_to_remove:  # copied and synced, but the unmount failed
             return self._notify(usb_notice("still_mounted", name=result.name, problem=result.unmount_problem))
         return self._notify(usb_notice("copied", name=result.name))
 
@@ -655,7 +746,9 @@ class BenchService:
         with self._lock:
             self._refuse_if_busy()
             if self._commissioning.session is not None:
-                raise SettingError("restore", "a commissioning step is in progress; finish or cancel it first")
+                raise SettingError(
+                    "restore", "a commissioning step is in progress; finish or cancel it first"
+                )
             out = backups.restore(self.store, doc)
         self._set(message="settings and calibration restored from a backup")
         return out
@@ -667,10 +760,16 @@ class BenchService:
     def system(self) -> dict:
         usage = shutil.disk_usage(self.data_dir)
         from .. import __version__
-        return {"version": __version__, "daemon_started": self._started,
-                "daemon_uptime_s": round(time.time() - self._started, 1), "box_uptime_s": _box_uptime(),
-                "disk": {"path": str(self.data_dir), "total_bytes": usage.total, "free_bytes": usage.free},
-                "jobs": len(self.store.list_jobs()), "webhook": self.webhook.last()}
+
+        return {
+            "version": __version__,
+            "daemon_started": self._started,
+            "daemon_uptime_s": round(time.time() - self._started, 1),
+            "box_uptime_s": _box_uptime(),
+            "disk": {"path": str(self.data_dir), "total_bytes": usage.total, "free_bytes": usage.free},
+            "jobs": len(self.store.list_jobs()),
+            "webhook": self.webhook.last(),
+        }
 
     def close(self) -> None:
         self.cancel(reason="cancelled: the daemon was stopped (service stop or shutdown)")
@@ -681,7 +780,7 @@ class BenchService:
         self._closing.set()
         self._panel_thread.join(timeout=5)
         if self._usb_thread is not None:
-            self._usb_thread.join(timeout=30)       # let a copy finish its fsync and verification
+            self._usb_thread.join(timeout=30)  # let a copy finish its fsync and verification
         self._panel.close()
         self.store.close()
 
@@ -696,25 +795,39 @@ class BenchService:
     # == internals ================================================================
     def _refuse_if_busy(self):
         try:
-            self.store.flush_unwritten()            # what a full disk held back is written first
+            self.store.flush_unwritten()  # what a full disk held back is written first
         except DiskFull:
             held = ", ".join(f"job {k} ({v['status']})" for k, v in self.store.unwritten().items())
-            raise DeviceError("disk", f"full: the end of {held or 'the last job'} is not yet stored; free some "
-                                      "space (delete old jobs), then start or resume") from None
+            raise DeviceError(
+                "disk",
+                f"full: the end of {held or 'the last job'} is not yet stored; free some "
+                "space (delete old jobs), then start or resume",
+            ) from None
         if self._calibration is not None and self._calibration.active:
-            raise SettingError("scan", "a guided calibration holds the bench; finish it or cancel it "
-                                       "(the Calibrate page, or POST /api/calibration/cancel)")
+            raise SettingError(
+                "scan",
+                "a guided calibration holds the bench; finish it or cancel it "
+                "(the Calibrate page, or POST /api/calibration/cancel)",
+            )
         if self._commissioning.holds_bench:
             step = self._commissioning.session.step
-            raise SettingError("scan", f"the commissioning step {step!r} holds the bench; finish it or cancel "
-                                       f"it (POST /api/commissioning/{step}/cancel)")
+            raise SettingError(
+                "scan",
+                f"the commissioning step {step!r} holds the bench; finish it or cancel "
+                f"it (POST /api/commissioning/{step}/cancel)",
+            )
         current = self._state["job_id"]
-        if self._thread is not None and self._thread.is_alive() and current \
-                and self.store.get_job(current)["status"] in ("done", "failed", "cancelled"):
-            self._thread.join(timeout=5)           # the job is over; its thread is closing the devices
+        if (
+            self._thread is not None
+            and self._thread.is_alive()
+            and current
+            and self.store.get_job(current)["status"] in ("done", "failed", "cancelled")
+        ):
+            self._thread.join(timeout=5)  # the job is over; its thread is closing the devices
         if self._thread is not None and self._thread.is_alive():
-            raise SettingError("scan", f"a scan is already running ({self._state['job_id']}); "
-                                       "cancel it first")
+            raise SettingError(
+                "scan", f"a scan is already running ({self._state['job_id']}); cancel it first"
+            )
 
     def _set(self, **changes):
         with self._lock:
@@ -727,31 +840,39 @@ class BenchService:
         for q in subs:
             try:
                 q.put_nowait(snap)
-            except queue.Full:                      # a stalled client loses updates, never blocks us
+            except queue.Full:  # a stalled client loses updates, never blocks us
                 pass
 
     def _launch(self, job_id, total, done):
         self._stop.clear()
         self._frame = None
-        self._set(state="homing", job_id=job_id, level_mm=None, levels_done=done, levels_total=total,
-                  eta_s=None, message="starting")
-        self._thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"scan-{job_id}",
-                                        daemon=True)
+        self._set(
+            state="homing",
+            job_id=job_id,
+            level_mm=None,
+            levels_done=done,
+            levels_total=total,
+            eta_s=None,
+            message="starting",
+        )
+        self._thread = threading.Thread(
+            target=self._run_job, args=(job_id,), name=f"scan-{job_id}", daemon=True
+        )
         self._thread.start()
 
     def _run_job(self, job_id):
-        self._manual.close()                        # a panel session gives the stage and camera back
+        self._manual.close()  # a panel session gives the stage and camera back
         job = self.store.get_job(job_id)
         self._job_settings = job["settings"]
         try:
             devices = self.factory.open(job["settings"], job["params"])
-        except Exception as e:                      # missing stage or camera, a bad wiring file ...
+        except Exception as e:  # missing stage or camera, a bad wiring file ...
             reason = f"cannot start: {e}"
             self._note_fault(str(e))
             try:
                 self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
                 self.store.event(job_id, "failed", reason)
-            except DiskFull as full:                # held in memory, written when there is room
+            except DiskFull as full:  # held in memory, written when there is room
                 log.warning("job %s: %s", job_id, full)
             self._set(state="failed", message=reason)
             return
@@ -770,12 +891,21 @@ class BenchService:
             else:
                 with self._lock:
                     self._set(**clock.eta({**self._state, **changes}, changes))
+
         processor = self.processor
-        if job["params"].get("reference"):             # the meniscus step's scan of the reference ball
+        if job["params"].get("reference"):  # the meniscus step's scan of the reference ball
             processor = reference_processor(job["params"]["reference"])
         try:
-            runner = ScanRunner(self.store, job_id, devices, processor, report, self._stop,
-                                on_frame=self._keep_frame, disk_free_mb=self.disk_free_mb)
+            runner = ScanRunner(
+                self.store,
+                job_id,
+                devices,
+                processor,
+                report,
+                self._stop,
+                on_frame=self._keep_frame,
+                disk_free_mb=self.disk_free_mb,
+            )
             status = runner.run()
             if status == "failed":
                 self._note_fault(self.store.get_job(job_id)["reason"])
@@ -792,10 +922,13 @@ class BenchService:
         except InkSliceError:
             job = None
         if job is not None and job["params"].get("reference"):
-            return                                  # commissioning's own scan: the page follows it
+            return  # commissioning's own scan: the page follows it
         event = "finished" if st["state"] == "done" else "failed"
-        text = (f"{(job or {}).get('name') or 'the job'} is done" if event == "finished"
-                else (job or {}).get("reason") or st.get("message") or "the job failed")
+        text = (
+            f"{(job or {}).get('name') or 'the job'} is done"
+            if event == "finished"
+            else (job or {}).get("reason") or st.get("message") or "the job failed"
+        )
         self.webhook.send(event, job, text)
 
     def _note_fault(self, reason):
@@ -813,8 +946,10 @@ class BenchService:
         small = cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
         if small.ndim == 2:
             small = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
-        part = info.pop("part")                     # the runner's part mask (vision/part.py)
-        mask = cv2.resize(part.astype(np.uint8), (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST)
+        part = info.pop("part")  # the runner's part mask (vision/part.py)
+        mask = cv2.resize(
+            part.astype(np.uint8), (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST
+        )
         contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
         cv2.drawContours(small, contours, -1, (0, 0, 255), 2, cv2.LINE_AA)
         ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
@@ -846,7 +981,7 @@ class BenchService:
             panel = Devices(None, None, hardware={"panel": f"fault: {e}"})
         for name, status in panel.hardware.items():
             if status != "ok":
-                log.warning("%s: %s (carrying on without it)", name, status)   # reported once
+                log.warning("%s: %s (carrying on without it)", name, status)  # reported once
         self._state["hardware"].update(panel.hardware)
         return panel
 
@@ -859,12 +994,16 @@ class BenchService:
                 self._poll_button()
                 st = self.state()
                 self._drive_led(st, tick)
-                lines = self._notice_lines() or self._commissioning_lines(st) or self._password_lines(st) \
+                lines = (
+                    self._notice_lines()
+                    or self._commissioning_lines(st)
+                    or self._password_lines(st)
                     or self._display_lines(st)
+                )
                 if lines != last_lines and self._panel.display is not None:
                     self._panel.display.show(lines)
                     last_lines = lines
-            except Exception as e:                 # a flaky I2C bus must not kill the panel
+            except Exception as e:  # a flaky I2C bus must not kill the panel
                 log.warning("front panel: %s", e)
 
     def _notify(self, notice: dict, log_it: bool = True) -> dict:
@@ -894,7 +1033,7 @@ class BenchService:
             self._start_usb_export()
             return
         with self._lock:
-            self._shown_notice = None               # any short press gives the display back to the scan
+            self._shown_notice = None  # any short press gives the display back to the scan
         if self._thread is not None and self._thread.is_alive():
             log.info("button: cancelling the scan")
             threading.Thread(target=self.cancel, daemon=True).start()
@@ -968,7 +1107,7 @@ class _JobClock:
                 out["eta_processing_s"] = out["eta_s"]
             return out
         if "eta_s" in changes or "levels_done" in changes or "state" in changes:
-            scan = changes.get("eta_s")             # the runner's: levels left x its recent level time
+            scan = changes.get("eta_s")  # the runner's: levels left x its recent level time
             if scan is None and self.per_level is not None:
                 scan = self.per_level * max(total - done, 0)
             out["eta_s"] = None if scan is None else round(scan + (proc or 0.0), 1)

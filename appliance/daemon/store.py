@@ -17,6 +17,7 @@ list_jobs as if stored, and written by flush_unwritten() as soon as there is
 room again; events that could not be written wait in memory the same way.
 Until the end is written the service refuses new scans and resumes.
 """
+
 from __future__ import annotations
 
 import json
@@ -65,13 +66,17 @@ class DiskFull(DeviceError):
     """SQLite could not write: the data disk is full (or failing). Nothing was half-written."""
 
     def __init__(self, detail: str):
-        super().__init__("disk", f"full: the job store cannot write ({detail}); free some space "
-                                 "(delete old jobs), then resume")
+        super().__init__(
+            "disk",
+            f"full: the job store cannot write ({detail}); free some space (delete old jobs), then resume",
+        )
 
 
 def _disk_fault(e: BaseException) -> DiskFull | None:
-    if isinstance(e, sqlite3.OperationalError) and \
-            (getattr(e, "sqlite_errorcode", None) or 0) & 0xFF in _DISK_ERRORS:
+    if (
+        isinstance(e, sqlite3.OperationalError)
+        and (getattr(e, "sqlite_errorcode", None) or 0) & 0xFF in _DISK_ERRORS
+    ):
         return DiskFull(str(e))
     return None
 
@@ -82,29 +87,33 @@ class Store:
         self.jobs_dir = self.data_dir / "jobs"
         self.jobs_dir.mkdir(parents=True, exist_ok=True)
         self._lock = threading.RLock()
-        self._db = sqlite3.connect(self.data_dir / "inkslice.db", check_same_thread=False,
-                                   isolation_level=None, timeout=10)
+        self._db = sqlite3.connect(
+            self.data_dir / "inkslice.db", check_same_thread=False, isolation_level=None, timeout=10
+        )
         self._db.row_factory = sqlite3.Row
         try:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(SCHEMA)
-        except sqlite3.OperationalError as e:       # e.g. no room for the write-ahead log
+        except sqlite3.OperationalError as e:  # e.g. no room for the write-ahead log
             self._db.close()
             fault = _disk_fault(e)
             if fault is not None:
                 raise fault from None
             raise
-        self._unwritten: dict[str, dict] = {}      # job id -> its end (raw columns), not yet stored
+        self._unwritten: dict[str, dict] = {}  # job id -> its end (raw columns), not yet stored
         self._unwritten_events: list[tuple] = []
 
     def close(self):
         with self._lock:
             try:
-                self.flush_unwritten()              # a job's end held back while the disk was full
+                self.flush_unwritten()  # a job's end held back while the disk was full
             except DiskFull as e:
-                log.warning("closing with %d job end(s) unwritten (%s); the next start marks those "
-                            "jobs interrupted", len(self._unwritten), e)
+                log.warning(
+                    "closing with %d job end(s) unwritten (%s); the next start marks those jobs interrupted",
+                    len(self._unwritten),
+                    e,
+                )
             self._db.close()
 
     def _tx(self, sql, args=()):
@@ -124,7 +133,7 @@ class Store:
                 self._db.execute("COMMIT")
                 return cur
             except BaseException as e:
-                if self._db.in_transaction:         # SQLite may have rolled back already
+                if self._db.in_transaction:  # SQLite may have rolled back already
                     try:
                         self._db.execute("ROLLBACK")
                     except sqlite3.Error as again:
@@ -141,16 +150,25 @@ class Store:
                 names = ", ".join(f"{k} = ?" for k in cols)
                 self._write([(f"UPDATE jobs SET {names} WHERE id = ?", (*cols.values(), job_id))])
                 del self._unwritten[job_id]
-                log.info("job %s: its end (%s) is written now that the disk has room", job_id, cols.get("status"))
+                log.info(
+                    "job %s: its end (%s) is written now that the disk has room", job_id, cols.get("status")
+                )
             if self._unwritten_events:
-                self._write([("INSERT INTO events (time, job_id, kind, message) VALUES (?, ?, ?, ?)", ev)
-                             for ev in self._unwritten_events])
+                self._write(
+                    [
+                        ("INSERT INTO events (time, job_id, kind, message) VALUES (?, ?, ?, ?)", ev)
+                        for ev in self._unwritten_events
+                    ]
+                )
                 self._unwritten_events.clear()
 
     def unwritten(self) -> dict[str, dict]:
         """Jobs whose end is only in memory (the disk was full): id -> status, reason."""
         with self._lock:
-            return {k: {"status": v.get("status"), "reason": v.get("reason", "")} for k, v in self._unwritten.items()}
+            return {
+                k: {"status": v.get("status"), "reason": v.get("reason", "")}
+                for k, v in self._unwritten.items()
+            }
 
     def integrity_ok(self) -> bool:
         with self._lock:
@@ -162,9 +180,11 @@ class Store:
 
     def create_job(self, job_id, name, settings, params, levels_total):
         now = time.time()
-        self._tx("INSERT INTO jobs (id, name, status, created, started, settings, params, levels_total) "
-                 "VALUES (?, ?, 'homing', ?, ?, ?, ?, ?)",
-                 (job_id, name, now, now, json.dumps(settings), json.dumps(params), levels_total))
+        self._tx(
+            "INSERT INTO jobs (id, name, status, created, started, settings, params, levels_total) "
+            "VALUES (?, ?, 'homing', ?, ?, ?, ?, ?)",
+            (job_id, name, now, now, json.dumps(settings), json.dumps(params), levels_total),
+        )
         self.event(job_id, "created", f"scan {name!r} created")
 
     def update_job(self, job_id, **fields):
@@ -177,14 +197,16 @@ class Store:
         try:
             self._tx(f"UPDATE jobs SET {cols} WHERE id = ?", (*fields.values(), job_id))
         except DiskFull:
-            if fields.get("status") in FINAL:       # the job is over: say so now, write it later
+            if fields.get("status") in FINAL:  # the job is over: say so now, write it later
                 with self._lock:
                     self._unwritten[job_id] = {**self._unwritten.get(job_id, {}), **fields}
             raise
 
     def delete_job(self, job_id) -> None:
         """The job's row and its events (its folder is the caller's to remove)."""
-        self._write([("DELETE FROM events WHERE job_id = ?", (job_id,)), ("DELETE FROM jobs WHERE id = ?", (job_id,))])
+        self._write(
+            [("DELETE FROM events WHERE job_id = ?", (job_id,)), ("DELETE FROM jobs WHERE id = ?", (job_id,))]
+        )
         with self._lock:
             self._unwritten.pop(job_id, None)
 
@@ -222,15 +244,21 @@ class Store:
         with self._lock:
             if self._unwritten or self._unwritten_events:
                 self.flush_unwritten()
-            self._write([("INSERT OR REPLACE INTO settings (key, value) VALUES (?, ?)", (k, json.dumps(v)))
-                         for k, v in settings.items()])
+            self._write(
+                [
+                    ("INSERT OR REPLACE INTO settings (key, value) VALUES (?, ?)", (k, json.dumps(v)))
+                    for k, v in settings.items()
+                ]
+            )
 
     # -- calibration history ------------------------------------------------------
     def add_calibration(self, data: dict, when: float | None = None):
         """A calibration result, dated now (or `when`: an imported one keeps its date). The newest
         row, in the order they were added, is the one in force."""
-        self._tx("INSERT INTO calibration (time, data) VALUES (?, ?)",
-                 (time.time() if when is None else float(when), json.dumps(data)))
+        self._tx(
+            "INSERT INTO calibration (time, data) VALUES (?, ?)",
+            (time.time() if when is None else float(when), json.dumps(data)),
+        )
 
     def calibrations(self) -> list[dict]:
         with self._lock:
@@ -240,13 +268,17 @@ class Store:
     def replace_calibrations(self, records: list[dict]):
         """The whole calibration history replaced at once (a restored backup): `records` as
         calibrations() returns them, newest first. One transaction: all or nothing."""
-        rows = [(float(r["time"]), json.dumps({k: v for k, v in r.items() if k != "time"}))
-                for r in reversed(records)]             # oldest first, so the newest gets the highest id
+        rows = [
+            (float(r["time"]), json.dumps({k: v for k, v in r.items() if k != "time"}))
+            for r in reversed(records)
+        ]  # oldest first, so the newest gets the highest id
         with self._lock:
             if self._unwritten or self._unwritten_events:
                 self.flush_unwritten()
-            self._write([("DELETE FROM calibration", ())] +
-                        [("INSERT INTO calibration (time, data) VALUES (?, ?)", row) for row in rows])
+            self._write(
+                [("DELETE FROM calibration", ())]
+                + [("INSERT INTO calibration (time, data) VALUES (?, ?)", row) for row in rows]
+            )
 
     # -- events -------------------------------------------------------------------
     def event(self, job_id, kind, message):
@@ -261,8 +293,9 @@ class Store:
     def events(self, job_id=None, limit=200) -> list[dict]:
         with self._lock:
             if job_id:
-                rows = self._db.execute("SELECT * FROM events WHERE job_id = ? ORDER BY id DESC LIMIT ?",
-                                        (job_id, limit)).fetchall()
+                rows = self._db.execute(
+                    "SELECT * FROM events WHERE job_id = ? ORDER BY id DESC LIMIT ?", (job_id, limit)
+                ).fetchall()
             else:
                 rows = self._db.execute("SELECT * FROM events ORDER BY id DESC LIMIT ?", (limit,)).fetchall()
         return [dict(r) for r in rows]

@@ -10,6 +10,7 @@ show them as they are. With the webhook_token setting the request carries
 `Authorization: Bearer TOKEN`. A failed delivery is logged and kept in last(); it is not retried
 (a missed phone buzz is not worth a queue that outlives a restart).
 """
+
 from __future__ import annotations
 
 import json
@@ -31,15 +32,26 @@ def message(event: str, job: dict | None, text: str) -> dict:
     """The JSON body for an event about a job (or the bench, when job is None)."""
     job = job or {}
     name = job.get("name") or job.get("id") or ""
-    return {"event": event, "job_id": job.get("id"), "name": job.get("name", ""), "status": job.get("status"),
-            "message": text, "title": f"InkSlice: {TITLES[event]}" + (f" ({name})" if name else ""),
-            "box": socket.gethostname(), "time": time.time()}
+    return {
+        "event": event,
+        "job_id": job.get("id"),
+        "name": job.get("name", ""),
+        "status": job.get("status"),
+        "message": text,
+        "title": f"InkSlice: {TITLES[event]}" + (f" ({name})" if name else ""),
+        "box": socket.gethostname(),
+        "time": time.time(),
+    }
 
 
 def post(url: str, body: dict, token: str = "", timeout: float = TIMEOUT_S) -> str:
     """POST body as JSON; returns "" when the receiver took it (2xx), else why not."""
-    req = urllib.request.Request(url, data=json.dumps(body).encode(), method="POST",
-                                 headers={"Content-Type": "application/json", "User-Agent": "inkslice"})
+    req = urllib.request.Request(
+        url,
+        data=json.dumps(body).encode(),
+        method="POST",
+        headers={"Content-Type": "application/json", "User-Agent": "inkslice"},
+    )
     if token:
         req.add_header("Authorization", f"Bearer {token}")
     try:
@@ -55,7 +67,7 @@ class Webhook:
     """Sends events in the background to the address settings() names at the time of the event."""
 
     def __init__(self, settings):
-        self._settings = settings               # callable -> the daemon's settings
+        self._settings = settings  # callable -> the daemon's settings
         self._queue: queue.Queue = queue.Queue(maxsize=50)
         self._thread: threading.Thread | None = None
         self._last: dict | None = None
@@ -92,7 +104,7 @@ class Webhook:
 
     def _run(self):
         while True:
-            url, token, body = self._queue.get()    # a daemon thread: it waits for the next event
+            url, token, body = self._queue.get()  # a daemon thread: it waits for the next event
             problem = post(url, body, token)
             if problem:
                 log.warning("webhook %s to %s: %s", body["event"], url.split("?")[0], problem)

@@ -6,6 +6,7 @@ its home switch; the liquid level above the base top is then
     level_mm = level_at_home_mm - position_mm
 where `level_at_home_mm` is a bench setting (found by calibration).
 """
+
 from __future__ import annotations
 
 import abc
@@ -16,11 +17,11 @@ import numpy as np
 
 @dataclass
 class StageStatus:
-    state: str                 # firmware state name, e.g. "idle", "moving", "homing", "alarm"
+    state: str  # firmware state name, e.g. "idle", "moving", "homing", "alarm"
     position_steps: int
     position_mm: float
     homed: bool
-    flags: dict = field(default_factory=dict)   # limit switches, e-stop, ...
+    flags: dict = field(default_factory=dict)  # limit switches, e-stop, ...
 
 
 class Stage(abc.ABC):
@@ -89,6 +90,7 @@ class Placement:
     text: the request in words, for the operator (display, web page).
     details: the numbers behind the request (board size and jig position, the ball's diameter, ...).
     """
+
     kind: str
     text: str
     details: dict = field(default_factory=dict)
@@ -122,8 +124,8 @@ class BenchFactory(abc.ABC):
     simulated one and the in-memory fakes (sim/fakes.py). The daemon knows no
     more of a bench than this."""
 
-    extra_params: tuple = ()        # scan parameters start_scan accepts beyond the settings
-    calibration_target: dict = {}   # the guided calibration's board and pose, when not the printed default
+    extra_params: tuple = ()  # scan parameters start_scan accepts beyond the settings
+    calibration_target: dict = {}  # the guided calibration's board and pose, when not the printed default
 
     @abc.abstractmethod
     def open(self, settings: dict, params: dict):
@@ -140,11 +142,13 @@ class BenchFactory(abc.ABC):
     def disk_free_mb(self, path) -> float:
         """Free space where the scans are written; scans stop before the disk is full."""
         import shutil
+
         return shutil.disk_usage(path).free / 1e6
 
     def usb(self):
         """What copies G-code to a USB stick (hw.usb.UsbExporter), or None for no USB export."""
         from .usb import UsbExporter
+
         return UsbExporter()
 
     def close(self) -> None:

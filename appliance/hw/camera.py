@@ -15,6 +15,7 @@ Select the device by a stable path: /dev/v4l/by-id/usb-...-video-index0 (or
 the /dev/inkslice-camera symlink our udev rule makes), never /dev/videoN,
 whose number changes with plug order.
 """
+
 from __future__ import annotations
 
 import os
@@ -33,12 +34,12 @@ BY_ID = "/dev/v4l/by-id"
 class CameraSettings:
     width: int = 2048
     height: int = 1536
-    fourcc: str = "MJPG"          # UVC cameras give full resolution at a usable rate only as MJPG
-    exposure: float = 156.0       # V4L2 exposure_time_absolute, 100 us units
+    fourcc: str = "MJPG"  # UVC cameras give full resolution at a usable rate only as MJPG
+    exposure: float = 156.0  # V4L2 exposure_time_absolute, 100 us units
     gain: float = 0.0
     wb_temperature: float = 4600.0
-    focus: float = 0.0            # absolute focus, camera units; 0 = infinity on most UVC cameras
-    flush: int = 4                # frames dropped after each move
+    focus: float = 0.0  # absolute focus, camera units; 0 = infinity on most UVC cameras
+    flush: int = 4  # frames dropped after each move
 
 
 def find_by_id(pattern: str = "") -> str:
@@ -78,7 +79,9 @@ class V4L2Camera(Camera):
         self._set(cv2.CAP_PROP_FRAME_HEIGHT, s.height, "height")
         got = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         if got != (s.width, s.height):
-            raise DeviceError(self.where, f"asked for {s.width}x{s.height}, the camera gives {got[0]}x{got[1]}")
+            raise DeviceError(
+                self.where, f"asked for {s.width}x{s.height}, the camera gives {got[0]}x{got[1]}"
+            )
         cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)
         # V4L2 auto exposure menu: 1 = manual, 3 = aperture priority (auto)
         self._set(cv2.CAP_PROP_AUTO_EXPOSURE, 1, "manual exposure")
@@ -98,8 +101,10 @@ class V4L2Camera(Camera):
         if not ok or frame is None:
             raise DeviceError(self.where, "no frame: the camera stopped delivering (unplugged?)")
         if frame.shape[:2] != (self.s.height, self.s.width):
-            raise DeviceError(self.where, f"frame is {frame.shape[1]}x{frame.shape[0]}, "
-                                          f"expected {self.s.width}x{self.s.height}")
+            raise DeviceError(
+                self.where,
+                f"frame is {frame.shape[1]}x{frame.shape[0]}, expected {self.s.width}x{self.s.height}",
+            )
         return frame
 
     def close(self) -> None:

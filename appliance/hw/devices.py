@@ -15,6 +15,7 @@ all keys optional):
      "i2c_bus": 1, "display_address": 60, "level_sensor_address": null,
      "level_sensor_mount_mm": 120.0}
 """
+
 from __future__ import annotations
 
 import json
@@ -28,32 +29,42 @@ from .base import BenchFactory
 log = logging.getLogger("inkslice.devices")
 
 WIRING = {
-    "stage_port": "/dev/inkslice-stage", "camera": "/dev/inkslice-camera", "camera_settings": {},
-    "gpiochip": "/dev/gpiochip0", "light_line": 17, "led_line": 27, "button_line": 22, "mcu_reset_line": 23,
-    "i2c_bus": 1, "display_address": 0x3C, "level_sensor_address": None, "level_sensor_mount_mm": 120.0,
+    "stage_port": "/dev/inkslice-stage",
+    "camera": "/dev/inkslice-camera",
+    "camera_settings": {},
+    "gpiochip": "/dev/gpiochip0",
+    "light_line": 17,
+    "led_line": 27,
+    "button_line": 22,
+    "mcu_reset_line": 23,
+    "i2c_bus": 1,
+    "display_address": 0x3C,
+    "level_sensor_address": None,
+    "level_sensor_mount_mm": 120.0,
 }
 
 
 @dataclass
 class Devices:
     """What a scan drives. light/led/display/button/level_sensor may be None (missing)."""
+
     stage: object
     camera: object
-    camera_model: object = None                      # scanfile.CameraModel, or None: use the calibration
+    camera_model: object = None  # scanfile.CameraModel, or None: use the calibration
     light: object = None
     led: object = None
     display: object = None
     button: object = None
     level_sensor: object = None
-    operator: object = None                          # hw.base.Operator (the panel's): who places things on the base
-    hardware: dict = field(default_factory=dict)     # name -> "ok" | "missing" | "fault: ..."
-    closers: list = field(default_factory=list)      # called by close(), in order
+    operator: object = None  # hw.base.Operator (the panel's): who places things on the base
+    hardware: dict = field(default_factory=dict)  # name -> "ok" | "missing" | "fault: ..."
+    closers: list = field(default_factory=list)  # called by close(), in order
 
     def close(self):
         for c in self.closers:
             try:
                 c()
-            except Exception:                        # closing must never hide the real error
+            except Exception:  # closing must never hide the real error
                 log.exception("closing a device")
 
     def capture_lit(self):
@@ -108,6 +119,7 @@ class HardwareBench(BenchFactory):
 
     def _reset_mcu(self):
         from .gpio import GpioOutput, pulse
+
         line = GpioOutput(self.w["gpiochip"], self.w["mcu_reset_line"], "mcu-reset", active_low=True)
         try:
             pulse(line, 0.05)
@@ -116,6 +128,7 @@ class HardwareBench(BenchFactory):
 
     def _open_stage(self):
         from .stage import SerialStage
+
         try:
             # auto_rehome=False: a reset mid-scan must stop the job with a reason, not be hidden
             return SerialStage(self.w["stage_port"], auto_rehome=False)
@@ -126,12 +139,14 @@ class HardwareBench(BenchFactory):
             except (InkSliceError, OSError, ImportError):
                 raise first from None
             import time
-            time.sleep(2.0)                          # the bootloader's wait
+
+            time.sleep(2.0)  # the bootloader's wait
             return SerialStage(self.w["stage_port"], auto_rehome=False)
 
     def open(self, settings, params) -> Devices:
         from .camera import CameraSettings, V4L2Camera
         from .gpio import GpioOutput
+
         hw = {}
         stage = self._open_stage()
         hw["stage"] = "ok"
@@ -145,19 +160,39 @@ class HardwareBench(BenchFactory):
         sensor = None
         if self.w["level_sensor_address"] is not None:
             from .sensors import Vl6180xLevel
-            sensor = _optional(hw, "level_sensor", lambda: Vl6180xLevel(
-                self.w["level_sensor_mount_mm"], self.w["i2c_bus"], self.w["level_sensor_address"]))
-        closers = [camera.close, stage.close] + ([light.close] if light else []) + ([sensor.close] if sensor else [])
+
+            sensor = _optional(
+                hw,
+                "level_sensor",
+                lambda: Vl6180xLevel(
+                    self.w["level_sensor_mount_mm"], self.w["i2c_bus"], self.w["level_sensor_address"]
+                ),
+            )
+        closers = (
+            [camera.close, stage.close]
+            + ([light.close] if light else [])
+            + ([sensor.close] if sensor else [])
+        )
         return Devices(stage, camera, None, light=light, level_sensor=sensor, hardware=hw, closers=closers)
 
     def open_panel(self) -> Devices:
         from .display import Ssd1306
         from .gpio import GpioButton, GpioOutput
+
         hw = {}
         led = _optional(hw, "led", lambda: GpioOutput(self.w["gpiochip"], self.w["led_line"], "led"))
         button = _optional(hw, "button", lambda: GpioButton(self.w["gpiochip"], self.w["button_line"]))
         display = _optional(hw, "display", lambda: Ssd1306(self.w["i2c_bus"], self.w["display_address"]))
         closers = [d.close for d in (led, button, display) if d is not None]
         from .base import HumanOperator
-        return Devices(None, None, led=led, button=button, display=display, operator=HumanOperator(),
-                       hardware=hw, closers=closers)
+
+        return Devices(
+            None,
+            None,
+            led=led,
+            button=button,
+            display=display,
+            operator=HumanOperator(),
+            hardware=hw,
+            closers=closers,
+        )

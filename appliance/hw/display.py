@@ -5,6 +5,7 @@ scaled to 8 x 16 cells: 16 characters a line. The frame is drawn in numpy
 and sent page by page; the controller keeps the picture, so the daemon only
 redraws when the text changes.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -14,8 +15,33 @@ from ..errors import DeviceError
 from .base import Display
 
 WIDTH, HEIGHT = 128, 64
-_INIT = [0xAE, 0xD5, 0x80, 0xA8, 0x3F, 0xD3, 0x00, 0x40, 0x8D, 0x14, 0x20, 0x00,
-         0xA1, 0xC8, 0xDA, 0x12, 0x81, 0x8F, 0xD9, 0xF1, 0xDB, 0x40, 0xA4, 0xA6, 0xAF]
+_INIT = [
+    0xAE,
+    0xD5,
+    0x80,
+    0xA8,
+    0x3F,
+    0xD3,
+    0x00,
+    0x40,
+    0x8D,
+    0x14,
+    0x20,
+    0x00,
+    0xA1,
+    0xC8,
+    0xDA,
+    0x12,
+    0x81,
+    0x8F,
+    0xD9,
+    0xF1,
+    0xDB,
+    0x40,
+    0xA4,
+    0xA6,
+    0xAF,
+]
 
 
 def render_lines(lines: list[str]) -> np.ndarray:
@@ -36,6 +62,7 @@ def to_pages(img: np.ndarray) -> bytes:
 class Ssd1306(Display):
     def __init__(self, bus: int = 1, address: int = 0x3C):
         from smbus2 import SMBus
+
         self.where = f"display i2c-{bus} 0x{address:02x}"
         self.address = address
         try:
@@ -55,15 +82,15 @@ class Ssd1306(Display):
         data = to_pages(render_lines(lines))
         try:
             self._command([0x21, 0, WIDTH - 1, 0x22, 0, HEIGHT // 8 - 1])
-            for i in range(0, len(data), 16):          # SMBus blocks are at most 32 bytes
-                self._bus.write_i2c_block_data(self.address, 0x40, list(data[i:i + 16]))
+            for i in range(0, len(data), 16):  # SMBus blocks are at most 32 bytes
+                self._bus.write_i2c_block_data(self.address, 0x40, list(data[i : i + 16]))
         except OSError as e:
             raise DeviceError(self.where, f"write failed: {e}") from None
         self._last = list(lines)
 
     def close(self):
         try:
-            self._command([0xAE])        # display off
+            self._command([0xAE])  # display off
         except OSError:
             pass
         self._bus.close()

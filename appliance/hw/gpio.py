@@ -12,6 +12,7 @@ Missing hardware is not an error for the daemon: `open_output`/`open_button`
 return None with a reason, and the daemon reports "missing" once and carries
 on without that line.
 """
+
 from __future__ import annotations
 
 import datetime
@@ -25,15 +26,23 @@ class GpioOutput(OutputLine):
     def __init__(self, chip: str, offset: int, name: str, active_low: bool = False):
         import gpiod
         from gpiod.line import Direction, Value
+
         self._Value = Value
         self.name, self.offset = name, offset
         try:
             self._req = gpiod.request_lines(
-                chip, consumer=f"inkslice-{name}",
-                config={offset: gpiod.LineSettings(direction=Direction.OUTPUT, active_low=active_low,
-                                                   output_value=Value.INACTIVE)})
+                chip,
+                consumer=f"inkslice-{name}",
+                config={
+                    offset: gpiod.LineSettings(
+                        direction=Direction.OUTPUT, active_low=active_low, output_value=Value.INACTIVE
+                    )
+                },
+            )
         except (OSError, ValueError) as e:
-            raise DeviceError(f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}") from None
+            raise DeviceError(
+                f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}"
+            ) from None
 
     def set(self, on: bool) -> None:
         try:
@@ -43,7 +52,7 @@ class GpioOutput(OutputLine):
 
     def close(self):
         try:
-            self.set(False)          # leave the light / LED off
+            self.set(False)  # leave the light / LED off
         finally:
             self._req.release()
 
@@ -66,11 +75,11 @@ class PressTimer:
 
     def edge(self, pressed: bool, t: float) -> str | None:
         if pressed:
-            if self._down is None:          # a second "down" without an "up" (a lost edge): keep the first
+            if self._down is None:  # a second "down" without an "up" (a lost edge): keep the first
                 self._down, self._fired = t, False
             return None
         down, fired, self._down = self._down, self._fired, None
-        if down is None or fired:           # released after a long press, or held since before we started
+        if down is None or fired:  # released after a long press, or held since before we started
             return None
         return LONG if t - down >= self.long_s else SHORT
 
@@ -92,17 +101,29 @@ class GpioButton:
     def __init__(self, chip: str, offset: int, name: str = "button", long_s: float = LONG_PRESS_S):
         import gpiod
         from gpiod.line import Bias, Direction, Edge
+
         self.name, self.offset = name, offset
         try:
             self._req = gpiod.request_lines(
-                chip, consumer=f"inkslice-{name}",
-                config={offset: gpiod.LineSettings(direction=Direction.INPUT, bias=Bias.PULL_UP,
-                                                   active_low=True, edge_detection=Edge.BOTH,
-                                                   debounce_period=datetime.timedelta(milliseconds=30))})
+                chip,
+                consumer=f"inkslice-{name}",
+                config={
+                    offset: gpiod.LineSettings(
+                        direction=Direction.INPUT,
+                        bias=Bias.PULL_UP,
+                        active_low=True,
+                        edge_detection=Edge.BOTH,
+                        debounce_period=datetime.timedelta(milliseconds=30),
+                    )
+                },
+            )
         except (OSError, ValueError) as e:
-            raise DeviceError(f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}") from None
+            raise DeviceError(
+                f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}"
+            ) from None
         from gpiod.edge_event import EdgeEvent
-        self._rising = EdgeEvent.Type.RISING_EDGE        # active-low: rising = pressed
+
+        self._rising = EdgeEvent.Type.RISING_EDGE  # active-low: rising = pressed
         self._timer = PressTimer(long_s)
 
     def poll(self) -> str | None:

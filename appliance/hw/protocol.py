@@ -6,6 +6,7 @@ alarms, reset reasons, settings) are not repeated here: they are read at
 import from appliance/firmware/stepper/codes.def, the same X-macro table the
 firmware is compiled from, so the two sides cannot drift apart.
 """
+
 from __future__ import annotations
 
 import binascii
@@ -17,9 +18,9 @@ from appliance.errors import DeviceError
 from appliance.firmware import codes_path
 
 PROTO_VERSION = 1
-LINE_MAX = 48            # characters the firmware buffers before '\n'
-RT_STATUS = b"?"         # real-time: status report
-RT_ESTOP = b"\x18"       # real-time: emergency stop (Ctrl-X)
+LINE_MAX = 48  # characters the firmware buffers before '\n'
+RT_STATUS = b"?"  # real-time: status report
+RT_ESTOP = b"\x18"  # real-time: emergency stop (Ctrl-X)
 
 
 @dataclass(frozen=True)

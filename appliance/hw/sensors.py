@@ -6,6 +6,7 @@ ink from a fixed height: level = mount height - range. Readings are in whole
 millimetres, so it checks the model (a few tenths of a mm over a scan), it
 never replaces the stage's position.
 """
+
 from __future__ import annotations
 
 import time
@@ -22,6 +23,7 @@ _IDENTIFICATION_MODEL_ID = 0x000
 class Vl6180xLevel:
     def __init__(self, mount_height_mm: float, bus: int = 1, address: int = 0x29):
         from smbus2 import SMBus, i2c_msg
+
         self._msg = i2c_msg
         self.where = f"level sensor i2c-{bus} 0x{address:02x}"
         self.address, self.mount = address, float(mount_height_mm)

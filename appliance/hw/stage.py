@@ -25,6 +25,7 @@ The rules it follows (appliance/firmware/stepper/PROTOCOL.md has the whole contr
   loaded host, a USB hub) commands get the time the link needs, while a dead
   line, which gives no samples, still fails after `timeout`.
 """
+
 from __future__ import annotations
 
 import os
@@ -38,8 +39,8 @@ from appliance.hw import protocol as P
 from appliance.hw.base import Stage, StageStatus
 
 BAUD = 115200
-ATTEMPTS = 8                # a command's budget: at least this many waits at the measured pace
-MAX_WAIT_S = 2.0            # no single wait for a reply is longer, however slow the line looked
+ATTEMPTS = 8  # a command's budget: at least this many waits at the measured pace
+MAX_WAIT_S = 2.0  # no single wait for a reply is longer, however slow the line looked
 
 
 class RoundTrip:
@@ -50,7 +51,7 @@ class RoundTrip:
         self.floor = floor
         self.srtt: float | None = None
         self.var = 0.0
-        self.carry = floor          # grown by silence, kept until the next clean sample
+        self.carry = floor  # grown by silence, kept until the next clean sample
         self.worst = 0.0
 
     def sample(self, rtt: float) -> None:
@@ -74,22 +75,40 @@ class RoundTrip:
 
 
 class SerialStage(Stage):
-    def __init__(self, port: str, steps_per_mm: float | None = None, timeout: float = 3.0,
-                 reply_timeout: float = 0.15, auto_rehome: bool = True, poll_interval: float = 0.004):
+    def __init__(
+        self,
+        port: str,
+        steps_per_mm: float | None = None,
+        timeout: float = 3.0,
+        reply_timeout: float = 0.15,
+        auto_rehome: bool = True,
+        poll_interval: float = 0.004,
+    ):
         self.port_name = port
         self.timeout = float(timeout)
         self.reply_timeout = float(reply_timeout)
         self.auto_rehome = auto_rehome
         self.poll_interval = poll_interval
-        self.counters = dict(commands=0, resends=0, damaged_lines=0, status_polls=0,
-                             resets_seen=0, spurious_estops=0, rehomes=0, reissued_moves=0,
-                             idle_off_target=0, longest_command_s=0.0, worst_round_trip_s=0.0,
-                             longest_budget_s=0.0, over_budget=0)
+        self.counters = dict(
+            commands=0,
+            resends=0,
+            damaged_lines=0,
+            status_polls=0,
+            resets_seen=0,
+            spurious_estops=0,
+            rehomes=0,
+            reissued_moves=0,
+            idle_off_target=0,
+            longest_command_s=0.0,
+            worst_round_trip_s=0.0,
+            longest_budget_s=0.0,
+            over_budget=0,
+        )
         self.rtt = RoundTrip(self.reply_timeout)
         self._stop_requested = False
-        self._ready = False         # the boot banner seen while connecting is no reset
+        self._ready = False  # the boot banner seen while connecting is no reset
         self._lock = threading.RLock()
-        self._seq = int.from_bytes(os.urandom(2), "big") % 60000 + 1   # unlike a previous session's last seq
+        self._seq = int.from_bytes(os.urandom(2), "big") % 60000 + 1  # unlike a previous session's last seq
         self._target: int | None = None
         try:
             self._ser = serial.serial_for_url(port, BAUD, timeout=self.reply_timeout)
@@ -97,8 +116,10 @@ class SerialStage(Stage):
             raise DeviceError(f"stage {port}", f"cannot open the serial port: {e}") from None
         try:
             self.info = self.identify()
-            self._settings = {name: self.get_setting(name) for name in
-                              ("steps_per_rev", "lead_um", "soft_min", "soft_max", "max_rate", "accel")}
+            self._settings = {
+                name: self.get_setting(name)
+                for name in ("steps_per_rev", "lead_um", "soft_min", "soft_max", "max_rate", "accel")
+            }
         except Exception:
             self._ser.close()
             raise
@@ -173,31 +194,36 @@ class SerialStage(Stage):
                 while True:
                     item = self._readline(attempt_end)
                     if item is None:
-                        self.rtt.silence()                  # silence: resend, waiting longer
+                        self.rtt.silence()  # silence: resend, waiting longer
                         break
                     if isinstance(item, P.Banner):
                         self._note_reset()
                         continue
                     if not isinstance(item, P.Reply):
-                        continue                            # a stray status report
+                        continue  # a stray status report
                     if item.seq == seq:
                         if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
-                            break                           # our line arrived damaged: resend
+                            break  # our line arrived damaged: resend
                         if tries == 1:
                             self._note_round_trip(time.monotonic() - sent)
                         self._note_took(start, budget)
                         return item
                     if item.seq == 0 and not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
-                        break                               # a damaged line, perhaps ours: resend
-            raise DeviceError(self._where(), f"no valid reply to {verb} after {tries} tries in "
-                                             f"{budget:.1f} s: is the controller connected and powered?")
+                        break  # a damaged line, perhaps ours: resend
+            raise DeviceError(
+                self._where(),
+                f"no valid reply to {verb} after {tries} tries in "
+                f"{budget:.1f} s: is the controller connected and powered?",
+            )
 
     def command(self, verb: str, *args) -> str:
         """transact() and turn an error reply into a DeviceError naming the code."""
         r = self.transact(verb, *args)
         if not r.ok:
-            raise DeviceError(self._where(), f"{verb} {' '.join(map(str, args))} refused: "
-                                             f"error:{r.error} {r.error_name} ({r.error_text})")
+            raise DeviceError(
+                self._where(),
+                f"{verb} {' '.join(map(str, args))} refused: error:{r.error} {r.error_name} ({r.error_text})",
+            )
         return r.payload
 
     def raw_status(self) -> P.Status:
@@ -208,7 +234,7 @@ class SerialStage(Stage):
             deadline = start + budget
             polls = 0
             while time.monotonic() < deadline:
-                self._ser.reset_input_buffer()               # drop stale reports
+                self._ser.reset_input_buffer()  # drop stale reports
                 self._ser.write(P.RT_STATUS)
                 sent = time.monotonic()
                 polls += 1
@@ -233,16 +259,24 @@ class SerialStage(Stage):
         try:
             r = self.transact("ID")
         except DeviceError:
-            raise DeviceError(self._where(), f"no reply to ID at {BAUD} baud: is this the InkSlice "
-                                             "stepper controller (appliance/firmware)?") from None
+            raise DeviceError(
+                self._where(),
+                f"no reply to ID at {BAUD} baud: is this the InkSlice "
+                "stepper controller (appliance/firmware)?",
+            ) from None
         info = P.parse_identity(r.payload) if r.ok else {}
         if not r.ok or info.get("name") != "inkslice-stepper":
-            raise DeviceError(self._where(), f"the device does not identify as inkslice-stepper "
-                                             f"(reply {r.payload or r.error_name!r})")
+            raise DeviceError(
+                self._where(),
+                f"the device does not identify as inkslice-stepper (reply {r.payload or r.error_name!r})",
+            )
         if info.get("proto") != P.PROTO_VERSION:
-            raise DeviceError(self._where(), f"firmware speaks protocol {info.get('proto')!r} but this driver "
-                                             f"speaks protocol {P.PROTO_VERSION}: flash this version's firmware "
-                                             "(`inkslice firmware flash`, the daemon stopped)")
+            raise DeviceError(
+                self._where(),
+                f"firmware speaks protocol {info.get('proto')!r} but this driver "
+                f"speaks protocol {P.PROTO_VERSION}: flash this version's firmware "
+                "(`inkslice firmware flash`, the daemon stopped)",
+            )
         return info
 
     def get_setting(self, name: str) -> int:
@@ -264,8 +298,13 @@ class SerialStage(Stage):
         st = self.raw_status()
         flags = dict(st.flags)
         flags["alarm"] = st.alarm
-        return StageStatus(state=st.state, position_steps=st.position,
-                           position_mm=st.position / self.steps_per_mm, homed=st.homed, flags=flags)
+        return StageStatus(
+            state=st.state,
+            position_steps=st.position,
+            position_mm=st.position / self.steps_per_mm,
+            homed=st.homed,
+            flags=flags,
+        )
 
     def _lost(self, st: P.Status) -> bool:
         """The position is gone through no fault of the bench: the MCU was
@@ -281,22 +320,31 @@ class SerialStage(Stage):
                     self.counters["spurious_estops"] += 1
                 return st
             if st.state in ("alarm", "estop"):
-                raise DeviceError(self._where(), f"{what} stopped: state {st.state}, alarm {st.alarm} "
-                                                 f"({P.ALARMS_BY_NAME[st.alarm].text if st.alarm in P.ALARMS_BY_NAME else ''}); "
-                                                 "home the stage to clear it")
+                raise DeviceError(
+                    self._where(),
+                    f"{what} stopped: state {st.state}, alarm {st.alarm} "
+                    f"({P.ALARMS_BY_NAME[st.alarm].text if st.alarm in P.ALARMS_BY_NAME else ''}); "
+                    "home the stage to clear it",
+                )
             if done(st):
                 return st
             if time.monotonic() > deadline:
-                raise DeviceError(self._where(), f"{what} did not finish in time (state {st.state}, "
-                                                 f"position {st.position} steps)")
+                raise DeviceError(
+                    self._where(),
+                    f"{what} did not finish in time (state {st.state}, position {st.position} steps)",
+                )
             time.sleep(self.poll_interval)
 
     def _recover_or_raise(self, what: str):
         if self._stop_requested:
-            raise DeviceError(self._where(), f"{what} refused: the stage was emergency-stopped; home it first")
+            raise DeviceError(
+                self._where(), f"{what} refused: the stage was emergency-stopped; home it first"
+            )
         self._note_reset()
         if not self.auto_rehome:
-            raise DeviceError(self._where(), f"the controller was reset during {what}: position unknown, home first")
+            raise DeviceError(
+                self._where(), f"the controller was reset during {what}: position unknown, home first"
+            )
         self.counters["rehomes"] += 1
 
     def home(self, timeout: float = 60.0) -> None:
@@ -312,7 +360,7 @@ class SerialStage(Stage):
                 self._stop_requested = False
                 st = self._wait(lambda s: s.state == "idle" and s.homed, "homing", deadline)
                 if self._lost(st):
-                    self._note_reset()          # reset mid-homing: start over
+                    self._note_reset()  # reset mid-homing: start over
                     continue
                 self._target = st.position
                 return
@@ -327,14 +375,19 @@ class SerialStage(Stage):
     def move_to_steps(self, target: int, timeout: float = 60.0) -> None:
         lo, hi = self._settings["soft_min"], self._settings["soft_max"]
         if not lo <= target <= hi:
-            raise SettingError("stage move", f"{target / self.steps_per_mm:.4f} mm is outside the soft limits "
-                                             f"{lo / self.steps_per_mm:.3f}..{hi / self.steps_per_mm:.3f} mm")
+            raise SettingError(
+                "stage move",
+                f"{target / self.steps_per_mm:.4f} mm is outside the soft limits "
+                f"{lo / self.steps_per_mm:.3f}..{hi / self.steps_per_mm:.3f} mm",
+            )
         with self._lock:
             deadline = time.monotonic() + timeout
             issued = 0
             while True:
                 if time.monotonic() > deadline:
-                    raise DeviceError(self._where(), f"move to {target} steps did not finish in {timeout:.1f} s")
+                    raise DeviceError(
+                        self._where(), f"move to {target} steps did not finish in {timeout:.1f} s"
+                    )
                 r = self.transact("MOVE", target)
                 if not r.ok:
                     if r.error == P.ERROR_NUMBER["not_homed"]:
@@ -342,10 +395,14 @@ class SerialStage(Stage):
                         self.home(max(1.0, deadline - time.monotonic()))
                         continue
                     if r.error == P.ERROR_NUMBER["busy"]:
-                        self._wait(lambda s: s.state not in ("moving", "homing"), "waiting for idle", deadline)
+                        self._wait(
+                            lambda s: s.state not in ("moving", "homing"), "waiting for idle", deadline
+                        )
                         continue
-                    raise DeviceError(self._where(), f"MOVE {target} refused: error:{r.error} {r.error_name} "
-                                                     f"({r.error_text})")
+                    raise DeviceError(
+                        self._where(),
+                        f"MOVE {target} refused: error:{r.error} {r.error_name} ({r.error_text})",
+                    )
                 if issued:
                     self.counters["reissued_moves"] += 1
                 issued += 1
@@ -355,11 +412,11 @@ class SerialStage(Stage):
                     if self._lost(st) or not st.homed:
                         self._recover_or_raise("a move")
                         self.home(max(1.0, deadline - time.monotonic()))
-                        break                       # re-issue the move from the new home
+                        break  # re-issue the move from the new home
                     if st.position == target:
                         self._target = target
                         return
-                    stuck += 1                      # idle elsewhere: a stale report, or a lost move
+                    stuck += 1  # idle elsewhere: a stale report, or a lost move
                     self.counters["idle_off_target"] += 1
                     if stuck >= 3:
                         break

@@ -31,6 +31,7 @@ Which file goes onto the stick is the daemon's business (BenchService.export_to_
 for the web, export_latest_gcode for the button's long press): this module copies
 a file it is given and knows nothing of jobs.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -44,9 +45,23 @@ from pathlib import Path
 
 from ..errors import DeviceError
 
-STICK_FS = {"vfat", "msdos", "exfat", "ntfs", "ntfs3", "fuseblk", "ext2", "ext3", "ext4", "f2fs", "btrfs", "xfs", "hfsplus"}
+STICK_FS = {
+    "vfat",
+    "msdos",
+    "exfat",
+    "ntfs",
+    "ntfs3",
+    "fuseblk",
+    "ext2",
+    "ext3",
+    "ext4",
+    "f2fs",
+    "btrfs",
+    "xfs",
+    "hfsplus",
+}
 MOUNT_ROOTS = ("/media", "/run/media", "/mnt")
-BOX_MOUNTS = "/media/inkslice"          # where inkslice-stick@.service mounts (systemd/inkslice-stick)
+BOX_MOUNTS = "/media/inkslice"  # where inkslice-stick@.service mounts (systemd/inkslice-stick)
 SLACK = 1 << 20
 FAT_BAD = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
 
@@ -57,7 +72,7 @@ class NoStick(DeviceError):
 
 @dataclass
 class Stick:
-    id: str             # stable while plugged: the device name (sda1)
+    id: str  # stable while plugged: the device name (sda1)
     mount: str
     device: str
     fstype: str
@@ -76,7 +91,7 @@ class CopyResult:
     sha256: str
     verified: bool
     safe_to_remove: bool
-    unmounted: bool | None = None       # None: not asked to; False: see unmount_problem
+    unmounted: bool | None = None  # None: not asked to; False: see unmount_problem
     unmount_problem: str = ""
 
     def to_json(self):
@@ -117,7 +132,12 @@ def find_sticks(mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys") 
         parts = line.split()
         if len(parts) < 4:
             continue
-        device, mount, fstype, options = _unescape(parts[0]), _unescape(parts[1]), parts[2], parts[3].split(",")
+        device, mount, fstype, options = (
+            _unescape(parts[0]),
+            _unescape(parts[1]),
+            parts[2],
+            parts[3].split(","),
+        )
         if fstype not in STICK_FS or "rw" not in options:
             continue
         if not any(mount == r or mount.startswith(r + "/") for r in roots) or mount in roots:
@@ -130,8 +150,16 @@ def find_sticks(mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys") 
             free = shutil.disk_usage(mount).free
         except OSError:
             continue
-        out.append(Stick(id=os.path.basename(device) or mount, mount=mount, device=device, fstype=fstype,
-                         label=os.path.basename(mount), free_bytes=free))
+        out.append(
+            Stick(
+                id=os.path.basename(device) or mount,
+                mount=mount,
+                device=device,
+                fstype=fstype,
+                label=os.path.basename(mount),
+                free_bytes=free,
+            )
+        )
     return out
 
 
@@ -166,7 +194,7 @@ def copy_verified(src, folder, name=None) -> CopyResult:
         stem, ext = name, ""
     final = folder / name
     i = 1
-    while final.exists():           # never overwrite what is on the operator's stick
+    while final.exists():  # never overwrite what is on the operator's stick
         final = folder / (f"{stem}-{i}.{ext}" if dot else f"{stem}-{i}")
         i += 1
     tmp = folder / f".{final.name}.inkslice-tmp"
@@ -203,7 +231,9 @@ def copy_verified(src, folder, name=None) -> CopyResult:
     ok = got == want.hexdigest()
     if not ok:
         raise DeviceError(final, "verification failed: the copy on the stick differs from the job's file")
-    return CopyResult(name=final.name, path=str(final), bytes=size, sha256=got, verified=True, safe_to_remove=True)
+    return CopyResult(
+        name=final.name, path=str(final), bytes=size, sha256=got, verified=True, safe_to_remove=True
+    )
 
 
 def _unmount_command(stick: Stick) -> list[str] | None:
@@ -235,11 +265,17 @@ class UsbExporter:
     unmount(stick) is how a stick is released after a copy (unmount_stick on the box;
     tests pass their own)."""
 
-    def __init__(self, mounts_file="/proc/mounts", roots=MOUNT_ROOTS, sys_root="/sys", subfolder="inkslice",
-                 unmount=unmount_stick):
+    def __init__(
+        self,
+        mounts_file="/proc/mounts",
+        roots=MOUNT_ROOTS,
+        sys_root="/sys",
+        subfolder="inkslice",
+        unmount=unmount_stick,
+    ):
         self.mounts_file, self.roots, self.sys_root, self.subfolder = mounts_file, roots, sys_root, subfolder
         self.unmount = unmount
-        self._lock = threading.Lock()       # one copy at a time: sticks are slow and FAT is fragile
+        self._lock = threading.Lock()  # one copy at a time: sticks are slow and FAT is fragile
 
     def sticks(self) -> list[Stick]:
         return find_sticks(self.mounts_file, self.roots, self.sys_root)
@@ -247,7 +283,11 @@ class UsbExporter:
     def export(self, src, stick_id=None, name=None, release=False) -> CopyResult:
         """Copy src onto the stick, verified; with release, sync and unmount it afterwards."""
         sticks = self.sticks()
-        stick = next((s for s in sticks if s.id == stick_id), None) if stick_id else (sticks[0] if sticks else None)
+        stick = (
+            next((s for s in sticks if s.id == stick_id), None)
+            if stick_id
+            else (sticks[0] if sticks else None)
+        )
         if stick is None:
             raise NoStick("usb", "no USB stick is plugged in" if not sticks else f"no stick {stick_id!r}")
         folder = Path(stick.mount) / self.subfolder if self.subfolder else Path(stick.mount)

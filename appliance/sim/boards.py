@@ -22,6 +22,7 @@ knows: the board and where the flat one lies) into `folder`, and the truth -
 the rig's true camera model, every pose, every corner's true pixel - to
 `<folder>.truth.json` outside it, like a scan's truth.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,8 @@ from .rig import Rig, _rot_x, _rot_y, _rot_z, pixel_map
 
 @dataclass(frozen=True)
 class Board:
-    cols: int = 9                # inner corners along the board's x
-    rows: int = 6                # inner corners along the board's y
+    cols: int = 9  # inner corners along the board's x
+    rows: int = 6  # inner corners along the board's y
     square_mm: float = 8.0
     margin_squares: float = 1.0  # white card around the squares
     white: float = 232.0
@@ -48,9 +49,8 @@ class Board:
 
     def object_points(self) -> np.ndarray:
         """Inner corners in the board frame (mm, z = 0), row by row (OpenCV order)."""
-        j, i = np.mgrid[0:self.rows, 0:self.cols]
-        return np.column_stack([i.ravel() * self.square_mm, j.ravel() * self.square_mm,
-                                np.zeros(i.size)])
+        j, i = np.mgrid[0 : self.rows, 0 : self.cols]
+        return np.column_stack([i.ravel() * self.square_mm, j.ravel() * self.square_mm, np.zeros(i.size)])
 
     @property
     def squares_box(self):
@@ -67,16 +67,20 @@ class Board:
 @dataclass(frozen=True)
 class Pose:
     """Board frame -> plane frame (x, y on the liquid plane, z up from it)."""
+
     rx_deg: float
     ry_deg: float
     rz_deg: float
-    x_mm: float          # where the board's centre is
+    x_mm: float  # where the board's centre is
     y_mm: float
-    z_mm: float          # height above the liquid
+    z_mm: float  # height above the liquid
 
     def rotation(self):
-        return _rot_z(math.radians(self.rz_deg)) @ _rot_y(math.radians(self.ry_deg)) \
+        return (
+            _rot_z(math.radians(self.rz_deg))
+            @ _rot_y(math.radians(self.ry_deg))
             @ _rot_x(math.radians(self.rx_deg))
+        )
 
 
 DEFAULT_POSES = (
@@ -100,7 +104,7 @@ def _box_cells(b, w, s, lo_cell, hi_cell):
     restricted to cells lo_cell..hi_cell. Exact: the window overlaps two cells."""
     left = b - w / 2
     c0 = np.floor(left / s)
-    f0 = np.clip(((c0 + 1) * s - left) / w, 0.0, 1.0)     # share of the window in cell c0
+    f0 = np.clip(((c0 + 1) * s - left) / w, 0.0, 1.0)  # share of the window in cell c0
     f1 = 1.0 - f0
     c1 = c0 + 1
     in0 = (c0 >= lo_cell) & (c0 <= hi_cell)
@@ -161,7 +165,9 @@ def render_board(board: Board, pose: Pose, rig: Rig = None, effects: Effects = N
     w = np.maximum(np.maximum(gu, gv), 1e-6)
     black, a_card = _checker(bx, by, w, board)
     # black is part of the card: its colour over the card's area is white except there
-    grey = board.white - (board.white - board.black) * np.where(a_card > 1e-6, black / np.maximum(a_card, 1e-6), 0.0)
+    grey = board.white - (board.white - board.black) * np.where(
+        a_card > 1e-6, black / np.maximum(a_card, 1e-6), 0.0
+    )
     # light falls on the card at an angle: a matte card is Lambertian
     lam = 0.55 + 0.45 * abs(float(n @ rig.light_unit()))
     card = (grey * lam).astype(np.float32)
@@ -200,8 +206,15 @@ def _vision_board_pose(board: Board, plane: Pose, plane_xy, rig: Rig) -> dict:
     return {"x0": float(x0), "y0": float(y0), "angle_deg": float(np.degrees(np.arctan2(d[1], d[0])))}
 
 
-def render_calibration(folder, rig: Rig = None, board: Board = None, poses=DEFAULT_POSES,
-                       plane: Pose = None, effects: Effects = None, seed: int = 0) -> dict:
+def render_calibration(
+    folder,
+    rig: Rig = None,
+    board: Board = None,
+    poses=DEFAULT_POSES,
+    plane: Pose = None,
+    effects: Effects = None,
+    seed: int = 0,
+) -> dict:
     """Render pose_NN.png and plane.png into `folder`, board.json beside them, and
     the truth (camera model, poses, corner pixels) to `<folder>.truth.json`.
 
@@ -219,34 +232,53 @@ def render_calibration(folder, rig: Rig = None, board: Board = None, poses=DEFAU
         name = "plane.png" if is_plane else f"pose_{i + 1:02d}.png"
         corners = true_corners(board, pose, rig)
         margin = 10
-        if (corners.min() < margin or corners[:, 0].max() > rig.width - margin
-                or corners[:, 1].max() > rig.height - margin):
+        if (
+            corners.min() < margin
+            or corners[:, 0].max() > rig.width - margin
+            or corners[:, 1].max() > rig.height - margin
+        ):
             raise ValueError(f"{name}: the board leaves the frame at pose {pose}")
         img = render_board(board, pose, rig, effects, np.random.default_rng([seed, i]))
         write_frame(folder, name, img)
-        images.append({"file": name, "kind": "plane" if is_plane else "pose",
-                       "pose": asdict(pose), "corners_px": corners.tolist()})
+        images.append(
+            {
+                "file": name,
+                "kind": "plane" if is_plane else "pose",
+                "pose": asdict(pose),
+                "corners_px": corners.tolist(),
+            }
+        )
     R = plane.rotation()
     x0, x1, y0, y1 = board.squares_box
     origin = np.array([plane.x_mm, plane.y_mm, 0.0]) - R @ np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
     plane_xy = (board.object_points() @ R.T + origin)[:, :2]
     doc = {
         "format": "inkslice.calibration/1",
-        "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm,
-                  "first_square": "black",
-                  "object_points_mm": board.object_points()[:, :2].tolist()},
+        "board": {
+            "inner_corners": [board.cols, board.rows],
+            "square_mm": board.square_mm,
+            "first_square": "black",
+            "object_points_mm": board.object_points()[:, :2].tolist(),
+        },
         "images": [{"file": im["file"], "kind": im["kind"]} for im in images],
-        "plane": {"file": "plane.png",
-                  "note": "board floating flat on the liquid; corners in the object frame, OpenCV order",
-                  "corners_xy_mm": plane_xy.tolist(),
-                  # appliance.vision.calibration.BoardPose: the inner corner seen nearest
-                  # the image's top-left, and the direction its row runs (0 = +x)
-                  "board_pose": _vision_board_pose(board, plane, plane_xy, rig)},
+        "plane": {
+            "file": "plane.png",
+            "note": "board floating flat on the liquid; corners in the object frame, OpenCV order",
+            "corners_xy_mm": plane_xy.tolist(),
+            # appliance.vision.calibration.BoardPose: the inner corner seen nearest
+            # the image's top-left, and the direction its row runs (0 = +x)
+            "board_pose": _vision_board_pose(board, plane, plane_xy, rig),
+        },
     }
     atomicio.write_json(folder / "board.json", doc)
     cm = rig.camera_model(distorted=effects.lens_distortion)
-    truth = {"format": "inkslice.calibration-truth/1", "camera": cm.to_json(),
-             "rig": rig.to_json(), "effects": effects.to_json(), "images": images}
+    truth = {
+        "format": "inkslice.calibration-truth/1",
+        "camera": cm.to_json(),
+        "rig": rig.to_json(),
+        "effects": effects.to_json(),
+        "images": images,
+    }
     atomicio.write_json(folder.parent / (folder.name + ".truth.json"), truth)
     truth["camera_model"] = cm
     return truth

@@ -11,6 +11,7 @@ time.monotonic or a simulated clock) the camera notes when the level last
 changed and renders the ripple of that age, so the daemon's settle step has
 something real to wait for.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -25,8 +26,15 @@ from .rig import Rig
 
 
 class VirtualCamera(Camera):
-    def __init__(self, surface, rig: Rig = None, level_mm: Callable[[], float] = None,
-                 effects=None, seed: int = 0, clock: Callable[[], float] = None):
+    def __init__(
+        self,
+        surface,
+        rig: Rig = None,
+        level_mm: Callable[[], float] = None,
+        effects=None,
+        seed: int = 0,
+        clock: Callable[[], float] = None,
+    ):
         if isinstance(surface, str):
             surface = _surfaces.get(surface)
         if isinstance(effects, str):
@@ -42,7 +50,7 @@ class VirtualCamera(Camera):
         self.frames_taken = 0
         self._last_level = None
         self._moved_at = None
-        self.last_level_mm = None       # the level the last frame was rendered at (for tests/logs)
+        self.last_level_mm = None  # the level the last frame was rendered at (for tests/logs)
         self.last_ripple_age_s = None
 
     def _effects_now(self, level: float) -> Effects:

@@ -21,6 +21,7 @@ exactly the frames an uninterrupted one would. It ignores the perspective of
 the part above the liquid (the renderer team's VirtualCamera models it).
 Faults: unplug_after N (captures after the N-th raise DeviceError).
 """
+
 from __future__ import annotations
 
 import threading
@@ -38,12 +39,12 @@ class FakeStage(Stage):
         self.steps_per_mm = float(steps_per_mm)
         self.travel_steps = round(travel_mm * steps_per_mm)
         self.faults = dict(faults or {})
-        self.position_steps = round(self.travel_steps / 2)   # somewhere; unknown until homed
+        self.position_steps = round(self.travel_steps / 2)  # somewhere; unknown until homed
         self.homed = False
         self.fresh_boot = True
         self.estopped = False
         self.moves = 0
-        self.calls: list[str] = []          # what was asked, for tests ("home", "move 12.5", "stop")
+        self.calls: list[str] = []  # what was asked, for tests ("home", "move 12.5", "stop")
         self._lock = threading.Lock()
 
     @property
@@ -99,8 +100,9 @@ class FakeStage(Stage):
     def status(self) -> StageStatus:
         self._check_plugged()
         state = "estop" if self.estopped else "idle"
-        return StageStatus(state, self.position_steps, self.position_mm, self.homed,
-                           {"fresh_boot": self.fresh_boot})
+        return StageStatus(
+            state, self.position_steps, self.position_mm, self.homed, {"fresh_boot": self.fresh_boot}
+        )
 
     def travel_mm(self) -> tuple[float, float]:
         return 0.0, self.travel_steps / self.steps_per_mm
@@ -114,15 +116,22 @@ class FakeStage(Stage):
 def small_rig(width=640, height=480):
     """The virtual bench's rig scaled to a small frame (same field of view)."""
     from .rig import Rig
+
     base = Rig()
     k = width / base.width
-    return Rig(width=width, height=height, focal_px=base.focal_px * k,
-               principal_u=base.principal_u * k, principal_v=base.principal_v * height / base.height)
+    return Rig(
+        width=width,
+        height=height,
+        focal_px=base.focal_px * k,
+        principal_u=base.principal_u * k,
+        principal_v=base.principal_v * height / base.height,
+    )
 
 
 class FakeCamera(Camera):
     def __init__(self, surface, rig, level_mm, faults: dict | None = None):
         from .rig import pixel_map
+
         self.surface, self.rig, self.level_mm = surface, rig, level_mm
         self.faults = dict(faults or {})
         self.captures = 0
@@ -143,7 +152,7 @@ class FakeCamera(Camera):
         ink = np.array(self.rig.ink_bgr, np.float32)
         part = np.array(self.rig.part_bgr, np.float32)
         img = ink + cover * (part - ink)
-        rng = np.random.default_rng(round(level * 10000) & 0xFFFFFFFF)   # seeded by the level
+        rng = np.random.default_rng(round(level * 10000) & 0xFFFFFFFF)  # seeded by the level
         img += rng.normal(0.0, 2.0, img.shape[:2])[..., None].astype(np.float32)
         return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
@@ -166,6 +175,7 @@ class ReplayCamera(Camera):
 
     def capture(self) -> np.ndarray:
         import cv2
+
         path = self.folder / replay_name(float(self.level_mm()))
         frame = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if frame is None:
@@ -223,6 +233,7 @@ class FakeLevelSensor:
 
 # -- device factories for BenchService (see appliance/daemon/service.py) --------
 
+
 class _KnownPart:
     """What the simulated benches add to a device factory: they know the part in the tank.
 
@@ -232,7 +243,8 @@ class _KnownPart:
     gets statistics against it. An imported scan, processed with no devices
     open, gets none.
     """
-    part_in_view = None             # the surface name while a scan's devices are open
+
+    part_in_view = None  # the surface name while a scan's devices are open
 
     def _showing(self, devices, part):
         self.part_in_view = part
@@ -249,9 +261,13 @@ class _KnownPart:
             # the job folder is replaced by the outputs: the truth file stays beside the scan
             options = {**options, "keep": [*options.get("keep", ()), truth_path(scan_folder).name]}
             if inner is child_process:
-                return child_process(scan_folder, out_folder, options, stop, module="appliance.sim.process_child")
+                return child_process(
+                    scan_folder, out_folder, options, stop, module="appliance.sim.process_child"
+                )
             from ..process import process_scan
+
             return process_scan(scan_folder, out_folder, truth=find_truth(scan_folder), **options)
+
         return process
 
 
@@ -267,15 +283,23 @@ class FakeBench(_KnownPart, BenchFactory):
     `replay`: a folder of frames rendered beforehand (ReplayCamera) instead
     of rendering in this process.
     """
+
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, faults: dict | None = None, replay=None,
-                 level_sensor: bool = False, level_at_home_mm: float | None = None):
+    def __init__(
+        self,
+        surface: str = "sphere",
+        rig=None,
+        faults: dict | None = None,
+        replay=None,
+        level_sensor: bool = False,
+        level_at_home_mm: float | None = None,
+    ):
         self.surface, self.replay, self.level_sensor = surface, replay, level_sensor
         # the bench's true liquid level above the base top with the stage at home; None: the
         # daemon's setting is right (commissioning's level zero measures it)
         self.level_at_home_mm = level_at_home_mm
-        self.placement = None           # what the operator was asked to put on the base (staging.py)
+        self.placement = None  # what the operator was asked to put on the base (staging.py)
         self.rig = rig or small_rig(320, 240)
         self.faults = dict(faults or {})
         self.last = None
@@ -285,6 +309,7 @@ class FakeBench(_KnownPart, BenchFactory):
     def disk_free_mb(self, path) -> float:
         """Free space as the daemon sees it (BenchService's disk_free_mb hook)."""
         import shutil
+
         disk = self.faults.get("disk")
         self._disk_checks += 1
         if disk and self._disk_checks > disk.get("after_frames", 0):
@@ -293,40 +318,61 @@ class FakeBench(_KnownPart, BenchFactory):
 
     def check(self, params):
         from .surfaces import get
-        return {**params, "surface": get(params.get("surface") or self.surface).name}   # SettingError if unknown
+
+        return {
+            **params,
+            "surface": get(params.get("surface") or self.surface).name,
+        }  # SettingError if unknown
 
     def open(self, settings, params):
         from ..hw.devices import Devices
         from .surfaces import get
         from .render import Effects
         from .staging import StagedCamera
+
         stage = FakeStage(faults=self.faults.get("stage"))
-        at_home = float(self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"])
-        level = lambda: at_home - stage.position_mm          # noqa: E731
+        at_home = float(
+            self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"]
+        )
+        level = lambda: at_home - stage.position_mm  # noqa: E731
         if self.replay:
             camera = ReplayCamera(self.replay, level)
         else:
-            camera = FakeCamera(get(params.get("surface") or self.surface), self.rig, level,
-                                faults=self.faults.get("camera"))
-            camera = StagedCamera(self, camera, lambda part: FakeCamera(part, self.rig, level), level, self.rig,
-                                  Effects())
+            camera = FakeCamera(
+                get(params.get("surface") or self.surface), self.rig, level, faults=self.faults.get("camera")
+            )
+            camera = StagedCamera(
+                self, camera, lambda part: FakeCamera(part, self.rig, level), level, self.rig, Effects()
+            )
         light = FakeLine("light")
         sensor = None
         if self.level_sensor:
             # reads the ink's true level: the nominal one lowered by the emerged volume
             from .physics import true_level
+
             part, area = get(params.get("surface") or self.surface), self.rig.tank_area_mm2
             sensor = FakeLevelSensor(lambda: true_level(part, level(), area))
-        self.last = Devices(stage, camera, self.rig.camera_model(), light=light, level_sensor=sensor,
-                            hardware={"stage": "ok", "camera": "ok", "light": "ok"})
+        self.last = Devices(
+            stage,
+            camera,
+            self.rig.camera_model(),
+            light=light,
+            level_sensor=sensor,
+            hardware={"stage": "ok", "camera": "ok", "light": "ok"},
+        )
         return self._showing(self.last, get(params.get("surface") or self.surface).name)
 
     def open_panel(self):
         from ..hw.devices import Devices
         from .staging import SimOperator
+
         missing = self.faults.get("panel", {})
         hw, parts = {}, {}
-        for name, make in (("led", lambda: FakeLine("led")), ("button", FakeButton), ("display", FakeDisplay)):
+        for name, make in (
+            ("led", lambda: FakeLine("led")),
+            ("button", FakeButton),
+            ("display", FakeDisplay),
+        ):
             if name in missing:
                 hw[name], parts[name] = "missing", None
             else:
@@ -364,7 +410,7 @@ class _SettledStage(Stage):
     def __init__(self, stage, camera):
         self.stage, self.camera = stage, camera
 
-    def __getattr__(self, name):                    # counters, info, ...: the real driver's
+    def __getattr__(self, name):  # counters, info, ...: the real driver's
         return getattr(self.stage, name)
 
     def identify(self):
@@ -397,13 +443,22 @@ class SimulatedBenchFactory(_KnownPart, BenchFactory):
     where the simulated stage really is. Falls back to FakeCamera when the
     renderer's module is not there. One SimulatedBench lives as long as the
     factory; each job opens a fresh SerialStage on its pty."""
+
     extra_params = ("surface",)
 
-    def __init__(self, surface: str = "sphere", rig=None, speed: float | None = None, effects=None,
-                 clock=None, level_at_home_mm: float | None = None):
+    def __init__(
+        self,
+        surface: str = "sphere",
+        rig=None,
+        speed: float | None = None,
+        effects=None,
+        clock=None,
+        level_at_home_mm: float | None = None,
+    ):
         from .hil import SimulatedBench
+
         self.surface, self.rig, self.effects, self.clock = surface, rig or small_rig(320, 240), effects, clock
-        self.level_at_home_mm = level_at_home_mm      # the bench's truth (see FakeBench); None: the setting's
+        self.level_at_home_mm = level_at_home_mm  # the bench's truth (see FakeBench); None: the setting's
         self.placement = None
         self.bench = SimulatedBench() if speed is None else SimulatedBench(speed=speed)
         self.last = None
@@ -419,18 +474,28 @@ class SimulatedBenchFactory(_KnownPart, BenchFactory):
         from ..hw.stage import SerialStage
         from .surfaces import get
         from .staging import StagedCamera
+
         stage = SerialStage(self.bench.port, auto_rehome=False)
-        at_home = float(self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"])
-        level = lambda: at_home - self.bench.stage_position_mm()      # noqa: E731
+        at_home = float(
+            self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"]
+        )
+        level = lambda: at_home - self.bench.stage_position_mm()  # noqa: E731
         part = self._camera(get(params.get("surface") or self.surface), level)
         model = self.rig.camera_model(distorted=part.effects.lens_distortion)
-        camera = StagedCamera(self, part, lambda other: self._camera(other, level), level, self.rig, part.effects)
+        camera = StagedCamera(
+            self, part, lambda other: self._camera(other, level), level, self.rig, part.effects
+        )
         light = FakeLine("light")
         if self.clock is not None:
             stage = _SettledStage(stage, part)
-        self.last = Devices(stage, camera, model, light=light,
-                            hardware={"stage": "ok", "camera": "ok", "light": "ok"},
-                            closers=[camera.close, stage.close])
+        self.last = Devices(
+            stage,
+            camera,
+            model,
+            light=light,
+            hardware={"stage": "ok", "camera": "ok", "light": "ok"},
+            closers=[camera.close, stage.close],
+        )
         return self._showing(self.last, part.surface.name)
 
     def open_panel(self):

@@ -19,6 +19,7 @@ core; thousands of times real time while the firmware sleeps, ~3x while it
 steps): for soak tests and benches.  Stepping never runs faster than the
 host can simulate it (~3x real time), whatever the speed.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -30,24 +31,44 @@ from appliance.firmware import build, source_dir
 
 FIRMWARE_DIR = source_dir()
 F_CPU = 16_000_000
-STEPS_PER_MM = 1600.0          # the simulated mechanics: 200 steps x 16 microsteps, 2 mm lead
+STEPS_PER_MM = 1600.0  # the simulated mechanics: 200 steps x 16 microsteps, 2 mm lead
 
 
 class SimulatedBench:
     FAULT_KINDS = ("drop", "corrupt", "dup")
 
-    def __init__(self, speed: float = 10.0, stage_mm: float = 40.0, seed: int = 1,
-                 elf: str | Path | None = None, steps_per_mm: float = STEPS_PER_MM,
-                 top_switch_mm: float = 98.0):
+    def __init__(
+        self,
+        speed: float = 10.0,
+        stage_mm: float = 40.0,
+        seed: int = 1,
+        elf: str | Path | None = None,
+        steps_per_mm: float = STEPS_PER_MM,
+        top_switch_mm: float = 98.0,
+    ):
         build_dir = build()
         self.elf = Path(elf) if elf else build_dir / "inkslice-stepper.elf"
         self.steps_per_mm = steps_per_mm
         self._lock = threading.Lock()
         self._proc = subprocess.Popen(
-            [str(build_dir / "hil"), str(self.elf), "--speed", str(speed),
-             "--stage", str(round(stage_mm * steps_per_mm)), "--seed", str(seed),
-             "--top-switch", str(round(top_switch_mm * steps_per_mm))],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, bufsize=1)
+            [
+                str(build_dir / "hil"),
+                str(self.elf),
+                "--speed",
+                str(speed),
+                "--stage",
+                str(round(stage_mm * steps_per_mm)),
+                "--seed",
+                str(seed),
+                "--top-switch",
+                str(round(top_switch_mm * steps_per_mm)),
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
+        )
         first = self._proc.stdout.readline().split()
         if len(first) != 2 or first[0] != "port":
             self._proc.kill()
@@ -59,6 +80,7 @@ class SimulatedBench:
         """Return once the firmware has started sending its boot banner: its
         UART and interrupts are then up, so no byte sent to it is lost."""
         import time
+
         deadline = time.monotonic() + timeout
         while self.stats()["tx_bytes"] <= tx_before:
             if time.monotonic() > deadline:

@@ -6,6 +6,7 @@ part's `level_sdf` at `resolution_mm`, trace the boundary of the exposed pixels
 true zero set by Newton steps along the sdf's gradient: the points are exact to
 well under a micrometre, the raster only decides how dense they are.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -52,7 +53,7 @@ def ideal_waterline(surface, level, resolution_mm=0.05) -> Waterline:
         pts = _project_to_zero_set(surface, pts, level)
         is_hole = h[3] >= 0
         area = signed_area(pts)
-        if (area > 0) == is_hole:        # outer boundaries CCW, holes CW
+        if (area > 0) == is_hole:  # outer boundaries CCW, holes CW
             pts = pts[::-1]
         loops.append(pts)
     return Waterline(float(level), loops)
@@ -74,16 +75,20 @@ class _MeniscusView:
 
     def _gradient(self, x, y, e=1e-4):
         s = self.s
-        return ((s.height(x + e, y) - s.height(x - e, y)) / (2 * e),
-                (s.height(x, y + e) - s.height(x, y - e)) / (2 * e))
+        return (
+            (s.height(x + e, y) - s.height(x - e, y)) / (2 * e),
+            (s.height(x, y + e) - s.height(x, y - e)) / (2 * e),
+        )
 
     def _curvature(self, x, y):
         """The contact line's curvature as the renderer takes it (render.curvature_grid)."""
         from .render import curvature_grid, surface_grid
+
         grid = surface_grid(self.s)
         k = np.asarray(curvature_grid(self.s)[0][..., 0], float)
         gx, gy = grid.coords(np.asarray(x, float).ravel(), np.asarray(y, float).ravel())
         from scipy import ndimage
+
         return ndimage.map_coordinates(k, [gy, gx], order=1, mode="nearest").reshape(np.shape(x))
 
     def level_sdf(self, x, y, level):
@@ -96,8 +101,9 @@ class _MeniscusView:
         return self.s.level_sdf(x, y, level + h)
 
 
-def meniscus_waterlines(surface, levels, capillary_length_mm=2.7, contact_angle_rad=0.0,
-                        resolution_mm=0.05, curved=False) -> list[Waterline]:
+def meniscus_waterlines(
+    surface, levels, capillary_length_mm=2.7, contact_angle_rad=0.0, resolution_mm=0.05, curved=False
+) -> list[Waterline]:
     """Waterlines as the ink's contact lines, observed straight down (no perspective).
 
     Valid on the sculptured top away from walls (there the renderer lets the ink

@@ -1,4 +1,5 @@
 """Which levels a simulated scan of a known part visits."""
+
 from __future__ import annotations
 
 
@@ -17,6 +18,7 @@ def sculpture_levels(surface, step, below_mm=0.0, from_above=False):
     A top that lies on a level then has a frame above it that bounds it.
     """
     from .scanrender import scan_levels
+
     lowest = surface.z_min_top - step - below_mm
     highest = float("inf") if from_above else surface.z_max
     return [lv for lv in scan_levels(surface, step) if lowest <= lv < highest]

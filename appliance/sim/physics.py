@@ -37,6 +37,7 @@ face has no level curve to bend), limited to +-CURVATURE_CLIP and averaged over
 CURVATURE_SMOOTHING_MM (the meniscus is wider than that: it feels the line's
 mean bend, not a kink on a crest).
 """
+
 from __future__ import annotations
 
 import functools
@@ -78,12 +79,14 @@ def meniscus_rise_curved(beta, kappa, l_c=CAPILLARY_LENGTH_MM, theta=CONTACT_ANG
     return 2.0 * l_c * np.sin(psi / 2.0) * curvature_factor(psi, kappa, l_c)
 
 
-def level_curve_curvature(z, step_mm, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP,
-                          smoothing_mm=CURVATURE_SMOOTHING_MM):
+def level_curve_curvature(
+    z, step_mm, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM
+):
     """In-plane curvature (1/mm) of the level curves of a height grid z (rows y, columns
     x, spacing step_mm): -div(grad z / |grad z|), > 0 round a peak, < 0 round a pit;
     limited to +-clip and averaged over smoothing_mm (Gaussian sigma)."""
     from scipy import ndimage
+
     zy, zx = np.gradient(np.asarray(z, float), step_mm)
     norm = np.sqrt(zx * zx + zy * zy + flat * flat)
     nx, ny = zx / norm, zy / norm
@@ -117,8 +120,9 @@ def emerged_area(surface, level_mm: float, cell_mm: float = 0.2) -> float:
     return float((h.size - np.searchsorted(h, level_mm, side="right")) * area)
 
 
-def true_level(surface, nominal_level_mm: float, tank_area_mm2: float,
-               tol: float = 1e-9, max_iter: int = 200) -> float:
+def true_level(
+    surface, nominal_level_mm: float, tank_area_mm2: float, tol: float = 1e-9, max_iter: int = 200
+) -> float:
     """Solve L = L_nominal - V_emerged(L) / A_tank by fixed point."""
     if tank_area_mm2 <= 0:
         raise ValueError("tank area must be positive")
@@ -138,12 +142,15 @@ def ripple_amplitude(amplitude_mm: float, age_s: float, decay_s: float) -> float
     return float(amplitude_mm * math.exp(-max(age_s, 0.0) / max(decay_s, 1e-9)))
 
 
-def ripple_offset(x, y, amplitude_mm, age_s, decay_s=0.6, wavelength_mm=14.0,
-                  period_s=0.3, centre=(75.0, 75.0)):
+def ripple_offset(
+    x, y, amplitude_mm, age_s, decay_s=0.6, wavelength_mm=14.0, period_s=0.3, centre=(75.0, 75.0)
+):
     """Free-surface height offset (mm) at (x, y): a decaying circular standing wave
     from the tank's centre (where the sleeve lifting the base disturbs it)."""
     a = ripple_amplitude(amplitude_mm, age_s, decay_s)
     if a == 0.0:
         return np.zeros(np.broadcast(np.asarray(x), np.asarray(y)).shape, np.float32)
     r = np.hypot(np.asarray(x, np.float32) - centre[0], np.asarray(y, np.float32) - centre[1])
-    return (a * np.cos(2 * np.pi * r / wavelength_mm) * math.cos(2 * np.pi * age_s / period_s)).astype(np.float32)
+    return (a * np.cos(2 * np.pi * r / wavelength_mm) * math.cos(2 * np.pi * age_s / period_s)).astype(
+        np.float32
+    )

@@ -1,6 +1,7 @@
 """python -m appliance.sim.process_child SCAN OUT OPTIONS_JSON: the daemon's
 processing child (daemon/process_child.py) with the ground truth of a scan of
 a known part, so the simulated bench's reports carry statistics."""
+
 import sys
 
 from ..daemon.process_child import main

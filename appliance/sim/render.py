@@ -32,6 +32,7 @@ function of (surface, level, rig, effects, rng state). Drifting glare and
 dust (the harsh preset) follow paths laid out from effects.drift_seed, so a
 scan's frames share them: they move with the level and jitter per frame.
 """
+
 from __future__ import annotations
 
 import functools
@@ -46,40 +47,41 @@ from . import physics
 from . import surfaces as _surfaces
 from .rig import PixelMap, Rig, pixel_map
 
-TOL_Z = 1e-3          # mm: a ray this close to a top has met it
+TOL_Z = 1e-3  # mm: a ray this close to a top has met it
 MAX_TRACE_STEPS = 64
 
 
 @dataclass(frozen=True)
 class Effects:
     """What degrades the ideal image. All off = the clean, exact image."""
-    blur_sigma_px: float = 0.0       # Gaussian optical blur
-    noise_sigma: float = 0.0         # sensor noise, DN (of 255)
-    salt_pepper: float = 0.0         # fraction of pixels stuck black or white
-    glare_spots: int = 0             # specular highlights on the liquid
-    glare_strength: float = 150.0    # DN added at a highlight's centre
-    vignetting: float = 0.0          # fractional fall-off of light at the image corners
-    lens_distortion: bool = False    # the frames carry the rig's lens distortion
-    dust_specks: int = 0             # dust specks and small bubbles floating on the ink
-    displacement: bool = False       # the ink level drops as the part emerges
-    meniscus: bool = False           # ink climbs the part at the contact line
+
+    blur_sigma_px: float = 0.0  # Gaussian optical blur
+    noise_sigma: float = 0.0  # sensor noise, DN (of 255)
+    salt_pepper: float = 0.0  # fraction of pixels stuck black or white
+    glare_spots: int = 0  # specular highlights on the liquid
+    glare_strength: float = 150.0  # DN added at a highlight's centre
+    vignetting: float = 0.0  # fractional fall-off of light at the image corners
+    lens_distortion: bool = False  # the frames carry the rig's lens distortion
+    dust_specks: int = 0  # dust specks and small bubbles floating on the ink
+    displacement: bool = False  # the ink level drops as the part emerges
+    meniscus: bool = False  # ink climbs the part at the contact line
     capillary_length_mm: float = physics.CAPILLARY_LENGTH_MM
     contact_angle_deg: float = 0.0
-    contact_line_curvature: bool = False   # the second meniscus model (physics.meniscus_rise_curved)
-    ripple_mm: float = 0.0           # amplitude of the free surface's oscillation just after a move
-    ripple_age_s: float = 0.0        # time since the move stopped (VirtualCamera sets it)
+    contact_line_curvature: bool = False  # the second meniscus model (physics.meniscus_rise_curved)
+    ripple_mm: float = 0.0  # amplitude of the free surface's oscillation just after a move
+    ripple_age_s: float = 0.0  # time since the move stopped (VirtualCamera sets it)
     ripple_decay_s: float = 0.6
-    base_shows: bool = False         # the base top, once at or above the ink, is drawn (lit, like the part)
-    base_half_mm: float = 60.0       # half the side of the square base, centred under the parts
+    base_shows: bool = False  # the base top, once at or above the ink, is drawn (lit, like the part)
+    base_half_mm: float = 60.0  # half the side of the square base, centred under the parts
     # A scan's worth of nuisances that move (the harsh bench). Off, glare and dust are drawn
     # afresh in every frame; on, they follow paths laid out once (seeded by drift_seed) that
     # drift as the level changes, jitter from frame to frame (the frame's rng), and each glare
     # blob flickers and now and then vanishes: a bright thing that comes and goes.
     drifting: bool = False
     drift_seed: int = 0
-    flicker: float = 0.0             # the lamp's brightness per frame: x (1 + u * flicker), u in [-1, 1]
-    jpeg_quality: int = 0            # the frame passes through JPEG at this quality (0: it does not)
-    wobble_mm: float = 0.0           # lateral stage play: each frame sees the part shifted up to this far
+    flicker: float = 0.0  # the lamp's brightness per frame: x (1 + u * flicker), u in [-1, 1]
+    jpeg_quality: int = 0  # the frame passes through JPEG at this quality (0: it does not)
+    wobble_mm: float = 0.0  # lateral stage play: each frame sees the part shifted up to this far
 
     def to_json(self):
         return asdict(self)
@@ -88,28 +90,69 @@ class Effects:
 PRESETS = {
     "clean": Effects(),
     "optics": Effects(blur_sigma_px=0.7, vignetting=0.25, lens_distortion=True),
-    "realistic": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
-                         vignetting=0.25, lens_distortion=True, dust_specks=30),
-    "physics": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
-                       vignetting=0.25, lens_distortion=True, dust_specks=30,
-                       displacement=True, meniscus=True),
+    "realistic": Effects(
+        blur_sigma_px=0.8,
+        noise_sigma=2.5,
+        salt_pepper=2e-5,
+        glare_spots=3,
+        vignetting=0.25,
+        lens_distortion=True,
+        dust_specks=30,
+    ),
+    "physics": Effects(
+        blur_sigma_px=0.8,
+        noise_sigma=2.5,
+        salt_pepper=2e-5,
+        glare_spots=3,
+        vignetting=0.25,
+        lens_distortion=True,
+        dust_specks=30,
+        displacement=True,
+        meniscus=True,
+    ),
     # a second ink, another meniscus model: wets at 35 deg (a depression on flatter faces),
     # the contact line's own curvature raising the meniscus in pits and lowering it on ridges
-    "physics2": Effects(blur_sigma_px=0.8, noise_sigma=2.5, salt_pepper=2e-5, glare_spots=3,
-                        vignetting=0.25, lens_distortion=True, dust_specks=30,
-                        displacement=True, meniscus=True, capillary_length_mm=2.3,
-                        contact_angle_deg=35.0, contact_line_curvature=True),
+    "physics2": Effects(
+        blur_sigma_px=0.8,
+        noise_sigma=2.5,
+        salt_pepper=2e-5,
+        glare_spots=3,
+        vignetting=0.25,
+        lens_distortion=True,
+        dust_specks=30,
+        displacement=True,
+        meniscus=True,
+        capillary_length_mm=2.3,
+        contact_angle_deg=35.0,
+        contact_line_curvature=True,
+    ),
     # Everything at once, moving: glare that drifts, jitters and flickers from frame to frame,
     # drifting dust and bubbles, salt and pepper, JPEG q85, 1.5 % lamp flicker, 0.05 mm of
     # stage wobble no calibration knows about, a rippling surface, and a meniscus that is not
     # the first model's: another capillary length and the contact line's own curvature. Its
     # contact angle stays 0: a depression on flat faces (physics2) is the meniscus model's
     # open question (benches/meniscus.py), not the images'.
-    "harsh": Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, glare_spots=6,
-                     glare_strength=200.0, vignetting=0.4, lens_distortion=True, dust_specks=120,
-                     displacement=True, meniscus=True, capillary_length_mm=2.5,
-                     contact_line_curvature=True, ripple_mm=0.05, ripple_age_s=0.5,
-                     drifting=True, drift_seed=18, flicker=0.015, jpeg_quality=85, wobble_mm=0.05),
+    "harsh": Effects(
+        blur_sigma_px=1.3,
+        noise_sigma=6.0,
+        salt_pepper=3e-4,
+        glare_spots=6,
+        glare_strength=200.0,
+        vignetting=0.4,
+        lens_distortion=True,
+        dust_specks=120,
+        displacement=True,
+        meniscus=True,
+        capillary_length_mm=2.5,
+        contact_line_curvature=True,
+        ripple_mm=0.05,
+        ripple_age_s=0.5,
+        drifting=True,
+        drift_seed=18,
+        flicker=0.015,
+        jpeg_quality=85,
+        wobble_mm=0.05,
+    ),
 }
 
 
@@ -117,7 +160,9 @@ def effects_preset(name: str) -> Effects:
     try:
         return PRESETS[name]
     except KeyError:
-        raise SettingError("effects", f"unknown effects preset {name!r}; known: {', '.join(PRESETS)}") from None
+        raise SettingError(
+            "effects", f"unknown effects preset {name!r}; known: {', '.join(PRESETS)}"
+        ) from None
 
 
 # -- cached grids of a part ---------------------------------------------------
@@ -125,9 +170,9 @@ def effects_preset(name: str) -> Effects:
 
 @dataclass
 class TierGrid:
-    FT: np.ndarray        # (ny, nx, 2) float32: footprint sdf (mm, > 0 inside), top height
-    N: np.ndarray         # (ny, nx, 4) float32: d top/dx, d top/dy, d sdf/dx, d sdf/dy
-    slope_max: float      # max |grad top| over the footprint (bounds the safe step)
+    FT: np.ndarray  # (ny, nx, 2) float32: footprint sdf (mm, > 0 inside), top height
+    N: np.ndarray  # (ny, nx, 4) float32: d top/dx, d top/dy, d sdf/dx, d sdf/dy
+    slope_max: float  # max |grad top| over the footprint (bounds the safe step)
 
 
 @dataclass
@@ -140,11 +185,13 @@ class SurfaceGrid:
     z_max: float
 
     def coords(self, x, y):
-        return (((x - self.x0) / self.step).astype(np.float32),
-                ((y - self.y0) / self.step).astype(np.float32))
+        return (
+            ((x - self.x0) / self.step).astype(np.float32),
+            ((y - self.y0) / self.step).astype(np.float32),
+        )
 
 
-@functools.lru_cache(maxsize=4)     # ~25 MB per tier of a 100 mm part
+@functools.lru_cache(maxsize=4)  # ~25 MB per tier of a 100 mm part
 def surface_grid(surface) -> SurfaceGrid:
     """Sample every tier of a part on a fine grid, once per process."""
     xmin, xmax, ymin, ymax = surface.bounds
@@ -215,8 +262,9 @@ def _lookup(img, gx, gy, border_value=None):
     if border_value is None:
         out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     else:
-        out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=border_value)
+        out = cv2.remap(
+            img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value
+        )
     return out.reshape(rows * _REMAP_COLS, -1)[:n]
 
 
@@ -287,7 +335,7 @@ def trace(grid: SurfaceGrid, px, py, kx, ky, level):
         # nothing above it: the pixel sees ink (or the waterline layer decides).
         keep = ~met & (z_next > L)
         stalled = keep & (step < 1e-5)
-        if stalled.any():        # grazing a top: accept the meeting
+        if stalled.any():  # grazing a top: accept the meeting
             j = idx[stalled]
             hit[j] = True
             zout[j] = z[stalled]
@@ -295,14 +343,14 @@ def trace(grid: SurfaceGrid, px, py, kx, ky, level):
             keep &= ~stalled
         idx = idx[keep]
         z = z_next[keep]
-    if idx.size:                 # out of steps: still above the part, call it met
+    if idx.size:  # out of steps: still above the part, call it met
         hit[idx] = True
         zout[idx] = z
         tier[idx] = 0
     return hit, zout, tier, wall
 
 
-COARSE = 4           # px: the ray march runs on every 4th pixel first
+COARSE = 4  # px: the ray march runs on every 4th pixel first
 
 
 def trace_image(grid, x0, y0, kx, ky, level, pix, h, w, s=COARSE):
@@ -327,10 +375,15 @@ def trace_image(grid, x0, y0, kx, ky, level, pix, h, w, s=COARSE):
     k_c = np.hypot(kx[sub], ky[sub])
     occ_c = hit_c & ~w_c & ((z_c - level) * k_c > 4 * pix[sub])
     label = np.where(occ_c, t_c, np.where(hit_c, -2, -1)).astype(np.int16).reshape(hc, wc)
-    uniform = ((label[:-1, :-1] == label[1:, :-1]) & (label[:-1, :-1] == label[:-1, 1:])
-               & (label[:-1, :-1] == label[1:, 1:]) & (label[:-1, :-1] != -2))
-    uniform = cv2.erode(uniform.view(np.uint8), np.ones((3, 3), np.uint8),
-                        borderType=cv2.BORDER_CONSTANT, borderValue=1).astype(bool)
+    uniform = (
+        (label[:-1, :-1] == label[1:, :-1])
+        & (label[:-1, :-1] == label[:-1, 1:])
+        & (label[:-1, :-1] == label[1:, 1:])
+        & (label[:-1, :-1] != -2)
+    )
+    uniform = cv2.erode(
+        uniform.view(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=1
+    ).astype(bool)
     # the coarse cell of each fine row / column
     rcell = np.minimum(np.searchsorted(ri, np.arange(h), side="right") - 1, hc - 2)
     ccell = np.minimum(np.searchsorted(ci, np.arange(w), side="right") - 1, wc - 2)
@@ -383,8 +436,7 @@ def _shade(grid, rig, x, y, tier, wall):
     return out
 
 
-def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall, hidden_tier,
-                behind=None):
+def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwall, hidden_tier, behind=None):
     """Analytic coverage of pixels next to a silhouette (a rim hiding what is behind).
 
     For each tier, find where the pixel's ray crosses the tier's top (Newton on
@@ -411,7 +463,7 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
             T = _lookup(tg.FT, gx, gy)[:, 1]
             d = _lookup(tg.N, gx, gy)
             dg = d[:, 0] * kxd + d[:, 1] * kyd - 1.0
-            dg = np.where(np.abs(dg) < 0.05, -0.05, dg)    # grazing: damp the step
+            dg = np.where(np.abs(dg) < 0.05, -0.05, dg)  # grazing: damp the step
             z = z - np.clip((T - z) / dg, -5.0, 5.0)
         px, py = x0d + kxd * (z - level), y0d + kyd * (z - level)
         F = np.asarray(t.footprint(px, py), float)
@@ -432,8 +484,14 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
         sh = np.zeros(n, np.float32)
         m = c > 0
         if m.any():
-            sh[m] = _shade(grid, rig, px[m].astype(np.float32), py[m].astype(np.float32),
-                           np.full(int(m.sum()), ti, np.int16), np.zeros(int(m.sum()), bool))
+            sh[m] = _shade(
+                grid,
+                rig,
+                px[m].astype(np.float32),
+                py[m].astype(np.float32),
+                np.full(int(m.sum()), ti, np.int16),
+                np.zeros(int(m.sum()), bool),
+            )
         shades.append(sh)
     cover, zs, shades = np.array(cover), np.array(zs), np.array(shades)
     order = np.argsort(-zs, axis=0)
@@ -448,7 +506,7 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
     s_wl = _shade(grid, rig, x0, y0, wtier, wwall)
     if behind is not None:
         s_wl = np.where(behind >= 0, behind, s_wl)
-    a_wl = np.where(hidden_tier >= 0, 0.0, a_wl)        # hidden: the rim layer replaces it
+    a_wl = np.where(hidden_tier >= 0, 0.0, a_wl)  # hidden: the rim layer replaces it
     colour += remaining * a_wl * s_wl
     alpha = 1.0 - remaining * (1.0 - a_wl)
     shade = np.where(alpha > 1e-6, colour / np.maximum(alpha, 1e-6), s_wl)
@@ -592,8 +650,9 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     # the local free-surface level: flat, or rippling after a move
     amp = physics.ripple_amplitude(effects.ripple_mm, effects.ripple_age_s, effects.ripple_decay_s)
     if amp > 0:
-        lvl = level + physics.ripple_offset(x0, y0, effects.ripple_mm, effects.ripple_age_s,
-                                            effects.ripple_decay_s)
+        lvl = level + physics.ripple_offset(
+            x0, y0, effects.ripple_mm, effects.ripple_age_s, effects.ripple_decay_s
+        )
     else:
         lvl = np.full(x0.size, np.float32(level))
 
@@ -652,8 +711,7 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     s = np.zeros(x0.size, np.float32)
     if hit.any():
         dz = zh[hit] - level
-        s[hit] = _shade(grid, rig, x0[hit] + kx[hit] * dz, y0[hit] + ky[hit] * dz,
-                        htier[hit], hwall[hit])
+        s[hit] = _shade(grid, rig, x0[hit] + kx[hit] * dz, y0[hit] + ky[hit] * dz, htier[hit], hwall[hit])
     rest = ~hit & (a > 0)
     if rest.any():
         s[rest] = _shade(grid, rig, x0[rest], y0[rest], wtier[rest], wwall[rest])
@@ -683,9 +741,22 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
         # (a wall met well above the liquid; nearer, the waterline ramp must stay)
         wall_seen = occluded[b] & hwall[b]
         behind = np.where(wall_seen, s[b], -1.0).astype(np.float32)
-        ab, sb = _silhouette(surface, grid, rig, level, x0[b], y0[b], kx[b], ky[b], pix[b],
-                             np.where(wall_seen, np.float32(1.0), a_wl[b]),
-                             wtier[b], wwall[b], hidden_tier, behind)
+        ab, sb = _silhouette(
+            surface,
+            grid,
+            rig,
+            level,
+            x0[b],
+            y0[b],
+            kx[b],
+            ky[b],
+            pix[b],
+            np.where(wall_seen, np.float32(1.0), a_wl[b]),
+            wtier[b],
+            wwall[b],
+            hidden_tier,
+            behind,
+        )
         a[b] = ab
         s[b] = sb
     return roi, a.reshape(r1 - r0, c1 - c0), s.reshape(r1 - r0, c1 - c0)
@@ -708,7 +779,7 @@ def _fresh_dust(W, H, effects, rng, level_mm):
         yield cx, cy, rad, bubble, (1.0 if bubble else rng.uniform(0.6, 1.4))
 
 
-DRIFT_JITTER_PX = 6.0      # frame-to-frame wander of a drifting glare blob (ripples, the lamp)
+DRIFT_JITTER_PX = 6.0  # frame-to-frame wander of a drifting glare blob (ripples, the lamp)
 
 
 def _layout(effects, n, speed_px_per_mm):
@@ -720,7 +791,7 @@ def _layout(effects, n, speed_px_per_mm):
     return start, speed[:, None] * np.column_stack([np.cos(angle), np.sin(angle)]), lay
 
 
-GLARE_WINDOW = 0.6         # drifting glare wanders over the middle 60 % of the frame, where parts are
+GLARE_WINDOW = 0.6  # drifting glare wanders over the middle 60 % of the frame, where parts are
 
 
 def _drifting_glare(W, H, effects, rng, level_mm):
@@ -731,10 +802,15 @@ def _drifting_glare(W, H, effects, rng, level_mm):
         jx, jy = rng.normal(0.0, DRIFT_JITTER_PX, 2)
         grow = rng.uniform(0.8, 1.2)
         peak = effects.glare_strength * rng.uniform(0.4, 1.0)
-        if rng.uniform() < 0.35:           # the highlight is gone in this frame
+        if rng.uniform() < 0.35:  # the highlight is gone in this frame
             continue
-        yield ((W - w) / 2 + (x0 * w + vx * level_mm + jx) % w,
-               (H - h) / 2 + (y0 * h + vy * level_mm + jy) % h, sx * grow, sy * grow, peak)
+        yield (
+            (W - w) / 2 + (x0 * w + vx * level_mm + jx) % w,
+            (H - h) / 2 + (y0 * h + vy * level_mm + jy) % h,
+            sx * grow,
+            sy * grow,
+            peak,
+        )
 
 
 def _drifting_dust(W, H, effects, rng, level_mm):
@@ -744,8 +820,13 @@ def _drifting_dust(W, H, effects, rng, level_mm):
     shade = lay.uniform(0.6, 1.4, effects.dust_specks)
     for i in range(effects.dust_specks):
         jx, jy = rng.normal(0.0, 1.0, 2)
-        yield ((start[i, 0] * W + vel[i, 0] * level_mm + jx) % W,
-               (start[i, 1] * H + vel[i, 1] * level_mm + jy) % H, rad[i], bubble[i], shade[i])
+        yield (
+            (start[i, 0] * W + vel[i, 0] * level_mm + jx) % W,
+            (start[i, 1] * H + vel[i, 1] * level_mm + jy) % H,
+            rad[i],
+            bubble[i],
+            shade[i],
+        )
 
 
 def _liquid_layer(rig, effects, level_mm, rng):
@@ -797,8 +878,9 @@ def _wobbled(pm: PixelMap, effects: Effects, rng) -> PixelMap:
     return replace(pm, x0=pm.x0 - np.float32(r * math.cos(a)), y0=pm.y0 - np.float32(r * math.sin(a)))
 
 
-def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = None,
-                 rng: np.random.Generator = None) -> np.ndarray:
+def render_frame(
+    surface, level_mm: float, rig: Rig = None, effects: Effects = None, rng: np.random.Generator = None
+) -> np.ndarray:
     """One 8-bit BGR frame with the ink at nominal level `level_mm` above the base top.
 
     With effects.displacement the ink's real level is lower than the nominal one
@@ -829,13 +911,13 @@ def render_frame(surface, level_mm: float, rig: Rig = None, effects: Effects = N
     return camera_effects(img, rig, effects, pm, rng)
 
 
-BASE_SHADE = 0.8      # the base's top is lit like a flat face of the part
+BASE_SHADE = 0.8  # the base's top is lit like a flat face of the part
 
 
 def _draw_base(img, rig: Rig, pm: PixelMap, level, half_mm):
     """The base top (z = 0) where the ink has left it: a real bench sees it light, which is
     how commissioning finds level 0. Drawn under the part (the part is composited over it)."""
-    up = -float(level)                                 # the base top's height above the ink
+    up = -float(level)  # the base top's height above the ink
     x = pm.x0 + pm.kx * up
     y = pm.y0 + pm.ky * up
     on = (np.abs(x - 50.0) <= half_mm) & (np.abs(y - 50.0) <= half_mm)
@@ -854,7 +936,7 @@ def camera_effects(img, rig: Rig, effects: Effects, pm: PixelMap, rng) -> np.nda
     if effects.noise_sigma > 0:
         # OpenCV's generator is ~2x faster than numpy's on 9.4 M samples; seeding it
         # from rng keeps the frame a function of the rng's state (its state is per thread)
-        cv2.setRNGSeed(int(rng.integers(1, 2 ** 31)))
+        cv2.setRNGSeed(int(rng.integers(1, 2**31)))
         noise = np.empty_like(img)
         cv2.randn(noise, 0.0, float(effects.noise_sigma))
         cv2.add(img, noise, dst=img)

@@ -13,6 +13,7 @@ Frames of reference
   not mirrored). A small tilt is applied on top of it so the homography is not
   a pure scale, as on a real stand.
 """
+
 from __future__ import annotations
 
 import functools
@@ -49,24 +50,25 @@ class Rig:
     larger). The camera is a little off the base centre and tilted by under a
     degree, as a hand-set stand would be.
     """
+
     width: int = 2048
     height: int = 1536
     focal_px: float = 3800.0
-    principal_u: float = 1030.0          # pixels; a few px off the image centre
+    principal_u: float = 1030.0  # pixels; a few px off the image centre
     principal_v: float = 763.5
-    camera_x_mm: float = 50.6            # camera centre over the base (object x, y)
+    camera_x_mm: float = 50.6  # camera centre over the base (object x, y)
     camera_y_mm: float = 49.3
-    height_mm: float = 300.0             # camera centre above the liquid plane
-    tilt_x_deg: float = 0.6              # rotations of the camera about its own axes
+    height_mm: float = 300.0  # camera centre above the liquid plane
+    tilt_x_deg: float = 0.6  # rotations of the camera about its own axes
     tilt_y_deg: float = -0.4
     yaw_deg: float = 0.7
-    dist: tuple = (-0.06, 0.04, 2.0e-4, -1.5e-4, 0.0)   # OpenCV k1 k2 p1 p2 k3
-    light_dir: tuple = (-0.35, 0.45, 0.82)   # towards the lamp, object frame
+    dist: tuple = (-0.06, 0.04, 2.0e-4, -1.5e-4, 0.0)  # OpenCV k1 k2 p1 p2 k3
+    light_dir: tuple = (-0.35, 0.45, 0.82)  # towards the lamp, object frame
     ambient: float = 0.38
     diffuse: float = 0.62
     part_bgr: tuple = (214.0, 220.0, 224.0)  # light grey part, fully lit
-    ink_bgr: tuple = (62.0, 24.0, 10.0)      # opaque dark-blue ink (B, G, R)
-    tank_area_mm2: float = 22500.0           # inner area of the tank (150 x 150 mm)
+    ink_bgr: tuple = (62.0, 24.0, 10.0)  # opaque dark-blue ink (B, G, R)
+    tank_area_mm2: float = 22500.0  # inner area of the tank (150 x 150 mm)
 
     # -- the camera -----------------------------------------------------------
 
@@ -78,13 +80,17 @@ class Rig:
     def rotation(self) -> np.ndarray:
         """World (plane frame) -> camera rotation."""
         r0 = np.diag([1.0, -1.0, -1.0])
-        tilt = _rot_z(math.radians(self.yaw_deg)) @ _rot_y(math.radians(self.tilt_y_deg)) \
+        tilt = (
+            _rot_z(math.radians(self.yaw_deg))
+            @ _rot_y(math.radians(self.tilt_y_deg))
             @ _rot_x(math.radians(self.tilt_x_deg))
+        )
         return tilt @ r0
 
     def K(self) -> np.ndarray:
-        return np.array([[self.focal_px, 0, self.principal_u],
-                         [0, self.focal_px, self.principal_v], [0, 0, 1]], float)
+        return np.array(
+            [[self.focal_px, 0, self.principal_u], [0, self.focal_px, self.principal_v], [0, 0, 1]], float
+        )
 
     def dist_coeffs(self) -> np.ndarray:
         return np.asarray(self.dist, float)
@@ -108,8 +114,7 @@ class Rig:
         dist is written as zeros so processing leaves them alone.
         """
         dist = self.dist_coeffs() if distorted else np.zeros(5)
-        return CameraModel(self.width, self.height, self.homography(), self.K(), dist,
-                           float(self.height_mm))
+        return CameraModel(self.width, self.height, self.homography(), self.K(), dist, float(self.height_mm))
 
     def project(self, xyz_plane, distorted: bool = False) -> np.ndarray:
         """Pinhole projection of points in the plane frame (z above the liquid) to pixels."""
@@ -119,8 +124,7 @@ class Rig:
         x, y = pc[:, 0] / pc[:, 2], pc[:, 1] / pc[:, 2]
         if distorted:
             x, y = _distort(x, y, self.dist_coeffs())
-        return np.column_stack([self.focal_px * x + self.principal_u,
-                                self.focal_px * y + self.principal_v])
+        return np.column_stack([self.focal_px * x + self.principal_u, self.focal_px * y + self.principal_v])
 
     def project_object(self, xyz_object, level_mm: float, distorted: bool = False):
         """Projection of object-frame points when the liquid is at `level_mm`."""
@@ -151,8 +155,9 @@ class Rig:
 
     @classmethod
     def from_json(cls, d: dict) -> "Rig":
-        fields = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()
-                  if k in cls.__dataclass_fields__}
+        fields = {
+            k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in cls.__dataclass_fields__
+        }
         return cls(**fields)
 
 
@@ -186,7 +191,7 @@ def _undistort(xd, yd, dist, iterations=8):
 def _rays_to_plane(rig: Rig, xn, yn):
     """Normalised camera coordinates -> intersection of the ray with the liquid plane."""
     R = rig.rotation()
-    d = np.stack([xn, yn, np.ones_like(xn)], axis=-1) @ R      # R^T d, row-wise
+    d = np.stack([xn, yn, np.ones_like(xn)], axis=-1) @ R  # R^T d, row-wise
     C = rig.centre
     s = -C[2] / d[..., 2]
     return np.stack([C[0] + s * d[..., 0], C[1] + s * d[..., 1]], axis=-1)
@@ -201,17 +206,18 @@ class PixelMap:
     the anti-aliasing ramp; kx, ky: horizontal travel of the ray per mm of
     height, (C - P0) / H, used by the perspective ray march.
     """
+
     x0: np.ndarray
     y0: np.ndarray
     pix: np.ndarray
     kx: np.ndarray
     ky: np.ndarray
-    vignette_r2: np.ndarray     # squared distance from the image centre / half-diagonal^2
+    vignette_r2: np.ndarray  # squared distance from the image centre / half-diagonal^2
 
 
-@functools.lru_cache(maxsize=2)     # ~75 MB each at 2048 x 1536
+@functools.lru_cache(maxsize=2)  # ~75 MB each at 2048 x 1536
 def pixel_map(rig: Rig, distorted: bool) -> PixelMap:
-    v, u = np.mgrid[0:rig.height, 0:rig.width].astype(np.float64)
+    v, u = np.mgrid[0 : rig.height, 0 : rig.width].astype(np.float64)
     x = (u - rig.principal_u) / rig.focal_px
     y = (v - rig.principal_v) / rig.focal_px
     if distorted:

@@ -6,6 +6,7 @@ them apart. What only the simulator knows - the part, the TRUE levels after
 displacement, the meniscus parameters, the rig and the effects - goes to
 `<folder>.truth.json`, OUTSIDE the folder, so processing can never peek at it.
 """
+
 from __future__ import annotations
 
 import json
@@ -41,9 +42,7 @@ def scan_levels(surface, step_mm: float) -> list[float]:
     return [lv for lv in levels if lv >= 0.5 - 1e-9] or [round(first, 6)]
 
 
-
-
-_FORKED = {}      # what forked workers inherit (a Surface holds closures: not picklable)
+_FORKED = {}  # what forked workers inherit (a Surface holds closures: not picklable)
 
 
 def _render_one(job):
@@ -60,6 +59,7 @@ def _render_all(surface, jobs, rig, effects, workers, progress=None) -> list[flo
     true_levels = []
     if workers and workers > 1 and len(jobs) > 1:
         import multiprocessing as mp
+
         pixel_map(rig, effects.lens_distortion)
         surface_grid(surface)
         if effects.meniscus and effects.contact_line_curvature:
@@ -68,7 +68,7 @@ def _render_all(surface, jobs, rig, effects, workers, progress=None) -> list[flo
         try:
             pool = mp.get_context("fork").Pool(min(workers, len(jobs)))
         finally:
-            _FORKED.clear()    # the children have their copy; keep no reference here
+            _FORKED.clear()  # the children have their copy; keep no reference here
         with pool:
             for i, t in enumerate(pool.imap(_render_one, [(None,) + j[1:] for j in jobs])):
                 true_levels.append(t)
@@ -82,9 +82,18 @@ def _render_all(surface, jobs, rig, effects, workers, progress=None) -> list[flo
     return true_levels
 
 
-def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=None,
-                seed: int = 0, levels=None, progress=None, workers: int = 1,
-                refine_mm: float = 0.0) -> Scan:
+def render_scan(
+    surface,
+    folder,
+    step_mm: float = 1.0,
+    rig: Rig = None,
+    effects=None,
+    seed: int = 0,
+    levels=None,
+    progress=None,
+    workers: int = 1,
+    refine_mm: float = 0.0,
+) -> Scan:
     """Render frames at each level into `folder` and write scan.json and the truth file.
 
     surface: a Surface or its name; effects: an Effects or a preset name.
@@ -109,8 +118,9 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
         raise SettingError("levels", "no levels to render")
     folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    jobs = [(surface, folder, f"frames/{i + 1:04d}.png", lv, rig, effects, seed, i)
-            for i, lv in enumerate(levels)]
+    jobs = [
+        (surface, folder, f"frames/{i + 1:04d}.png", lv, rig, effects, seed, i) for i, lv in enumerate(levels)
+    ]
     frames = [FrameRef(j[2], j[3]) for j in jobs]
     true_levels = _render_all(surface, jobs, rig, effects, workers, progress)
     extra = {"source": {"kind": "simulated", "renderer": "appliance.sim.render"}}
@@ -127,17 +137,20 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
         "scan": folder.name,
         "step_mm": step_mm,
         "seed": seed,
-        "frames": [{"file": f.file, "level_nominal_mm": f.level_mm, "level_true_mm": t}
-                   for f, t in zip(frames, true_levels)],
+        "frames": [
+            {"file": f.file, "level_nominal_mm": f.level_mm, "level_true_mm": t}
+            for f, t in zip(frames, true_levels)
+        ],
         "levels_true_mm": true_levels,
         "rig": rig.to_json(),
         "effects": effects.to_json(),
-        "meniscus": {"enabled": effects.meniscus,
-                     "capillary_length_mm": effects.capillary_length_mm,
-                     "contact_angle_deg": effects.contact_angle_deg,
-                     "contact_line_curvature": effects.contact_line_curvature},
-        "displacement": {"enabled": effects.displacement,
-                         "tank_inner_area_mm2": float(rig.tank_area_mm2)},
+        "meniscus": {
+            "enabled": effects.meniscus,
+            "capillary_length_mm": effects.capillary_length_mm,
+            "contact_angle_deg": effects.contact_angle_deg,
+            "contact_line_curvature": effects.contact_line_curvature,
+        },
+        "displacement": {"enabled": effects.displacement, "tank_inner_area_mm2": float(rig.tank_area_mm2)},
         "render_seconds": round(time.perf_counter() - t0, 3),
     }
     atomicio.write_json(truth_path(folder), truth)
@@ -147,8 +160,15 @@ def render_scan(surface, folder, step_mm: float = 1.0, rig: Rig = None, effects=
     return scan
 
 
-def refine_scan(surface, folder, refine_mm: float = RESOLUTION_MM, rig: Rig = None, effects=None,
-                seed: int = 0, workers: int = 1) -> int:
+def refine_scan(
+    surface,
+    folder,
+    refine_mm: float = RESOLUTION_MM,
+    rig: Rig = None,
+    effects=None,
+    seed: int = 0,
+    workers: int = 1,
+) -> int:
     """The render loop's second pass, the runner's refinement (daemon/runner.py) on a rendered
     scan: find the part in each frame (vision/part.py), ask vision/refine.py where a face came
     out at once between two levels, render the frames it asks for, and again until it asks for
@@ -174,8 +194,11 @@ def refine_scan(surface, folder, refine_mm: float = RESOLUTION_MM, rig: Rig = No
     for above, below in zip(plan, plan[1:]):
         faces = surfaced_faces(mask(above), mask(below), mask_pixel_mm(scan.camera, mask(below).shape))
         if faces:
-            seen = [(f.level_mm, mask(f)) for f in scan.frames
-                    if f.extra.get("refines") == [above.level_mm, below.level_mm]]
+            seen = [
+                (f.level_mm, mask(f))
+                for f in scan.frames
+                if f.extra.get("refines") == [above.level_mm, below.level_mm]
+            ]
             steps.append((above.level_mm, below.level_mm, faces, seen))
     added = 0
     while True:
@@ -184,8 +207,10 @@ def refine_scan(surface, folder, refine_mm: float = RESOLUTION_MM, rig: Rig = No
         if not asks:
             return added
         n = len(scan.frames)
-        jobs = [(surface, folder, f"frames/{n + i + 1:04d}.png", lv, rig, effects, seed, n + i)
-                for i, (_, lv) in enumerate(asks)]
+        jobs = [
+            (surface, folder, f"frames/{n + i + 1:04d}.png", lv, rig, effects, seed, n + i)
+            for i, (_, lv) in enumerate(asks)
+        ]
         true_levels = _render_all(surface, jobs, rig, effects, workers)
         for (st, lv), job, t in zip(asks, jobs, true_levels):
             ref = FrameRef(job[2], lv, {"refines": [st[0], st[1]]})

@@ -15,13 +15,14 @@ that is a message; here SimOperator records the request on the bench, and the ca
 The level the camera sees is the bench's own truth (the factory's level at home, which
 need not equal the daemon's setting: that is what level zero measures).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from ..hw.base import Camera, Operator, Placement
 
-BALL_AT = (48.0, 52.5)          # where the simulated hand puts the reference ball (mm)
+BALL_AT = (48.0, 52.5)  # where the simulated hand puts the reference ball (mm)
 
 
 class SimOperator(Operator):
@@ -37,6 +38,7 @@ class SimOperator(Operator):
 def _board_poses(board, rig):
     """The tilted views of the sim's calibration set that keep this board whole in the frame."""
     from .boards import DEFAULT_POSES, true_corners
+
     keep = []
     for pose in DEFAULT_POSES:
         c = true_corners(board, pose, rig)
@@ -62,6 +64,7 @@ class StagedCamera(Camera):
 
     def capture(self) -> np.ndarray:
         from . import surfaces
+
         self.captures += 1
         p = getattr(self.bench, "placement", None)
         if p is None:
@@ -77,6 +80,7 @@ class StagedCamera(Camera):
     def _board(self, p: Placement) -> np.ndarray:
         from .boards import Board, Pose, render_board
         from .render import Effects
+
         d = p.details
         cols, rows = d["inner_corners"]
         board = Board(cols, rows, float(d["square_mm"]))
@@ -86,14 +90,19 @@ class StagedCamera(Camera):
             poses = _board_poses(board, self.rig)
             return render_board(board, poses[p.view % len(poses)], self.rig, effects, rng)
         level = float(self.level_mm())
-        if level > 0.05:                    # the base, and the board on it, are under the ink
+        if level > 0.05:  # the base, and the board on it, are under the ink
             from .surfaces import BASE_PLATE
+
             return self._staged(BASE_PLATE).capture()
         # the jig's first corner (nearest the image's top-left) and the rows' direction -> the centre
         a = np.radians(float(d.get("angle_deg", 0.0)))
         along, down = np.array([np.cos(a), np.sin(a)]), np.array([np.sin(a), -np.cos(a)])
         x0, y0 = d["first_corner_mm"]
-        c = np.array([x0, y0]) + along * (cols - 1) * board.square_mm / 2 + down * (rows - 1) * board.square_mm / 2
+        c = (
+            np.array([x0, y0])
+            + along * (cols - 1) * board.square_mm / 2
+            + down * (rows - 1) * board.square_mm / 2
+        )
         # (the corners are symmetric about the centre: the detector orders them the same either way up)
         pose = Pose(0.0, 0.0, float(np.degrees(a)), float(c[0]), float(c[1]), -level)
         return render_board(board, pose, self.rig, effects, rng)

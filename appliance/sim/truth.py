@@ -3,6 +3,7 @@ the scan folder as `<scan>.truth.json` (never inside it, so processing can
 never peek). Processing itself only takes a truth object (appliance/process.py);
 the commands, the simulated bench, benches and tests find it here.
 """
+
 from __future__ import annotations
 
 import json

@@ -16,6 +16,7 @@ better than the spread of the heights around it. `stand_on_base` is applied to t
 height map `inkslice process` writes and to any map `inkslice toolpath`
 reads, so both mill the same surface.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -25,16 +26,17 @@ from scipy import ndimage
 
 from .heightmap import HeightMap
 
-HOLE_TO_BASE_MM = 5.0     # a gap whose middle is this far from the part is a hole down to the base
+HOLE_TO_BASE_MM = 5.0  # a gap whose middle is this far from the part is a hole down to the base
 
 
 @dataclass
 class BaseFix:
     """What stand_on_base changed, for the report."""
-    clamped_cells: int = 0        # cells that were below the base top
-    deepest_dip_mm: float = 0.0   # how far below it the deepest was (>= 0)
-    filled_cells: int = 0         # gap cells filled from their neighbours
-    base_cells: int = 0           # hole cells set to the base top (a hole down to the base)
+
+    clamped_cells: int = 0  # cells that were below the base top
+    deepest_dip_mm: float = 0.0  # how far below it the deepest was (>= 0)
+    filled_cells: int = 0  # gap cells filled from their neighbours
+    base_cells: int = 0  # hole cells set to the base top (a hole down to the base)
 
     @property
     def changed(self):
@@ -43,18 +45,25 @@ class BaseFix:
     def sentences(self) -> list[str]:
         out = []
         if self.clamped_cells:
-            out.append(f"{self.clamped_cells} cells were below the base top (deepest "
-                       f"{self.deepest_dip_mm:.3f} mm) and were clamped to it")
+            out.append(
+                f"{self.clamped_cells} cells were below the base top (deepest "
+                f"{self.deepest_dip_mm:.3f} mm) and were clamped to it"
+            )
         if self.filled_cells:
-            out.append(f"{self.filled_cells} cells with no height inside the part were filled "
-                       "from their neighbours")
+            out.append(
+                f"{self.filled_cells} cells with no height inside the part were filled from their neighbours"
+            )
         if self.base_cells:
             out.append(f"{self.base_cells} cells of holes down to the base were set to the base top")
         return out
 
     def to_json(self):
-        return {"clamped_cells": self.clamped_cells, "deepest_dip_mm": round(self.deepest_dip_mm, 4),
-                "filled_cells": self.filled_cells, "base_cells": self.base_cells}
+        return {
+            "clamped_cells": self.clamped_cells,
+            "deepest_dip_mm": round(self.deepest_dip_mm, 4),
+            "filled_cells": self.filled_cells,
+            "base_cells": self.base_cells,
+        }
 
 
 def interior_holes(on_part):
@@ -81,7 +90,7 @@ def stand_on_base(hm: HeightMap) -> tuple[HeightMap, BaseFix]:
     to_base = gaps = np.zeros_like(holes)
     if holes.any():
         dx, dy = hm.spacing
-        depth = ndimage.distance_transform_edt(holes, sampling=(dy, dx))   # to the nearest part cell
+        depth = ndimage.distance_transform_edt(holes, sampling=(dy, dx))  # to the nearest part cell
         lab, n = ndimage.label(holes)
         widest = ndimage.maximum(depth, lab, np.arange(1, n + 1))
         to_base = np.isin(lab, 1 + np.flatnonzero(np.asarray(widest) >= HOLE_TO_BASE_MM))
@@ -99,6 +108,7 @@ def stand_on_base(hm: HeightMap) -> tuple[HeightMap, BaseFix]:
 def _mark(hm, z, clamped, dip, gaps, to_base):
     """The changed cells' source and uncertainty (see the module's docstring)."""
     from .uncertainty import CLAMPED, FILLED
+
     sigma = hm.sigma
     if sigma is not None:
         sigma = np.where(clamped, np.hypot(np.nan_to_num(sigma), dip), sigma)
@@ -108,8 +118,8 @@ def _mark(hm, z, clamped, dip, gaps, to_base):
             spread = float(np.ptp(around)) if around.size else 0.0
             worst = float(np.nanmax(sigma[ring])) if ring.any() and np.isfinite(sigma[ring]).any() else 0.0
             sigma = np.where(gaps, np.hypot(worst, spread / 2), sigma)
-        sigma = np.where(to_base, 0.0, sigma)          # the base top itself is exact
-    source = hm.source                                   # a map that never said stays silent
+        sigma = np.where(to_base, 0.0, sigma)  # the base top itself is exact
+    source = hm.source  # a map that never said stays silent
     if source is not None:
         source = source.copy()
         source[clamped | to_base] = CLAMPED

@@ -13,6 +13,7 @@ frame above (where the part was not yet visible). The levels the areas belong
 to are the unknown true ones, so the whole set is solved by fixed point: the
 iteration contracts because the emerged area is smaller than the tank's.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -41,7 +42,7 @@ def cap_volume(levels, areas, f, gap_above=None):
     A0 = areas[f]
     limit = levels[f - 1] - levels[f] if f > 0 else gap_above
     if f + 1 < levels.size and levels[f] > levels[f + 1]:
-        growth = (areas[f + 1] - A0) / (levels[f] - levels[f + 1])      # mm^2 per mm of depth
+        growth = (areas[f + 1] - A0) / (levels[f] - levels[f + 1])  # mm^2 per mm of depth
         hc = A0 / growth if growth > 0 else np.inf
     else:
         hc = np.inf
@@ -58,8 +59,10 @@ def true_levels(nominal, areas, tank_area_mm2, iterations=100, tol=1e-10):
     nominal = np.asarray(nominal, float)
     areas = np.asarray(areas, float)
     if areas.max(initial=0.0) >= tank_area_mm2:
-        raise SettingError("tank.inner_area_mm2", f"{tank_area_mm2:g} mm^2 is smaller than the part's "
-                           f"waterline area ({areas.max():.0f} mm^2)")
+        raise SettingError(
+            "tank.inner_area_mm2",
+            f"{tank_area_mm2:g} mm^2 is smaller than the part's waterline area ({areas.max():.0f} mm^2)",
+        )
     return _solve_levels(nominal, lambda L: emerged_volumes(L, areas), tank_area_mm2, iterations, tol)
 
 
@@ -99,18 +102,18 @@ def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100
         w = np.zeros(z.shape)
         for dj in (0, 1):
             for di in (0, 1):
-                w[dj:dj + cell.shape[0], di:di + cell.shape[1]] += 0.25 * cell
+                w[dj : dj + cell.shape[0], di : di + cell.shape[1]] += 0.25 * cell
     order = np.argsort(-np.where(on, z, -np.inf).ravel())
     keep = on.ravel()[order] & (w.ravel()[order] > 0)
     zz = z.ravel()[order][keep]
     ww = w.ravel()[order][keep]
     if zz.size == 0:
         return np.asarray(nominal, float)
-    wz = np.cumsum(ww * zz)                    # over the k highest nodes
+    wz = np.cumsum(ww * zz)  # over the k highest nodes
     wsum = np.cumsum(ww)
 
     def volume(L):
-        k = np.asarray(np.searchsorted(-zz, -L, side="left"))     # nodes higher than L
+        k = np.asarray(np.searchsorted(-zz, -L, side="left"))  # nodes higher than L
         i = np.maximum(k - 1, 0)
         return cell_area_mm2 * np.where(k > 0, wz[i] - wsum[i] * L, 0.0)
 
@@ -124,6 +127,10 @@ def correct_slices(slices, tank_area_mm2, levels=None):
     areas = [max(s.area(), 0.0) for s in slices]
     L = true_levels(nominal, areas, tank_area_mm2) if levels is None else np.asarray(levels, float)
     out = [s.at_level(lv) for s, lv in zip(slices, L)]
-    info = {"tank_area_mm2": float(tank_area_mm2), "nominal_mm": list(map(float, nominal)),
-            "true_mm": list(map(float, L)), "max_drop_mm": float(np.max(np.asarray(nominal) - L))}
+    info = {
+        "tank_area_mm2": float(tank_area_mm2),
+        "nominal_mm": list(map(float, nominal)),
+        "true_mm": list(map(float, L)),
+        "max_drop_mm": float(np.max(np.asarray(nominal) - L)),
+    }
     return out, info

@@ -19,6 +19,7 @@ as a sparse least-squares problem (normal equations, SuperLU). The thin-plate
 term reproduces any quadric exactly, so a cap with no data above the highest
 waterline is continued as the paraboloid its neighbours imply.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from .slices import Slice, polyline_distance
 
-_SHIFT = 8      # fillPoly sub-pixel bits
+_SHIFT = 8  # fillPoly sub-pixel bits
 DIRECT_MAX = 12000  # unknowns up to which the fit is solved directly (SuperLU), else by CG
 
 
@@ -89,8 +90,9 @@ def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
     the view in the lowest frames their loop cuts a chord across it (sample 2: 73 mm^2
     short, the lowest levels 0.15 mm high)."""
     off = (np.arange(sub) + 0.5) / sub - 0.5
-    fine = Lattice(np.ravel(lat.x[:, None] + lat.hx * off[None, :]),
-                   np.ravel(lat.y[:, None] + lat.hy * off[None, :]))
+    fine = Lattice(
+        np.ravel(lat.x[:, None] + lat.hx * off[None, :]), np.ravel(lat.y[:, None] + lat.hy * off[None, :])
+    )
     inside = np.zeros(fine.shape, bool)
     for sl in slices:
         if not sl.empty:
@@ -194,7 +196,7 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         # one more level uphill than the rule needs: where the lower waterlines are
         # walls the node is extrapolated from the uphill ones alone
         js = [j for j in range(k - (order - lo_span) - 1, k + lo_span) if top <= j < K]
-        if k == top:   # the cap: every neighbouring waterline lies downhill
+        if k == top:  # the cap: every neighbouring waterline lies downhill
             js = [j for j in range(top, min(K, top + max(order - 1, 2)))]
         S = np.zeros((len(q), len(js)))
         Z = np.zeros_like(S)
@@ -244,7 +246,7 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
         zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
         zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
-        rise = np.where(ok, Z - levels, 0.0)        # meniscus-corrected heights widen it
+        rise = np.where(ok, Z - levels, 0.0)  # meniscus-corrected heights widen it
         zmin = zmin + np.minimum(rise.min(axis=1), 0)
         zmax = zmax + np.maximum(rise.max(axis=1), 0)
         raw = _lagrange_at_zero(S, Z, ok)
@@ -321,7 +323,7 @@ def tilt_crossed_faces(lat: Lattice, slices: list[Slice], z, mask, first, far_mm
     K = len(slices)
     tilted = np.zeros(lat.shape, bool)
     X, Y = np.meshgrid(lat.x, lat.y)
-    touch = far_mm + 2.0 * max(lat.hx, lat.hy)        # a piece ends this near the curve it meets
+    touch = far_mm + 2.0 * max(lat.hx, lat.hy)  # a piece ends this near the curve it meets
     for k in range(2, K):
         below, above = mask & (first == k), mask & (first == k - 1)
         curve = slices[k - 1].level_curve()
@@ -341,6 +343,7 @@ def tilt_crossed_faces(lat: Lattice, slices: list[Slice], z, mask, first, far_mm
             # along the polyline where its nearest vertex is on the stretch, else to the stretch's points
             d, i = polyline_distance(curve, q)
             return np.where(is_shared[i], d, tree.query(q)[0])
+
         L = slices[k - 1].level
         steps = (L - slices[k].level, slices[k - 2].level - L)
         # the pieces on either side, and which piece of one side faces which of the other
@@ -416,7 +419,7 @@ def stencil_rows(index: np.ndarray, stencils) -> sp.csr_matrix:
         di = [s[1] for s in stencil]
         j0, j1 = -min(dj), ny - max(dj)
         i0, i1 = -min(di), nx - max(di)
-        ids = [index[j0 + a:j1 + a, i0 + b:i1 + b] for a, b in zip(dj, di)]
+        ids = [index[j0 + a : j1 + a, i0 + b : i1 + b] for a, b in zip(dj, di)]
         ok = np.all([m >= 0 for m in ids], axis=0)
         m = int(ok.sum())
         for (_, _, c), im in zip(stencil, ids):
@@ -442,10 +445,14 @@ class FitProblem:
         """Thin-plate energy: integral of z_xx^2 + 2 z_xy^2 + z_yy^2 over the part."""
         hx, hy = self.lat.hx, self.lat.hy
         s = np.sqrt(hx * hy)
-        R = stencil_rows(self.index, [
-            (s / hx ** 2, [(0, -1, 1.0), (0, 0, -2.0), (0, 1, 1.0)]),
-            (s / hy ** 2, [(-1, 0, 1.0), (0, 0, -2.0), (1, 0, 1.0)]),
-            (s * np.sqrt(2) / (hx * hy), [(0, 0, 1.0), (0, 1, -1.0), (1, 0, -1.0), (1, 1, 1.0)])])
+        R = stencil_rows(
+            self.index,
+            [
+                (s / hx**2, [(0, -1, 1.0), (0, 0, -2.0), (0, 1, 1.0)]),
+                (s / hy**2, [(-1, 0, 1.0), (0, 0, -2.0), (1, 0, 1.0)]),
+                (s * np.sqrt(2) / (hx * hy), [(0, 0, 1.0), (0, 1, -1.0), (1, 0, -1.0), (1, 1, 1.0)]),
+            ],
+        )
         return (R.T @ R).tocsc()
 
     def third_order(self):
@@ -455,11 +462,21 @@ class FitProblem:
         s = np.sqrt(hx * hy)
         d3 = (-1.0, 3.0, -3.0, 1.0)
         d2, d1 = (1.0, -2.0, 1.0), (-1.0, 1.0)
-        R = stencil_rows(self.index, [
-            (s / hx ** 3, [(0, k, c) for k, c in enumerate(d3)]),
-            (s / hy ** 3, [(k, 0, c) for k, c in enumerate(d3)]),
-            (s * np.sqrt(3) / (hx ** 2 * hy), [(a, b, ca * cb) for a, ca in enumerate(d1) for b, cb in enumerate(d2)]),
-            (s * np.sqrt(3) / (hx * hy ** 2), [(a, b, ca * cb) for a, ca in enumerate(d2) for b, cb in enumerate(d1)])])
+        R = stencil_rows(
+            self.index,
+            [
+                (s / hx**3, [(0, k, c) for k, c in enumerate(d3)]),
+                (s / hy**3, [(k, 0, c) for k, c in enumerate(d3)]),
+                (
+                    s * np.sqrt(3) / (hx**2 * hy),
+                    [(a, b, ca * cb) for a, ca in enumerate(d1) for b, cb in enumerate(d2)],
+                ),
+                (
+                    s * np.sqrt(3) / (hx * hy**2),
+                    [(a, b, ca * cb) for a, ca in enumerate(d2) for b, cb in enumerate(d1)],
+                ),
+            ],
+        )
         return (R.T @ R).tocsc()
 
     def gradient(self):
@@ -469,23 +486,31 @@ class FitProblem:
         J, I = np.nonzero(self.active)
         me = self.index[J, I]
         for axis, h in ((1, self.lat.hx), (0, self.lat.hy)):
+
             def neighbour(d):
                 jj, ii = (J + d, I) if axis == 0 else (J, I + d)
                 ok = (jj >= 0) & (ii >= 0) & (jj < self.lat.shape[0]) & (ii < self.lat.shape[1])
                 out = np.full(J.size, -1)
                 out[ok] = self.index[jj[ok], ii[ok]]
                 return out
+
             lo, hi = neighbour(-1), neighbour(1)
             rows, cols, vals = [], [], []
-            for sel, terms in (((lo >= 0) & (hi >= 0), ((lo, -0.5), (hi, 0.5))),
-                               ((lo < 0) & (hi >= 0), ((me, -1.0), (hi, 1.0))),
-                               ((lo >= 0) & (hi < 0), ((lo, -1.0), (me, 1.0)))):
+            for sel, terms in (
+                ((lo >= 0) & (hi >= 0), ((lo, -0.5), (hi, 0.5))),
+                ((lo < 0) & (hi >= 0), ((me, -1.0), (hi, 1.0))),
+                ((lo >= 0) & (hi < 0), ((lo, -1.0), (me, 1.0))),
+            ):
                 for col, c in terms:
                     rows.append(me[sel])
                     cols.append(col[sel])
                     vals.append(np.full(int(sel.sum()), c / h))
-            ops.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                     shape=(self.n, self.n)))
+            ops.append(
+                sp.csr_matrix(
+                    (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                    shape=(self.n, self.n),
+                )
+            )
         return tuple(ops)
 
     def data_rows(self, pts, z, weight=1.0):

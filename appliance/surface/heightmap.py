@@ -7,6 +7,7 @@ that is not on the part (off its footprint, or inside a hole down to the base).
 Where the reconstruction knows it, each cell also carries its uncertainty in mm
 (`sigma`) and how it was obtained (`source`, codes of uncertainty.SOURCES).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ class HeightMap:
     x: np.ndarray
     y: np.ndarray
     z: np.ndarray
-    sigma: np.ndarray | None = None   # 1-sigma uncertainty per cell, mm, where known
+    sigma: np.ndarray | None = None  # 1-sigma uncertainty per cell, mm, where known
     source: np.ndarray | None = None  # int8 per cell: index into uncertainty.SOURCES, -1 unknown
 
     def __post_init__(self):

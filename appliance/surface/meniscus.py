@@ -40,6 +40,7 @@ L + h(beta, kappa) are found by robust least squares. On a ball the contact
 lines' bend (1/r) and slope change together, yet the three separate: from exact
 contact lines of a 30 mm ball they come back to 1e-3.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -55,9 +56,9 @@ from .gridfit import FitProblem, Lattice, bilinear, fill_nearest
 from .slices import check_waterlines, mark_walls, polyline_distance
 
 
-CURVATURE_FLAT = 0.05        # slopes under ~3 deg: no level curve to take a curvature of
-CURVATURE_LIMIT = 1.0        # |kappa l_c| beyond which the first-order correction stops growing
-CURVATURE_CLIP = 0.5         # 1/mm: a tighter bend is a crest's kink, not a contact line's
+CURVATURE_FLAT = 0.05  # slopes under ~3 deg: no level curve to take a curvature of
+CURVATURE_LIMIT = 1.0  # |kappa l_c| beyond which the first-order correction stops growing
+CURVATURE_CLIP = 0.5  # 1/mm: a tighter bend is a crest's kink, not a contact line's
 CURVATURE_SMOOTHING_MM = 1.0
 
 
@@ -69,7 +70,9 @@ def curvature_shape(psi):
         return np.where(s2 > 1e-8, (1.0 - np.cos(half) ** 3) / (3.0 * np.maximum(s2, 1e-300)), 0.5)
 
 
-def level_curve_curvature(z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM):
+def level_curve_curvature(
+    z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM
+):
     """In-plane curvature (1/mm) of the level curves of a height grid (rows y, columns x):
     -div(grad z / |grad z|), > 0 round a peak, < 0 round a pit; limited to +-clip and
     averaged over smoothing_mm (a meniscus feels the line's mean bend, not a crest's kink)."""
@@ -83,9 +86,9 @@ def level_curve_curvature(z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, s
 class MeniscusModel:
     capillary_length_mm: float = 2.7
     contact_angle_rad: float = 0.0
-    camera_xy_mm: tuple | None = None      # camera centre over the base, for the perspective
+    camera_xy_mm: tuple | None = None  # camera centre over the base, for the perspective
     camera_height_mm: float | None = None  # camera centre above the liquid plane
-    curvature: float = 0.0                 # weight of the contact line's own curvature (1: Young-Laplace)
+    curvature: float = 0.0  # weight of the contact line's own curvature (1: Young-Laplace)
 
     def rise(self, beta, kappa=None):
         psi = np.asarray(beta, float) - self.contact_angle_rad
@@ -95,8 +98,11 @@ class MeniscusModel:
         """h / h_straight where the contact line bends by kappa (1/mm, > 0 round the part)."""
         if kappa is None or self.curvature == 0.0:
             return 1.0
-        k = np.clip(self.curvature * np.asarray(kappa, float) * self.capillary_length_mm,
-                    -CURVATURE_LIMIT, CURVATURE_LIMIT)
+        k = np.clip(
+            self.curvature * np.asarray(kappa, float) * self.capillary_length_mm,
+            -CURVATURE_LIMIT,
+            CURVATURE_LIMIT,
+        )
         return np.sqrt(np.maximum(1.0 - 2.0 * curvature_shape(psi) * k, 0.25))
 
     def rise_on_slope(self, g, kappa=None):
@@ -107,13 +113,22 @@ class MeniscusModel:
         """dh / dg (the curvature factor's own slow change with the slope left out)."""
         g = np.asarray(g, float)
         beta = np.arctan(g)
-        return (self.capillary_length_mm * np.cos((beta - self.contact_angle_rad) / 2.0) / (1.0 + g * g)
-                * self.curvature_factor(beta - self.contact_angle_rad, kappa))
+        return (
+            self.capillary_length_mm
+            * np.cos((beta - self.contact_angle_rad) / 2.0)
+            / (1.0 + g * g)
+            * self.curvature_factor(beta - self.contact_angle_rad, kappa)
+        )
 
     def scaled(self, f):
         """The same ink with its capillary length times f (the solver turns the meniscus on in steps)."""
-        return MeniscusModel(f * self.capillary_length_mm, self.contact_angle_rad, self.camera_xy_mm,
-                             self.camera_height_mm, self.curvature)
+        return MeniscusModel(
+            f * self.capillary_length_mm,
+            self.contact_angle_rad,
+            self.camera_xy_mm,
+            self.camera_height_mm,
+            self.curvature,
+        )
 
     def unproject(self, P, h):
         """Plane positions of contact points standing h above the ink."""
@@ -127,7 +142,7 @@ def camera_centre_xy(K, homography):
     """Camera centre over the base (x, y, mm) from the camera matrix K and the scan's
     homography (undistorted pixel -> liquid plane): the meniscus' perspective needs it."""
     M = np.linalg.inv(np.asarray(K, float)) @ np.linalg.inv(np.asarray(homography, float))
-    M = M / np.linalg.norm(M[:, 0])            # ~ [r1 r2 t] of the plane in the camera
+    M = M / np.linalg.norm(M[:, 0])  # ~ [r1 r2 t] of the plane in the camera
     r1, r2, t = M[:, 0], M[:, 1], M[:, 2]
     R = np.column_stack([r1, r2, np.cross(r1, r2)])
     C = -R.T @ t
@@ -206,9 +221,9 @@ def correct_slices_from_spacing(slices, model: MeniscusModel):
 # On exact apparent surfaces (a dome, sample 4's saddle) this recovers the top to 0.005 and
 # 0.004 mm mean (tests/test_surface_physics.py).
 
-SOLVE_MAX_SIDE = 101      # the rise is smooth: solved on at most this many nodes a side
-FINE_ITERATIONS = 3       # Levenberg-Marquardt steps on the full solve lattice
-RIM_UNTRUSTED = 2         # nodes next to the outline whose apparent height the solve ignores
+SOLVE_MAX_SIDE = 101  # the rise is smooth: solved on at most this many nodes a side
+FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
+RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve ignores
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None):
@@ -231,19 +246,40 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
         coarse = Lattice(sub.x[::2], sub.y[::2])
         Ac = A[::2, ::2]
         kc = None if kappa is None else kappa[::2, ::2]
-        tc = _solve_top(coarse, Ac, fp[::2, ::2], model, 3 * 2 * h, Ac, steps=(0.5, 1.0), iterations=5,
-                        kappa=kc, straight=None if straight is None else straight[::2, ::2])
+        tc = _solve_top(
+            coarse,
+            Ac,
+            fp[::2, ::2],
+            model,
+            3 * 2 * h,
+            Ac,
+            steps=(0.5, 1.0),
+            iterations=5,
+            kappa=kc,
+            straight=None if straight is None else straight[::2, ::2],
+        )
         start = A + _resample_rise(tc - Ac, coarse, sub)
-        top = _solve_top(sub, A, fp, model, h, start, steps=(1.0,), iterations=FINE_ITERATIONS, kappa=kappa,
-                         straight=straight)
+        top = _solve_top(
+            sub,
+            A,
+            fp,
+            model,
+            h,
+            start,
+            steps=(1.0,),
+            iterations=FINE_ITERATIONS,
+            kappa=kappa,
+            straight=straight,
+        )
     else:
-        top = _solve_top(sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa,
-                         straight=straight)
+        top = _solve_top(
+            sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa, straight=straight
+        )
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
 
 
-CURVATURE_STEP_MM = 0.2       # the fine grid the curvature is taken on
+CURVATURE_STEP_MM = 0.2  # the fine grid the curvature is taken on
 
 
 def contact_line_curvature(lat, top):
@@ -255,7 +291,7 @@ def contact_line_curvature(lat, top):
     fj = np.arange((top.shape[0] - 1) * ky + 1) / ky
     fi = np.arange((top.shape[1] - 1) * kx + 1) / kx
     FJ, FI = np.meshgrid(fj, fi, indexing="ij")
-    fine = ndimage.map_coordinates(top, [FJ, FI], order=3, mode="nearest")     # C2: curvature needs it
+    fine = ndimage.map_coordinates(top, [FJ, FI], order=3, mode="nearest")  # C2: curvature needs it
     return level_curve_curvature(fine, lat.hy / ky, lat.hx / kx)[::ky, ::kx]
 
 
@@ -267,15 +303,16 @@ def _resample_rise(phi, src, dst):
     return ndimage.map_coordinates(fill_nearest(phi), [FJ, FI], order=3, mode="nearest")
 
 
-def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None,
-               straight=None):
+def _solve_top(
+    lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None, straight=None
+):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
     problem = FitProblem(lat, footprint)
     act = problem.active
     Dx, Dy = problem.gradient()
     R = problem.third_order()
-    lam = length_mm ** 6 / (lat.hx * lat.hy)
+    lam = length_mm**6 / (lat.hx * lat.hy)
     # the apparent surface's outline nodes are the fit's least sure (their first exposure
     # comes from the wall's waterline, a level step wide): where the top rises to a rim the
     # equation carries their error inwards, so there the top is the smoothness' continuation
@@ -311,7 +348,7 @@ def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, to
             gx, gy = Dx @ t, Dy @ t
             g = np.hypot(gx, gy)
             r = on * (t - m.rise_on_slope(g, kap) - a)
-            c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)   # dh/d(grad) = h' grad / |grad|
+            c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
             M = (J.T @ J + lam * R).tocsc()
             rhs = -(J.T @ r) - lam * (R @ (t - a))
@@ -323,7 +360,7 @@ def _solve_top(lat, A, footprint, model, length_mm, start, steps, iterations, to
                     break
                 mu *= 4.0
             else:
-                break                          # no step lowers it: as good as it gets
+                break  # no step lowers it: as good as it gets
             if np.max(np.abs(step)) < tol:
                 break
     out = np.full(lat.shape, np.nan)
@@ -344,8 +381,13 @@ def contact_points(slices, lat, rise, model: MeniscusModel):
             flat.append(s)
             raised.append(s)
             continue
-        h = bilinear(lat, filled, np.column_stack([np.clip(s.P[:, 0], lat.x[0], lat.x[-1]),
-                                                   np.clip(s.P[:, 1], lat.y[0], lat.y[-1])]))
+        h = bilinear(
+            lat,
+            filled,
+            np.column_stack(
+                [np.clip(s.P[:, 0], lat.x[0], lat.x[-1]), np.clip(s.P[:, 1], lat.y[0], lat.y[-1])]
+            ),
+        )
         h = np.where(s.wall | ~np.isfinite(h), 0.0, h)
         P = model.unproject(s.P, h)
         flat.append(s.moved(P, s.z))
@@ -375,7 +417,7 @@ def contact_points(slices, lat, rise, model: MeniscusModel):
 # cleverer fit, is what would place it closer.
 
 
-DEPRESSION_MIN_MM = 0.05     # shallower, a flat face comes out within that of its height
+DEPRESSION_MIN_MM = 0.05  # shallower, a flat face comes out within that of its height
 
 
 def depression_depth(model: MeniscusModel) -> float:
@@ -427,7 +469,7 @@ def _distance_to_contact_line(slices, k, q):
     return polyline_distance(slices[k].level_curve(), q)[0] if k >= top else np.full(len(q), np.inf)
 
 
-FACE_SPACINGS = 2     # a face: its contact line above is this many of their spacings away
+FACE_SPACINGS = 2  # a face: its contact line above is this many of their spacings away
 
 
 def _dewetted(lat, z_fe, first, footprint, slices, model):
@@ -509,13 +551,21 @@ def _reference_curvature(surface):
     k = level_curve_curvature(surface.height(X, Y), step, step)
 
     def at(P):
-        return ndimage.map_coordinates(k, [(P[:, 1] - ys[0]) / step, (P[:, 0] - xs[0]) / step],
-                                       order=1, mode="nearest")
+        return ndimage.map_coordinates(
+            k, [(P[:, 1] - ys[0]) / step, (P[:, 0] - xs[0]) / step], order=1, mode="nearest"
+        )
+
     return at
 
 
-def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera_xy_mm=None,
-                       camera_height_mm=None, wall_tol_mm=0.03) -> MeniscusModel:
+def calibrate_meniscus(
+    waterlines,
+    reference_surface,
+    tank_area_mm2=None,
+    camera_xy_mm=None,
+    camera_height_mm=None,
+    wall_tol_mm=0.03,
+) -> MeniscusModel:
     """(l_c, theta) from a scan of a reference part whose `height(x, y)` is known.
 
     Only points on the sculptured top, well away from the part's outline,
@@ -526,6 +576,7 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
         # the reference's shape is known, so is its emerged volume at every level: the
         # waterlines' areas would undercount it by the meniscus being calibrated
         from .displacement import correct_slices, levels_from_surface
+
         x0, x1, y0, y1 = reference_surface.bounds
         step = max(x1 - x0, y1 - y0) / 500.0
         X, Y = np.meshgrid(np.arange(x0, x1 + step / 2, step), np.arange(y0, y1 + step / 2, step))
@@ -541,7 +592,9 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
         P.append(s.P[keep])
         L.append(np.full(int(keep.sum()), s.level))
     if not P or sum(len(p) for p in P) < 20:
-        raise InkSliceError("calibration", "too few waterline points on the reference's top to calibrate the meniscus")
+        raise InkSliceError(
+            "calibration", "too few waterline points on the reference's top to calibrate the meniscus"
+        )
     P, L = np.vstack(P), np.concatenate(L)
     if len(P) > 20000:
         P, L = P[:: len(P) // 20000], L[:: len(P) // 20000]
@@ -553,13 +606,18 @@ def calibrate_meniscus(waterlines, reference_surface, tank_area_mm2=None, camera
     def residual(params):
         m = MeniscusModel(params[0], params[1], curvature=params[2], **cam)
         h = m.rise(beta, kappa)
-        for _ in range(2):      # the slope and curvature where the contact point really is
+        for _ in range(2):  # the slope and curvature where the contact point really is
             Q = m.unproject(P, h)
             h = m.rise(np.arctan(_reference_slopes(reference_surface, Q)), curvature(Q))
         return reference_surface.height(*m.unproject(P, h).T) - (L + h)
 
     # the weight is no less than 0: a line bending round the part never raises its meniscus
-    sol = least_squares(residual, x0=[2.0, 0.1, 0.5], bounds=([0.0, -np.pi / 2, 0.0], [10.0, np.pi / 2, 3.0]),
-                        loss="soft_l1", f_scale=0.05)
-    weight = float(sol.x[2]) if sol.x[2] > 1e-6 else 0.0      # at its bound: a straight line, exactly
+    sol = least_squares(
+        residual,
+        x0=[2.0, 0.1, 0.5],
+        bounds=([0.0, -np.pi / 2, 0.0], [10.0, np.pi / 2, 3.0]),
+        loss="soft_l1",
+        f_scale=0.05,
+    )
+    weight = float(sol.x[2]) if sol.x[2] > 1e-6 else 0.0  # at its bound: a straight line, exactly
     return MeniscusModel(float(sol.x[0]), float(sol.x[1]), curvature=weight, **cam)

@@ -19,6 +19,7 @@ Steps, each in its own module:
 The dissertation's methods stay selectable (options.method = "nearest",
 "spline", "lsq1".."lsq3", "captured") on the same checked, corrected waterlines.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,18 +31,43 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from . import seed as seed_methods
-from .gridfit import (DIRECT_MAX, FitProblem, Lattice, area_weights, bilinear, exposed_mask, fill_nearest,
-                      first_exposure, flat_faces, occluded_nodes, point_data, tilt_crossed_faces)
+from .gridfit import (
+    DIRECT_MAX,
+    FitProblem,
+    Lattice,
+    area_weights,
+    bilinear,
+    exposed_mask,
+    fill_nearest,
+    first_exposure,
+    flat_faces,
+    occluded_nodes,
+    point_data,
+    tilt_crossed_faces,
+)
 from .heightmap import HeightMap
-from .meniscus import (bracket_dewetted_faces, contact_points, depression_depth, dewetted_nodes,
-                       pinned_rims_as_walls, place_dewetted_faces, top_from_apparent)
+from .meniscus import (
+    bracket_dewetted_faces,
+    contact_points,
+    depression_depth,
+    dewetted_nodes,
+    pinned_rims_as_walls,
+    place_dewetted_faces,
+    top_from_apparent,
+)
 from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
-from .slices import (Perspective, check_waterlines, mark_silhouettes, mark_walls, outline_bounds,
-                     unproject_rims)
+from .slices import (
+    Perspective,
+    check_waterlines,
+    mark_silhouettes,
+    mark_walls,
+    outline_bounds,
+    unproject_rims,
+)
 
 METHODS = ("fit",) + seed_methods.METHODS
-PASSES = 3   # with walls seen in perspective or a tank given: each later fit takes the true
-             # levels, each wall edge's height and the emerged volume from the one before
+PASSES = 3  # with walls seen in perspective or a tank given: each later fit takes the true
+# levels, each wall edge's height and the emerged volume from the one before
 
 
 @dataclass(frozen=True)
@@ -49,6 +75,7 @@ class GridSpec:
     """Output lattice: bounds (xmin, xmax, ymin, ymax) in mm and either n = (nx, ny)
     nodes spanning the bounds inclusive (the dissertation's 50 x 50) or a spacing in mm.
     bounds None: the part's outline as the waterlines show it (after the perspective)."""
+
     bounds: tuple | None
     n: tuple | None = None
     spacing_mm: float | None = None
@@ -77,16 +104,16 @@ class GridSpec:
 @dataclass
 class ReconstructOptions:
     method: str = "fit"
-    smoothing_mm: float | None = None        # thin-plate smoothing length; None = cross-validate
-    wall_tol_mm: float = 0.03                # a waterline moving less than this between levels is a wall
-    lattice_max: int = 241                   # internal lattice nodes per side (fit size)
-    point_weight: float = 0.3                # weight of a raw waterline point vs a first-exposure node height
-    footprint_tol_mm: float | None = None    # default: a quarter of the lattice spacing
-    tank_area_mm2: float | None = None       # displacement correction when given
-    meniscus: object = None                  # meniscus.MeniscusModel when the correction is wanted
-    perspective: Perspective | None = None   # camera foot and height: walls seen by their raised edges
-    pixel_mm: float = 0.0                    # the camera's pixel on the liquid plane (waterline placement)
-    explain_uncertainty: bool = False        # diagnostics["uncertainty_terms"]: each term on the output grid
+    smoothing_mm: float | None = None  # thin-plate smoothing length; None = cross-validate
+    wall_tol_mm: float = 0.03  # a waterline moving less than this between levels is a wall
+    lattice_max: int = 241  # internal lattice nodes per side (fit size)
+    point_weight: float = 0.3  # weight of a raw waterline point vs a first-exposure node height
+    footprint_tol_mm: float | None = None  # default: a quarter of the lattice spacing
+    tank_area_mm2: float | None = None  # displacement correction when given
+    meniscus: object = None  # meniscus.MeniscusModel when the correction is wanted
+    perspective: Perspective | None = None  # camera foot and height: walls seen by their raised edges
+    pixel_mm: float = 0.0  # the camera's pixel on the liquid plane (waterline placement)
+    explain_uncertainty: bool = False  # diagnostics["uncertainty_terms"]: each term on the output grid
 
 
 @dataclass
@@ -131,7 +158,7 @@ def _to_output(lat, zl, r, xo, yo):
 # -- the fit --------------------------------------------------------------------------
 
 
-BRACKET_SLACK_LEVELS = 2   # one held sample 4's rim nodes 1.4 mm low (clean Ea 0.0220 -> 0.0174 with two)
+BRACKET_SLACK_LEVELS = 2  # one held sample 4's rim nodes 1.4 mm low (clean Ea 0.0220 -> 0.0174 with two)
 
 
 def _bracket(z, first, slices, rise_max=0.0):
@@ -160,7 +187,7 @@ def _bracket(z, first, slices, rise_max=0.0):
     n = BRACKET_SLACK_LEVELS
     lo_s = np.r_[lo[n:], [-np.inf] * n]
     hi_s = np.r_[[np.inf] * n, hi[:-n]]
-    hi_s[K] = np.inf            # never exposed (nodes on the outline itself): no bracket
+    hi_s[K] = np.inf  # never exposed (nodes on the outline itself): no bracket
     return np.clip(z, lo_s[first], hi_s[first])
 
 
@@ -168,7 +195,7 @@ def _fit_nodes(problem, z_nodes, pts, zp, length_mm, point_weight, prior=None):
     """The regularised fit; `prior` (NaN where none): node heights for the faces nothing
     else places (faces that came out at once: _flat_prior)."""
     lat = problem.lat
-    lam = length_mm ** 4 / (lat.hx * lat.hy)     # data are one per node: density 1 / cell area
+    lam = length_mm**4 / (lat.hx * lat.hy)  # data are one per node: density 1 / cell area
     blocks = [problem.node_rows(z_nodes, 1.0)]
     if point_weight > 0 and len(pts):
         blocks.append(problem.data_rows(pts, zp, point_weight))
@@ -193,7 +220,7 @@ def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
     for mult in (0.5, 1, 2, 4):
         z = _fit_nodes(problem, train, pts, zp, mult * h, point_weight)
         r = z.ravel()[held] - z_fe.ravel()[held]
-        curve.append((mult * h, float(np.sqrt(np.mean(r ** 2)))))
+        curve.append((mult * h, float(np.sqrt(np.mean(r**2)))))
     best = min(curve, key=lambda c: c[1])[0]
     return best, curve
 
@@ -233,10 +260,12 @@ def _corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         slices = unproject_rims(slices, opt.perspective, opt.wall_tol_mm, rim_height, max(rise, 0.0), rng)
     if opt.tank_area_mm2:
         from .displacement import correct_slices, levels_from_surface
+
         true = None
         if z is not None:
-            true = levels_from_surface(nominal, z, lat.hx * lat.hy, opt.tank_area_mm2,
-                                       weights=area_weights(lat, slices))
+            true = levels_from_surface(
+                nominal, z, lat.hx * lat.hy, opt.tank_area_mm2, weights=area_weights(lat, slices)
+            )
             true = _relaxed_levels(levels, true, slices, opt.tank_area_mm2)
         base = [s.at_level(L) for s, L in zip(slices, nominal)]
         slices, disp = correct_slices(base, opt.tank_area_mm2, true)
@@ -268,12 +297,12 @@ def _resample(old: Lattice, z, new: Lattice):
     return np.where(on & np.isfinite(v), v, np.nan).reshape(X.shape)
 
 
-FLAT_FAR_NODES = 3   # lattice spacings from any waterline: a node on a face that came out at once,
-FLAT_FAR_MM = 2.0    # and at least this far (a small part's fine lattice: sample 4's waterlines
-                     # a node or two apart on its 20 mm rims would take its faces for flat)
-FLAT_EDGE_MM = 0.5   # nor on the outline: sample 4's rim nodes first come out levels late
-FLAT_PRIOR_WEIGHT = 1.0    # such a node's mid-bracket height, as a first-exposure height weighs
-RIM_INSET = 2   # lattice nodes: nearer its outline than this the fit is extrapolating
+FLAT_FAR_NODES = 3  # lattice spacings from any waterline: a node on a face that came out at once,
+FLAT_FAR_MM = 2.0  # and at least this far (a small part's fine lattice: sample 4's waterlines
+# a node or two apart on its 20 mm rims would take its faces for flat)
+FLAT_EDGE_MM = 0.5  # nor on the outline: sample 4's rim nodes first come out levels late
+FLAT_PRIOR_WEIGHT = 1.0  # such a node's mid-bracket height, as a first-exposure height weighs
+RIM_INSET = 2  # lattice nodes: nearer its outline than this the fit is extrapolating
 
 
 def _rim_height(lat, z):
@@ -302,6 +331,7 @@ def _rim_height(lat, z):
         cj, ci = qj[j, i], qi[j, i]
         ext = filled[cj, ci] + gx[cj, ci] * (P[:, 0] - lat.x[ci]) + gy[cj, ci] * (P[:, 1] - lat.y[cj])
         return np.where(inner, out, ext)
+
     return at
 
 
@@ -344,8 +374,9 @@ def _fit_pass(lat, slices, opt, ftol, length, rise):
     if opt.meniscus is not None:
         placed = place_dewetted_faces(lat, z_fe, first, footprint, slices, opt.meniscus)
     h = max(lat.hx, lat.hy)
-    z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, max(FLAT_FAR_NODES * h, FLAT_FAR_MM),
-                                  max(2 * h, FLAT_EDGE_MM))
+    z_mid, mid, flat = flat_faces(
+        lat, slices, z_fe, first, max(FLAT_FAR_NODES * h, FLAT_FAR_MM), max(2 * h, FLAT_EDGE_MM)
+    )
     tilted = tilt_crossed_faces(lat, slices, z_mid, mid, first, max(FLAT_FAR_NODES * h, FLAT_FAR_MM))
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")
@@ -392,6 +423,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     if opt.method != "fit":
         if opt.meniscus is not None:
             from .meniscus import correct_slices_from_spacing
+
             slices = correct_slices_from_spacing(slices, opt.meniscus)
         hm = _seed_method(opt.method, slices, xo, yo)
         diag["seconds"] = time.perf_counter() - t0
@@ -410,17 +442,21 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             true = diag["displacement"]["true_mm"] if "displacement" in diag else None
             slices = _corrected_levels(seen, opt, diag, lat, np.where(footprint, z, np.nan), true)
             corrected = slices
-            if auto_bounds:          # the outline is surer now: the grid follows it
+            if auto_bounds:  # the outline is surer now: the grid follows it
                 grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
                 xo, yo = grid.axes()
                 diag["bounds"] = grid.bounds
                 old, (lat, r) = lat, _lattice_for(xo, yo, opt.lattice_max)
                 rise = None if rise is None else _resample(old, rise, lat)
-        z, z_fe, first, footprint, slices, length, cv, rise, flat = _fit_pass(lat, slices, opt, ftol, length, rise)
+        z, z_fe, first, footprint, slices, length, cv, rise, flat = _fit_pass(
+            lat, slices, opt, ftol, length, rise
+        )
         curve = cv if cv is not None else curve
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
     # the bracket guards the gaps the fit extrapolates into; nodes with data keep the fit
-    rise_max = 0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)   # h grows with the slope
+    rise_max = (
+        0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)
+    )  # h grows with the slope
     z = np.where(np.isfinite(z_fe), z, _bracket(z, first, slices, rise_max))
     # a face that came out at once lies between its two levels, whatever the fit says
     # (an ink that dewets stands its depression above a flat face it has just left: the
@@ -433,11 +469,26 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
     z_fe_top = z_fe if rise is None else z_fe + np.where(np.isfinite(rise), rise, 0.0)
     explain = {} if opt.explain_uncertainty else None
-    src, sig = node_uncertainty(CellEvidence(lat, z, z_fe_top, first, footprint, slices, exposed,
-                                             opt.pixel_mm, None, rise,
-                                             opt.meniscus.capillary_length_mm if opt.meniscus else 0.0), explain)
+    src, sig = node_uncertainty(
+        CellEvidence(
+            lat,
+            z,
+            z_fe_top,
+            first,
+            footprint,
+            slices,
+            exposed,
+            opt.pixel_mm,
+            None,
+            rise,
+            opt.meniscus.capillary_length_mm if opt.meniscus else 0.0,
+        ),
+        explain,
+    )
     if explain is not None:
-        diag["uncertainty_terms"] = {k: uncertainty_to_output(lat, src, v, r, xo, yo)[1] for k, v in explain.items()}
+        diag["uncertainty_terms"] = {
+            k: uncertainty_to_output(lat, src, v, r, xo, yo)[1] for k, v in explain.items()
+        }
     zo = _to_output(lat, z, r, xo, yo)
     srco, so = uncertainty_to_output(lat, src, sig, r, xo, yo)
     fo = _to_output(lat, footprint.astype(float), r, xo, yo) > 0.5
@@ -448,11 +499,17 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     occluded = occluded_nodes(lat, seen, corrected) & footprint
     diag["occluded_nodes"] = int(occluded.sum())
     diag["occluded_cells"] = (_to_output(lat, occluded.astype(float), r, xo, yo) > 0.5) & fo
-    diag.update({"cross_validation": curve, "smoothing_mm": length,
-                 "first_exposure_nodes": int(np.isfinite(z_fe).sum()),
-                 "cap_nodes": int((footprint & (first == next(k for k, s in enumerate(slices)
-                                                              if not s.empty))).sum()),
-                 "seconds": time.perf_counter() - t0})
+    diag.update(
+        {
+            "cross_validation": curve,
+            "smoothing_mm": length,
+            "first_exposure_nodes": int(np.isfinite(z_fe).sum()),
+            "cap_nodes": int(
+                (footprint & (first == next(k for k, s in enumerate(slices) if not s.empty))).sum()
+            ),
+            "seconds": time.perf_counter() - t0,
+        }
+    )
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
     return Reconstruction(HeightMap(xo, yo, zo, so, srco), length, diag)
 
@@ -464,6 +521,7 @@ def _occluded_cells(src, sig, occluded, slices):
     if not isinstance(occluded, np.ndarray) or occluded.shape != src.shape or not occluded.any():
         return src, sig
     from .uncertainty import OCCLUDED
+
     levels = np.array([s.level for s in slices])
     step = float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
     on = occluded & (src >= 0)

@@ -14,6 +14,7 @@ frames): the tank's displacement when scan.json has the tank, the camera's
 perspective, and surface.meniscus.calibrate_meniscus. reference_error compares a height map of the
 part with its true shape.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -23,12 +24,13 @@ import numpy as np
 from ..errors import InkSliceError
 from .meniscus import calibrate_meniscus, camera_centre_xy
 
-BALL_DIAMETER_MM = 25.4          # the default reference: a one-inch precision ball
+BALL_DIAMETER_MM = 25.4  # the default reference: a one-inch precision ball
 
 
 @dataclass(frozen=True)
 class Ball:
     """A ball of `diameter_mm` lying on the base, its centre over (cx, cy)."""
+
     diameter_mm: float = BALL_DIAMETER_MM
     cx: float = 50.0
     cy: float = 50.0
@@ -58,7 +60,11 @@ class Ball:
         return Ball(self.diameter_mm, float(cx), float(cy))
 
     def to_json(self) -> dict:
-        return {"kind": "ball", "diameter_mm": self.diameter_mm, "centre_mm": [round(self.cx, 3), round(self.cy, 3)]}
+        return {
+            "kind": "ball",
+            "diameter_mm": self.diameter_mm,
+            "centre_mm": [round(self.cx, 3), round(self.cy, 3)],
+        }
 
 
 def _circle_centre(P):
@@ -78,8 +84,11 @@ def locate_ball(waterlines, ball: Ball) -> Ball:
         if len(P) >= 12 and wl.level_mm > ball.radius + 0.5:
             centres.append(_circle_centre(P))
     if not centres:
-        raise InkSliceError("reference scan", f"no waterline of the {ball.name} above its equator: "
-                                              "is the ball in view, and did the scan start above its top?")
+        raise InkSliceError(
+            "reference scan",
+            f"no waterline of the {ball.name} above its equator: "
+            "is the ball in view, and did the scan start above its top?",
+        )
     c = np.median(np.array(centres), axis=0)
     return ball.at(c[0], c[1])
 
@@ -98,8 +107,9 @@ def fit_meniscus(scan, part, waterlines):
         part = locate_ball(waterlines, part)
     cam = scan.camera
     centre = camera_centre_xy(cam.K, cam.homography) if cam.K is not None else None
-    model = calibrate_meniscus(waterlines, part, tank_area_mm2=_tank(scan), camera_xy_mm=centre,
-                               camera_height_mm=cam.height_mm)
+    model = calibrate_meniscus(
+        waterlines, part, tank_area_mm2=_tank(scan), camera_xy_mm=centre, camera_height_mm=cam.height_mm
+    )
     return model, part
 
 
@@ -115,5 +125,8 @@ def reference_error(part, hm, margin_mm: float = 1.0) -> dict:
     if not keep.any():
         raise InkSliceError("reference scan", "the height map has no cell on the reference part's top")
     err = np.abs(z[keep] - part.height(X[keep], Y[keep]))
-    return {"mean_abs_error_mm": round(float(err.mean()), 4), "max_error_mm": round(float(err.max()), 4),
-            "cells": int(keep.sum())}
+    return {
+        "mean_abs_error_mm": round(float(err.mean()), 4),
+        "max_error_mm": round(float(err.max()), 4),
+        "cells": int(keep.sum()),
+    }

@@ -16,6 +16,7 @@ height map on the dissertation's 50 x 50 grid over the part.
   x, y to [-1, 1] first: on raw millimetres the cubic's normal matrix has a
   condition number near 1e17 and the solve would be noise.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -76,7 +77,7 @@ def poly_terms(u, v, degree):
     if degree >= 2:
         cols += [u * u, u * v, v * v]
     if degree >= 3:
-        cols += [u * u * v, u * v * v, u ** 3, v ** 3]
+        cols += [u * u * v, u * v * v, u**3, v**3]
     return np.column_stack(cols)
 
 
@@ -84,7 +85,7 @@ def least_squares(x, y, pts, degree) -> HeightMap:
     cx, sx = (x[0] + x[-1]) / 2, max((x[-1] - x[0]) / 2, 1e-9)
     cy, sy = (y[0] + y[-1]) / 2, max((y[-1] - y[0]) / 2, 1e-9)
     A = poly_terms((pts[:, 0] - cx) / sx, (pts[:, 1] - cy) / sy, degree)
-    coef = np.linalg.solve(A.T @ A, A.T @ pts[:, 2])      # the normal equations
+    coef = np.linalg.solve(A.T @ A, A.T @ pts[:, 2])  # the normal equations
     X, Y = np.meshgrid((x - cx) / sx, (y - cy) / sy)
     z = poly_terms(X.ravel(), Y.ravel(), degree) @ coef
     return HeightMap(x, y, z.reshape(X.shape))

@@ -9,6 +9,7 @@ whether the point lies on a wall.
 Checking the input (levels out of order, duplicated, non-finite, frames with
 no part) happens here, once, with clear errors.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -22,16 +23,16 @@ from ..vision.types import Waterline
 
 @dataclass
 class Slice:
-    level: float                 # free-surface level of the frame, mm
-    loops: list                  # list of (N, 2) arrays, as observed
-    P: np.ndarray                # (M, 2) stacked points (possibly corrected positions)
-    nxt: np.ndarray              # (M,) index of the next point on the same loop
+    level: float  # free-surface level of the frame, mm
+    loops: list  # list of (N, 2) arrays, as observed
+    P: np.ndarray  # (M, 2) stacked points (possibly corrected positions)
+    nxt: np.ndarray  # (M,) index of the next point on the same loop
     prv: np.ndarray
-    z: np.ndarray                # (M,) height each point samples
-    wall: np.ndarray = None      # (M,) bool
-    edge: np.ndarray = None      # (M,) bool: a wall seen by its raised top edge (moves in perspective)
-    hidden: np.ndarray = None    # (M,) bool: a silhouette - a face above the ink hides the waterline there
-    rim: np.ndarray = None       # (M, 2): height bracket of the rim a silhouette point shows (NaN: none)
+    z: np.ndarray  # (M,) height each point samples
+    wall: np.ndarray = None  # (M,) bool
+    edge: np.ndarray = None  # (M,) bool: a wall seen by its raised top edge (moves in perspective)
+    hidden: np.ndarray = None  # (M,) bool: a silhouette - a face above the ink hides the waterline there
+    rim: np.ndarray = None  # (M, 2): height bracket of the rim a silhouette point shows (NaN: none)
     _tree: cKDTree = field(default=None, repr=False)
     _curve: "Slice" = field(default=None, repr=False)
 
@@ -55,18 +56,26 @@ class Slice:
             new[keep] = np.arange(keep.size)
             nxt = np.where(wall[self.nxt[keep]], np.arange(keep.size), new[self.nxt[keep]])
             prv = np.where(wall[self.prv[keep]], np.arange(keep.size), new[self.prv[keep]])
-            self._curve = Slice(self.level, [], self.P[keep], nxt, prv, self.z[keep],
-                                np.zeros(keep.size, bool))
+            self._curve = Slice(
+                self.level, [], self.P[keep], nxt, prv, self.z[keep], np.zeros(keep.size, bool)
+            )
         return self._curve
 
     def moved(self, P, z):
         """The same slice with corrected point positions and heights (its loops follow
         the points: the exposed area is where the points say)."""
         loops = self.loops if P is self.P else _split_like(P, self.loops)
-        return Slice(self.level, loops, P, self.nxt, self.prv, z,
-                     None if self.wall is None else self.wall.copy(),
-                     None if self.edge is None else self.edge.copy(),
-                     None if self.hidden is None else self.hidden.copy())
+        return Slice(
+            self.level,
+            loops,
+            P,
+            self.nxt,
+            self.prv,
+            z,
+            None if self.wall is None else self.wall.copy(),
+            None if self.edge is None else self.edge.copy(),
+            None if self.hidden is None else self.hidden.copy(),
+        )
 
     def at_level(self, level) -> "Slice":
         """The same slice at another level (its point heights move with it)."""
@@ -136,8 +145,10 @@ def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
     at_base = [items[i].level_mm for i in order if not shows_waterline(items[i].level_mm)]
     if at_base:
         order = [i for i in order if shows_waterline(items[i].level_mm)]
-        notes.append(f"{len(at_base)} frame(s) at or below level 0 mm not used: the base top is out of "
-                     "the ink there, and its outline is not the part's waterline")
+        notes.append(
+            f"{len(at_base)} frame(s) at or below level 0 mm not used: the base top is out of "
+            "the ink there, and its outline is not the part's waterline"
+        )
     for i in order:
         s = make_slice(items[i].level_mm, items[i].loops)
         if slices and abs(slices[-1].level - s.level) < 1e-6:
@@ -151,16 +162,22 @@ def check_waterlines(waterlines) -> tuple[list[Slice], list[str]]:
     if not seen:
         raise InkSliceError("waterlines", "no part is visible at any level")
     if len(slices) < 2:
-        raise InkSliceError("waterlines", f"only one level ({slices[0].level:g} mm): a height map "
-                            "needs at least two levels to interpolate between")
+        raise InkSliceError(
+            "waterlines",
+            f"only one level ({slices[0].level:g} mm): a height map "
+            "needs at least two levels to interpolate between",
+        )
     # frames below the first empty one after the part appeared cannot be: the part only grows
     # as the level drops. An empty frame BELOW visible ones means the part left the view.
     first = next(i for i, s in enumerate(slices) if not s.empty)
     for s in slices[first:]:
         if s.empty:
-            raise InkSliceError(f"level {s.level:g} mm", "no part visible although higher levels "
-                                "showed it: the part left the view, a frame failed, or the frames "
-                                "contradict their levels")
+            raise InkSliceError(
+                f"level {s.level:g} mm",
+                "no part visible although higher levels "
+                "showed it: the part left the view, a frame failed, or the frames "
+                "contradict their levels",
+            )
     _check_emerging(slices[first:])
     return slices, notes
 
@@ -174,9 +191,12 @@ def _check_emerging(slices):
     for s in slices:
         area = s.area()
         if area < most - max(0.1 * most, 5.0):
-            raise InkSliceError(f"level {s.level:g} mm", f"shows {area:.0f} mm² of the part, less than the "
-                                f"{most:.0f} mm² at {at:g} mm above it: the part only emerges as the ink drops, "
-                                "so the frames contradict their levels")
+            raise InkSliceError(
+                f"level {s.level:g} mm",
+                f"shows {area:.0f} mm² of the part, less than the "
+                f"{most:.0f} mm² at {at:g} mm above it: the part only emerges as the ink drops, "
+                "so the frames contradict their levels",
+            )
         if area > most:
             most, at = area, s.level
 
@@ -222,6 +242,7 @@ class Perspective:
     A point standing h above the ink at plane position x is seen at
     C + (x - C) H / (H - h): the higher, the further from the camera's foot.
     """
+
     xy: tuple
     height_mm: float
 
@@ -231,8 +252,9 @@ class Perspective:
         return C + (P - C) * ((self.height_mm - np.asarray(h, float)) / self.height_mm)[..., None]
 
 
-def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None,
-               step_range=(1.0, 1.0)) -> int:
+def mark_walls(
+    slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None, step_range=(1.0, 1.0)
+) -> int:
     """Mark points whose waterline stays put to the next level down (or up): walls.
 
     On a sculptured top the level curve moves by step / slope between levels;
@@ -253,39 +275,54 @@ def mark_walls(slices: list[Slice], wall_tol_mm: float, camera: Perspective | No
     for k, s in enumerate(slices):
         if s.empty:
             continue
-        static = np.zeros(len(s.P), bool)       # a wall facing the camera shows its foot: no move
+        static = np.zeros(len(s.P), bool)  # a wall facing the camera shows its foot: no move
         raised = np.zeros(len(s.P), bool)
         for j in (k - 1, k + 1):
             if not (0 <= j < len(slices)) or slices[j].empty:
                 continue
             static |= polyline_distance(slices[j], s.P)[0] < wall_tol_mm
             if camera is not None:
-                dl = s.level - slices[j].level          # > 0: the neighbour is lower
+                dl = s.level - slices[j].level  # > 0: the neighbour is lower
                 # the edge's height above the ink is unknown (0 .. top - level): take the
                 # middle and widen the tolerance by what the rest of the range moves it
                 h_max = max(top - s.level, 0.0) + abs(dl)
-                raised |= _ray_match(camera, s.P, slices[j], dl, 0.5 * h_max, step_range[1] * 0.5 * h_max,
-                                     wall_tol_mm, step_range)[1]
+                raised |= _ray_match(
+                    camera,
+                    s.P,
+                    slices[j],
+                    dl,
+                    0.5 * h_max,
+                    step_range[1] * 0.5 * h_max,
+                    wall_tol_mm,
+                    step_range,
+                )[1]
         s.wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
         # a raised edge moves as the perspective says (near the camera's foot it also
         # looks static: the move is then too small to matter)
-        s.edge = s.wall & _close_gaps(s, raised, WALL_GAP_POINTS) if camera is not None else \
-            np.zeros(len(s.P), bool)
+        s.edge = (
+            s.wall & _close_gaps(s, raised, WALL_GAP_POINTS)
+            if camera is not None
+            else np.zeros(len(s.P), bool)
+        )
         s._curve = None
         total += int(s.wall.sum())
     return total
 
 
-SILHOUETTE_FRAMES = 3      # frames above a point in which its ray is looked for
-SILHOUETTE_TOL_MM = 0.04   # how near the part seen at a higher level the ray may pass
-SILHOUETTE_RUN = 5         # consecutive points a silhouette off the walls already found must span
-BACK_TOL_FACTOR = 2.5      # up from a silhouette, its continuation: two outlines each a bit off
-RIM_TOL_MM = 0.3           # two silhouettes of a crease seen edge-on, each ~a pixel off
-RIM_MISSES = 2             # frames in a row the ray may miss before the rim is behind it
+SILHOUETTE_FRAMES = 3  # frames above a point in which its ray is looked for
+SILHOUETTE_TOL_MM = 0.04  # how near the part seen at a higher level the ray may pass
+SILHOUETTE_RUN = 5  # consecutive points a silhouette off the walls already found must span
+BACK_TOL_FACTOR = 2.5  # up from a silhouette, its continuation: two outlines each a bit off
+RIM_TOL_MM = 0.3  # two silhouettes of a crease seen edge-on, each ~a pixel off
+RIM_MISSES = 2  # frames in a row the ray may miss before the rim is behind it
 
 
-def silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = SILHOUETTE_TOL_MM,
-                frames: int = SILHOUETTE_FRAMES) -> list[np.ndarray]:
+def silhouettes(
+    slices: list[Slice],
+    camera: Perspective,
+    tol_mm: float = SILHOUETTE_TOL_MM,
+    frames: int = SILHOUETTE_FRAMES,
+) -> list[np.ndarray]:
     """Per slice: which of its points are silhouettes, not waterlines.
 
     The camera sees a plane point P of the ink at level L along the ray from its
@@ -326,12 +363,13 @@ def silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = SILHOU
         P = s.P[src]
         Q = P + (C - P) * ((slices[j].level - s.level) / H)
         d, i = polyline_distance(slices[j], Q)
-        out[j][i[d <= BACK_TOL_FACTOR * tol_mm]] = True   # two outlines' noise, not one ray's
+        out[j][i[d <= BACK_TOL_FACTOR * tol_mm]] = True  # two outlines' noise, not one ray's
     return out
 
 
-def rim_brackets(slices: list[Slice], camera: Perspective, hidden: list[np.ndarray],
-                 tol_mm: float = RIM_TOL_MM) -> list[np.ndarray]:
+def rim_brackets(
+    slices: list[Slice], camera: Perspective, hidden: list[np.ndarray], tol_mm: float = RIM_TOL_MM
+) -> list[np.ndarray]:
     """Per slice, (M, 2): the height bracket (lo, hi) of the rim each silhouette point
     shows (NaN for the other points).
 
@@ -404,7 +442,7 @@ def mark_silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = S
             # a silhouette is a stretch of rim: a point or two of a level curve whose ray
             # grazes the frame above within the noise is not one
             hidden &= s.wall | _in_runs(s, hidden, SILHOUETTE_RUN)
-            rim[~hidden | s.edge] = np.nan        # edges found frame to frame keep their chain
+            rim[~hidden | s.edge] = np.nan  # edges found frame to frame keep their chain
         s.hidden = hidden
         s.rim = rim
         s.wall = hidden if s.wall is None else s.wall | hidden
@@ -414,8 +452,8 @@ def mark_silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = S
     return total
 
 
-EDGE_HISTORY = 2        # a wall point may continue an edge seen this many frames up
-WALL_GAP_POINTS = 4     # a run of up to this many non-wall points between wall points is wall
+EDGE_HISTORY = 2  # a wall point may continue an edge seen this many frames up
+WALL_GAP_POINTS = 4  # a run of up to this many non-wall points between wall points is wall
 
 
 def _close_gaps(s: Slice, wall, n):
@@ -451,8 +489,14 @@ def _along_ray(camera: Perspective, P, other: Slice, dl, h, step_range):
     return d, i
 
 
-def unproject_rims(slices: list[Slice], camera: Perspective, wall_tol_mm: float,
-                   rim_height=None, rise_max: float = 0.0, step_range=(1.0, 1.0)) -> list[Slice]:
+def unproject_rims(
+    slices: list[Slice],
+    camera: Perspective,
+    wall_tol_mm: float,
+    rim_height=None,
+    rise_max: float = 0.0,
+    step_range=(1.0, 1.0),
+) -> list[Slice]:
     """Move each wall point from where the camera sees its top edge to where the wall is.
 
     A wall's top edge at height z0 first shows at the highest level below z0,
@@ -504,13 +548,13 @@ def _ray_match(camera, P, frame: Slice, dl, h, h_spread, wall_tol_mm, step_range
     grows by what an edge h_spread higher or lower would move differently."""
     d, i = _along_ray(camera, P, frame, dl, h, step_range)
     r = np.hypot(*(P - np.asarray(camera.xy, float)).T)
-    return i, d < wall_tol_mm + r * abs(dl) * h_spread / camera.height_mm ** 2
+    return i, d < wall_tol_mm + r * abs(dl) * h_spread / camera.height_mm**2
 
 
 def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
     """Per frame: each wall point's edge height as a bracket (lo, hi) - where it first
     showed - (None for a frame without wall points)."""
-    spans, above = [], []   # above: the last EDGE_HISTORY frames and their brackets
+    spans, above = [], []  # above: the last EDGE_HISTORY frames and their brackets
     for s in slices:
         if s.empty or s.edge is None or not s.edge.any():
             spans.append(None)
@@ -528,14 +572,22 @@ def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
             # edge that showed first wins: a point continuing a frame's glitch (itself a
             # "new" edge) would otherwise carry the glitch's bracket all the way down
             dl = s.level - frame.level
-            i, near = _ray_match(camera, s.P[w], frame, dl, 0.5 * abs(dl), 0.5 * max(slices[0].level - s.level, 1.0),
-                                 wall_tol_mm, step_range)
+            i, near = _ray_match(
+                camera,
+                s.P[w],
+                frame,
+                dl,
+                0.5 * abs(dl),
+                0.5 * max(slices[0].level - s.level, 1.0),
+                wall_tol_mm,
+                step_range,
+            )
             cand = span_above[i]
-            older = near & (cand[:, 0] > span[w, 0])          # NaN (no edge there) compares False
+            older = near & (cand[:, 0] > span[w, 0])  # NaN (no edge there) compares False
             span[w[older]] = cand[older]
         span = _mend_along_wall(s, span)
         spans.append(span)
-        above = (above + [(s, span)])[-EDGE_HISTORY:]   # matched against the frames as seen
+        above = (above + [(s, span)])[-EDGE_HISTORY:]  # matched against the frames as seen
     return spans
 
 
@@ -545,7 +597,7 @@ def _mend_along_wall(s: Slice, span, n=WALL_GAP_POINTS):
     is a glitch of this frame (a rim point a pixel off): it takes its neighbours' bracket.
     Repeated while it mends more: a glitch a few points longer than n mends from its ends."""
     while True:
-        known = np.isfinite(span[:, 0]) & (span[:, 0] > s.level)      # continues an edge from above
+        known = np.isfinite(span[:, 0]) & (span[:, 0] > s.level)  # continues an edge from above
         suspect = s.wall & ~known
         if not suspect.any() or not known.any():
             return span

@@ -14,6 +14,7 @@ dissertation's frame; 28.36 for sample 4), so both are computed, named apart,
 and the table form is used when comparing with the tables. Heights must be
 given in the dissertation's frame for Ep to mean what it meant there.
 """
+
 from __future__ import annotations
 
 import numpy as np

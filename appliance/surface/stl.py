@@ -6,6 +6,7 @@ set of cells (the outline and the rims of holes); the bottom is the same cells
 at z = 0. Every edge is then shared by exactly two triangles, and the normals
 point out of the solid (top up, bottom down, walls away from the part).
 """
+
 from __future__ import annotations
 
 import struct
@@ -34,17 +35,17 @@ def heightmap_to_stl(hm: HeightMap, name: str = "inkslice") -> bytes:
     p10 = np.stack([X[j, i + 1], Y[j, i + 1], Z[j, i + 1]], -1)
     p01 = np.stack([X[j + 1, i], Y[j + 1, i], Z[j + 1, i]], -1)
     p11 = np.stack([X[j + 1, i + 1], Y[j + 1, i + 1], Z[j + 1, i + 1]], -1)
-    tris = [np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)]       # top, CCW from above
-    flat = lambda p: p * np.array([1.0, 1.0, 0.0])                           # noqa: E731
+    tris = [np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)]  # top, CCW from above
+    flat = lambda p: p * np.array([1.0, 1.0, 0.0])  # noqa: E731
     tris += [np.stack([flat(p00), flat(p11), flat(p10)], 1), np.stack([flat(p00), flat(p01), flat(p11)], 1)]
     # walls: a cell edge whose neighbour cell is not on the part
     pad = np.pad(cells, 1)
     c = pad[1:-1, 1:-1]
     sides = [  # (neighbour missing, edge start, edge end) with the part on the edge's left seen from above
-        (~pad[:-2, 1:-1] & c, (0, 0), (0, 1)),     # south edge, runs +x
-        (~pad[1:-1, 2:] & c, (0, 1), (1, 1)),      # east edge, runs +y
-        (~pad[2:, 1:-1] & c, (1, 1), (1, 0)),      # north edge, runs -x
-        (~pad[1:-1, :-2] & c, (1, 0), (0, 0)),     # west edge, runs -y
+        (~pad[:-2, 1:-1] & c, (0, 0), (0, 1)),  # south edge, runs +x
+        (~pad[1:-1, 2:] & c, (0, 1), (1, 1)),  # east edge, runs +y
+        (~pad[2:, 1:-1] & c, (1, 1), (1, 0)),  # north edge, runs -x
+        (~pad[1:-1, :-2] & c, (1, 0), (0, 0)),  # west edge, runs -y
     ]
     for miss, (ja, ia), (jb, ib) in sides:
         jj, ii = np.nonzero(miss)

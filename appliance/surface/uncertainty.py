@@ -38,6 +38,7 @@ from what limits each:
 confidence: the G-code header lists such regions (`low_confidence_regions`),
 and the report names them.
 """
+
 from __future__ import annotations
 
 import math
@@ -50,12 +51,12 @@ from scipy.spatial import cKDTree
 # the sources, in the order of their codes (HeightMap.source holds the codes)
 SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled")
 SEEN, INTERPOLATED, EXTRAPOLATED, OCCLUDED, WALL, CLAMPED, FILLED = range(len(SOURCES))
-NO_SOURCE = -1                     # off the part, or a map that does not say
+NO_SOURCE = -1  # off the part, or a map that does not say
 
-DEFAULT_UNCERTAIN_MM = 0.1         # cells above this are low confidence (G-code header, report)
-LATERAL_PX = 0.5                   # a waterline is placed to about half a pixel
-FAR_GAPS = 4.0                     # this many times the part's typical distance to a waterline: unpinned
-STEEP_SLOPE = 3.0                  # |grad z| above this (72 deg) the cell is on a wall
+DEFAULT_UNCERTAIN_MM = 0.1  # cells above this are low confidence (G-code header, report)
+LATERAL_PX = 0.5  # a waterline is placed to about half a pixel
+FAR_GAPS = 4.0  # this many times the part's typical distance to a waterline: unpinned
+STEEP_SLOPE = 3.0  # |grad z| above this (72 deg) the cell is on a wall
 
 
 def source_code(name: str) -> int:
@@ -65,17 +66,18 @@ def source_code(name: str) -> int:
 @dataclass
 class CellEvidence:
     """What the lattice fit knows per node, the inputs of `node_uncertainty`."""
-    lat: object                    # gridfit.Lattice
-    z: np.ndarray                  # the fitted heights (NaN off the part)
-    z_fe: np.ndarray               # first-exposure heights (NaN where the fit filled in)
-    first: np.ndarray              # index of the level where each node came out of the ink
+
+    lat: object  # gridfit.Lattice
+    z: np.ndarray  # the fitted heights (NaN off the part)
+    z_fe: np.ndarray  # first-exposure heights (NaN where the fit filled in)
+    first: np.ndarray  # index of the level where each node came out of the ink
     footprint: np.ndarray
-    slices: list                   # the slices the fit used (at their corrected heights)
-    exposed: np.ndarray            # (K, ny, nx) bool: inside each slice's waterline
+    slices: list  # the slices the fit used (at their corrected heights)
+    exposed: np.ndarray  # (K, ny, nx) bool: inside each slice's waterline
     pixel_mm: float = 0.0
-    occluded: np.ndarray | None = None   # nodes under a face that hid the waterline
-    rise: np.ndarray | None = None       # the meniscus correction applied per node (top - contact line)
-    capillary_mm: float = 0.0            # the ink's capillary length (how far a meniscus reaches)
+    occluded: np.ndarray | None = None  # nodes under a face that hid the waterline
+    rise: np.ndarray | None = None  # the meniscus correction applied per node (top - contact line)
+    capillary_mm: float = 0.0  # the ink's capillary length (how far a meniscus reaches)
 
 
 def _levels_and_steps(slices):
@@ -94,6 +96,7 @@ def _frames_disagree(ev: CellEvidence, lv):
     sure: that is no contradiction, nor is a node that never comes out again (the lowest
     frames can lose the part's edge from their view)."""
     from .slices import polyline_distance
+
     K = len(ev.slices)
     lat = ev.lat
     first = np.where(ev.footprint, ev.first, K)
@@ -152,6 +155,7 @@ def _inradius(region, d, floor):
 def _fit_residual(ev: CellEvidence, pts, zp):
     """Local RMS of the fit's misfit at the waterline points around each node."""
     from .gridfit import bilinear
+
     lat = ev.lat
     if len(pts) == 0:
         return np.zeros(lat.shape)
@@ -173,6 +177,7 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     """-> (source codes, uncertainty in mm) on the lattice, NO_SOURCE / NaN off the part.
     `explain`, a dict, receives each term's field (for benches and the curious)."""
     from .gridfit import fill_nearest
+
     lat = ev.lat
     h = min(lat.hx, lat.hy)
     lv, step = _levels_and_steps(ev.slices)
@@ -200,7 +205,7 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     # the larger principal curvature of the height field (its Hessian's larger |eigenvalue|)
     tr, det = gxx + gyy, gxx * gyy - 0.5 * (gxy + gyx) * 0.5 * (gxy + gyx)
     bend = np.abs(tr) / 2 + np.sqrt(np.maximum((tr / 2) ** 2 - det, 0.0))
-    bend = ndimage.maximum_filter(bend, size=3)      # a kink's neighbours bend too
+    bend = ndimage.maximum_filter(bend, size=3)  # a kink's neighbours bend too
 
     # the level step around each node's first exposure (the bracket the frames give)
     fk = np.clip(ev.first, 0, K - 1)
@@ -218,7 +223,7 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     d = np.where(np.isfinite(d_seen), d_seen, 0.0)
     bracket = local_step / math.sqrt(12.0)
     typical = max(float(np.median(d[ev.footprint])) if ev.footprint.any() else h, h)
-    u_bend = np.minimum(0.5 * bend * d ** 2, bracket)
+    u_bend = np.minimum(0.5 * bend * d**2, bracket)
     u_far = bracket * np.clip(d / (FAR_GAPS * typical), 0.0, 1.0) ** 2
     u_gap = np.maximum(u_bend, u_far)
     # above the top frame: the top lies somewhere in the step above the highest level
@@ -251,9 +256,20 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
         # the lattice's border is the outline too (a part that fills its bounds)
         d_out = ndimage.distance_transform_edt(np.pad(ev.footprint, 1), sampling=(lat.hy, lat.hx))[1:-1, 1:-1]
         u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
-    u = np.sqrt(u_lat ** 2 + u_gap ** 2 + u_fit ** 2 + u_frames ** 2 + u_bound ** 2 + u_rim ** 2 + u_men ** 2)
+    u = np.sqrt(u_lat**2 + u_gap**2 + u_fit**2 + u_frames**2 + u_bound**2 + u_rim**2 + u_men**2)
     if explain is not None:
-        explain.update(lateral=u_lat, gap=u_gap, gap_bend=u_bend, gap_far=u_far, gap_cap=u_cap, fit=u_fit, frames=u_frames, bound=u_bound, rim=u_rim, meniscus=u_men)
+        explain.update(
+            lateral=u_lat,
+            gap=u_gap,
+            gap_bend=u_bend,
+            gap_far=u_far,
+            gap_cap=u_cap,
+            fit=u_fit,
+            frames=u_frames,
+            bound=u_bound,
+            rim=u_rim,
+            meniscus=u_men,
+        )
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
@@ -271,6 +287,7 @@ def to_output(lat, src, u, r, xo, yo):
     """Lattice fields on the output grid: the nearest node's source, the uncertainty
     bilinear (and never below the nearest node's: a wall node must not be averaged away)."""
     from .gridfit import fill_nearest
+
     if r is not None:
         return src[::r, ::r].copy(), u[::r, ::r].copy()
     fi = (xo - lat.x[0]) / lat.hx
@@ -293,13 +310,15 @@ class Region:
     ymin: float
     ymax: float
     cells: int
-    share: float                   # of the part's cells
+    share: float  # of the part's cells
     worst_mm: float
-    source: str                    # the commonest source in it
+    source: str  # the commonest source in it
 
     def describe(self):
-        return (f"X {self.xmin:.1f}..{self.xmax:.1f} Y {self.ymin:.1f}..{self.ymax:.1f} mm, "
-                f"{100 * self.share:.1f} % of the part, up to {self.worst_mm:.2f} mm, mostly {self.source}")
+        return (
+            f"X {self.xmin:.1f}..{self.xmax:.1f} Y {self.ymin:.1f}..{self.ymax:.1f} mm, "
+            f"{100 * self.share:.1f} % of the part, up to {self.worst_mm:.2f} mm, mostly {self.source}"
+        )
 
 
 def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
@@ -324,11 +343,18 @@ def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
         common = "unknown"
         if src is not None and (src >= 0).any():
             common = SOURCES[int(np.bincount(src[src >= 0].astype(int)).argmax())]
-        out.append(Region(float(max(hm.x[sl[1].start] - dx / 2, hm.x[0])),
-                          float(min(hm.x[sl[1].stop - 1] + dx / 2, hm.x[-1])),
-                          float(max(hm.y[sl[0].start] - dy / 2, hm.y[0])),
-                          float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
-                          int(m.sum()), float(m.sum()) / total, float(np.max(hm.sigma[sl][m])), common))
+        out.append(
+            Region(
+                float(max(hm.x[sl[1].start] - dx / 2, hm.x[0])),
+                float(min(hm.x[sl[1].stop - 1] + dx / 2, hm.x[-1])),
+                float(max(hm.y[sl[0].start] - dy / 2, hm.y[0])),
+                float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
+                int(m.sum()),
+                float(m.sum()) / total,
+                float(np.max(hm.sigma[sl][m])),
+                common,
+            )
+        )
     out.sort(key=lambda r: -r.cells)
     return out
 
@@ -341,14 +367,18 @@ def header_notes(hm, threshold_mm=DEFAULT_UNCERTAIN_MM, most=8):
     if not regions:
         return [f"confidence: every cell of the height map within {threshold_mm:g} mm"]
     share = sum(r.share for r in regions)
-    lines = [f"low confidence: {100 * share:.1f} % of the part in {len(regions)} region(s) "
-             f"with uncertainty over {threshold_mm:g} mm; check these after milling"]
+    lines = [
+        f"low confidence: {100 * share:.1f} % of the part in {len(regions)} region(s) "
+        f"with uncertainty over {threshold_mm:g} mm; check these after milling"
+    ]
     for i, r in enumerate(regions[:most], start=1):
         lines.append(f"low confidence {i}: {r.describe()}")
     if len(regions) > most:
         rest = regions[most:]
-        lines.append(f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
-                     "of the part")
+        lines.append(
+            f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
+            "of the part"
+        )
     return lines
 
 
@@ -358,5 +388,8 @@ def source_summary(hm):
         return {}
     on = hm.on_part & (hm.source >= 0)
     total = int(hm.on_part.sum())
-    return {name: float(np.sum(on & (hm.source == k))) / total
-            for k, name in enumerate(SOURCES) if total and np.any(on & (hm.source == k))}
+    return {
+        name: float(np.sum(on & (hm.source == k))) / total
+        for k, name in enumerate(SOURCES)
+        if total and np.any(on & (hm.source == k))
+    }

@@ -7,6 +7,7 @@ tile sees true neighbours) side by side into one short, wide strip, filtered
 and thresholded there in two OpenCV calls, and scattered back into the
 full-frame buffers. The rest of the binary image keeps last frame's labels.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -89,9 +90,10 @@ class TileGrid:
         T, a = self.tile, self.apron
         A = T + 2 * a
         s0, s1 = image.strides
-        base = image[self.oy - a:, self.ox - a:]
-        view = as_strided(base, shape=(A, self.ny, self.nx, A), strides=(s0, s0 * T, s1 * T, s1),
-                          writeable=False)
+        base = image[self.oy - a :, self.ox - a :]
+        view = as_strided(
+            base, shape=(A, self.ny, self.nx, A), strides=(s0, s0 * T, s1 * T, s1), writeable=False
+        )
         return view[:, ty, tx].reshape(A, -1)
 
     def scatter(self, strip: np.ndarray, dst: np.ndarray, ty: np.ndarray, tx: np.ndarray):
@@ -99,6 +101,6 @@ class TileGrid:
         T, a = self.tile, self.apron
         A = T + 2 * a
         n = len(ty)
-        inner = strip.reshape(A, n, A)[a:-a, :, a:-a].transpose(1, 0, 2)     # (n, T, T)
+        inner = strip.reshape(A, n, A)[a:-a, :, a:-a].transpose(1, 0, 2)  # (n, T, T)
         x0, y0, x1, y1 = self.covered
         dst[y0:y1, x0:x1].reshape(self.ny, T, self.nx, T)[ty, :, tx, :] = inner

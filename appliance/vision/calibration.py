@@ -16,6 +16,7 @@ mirrored, so rows run down the image as they run down the top view).
 
 Pure: images in, arrays out; the calibrate command does the files.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,8 +33,8 @@ class CalibrationError(InkSliceError):
 
 @dataclass(frozen=True)
 class Board:
-    cols: int                # inner corners along a row
-    rows: int                # inner corners along a column
+    cols: int  # inner corners along a row
+    rows: int  # inner corners along a column
     square_mm: float
 
     @property
@@ -52,8 +53,8 @@ class BoardPose:
 class Intrinsics:
     K: np.ndarray
     dist: np.ndarray
-    rms_px: float            # reprojection error of the corners
-    size: tuple              # (width, height)
+    rms_px: float  # reprojection error of the corners
+    size: tuple  # (width, height)
 
 
 def _gray(image):
@@ -69,11 +70,17 @@ def find_corners(image: np.ndarray, board: Board, where="image") -> np.ndarray:
     gray = _gray(image)
     found, corners = cv2.findChessboardCornersSB(gray, board.pattern, flags=cv2.CALIB_CB_ACCURACY)
     if not found:
-        found, corners = cv2.findChessboardCorners(gray, board.pattern,
-                                                   flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        found, corners = cv2.findChessboardCorners(
+            gray, board.pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+        )
         if found:
-            corners = cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1),
-                                       (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3))
+            corners = cv2.cornerSubPix(
+                gray,
+                corners,
+                (5, 5),
+                (-1, -1),
+                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3),
+            )
     if not found:
         raise CalibrationError(where, f"chessboard with {board.cols}x{board.rows} inner corners not found")
     c = corners.reshape(-1, 2).astype(np.float64)
@@ -100,16 +107,19 @@ def _canonical_order(c, board):
 
 def board_points(board: Board) -> np.ndarray:
     """Corner positions on the board (mm), z = 0, in the order find_corners returns."""
-    j, i = np.mgrid[0:board.rows, 0:board.cols]
-    return np.column_stack([i.ravel() * board.square_mm, j.ravel() * board.square_mm,
-                            np.zeros(board.rows * board.cols)]).astype(np.float64)
+    j, i = np.mgrid[0 : board.rows, 0 : board.cols]
+    return np.column_stack(
+        [i.ravel() * board.square_mm, j.ravel() * board.square_mm, np.zeros(board.rows * board.cols)]
+    ).astype(np.float64)
 
 
 def intrinsics(images, board: Board, names=None) -> Intrinsics:
     """K and distortion from several views of the board (all the same size)."""
     names = list(names) if names is not None else [f"image {k + 1}" for k in range(len(images))]
     if len(images) < 3:
-        raise CalibrationError("calibration", f"need at least 3 board images for intrinsics, got {len(images)}")
+        raise CalibrationError(
+            "calibration", f"need at least 3 board images for intrinsics, got {len(images)}"
+        )
     size = None
     img_pts, obj_pts = [], []
     for image, name in zip(images, names):
@@ -117,8 +127,11 @@ def intrinsics(images, board: Board, names=None) -> Intrinsics:
         if size is None:
             size = s
         elif s != size:
-            raise CalibrationError(name, f"is {s[0]}x{s[1]}, the first image is {size[0]}x{size[1]}: "
-                                         "all calibration images must come from the same camera mode")
+            raise CalibrationError(
+                name,
+                f"is {s[0]}x{s[1]}, the first image is {size[0]}x{size[1]}: "
+                "all calibration images must come from the same camera mode",
+            )
         img_pts.append(find_corners(image, board, name).astype(np.float32).reshape(-1, 1, 2))
         obj_pts.append(board_points(board).astype(np.float32))
     # k3 stays 0: with a handful of views it only buys overfitting at the
@@ -132,7 +145,7 @@ def plane_points(board: Board, pose: BoardPose) -> np.ndarray:
     p = board_points(board)[:, :2]
     a = np.radians(pose.angle_deg)
     along = np.array([np.cos(a), np.sin(a)])
-    down = np.array([np.sin(a), -np.cos(a)])       # a quarter turn clockwise seen from above
+    down = np.array([np.sin(a), -np.cos(a)])  # a quarter turn clockwise seen from above
     return np.array([pose.x0, pose.y0]) + p[:, :1] * along + p[:, 1:] * down
 
 
@@ -177,14 +190,16 @@ def camera_json(size, Hm, K=None, dist=None, height_mm=None) -> dict:
     return out
 
 
-def calibrate(board_images, plane_image, board: Board, pose: BoardPose, board_names=None,
-              plane_name="plane image") -> tuple[dict, dict]:
+def calibrate(
+    board_images, plane_image, board: Board, pose: BoardPose, board_names=None, plane_name="plane image"
+) -> tuple[dict, dict]:
     """The whole calibration: (camera block, report figures)."""
     intr = intrinsics(board_images, board, board_names)
     size = (plane_image.shape[1], plane_image.shape[0])
     if size != intr.size:
-        raise CalibrationError(plane_name, f"is {size[0]}x{size[1]}, the board images are "
-                                           f"{intr.size[0]}x{intr.size[1]}")
+        raise CalibrationError(
+            plane_name, f"is {size[0]}x{size[1]}, the board images are {intr.size[0]}x{intr.size[1]}"
+        )
     Hm, height, rms_mm = plane_homography(plane_image, board, pose, intr.K, intr.dist, plane_name)
     report = {"reprojection_rms_px": intr.rms_px, "plane_rms_mm": rms_mm, "images": len(board_images)}
     return camera_json(size, Hm, intr.K, intr.dist, height), report

@@ -7,6 +7,7 @@ from a histogram of a decimated view of the tank (a few tens of thousands of
 pixels), not of the whole frame, and saturated bins are left out so that
 specular glare (clipped at 255) cannot drag it upwards.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ import numpy as np
 
 from ..errors import ScanError
 
-SATURATED = 250          # bins at or above this are glare or clipped highlights
+SATURATED = 250  # bins at or above this are glare or clipped highlights
 
 
 class FrameError(ScanError):
@@ -46,7 +47,7 @@ def check_frame(frame, width: int, height: int, where="frame"):
         raise FrameError(where, f"frame is {w}x{h}, the camera is {width}x{height}")
     # A truncated file decoded by a lenient reader ends in rows of exact zeros;
     # a real sensor never reads 0 in every channel over whole rows (black level).
-    tail = frame[-max(2, height // 64):]
+    tail = frame[-max(2, height // 64) :]
     if not tail.any():
         raise FrameError(where, "frame ends in rows of zeros (truncated capture or file?)")
 
@@ -61,12 +62,13 @@ def channel_view(frame, channel: int):
 @dataclass
 class Split:
     """Two classes of a histogram: ink below `threshold`, part at or above it."""
+
     threshold: int
-    ink: float            # mean grey level of the ink class
-    part: float           # mean grey level of the part class
+    ink: float  # mean grey level of the ink class
+    part: float  # mean grey level of the part class
     part_fraction: float
-    separability: float   # Otsu's between-class / total variance, 0..1
-    otsu: int = -1        # Otsu's own threshold, when `threshold` was moved towards the ink
+    separability: float  # Otsu's between-class / total variance, 0..1
+    otsu: int = -1  # Otsu's own threshold, when `threshold` was moved towards the ink
 
     @property
     def contrast(self):
@@ -87,7 +89,7 @@ def otsu_split(hist: np.ndarray) -> Split:
     with np.errstate(divide="ignore", invalid="ignore"):
         between = (mean * w0 - m0) ** 2 / (w0 * w1)
     between[~np.isfinite(between)] = 0
-    k = int(np.argmax(between))                    # ink is 0..k, part k+1..
+    k = int(np.argmax(between))  # ink is 0..k, part k+1..
     var = float(np.dot(h, (levels - mean) ** 2) / total)
     ink = m0[k] / w0[k] if w0[k] > 0 else 0.0
     part = (m0[-1] - m0[k]) / w1[k] if w1[k] > 0 else 255.0
@@ -105,8 +107,14 @@ def towards_ink(split: Split, fraction: float) -> Split:
     part pixel (glare is dealt with by colour, specks by size).
     """
     t = int(np.ceil(split.ink + fraction * (split.part - split.ink)))
-    return Split(max(1, min(t, split.threshold)), split.ink, split.part, split.part_fraction,
-                 split.separability, split.threshold)
+    return Split(
+        max(1, min(t, split.threshold)),
+        split.ink,
+        split.part,
+        split.part_fraction,
+        split.separability,
+        split.threshold,
+    )
 
 
 def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
@@ -128,7 +136,7 @@ def glare_cut(hist: np.ndarray, split: Split) -> int:
     near-white ring round it cannot pose as part.
     """
     h = np.asarray(hist, np.float64)
-    part = h[split.threshold:SATURATED]
+    part = h[split.threshold : SATURATED]
     if part.sum() <= 0:
         return 256
     top = split.threshold + int(np.searchsorted(np.cumsum(part), 0.995 * part.sum()))
@@ -144,10 +152,10 @@ class Hue:
     stays much bluer than red and the light grey part does not. The saturating
     8-bit difference other - main (blue - red) separates them at any glare.
     """
+
     other: int
     cut: int
-    clip: int = 256       # other-channel level from which a pixel is a clipped highlight
-
+    clip: int = 256  # other-channel level from which a pixel is a clipped highlight
 
 
 def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 24.0):
@@ -170,14 +178,14 @@ def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 
         if c == main:
             continue
         o = np.ascontiguousarray(sample_bgr[:, :, c])
-        d = cv2.subtract(o, m)      # saturates at 0
+        d = cv2.subtract(o, m)  # saturates at 0
         d_ink = float(d[~bright].mean())
         d_part = 0.0
         if bright.sum() >= 4:
             inner = otsu_split(np.bincount(d[bright], minlength=256))
             lower = (1 - inner.part_fraction) * bright.sum()
             if inner.contrast >= min_gap and lower >= 4:
-                d_part = inner.ink          # (a small part among big highlights: still a class)
+                d_part = inner.ink  # (a small part among big highlights: still a class)
             elif float(d[bright].mean()) < 0.5 * d_ink:
                 d_part = float(d[bright].mean())
         gap = d_ink - d_part

@@ -8,6 +8,7 @@ frame alone: the same channel choice, threshold, colour test against glare
 and speck filter that processing will apply, so the daemon never scans for
 a part that processing would not see, nor misses one it would.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -15,7 +16,7 @@ import numpy as np
 
 from .pipeline import WaterlineExtractor
 
-WIDTH = 256                 # px across the mask: cheap to compare, ~0.6 mm a pixel on a 160 mm field
+WIDTH = 256  # px across the mask: cheap to compare, ~0.6 mm a pixel on a 160 mm field
 
 
 def find_part(frame: np.ndarray, camera, level_mm: float, width: int = WIDTH) -> np.ndarray:
@@ -28,7 +29,7 @@ def find_part(frame: np.ndarray, camera, level_mm: float, width: int = WIDTH) ->
     h, w = frame.shape[:2]
     k = width / w
     mask = np.zeros((max(1, round(h * k)), width), np.uint8)
-    for pixels, hole in extractor.outline:             # outer loops come before their holes
+    for pixels, hole in extractor.outline:  # outer loops come before their holes
         contour = np.rint((pixels + 0.5) * k - 0.5).astype(np.int32).reshape(-1, 1, 2)
         cv2.drawContours(mask, [contour], -1, 0 if hole else 1, cv2.FILLED)
     return mask.astype(bool)

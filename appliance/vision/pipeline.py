@@ -41,6 +41,7 @@ counts as part only if it is part-like in each of them too (the same threshold
 and colour test, without the glare cut, grown by a pixel for the stage's play).
 Only 8-bit masks of those frames are kept, one per frame.
 """
+
 from __future__ import annotations
 
 import copy
@@ -51,8 +52,21 @@ import numpy as np
 
 from ..errors import SettingError
 from .band import TileGrid
-from .frames import (AllPartError, FrameError, Hue, NoPartError, Split, best_channel, check_frame,
-                     glare_cut, histogram, hue_split, otsu_split, part_mask, towards_ink)
+from .frames import (
+    AllPartError,
+    FrameError,
+    Hue,
+    NoPartError,
+    Split,
+    best_channel,
+    check_frame,
+    glare_cut,
+    histogram,
+    hue_split,
+    otsu_split,
+    part_mask,
+    towards_ink,
+)
 from .subpixel import bumps, refine, refine_colour
 from .types import Waterline, signed_area
 
@@ -62,16 +76,16 @@ __all__ = ["WaterlineExtractor", "FrameError", "NoPartError", "AllPartError", "E
 @dataclass
 class Event:
     level_mm: float
-    kind: str           # "rejected-island", "vanished-island", "full-frame"
+    kind: str  # "rejected-island", "vanished-island", "full-frame"
     detail: str
 
 
 @dataclass
 class _Loop:
-    pixels: np.ndarray      # (N, 2) int32 contour pixels (u, v)
+    pixels: np.ndarray  # (N, 2) int32 contour pixels (u, v)
     hole: bool
-    parent: int             # index of the outer loop a hole belongs to, else -1
-    grey: float = 1.0       # fraction of its pixels placed by the grey-level step
+    parent: int  # index of the outer loop a hole belongs to, else -1
+    grey: float = 1.0  # fraction of its pixels placed by the grey-level step
 
 
 class WaterlineExtractor:
@@ -97,12 +111,24 @@ class WaterlineExtractor:
     def __init__(self, camera, **options):
         self.camera = camera
         self.width, self.height = int(camera.width), int(camera.height)
-        opts = dict(channel="auto", roi=None, band=True, band_px=13, tile_px=24, min_area_px=60,
-                    min_new_island_px=400, min_contrast=24, half_width=4, threshold_fraction=0.3,
-                    no_part="raise")
+        opts = dict(
+            channel="auto",
+            roi=None,
+            band=True,
+            band_px=13,
+            tile_px=24,
+            min_area_px=60,
+            min_new_island_px=400,
+            min_contrast=24,
+            half_width=4,
+            threshold_fraction=0.3,
+            no_part="raise",
+        )
         unknown = set(options) - set(opts)
         if unknown:
-            raise SettingError("vision", f"unknown WaterlineExtractor option(s): {', '.join(sorted(unknown))}")
+            raise SettingError(
+                "vision", f"unknown WaterlineExtractor option(s): {', '.join(sorted(unknown))}"
+            )
         opts.update(options)
         self.options = opts
         if opts["no_part"] not in ("raise", "empty"):
@@ -119,7 +145,7 @@ class WaterlineExtractor:
         self._binary = np.zeros((self.height, self.width), np.uint8)
         self._bufs = {}
         self._decimated = None
-        self.hue: Hue | None = None       # colour test against glare, learned on the first frame showing it
+        self.hue: Hue | None = None  # colour test against glare, learned on the first frame showing it
         self.reset()
 
     # -- state -----------------------------------------------------------------
@@ -128,24 +154,26 @@ class WaterlineExtractor:
         """Forget the previous frame (the next one is read in full)."""
         self.split: Split | None = None
         self.glare_cut = 256
-        self._band = None                 # (ny, nx) bool tiles to read next frame
-        self._islands = []                # previous frame's outer loops, pixel contours
+        self._band = None  # (ny, nx) bool tiles to read next frame
+        self._islands = []  # previous frame's outer loops, pixel contours
         self._level = None
         self.events: list[Event] = []
-        self.last_mode = None             # "coarse", "band" or "full": how the last frame was read
-        self.outline = []                 # the last frame's kept loops: (pixel contour, is a hole)
-        self._below = []                  # the next lower frames, (level, frame)
-        self._support_masks = {}          # level -> 0/255 part-like mask of that frame (grown 1 px)
-        self._cut = None                  # (box, mask): where this frame's part was cut back by them
+        self.last_mode = None  # "coarse", "band" or "full": how the last frame was read
+        self.outline = []  # the last frame's kept loops: (pixel contour, is a hole)
+        self._below = []  # the next lower frames, (level, frame)
+        self._support_masks = {}  # level -> 0/255 part-like mask of that frame (grown 1 px)
+        self._cut = None  # (box, mask): where this frame's part was cut back by them
 
-    LATTICE = 16                          # px between the samples that watch the rest of the tank
+    LATTICE = 16  # px between the samples that watch the rest of the tank
 
     def _check_roi(self, roi):
         if roi is None:
             return (0, 0, self.width, self.height)
         x0, y0, x1, y1 = (int(v) for v in roi)
         if not (0 <= x0 < x1 <= self.width and 0 <= y0 < y1 <= self.height) or x1 - x0 < 16 or y1 - y0 < 16:
-            raise SettingError("vision.roi", f"{roi!r} is not a rectangle inside the {self.width}x{self.height} frame")
+            raise SettingError(
+                "vision.roi", f"{roi!r} is not a rectangle inside the {self.width}x{self.height} frame"
+            )
         return (x0, y0, x1, y1)
 
     # -- the frame ---------------------------------------------------------------
@@ -175,9 +203,11 @@ class WaterlineExtractor:
         check_frame(frame, self.width, self.height, where)
         self._decimated = None
         if self.channel is None:
-            self.channel = best_channel(self._sample(frame, 4, all_channels=True), self.options["min_contrast"])
+            self.channel = best_channel(
+                self._sample(frame, 4, all_channels=True), self.options["min_contrast"]
+            )
             if self.channel is not None and self.split is not None:
-                self._learn(frame, where)         # the colour test needs the channel: learn it now
+                self._learn(frame, where)  # the colour test needs the channel: learn it now
         loops = None
         if self._band is not None and self._band.any() and self.options["band"]:
             loops = self._read_band(frame, level_mm, where)
@@ -189,14 +219,14 @@ class WaterlineExtractor:
 
     @property
     def _ch(self):
-        return 2 if self.channel is None else self.channel     # red until a frame shows two classes
+        return 2 if self.channel is None else self.channel  # red until a frame shows two classes
 
     def _sample(self, frame, step, all_channels=False):
         """A decimated copy of the tank: one strided read of the frame, shared by the checks."""
         if self._decimated is None:
             x0, y0, x1, y1 = self.roi
-            self._decimated = np.ascontiguousarray(frame[y0 + 2:y1:4, x0 + 2:x1:4])
-        sub = self._decimated[::step // 4, ::step // 4]
+            self._decimated = np.ascontiguousarray(frame[y0 + 2 : y1 : 4, x0 + 2 : x1 : 4])
+        sub = self._decimated[:: step // 4, :: step // 4]
         if sub.ndim == 3 and not all_channels:
             sub = sub[:, :, min(self._ch, sub.shape[2] - 1)]
         return sub
@@ -212,8 +242,9 @@ class WaterlineExtractor:
         if frame.ndim == 2:
             return frame[y0:y1, x0:x1]
         c = self._ch if channel is None else channel
-        return cv2.extractChannel(frame[y0:y1, x0:x1], min(c, frame.shape[2] - 1),
-                                  self._buf(name, (y1 - y0, x1 - x0)))
+        return cv2.extractChannel(
+            frame[y0:y1, x0:x1], min(c, frame.shape[2] - 1), self._buf(name, (y1 - y0, x1 - x0))
+        )
 
     def _apply_hue(self, main, other, binary, name):
         """binary &= (other - main <= cut) & (other < clip): glare is ink, not part."""
@@ -278,7 +309,9 @@ class WaterlineExtractor:
     def _check_split(self, split: Split, where):
         """Refuse a frame whose histogram has no ink/part split (all ink, all part, blank)."""
         mc = self.options["min_contrast"]
-        two_classes = split.separability >= 0.75 and split.contrast >= mc and 1e-4 < split.part_fraction < 0.995
+        two_classes = (
+            split.separability >= 0.75 and split.contrast >= mc and 1e-4 < split.part_fraction < 0.995
+        )
         if two_classes:
             return
         mean = split.ink * (1 - split.part_fraction) + split.part * split.part_fraction
@@ -286,7 +319,9 @@ class WaterlineExtractor:
             mean = split.part if split.part_fraction >= 1 else split.ink
         if mean < (0.5 * (self.split.ink + self.split.part) if self.split else 100):
             raise NoPartError(where, "all ink: no part above the liquid at this level")
-        raise AllPartError(where, "no ink in view: the part fills the frame (or the frame is blank/overexposed)")
+        raise AllPartError(
+            where, "no ink in view: the part fills the frame (or the frame is blank/overexposed)"
+        )
 
     def _read_full(self, frame, level_mm, where):
         self.last_mode = "full"
@@ -359,7 +394,7 @@ class WaterlineExtractor:
         split = self._split(hist) if learn else self.split
         mc = self.options["min_contrast"]
         if learn and (split.separability < 0.6 or split.contrast < mc):
-            return None                       # the band lost the edge: read everything
+            return None  # the band lost the edge: read everything
         self.split = split
         # The glare cut stays as the whole-tank sample set it - the band is where glare
         # next to the part is, the worst place to learn the part's top - unless the colour
@@ -375,8 +410,12 @@ class WaterlineExtractor:
         grid.scatter(binary, self._binary, ty, tx)
         rows, cols = np.nonzero(read.any(axis=1))[0], np.nonzero(read.any(axis=0))[0]
         T = grid.tile
-        box = (grid.ox + cols[0] * T, grid.oy + rows[0] * T,
-               grid.ox + (cols[-1] + 1) * T, grid.oy + (rows[-1] + 1) * T)
+        box = (
+            grid.ox + cols[0] * T,
+            grid.oy + rows[0] * T,
+            grid.ox + (cols[-1] + 1) * T,
+            grid.oy + (rows[-1] + 1) * T,
+        )
         self._confirm(box)
         return self._loops(frame, box, level_mm, read, full=False)
 
@@ -405,16 +444,19 @@ class WaterlineExtractor:
             check_frame(frame, self.width, self.height, where)
             probe.outline = []
             probe._decimated = None
-            probe._below = [(float(lv), f) for lv, f in below[:max(1, len(self._below))]]   # as many as it used
+            probe._below = [
+                (float(lv), f) for lv, f in below[: max(1, len(self._below))]
+            ]  # as many as it used
             read = probe._band.copy()
             g = probe.grid
-            for island in probe._islands:          # the tiles of the part below, not just its edge
+            for island in probe._islands:  # the tiles of the part below, not just its edge
                 x, y, w, h = cv2.boundingRect(island)
                 t = ((np.array([[x, y], [x + w, y + h]]) - (g.ox, g.oy)) // g.tile).astype(int)
-                read[max(0, t[0, 1]):t[1, 1] + 1, max(0, t[0, 0]):t[1, 0] + 1] = True
+                read[max(0, t[0, 1]) : t[1, 1] + 1, max(0, t[0, 0]) : t[1, 0] + 1] = True
             try:
-                loops = probe._read_band(frame, level_mm, where, band=read, lattice=False, mode="above",
-                                         learn=False)
+                loops = probe._read_band(
+                    frame, level_mm, where, band=read, lattice=False, mode="above", learn=False
+                )
                 wl = probe._finish(loops or [], level_mm, where)
             except NoPartError:
                 break
@@ -490,7 +532,7 @@ class WaterlineExtractor:
         g = self.grid
         D = self.LATTICE
         x0, y0, x1, y1 = g.covered
-        lat = np.ascontiguousarray(frame[y0 + D // 2:y1:D, x0 + D // 2:x1:D])
+        lat = np.ascontiguousarray(frame[y0 + D // 2 : y1 : D, x0 + D // 2 : x1 : D])
         main = self._channel_view(lat, self._ch)
         now = cv2.medianBlur(np.ascontiguousarray(main), 3)
         part = now >= self.split.threshold
@@ -505,16 +547,18 @@ class WaterlineExtractor:
             # here first, between the lattice's rows, so read there now
             coming = np.ones(part.shape, bool)
             for level, lower in self._below:
-                coming &= self._support(level, lower)[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0
+                coming &= self._support(level, lower)[y0 + D // 2 : y1 : D, x0 + D // 2 : x1 : D] > 0
             part |= coming
-        changed = part != (self._binary[y0 + D // 2:y1:D, x0 + D // 2:x1:D] > 0)
-        changed[0, :] = changed[-1, :] = False     # median borders of the lattice are not trusted
+        changed = part != (self._binary[y0 + D // 2 : y1 : D, x0 + D // 2 : x1 : D] > 0)
+        changed[0, :] = changed[-1, :] = False  # median borders of the lattice are not trusted
         changed[:, 0] = changed[:, -1] = False
         cy, cx = np.nonzero(changed)
         out = band.copy()
         if len(cy):
             pts = np.column_stack([x0 + D // 2 + cx * D, y0 + D // 2 + cy * D]).astype(np.float64)
-            off = ~band[((pts[:, 1] - g.oy) // g.tile).astype(np.intp), ((pts[:, 0] - g.ox) // g.tile).astype(np.intp)]
+            off = ~band[
+                ((pts[:, 1] - g.oy) // g.tile).astype(np.intp), ((pts[:, 0] - g.ox) // g.tile).astype(np.intp)
+            ]
             g.mark(out, pts[off], g.tile)
         return out
 
@@ -522,14 +566,15 @@ class WaterlineExtractor:
 
     def _loops(self, frame, box, level_mm, read, full):
         x0, y0, x1, y1 = box
-        contours, hierarchy = cv2.findContours(self._binary[y0:y1, x0:x1], cv2.RETR_CCOMP,
-                                               cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
+        contours, hierarchy = cv2.findContours(
+            self._binary[y0:y1, x0:x1], cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(x0, y0)
+        )
         loops = self._filter(contours, hierarchy, level_mm)
         refined = []
         half = self.options["half_width"]
         for lp in loops:
             pts, grey = self._refine(frame, lp.pixels, self._uncut(lp.pixels))
-            for _ in range(2):              # a bump's tip shows once its flanks are gone
+            for _ in range(2):  # a bump's tip shows once its flanks are gone
                 pts = pts[~bumps(pts)]
             refined.append(pts)
             lp.grey = grey
@@ -552,8 +597,13 @@ class WaterlineExtractor:
         a highlight beside it keeps plain ink along most of its edge, and one
         that continues an island of the previous frame is kept whatever the glare.
         """
-        bad = {i for i, lp in enumerate(loops) if not lp.hole and lp.grey < 0.25
-               and not (self._islands and self._connected(lp.pixels.reshape(-1, 1, 2)))}
+        bad = {
+            i
+            for i, lp in enumerate(loops)
+            if not lp.hole
+            and lp.grey < 0.25
+            and not (self._islands and self._connected(lp.pixels.reshape(-1, 1, 2)))
+        }
         if not bad:
             return loops, refined
         for i in bad:
@@ -570,7 +620,9 @@ class WaterlineExtractor:
         grey = len(idx) / max(1, len(pixels))
         if self.hue is not None and frame.ndim == 3 and len(idx) < len(pixels):
             missing = np.setdiff1d(np.arange(len(pixels)), idx)
-            more, midx = refine_colour(frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc)
+            more, midx = refine_colour(
+                frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc
+            )
             if len(midx):
                 idx = np.concatenate([idx, midx])
                 order = np.argsort(idx, kind="stable")
@@ -608,8 +660,9 @@ class WaterlineExtractor:
         if self._connected(contour):
             return True
         if level_mm > self._level:
-            self.events.append(Event(level_mm, "rejected-island",
-                                     f"{area:.0f} px island appeared while the liquid rose"))
+            self.events.append(
+                Event(level_mm, "rejected-island", f"{area:.0f} px island appeared while the liquid rose")
+            )
             return False
         # with lower frames beside it, what is left of the island is in them too (_confirm):
         # not flotsam but a peak or ridge coming out, kept from the size of a hole
@@ -639,8 +692,13 @@ class WaterlineExtractor:
         if self._level is not None and level_mm < self._level:
             for prev in self._islands:
                 if not any(self._overlaps(prev, o) for o in outer):
-                    self.events.append(Event(level_mm, "vanished-island",
-                                             "an island of the previous frame is gone although the liquid fell"))
+                    self.events.append(
+                        Event(
+                            level_mm,
+                            "vanished-island",
+                            "an island of the previous frame is gone although the liquid fell",
+                        )
+                    )
         self._islands = outer
         self._level = level_mm
         band = np.zeros(self.grid.shape, bool)
@@ -664,7 +722,7 @@ class WaterlineExtractor:
         for lp, pts in loops:
             mm = self.to_mm(pts)
             area = signed_area(mm)
-            if (area < 0) != lp.hole:          # outer CCW (area > 0), holes CW
+            if (area < 0) != lp.hole:  # outer CCW (area > 0), holes CW
                 mm = mm[::-1].copy()
             out.append(mm)
         return Waterline(float(level_mm), out)

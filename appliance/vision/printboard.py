@@ -11,6 +11,7 @@ print and the detector cannot disagree:
 The PDF is written by hand (filled rectangles and a few words of Helvetica):
 no PDF library for a page of squares.
 """
+
 from __future__ import annotations
 
 import struct
@@ -47,8 +48,10 @@ def printed_size_mm(board: Board) -> tuple[float, float]:
 def describe(board: Board) -> str:
     """The sentence the wizard shows: what to print and how big it must come out."""
     (nx, ny), (w, h) = squares(board), printed_size_mm(board)
-    return (f"{nx} x {ny} squares of {board.square_mm:g} mm, {w:g} x {h:g} mm in all: "
-            f"print at 100 % (no fit to page) and check a square with a ruler")
+    return (
+        f"{nx} x {ny} squares of {board.square_mm:g} mm, {w:g} x {h:g} mm in all: "
+        f"print at 100 % (no fit to page) and check a square with a ruler"
+    )
 
 
 def _dark_squares(board: Board):
@@ -59,29 +62,38 @@ def _dark_squares(board: Board):
 
 def board_pdf(board: Board) -> bytes:
     w, h = printed_size_mm(board)
-    x0, top = (A4_MM[0] - w) / 2, (A4_MM[1] + h) / 2          # PDF's y axis points up
+    x0, top = (A4_MM[0] - w) / 2, (A4_MM[1] + h) / 2  # PDF's y axis points up
     s = board.square_mm
     ops = ["q", f"{PT_PER_MM:.5f} 0 0 {PT_PER_MM:.5f} 0 0 cm", "0 g"]
     ops += [f"{x0 + i * s:.3f} {top - (j + 1) * s:.3f} {s:.3f} {s:.3f} re f" for i, j in _dark_squares(board)]
     bar_y = top - h - 15
-    ops += [f"{x0:.3f} {bar_y:.3f} {SCALE_BAR_MM:.3f} 1 re f",                      # the scale bar
-            f"{x0:.3f} {bar_y - 2:.3f} 0.3 5 re f", f"{x0 + SCALE_BAR_MM - 0.3:.3f} {bar_y - 2:.3f} 0.3 5 re f",
-            "Q"]
-    lines = [(top + 12, 14, "InkSlice calibration board"),
-             (top + 6, 10, describe(board)[:1].upper() + describe(board)[1:] + "."),
-             (bar_y - 7, 10, f"This bar is {SCALE_BAR_MM:g} mm long when printed at the right size."),
-             (bar_y - 13, 10, "Lay it flat on the base, squares up, when the wizard asks for it.")]
+    ops += [
+        f"{x0:.3f} {bar_y:.3f} {SCALE_BAR_MM:.3f} 1 re f",  # the scale bar
+        f"{x0:.3f} {bar_y - 2:.3f} 0.3 5 re f",
+        f"{x0 + SCALE_BAR_MM - 0.3:.3f} {bar_y - 2:.3f} 0.3 5 re f",
+        "Q",
+    ]
+    lines = [
+        (top + 12, 14, "InkSlice calibration board"),
+        (top + 6, 10, describe(board)[:1].upper() + describe(board)[1:] + "."),
+        (bar_y - 7, 10, f"This bar is {SCALE_BAR_MM:g} mm long when printed at the right size."),
+        (bar_y - 13, 10, "Lay it flat on the base, squares up, when the wizard asks for it."),
+    ]
     for y_mm, size, text in lines:
         esc = text.replace("\\", "\\\\").replace("(", "\\(").replace(")", "\\)")
         ops.append(f"BT /F1 {size} Tf {x0 * PT_PER_MM:.2f} {y_mm * PT_PER_MM:.2f} Td ({esc}) Tj ET")
     content = "\n".join(ops).encode("ascii")
     page_w, page_h = (v * PT_PER_MM for v in A4_MM)
-    objects = [b"<< /Type /Catalog /Pages 2 0 R >>",
-               b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>",
-               (f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {page_w:.2f} {page_h:.2f}] /Contents 4 0 R "
-                f"/Resources << /Font << /F1 5 0 R >> >> >>").encode(),
-               b"<< /Length %d >>\nstream\n" % len(content) + content + b"\nendstream",
-               b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica >>"]
+    objects = [
+        b"<< /Type /Catalog /Pages 2 0 R >>",
+        b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>",
+        (
+            f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {page_w:.2f} {page_h:.2f}] /Contents 4 0 R "
+            f"/Resources << /Font << /F1 5 0 R >> >> >>"
+        ).encode(),
+        b"<< /Length %d >>\nstream\n" % len(content) + content + b"\nendstream",
+        b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica >>",
+    ]
     out = bytearray(b"%PDF-1.4\n")
     offsets = []
     for n, body in enumerate(objects, 1):
@@ -100,10 +112,10 @@ def board_image(board: Board, dpi: int = PNG_DPI) -> np.ndarray:
     w, h = printed_size_mm(board)
     m = board.square_mm
     img = np.full((round((h + 2 * m) * px), round((w + 2 * m) * px)), 255, np.uint8)
-    edge = lambda mm: round((m + mm) * px)                     # noqa: E731 (mm from the board's corner)
+    edge = lambda mm: round((m + mm) * px)  # noqa: E731 (mm from the board's corner)
     for i, j in _dark_squares(board):
         s = board.square_mm
-        img[edge(j * s):edge((j + 1) * s), edge(i * s):edge((i + 1) * s)] = 0
+        img[edge(j * s) : edge((j + 1) * s), edge(i * s) : edge((i + 1) * s)] = 0
     return img
 
 
@@ -116,8 +128,8 @@ def board_png(board: Board, dpi: int = PNG_DPI) -> bytes:
     assert ok
     png = png.tobytes()
     ppm = round(dpi / 0.0254)
-    phys = _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))    # unit 1: pixels per metre
-    ihdr_end = 8 + 8 + 13 + 4                                    # signature, IHDR length+type, data, CRC
+    phys = _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))  # unit 1: pixels per metre
+    ihdr_end = 8 + 8 + 13 + 4  # signature, IHDR length+type, data, CRC
     return png[:ihdr_end] + phys + png[ihdr_end:]
 
 

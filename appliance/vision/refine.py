@@ -18,19 +18,21 @@ least FACE_MIN_WIDTH_MM across. A level step of s uncovers a band s / tan(slope)
 slope; 8 mm is a slope under 7 deg at 1 mm steps. Narrower pieces are the ordinary descent of
 a waterline, which the frames already follow.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
 
-FACE_MIN_WIDTH_MM = 8.0     # inscribed diameter of a newly exposed piece that makes it a face
-RESOLUTION_MM = 0.1         # bisect until every face's bracket is at most this tall
-OUT_FRACTION = 0.5          # a face counts as out of the ink in a frame showing this much of it
+FACE_MIN_WIDTH_MM = 8.0  # inscribed diameter of a newly exposed piece that makes it a face
+RESOLUTION_MM = 0.1  # bisect until every face's bracket is at most this tall
+OUT_FRACTION = 0.5  # a face counts as out of the ink in a frame showing this much of it
 EPS = 1e-6
 
 
-def surfaced_faces(before: np.ndarray, after: np.ndarray, pixel_mm: float,
-                   min_width_mm: float = FACE_MIN_WIDTH_MM) -> list[np.ndarray]:
+def surfaced_faces(
+    before: np.ndarray, after: np.ndarray, pixel_mm: float, min_width_mm: float = FACE_MIN_WIDTH_MM
+) -> list[np.ndarray]:
     """The faces that came out between two frames: pieces of `after & ~before` (part masks
     of the frame above and the one below) at least `min_width_mm` wide. `pixel_mm`: the
     masks' pixel size on the liquid plane."""
@@ -62,8 +64,9 @@ def face_bracket(face: np.ndarray, upper: float, lower: float, seen) -> tuple[fl
     return lo, max(hi, lo)
 
 
-def next_refinement(upper: float, lower: float, faces, seen,
-                    resolution_mm: float = RESOLUTION_MM) -> float | None:
+def next_refinement(
+    upper: float, lower: float, faces, seen, resolution_mm: float = RESOLUTION_MM
+) -> float | None:
     """The next level to capture between `upper` (faces under) and `lower` (faces out), or
     None when every face's bracket is at most `resolution_mm` tall. Bisects the widest
     bracket first; one frame narrows every face whose bracket it falls in."""

@@ -9,6 +9,7 @@ at about a third of a pixel, against the sub-pixel waterlines of pipeline.py.
 Points are mapped to mm through the scan's calibration (the dissertation had
 none; using ours isolates the pipeline's own error from the optics').
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,8 +21,8 @@ import numpy as np
 @dataclass
 class SeedSlice:
     level_mm: float
-    edges_mm: np.ndarray     # (N, 2) edge pixel centres mapped to the liquid plane
-    binary: np.ndarray       # uint8 0/255, the thresholded frame (part = 255)
+    edges_mm: np.ndarray  # (N, 2) edge pixel centres mapped to the liquid plane
+    binary: np.ndarray  # uint8 0/255, the thresholded frame (part = 255)
 
 
 def binarise(frame: np.ndarray) -> np.ndarray:
@@ -63,8 +64,7 @@ def mm_to_pixels(xy: np.ndarray, camera) -> np.ndarray:
     if camera.K is None or camera.dist is None:
         return uv
     K = np.asarray(camera.K)
-    norm = np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1],
-                            np.ones(len(uv))])
+    norm = np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))])
     proj, _ = cv2.projectPoints(norm.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.asarray(camera.dist))
     return proj.reshape(-1, 2)
 
@@ -79,5 +79,7 @@ def exposed_at(binary: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     h, w = binary.shape
     u = np.clip(np.rint(pixels[:, 0]).astype(int), 0, w - 1)
     v = np.clip(np.rint(pixels[:, 1]).astype(int), 0, h - 1)
-    inside = (pixels[:, 0] >= -0.5) & (pixels[:, 0] < w - 0.5) & (pixels[:, 1] >= -0.5) & (pixels[:, 1] < h - 0.5)
+    inside = (
+        (pixels[:, 0] >= -0.5) & (pixels[:, 0] < w - 0.5) & (pixels[:, 1] >= -0.5) & (pixels[:, 1] < h - 0.5)
+    )
     return (binary[v, u] > 0) & inside

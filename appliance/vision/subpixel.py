@@ -12,11 +12,12 @@ from the 8-bit median-filtered image; levels are taken locally at both ends
 of each profile, so vignetting (a slow drift of both levels) does not move
 the crossing.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-Q = 8                      # fractional bits of the fixed-point samples
+Q = 8  # fractional bits of the fixed-point samples
 ONE = 1 << Q
 
 
@@ -37,7 +38,7 @@ def sample_q8(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     if x.min() < 0 or y.min() < 0 or x.max() >= w - 1 or y.max() >= h - 1:
         x = np.clip(x, 0, w - 1.001)
         y = np.clip(y, 0, h - 1.001)
-    xq = (x * ONE).astype(np.int32)            # Q8 positions: integer part and fraction in one
+    xq = (x * ONE).astype(np.int32)  # Q8 positions: integer part and fraction in one
     yq = (y * ONE).astype(np.int32)
     fx = xq & (ONE - 1)
     fy = yq & (ONE - 1)
@@ -46,7 +47,7 @@ def sample_q8(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     p01 = flat.take(i + 1)
     p10 = flat.take(i + w)
     p11 = flat.take(i + (w + 1))
-    top = p00 * (ONE - fx) + p01 * fx          # uint8 * int32 -> int32
+    top = p00 * (ONE - fx) + p01 * fx  # uint8 * int32 -> int32
     bottom = p10 * (ONE - fx) + p11 * fx
     return (top * (ONE - fy) + bottom * fy) >> Q
 
@@ -80,12 +81,18 @@ def _crossing(p, s, threshold, min_contrast, max_shift):
     dist = np.where(crosses, np.abs(where + 0.5 * np.sign(b - a)[:, None]), np.inf)
     j = np.argmin(dist, axis=1)
     rows = np.arange(len(p))
-    ok = ((dist[rows, j] <= max_shift) & (hi - lo >= min_contrast) & (lo < threshold) & (hi >= threshold))
+    ok = (dist[rows, j] <= max_shift) & (hi - lo >= min_contrast) & (lo < threshold) & (hi >= threshold)
     return where[rows, j], ok
 
 
-def refine(img: np.ndarray, contour: np.ndarray, threshold: float, half: int = 4,
-           min_contrast: float = 20.0, max_shift: float = 1.5):
+def refine(
+    img: np.ndarray,
+    contour: np.ndarray,
+    threshold: float,
+    half: int = 4,
+    min_contrast: float = 20.0,
+    max_shift: float = 1.5,
+):
     """Sub-pixel points (M, 2) (u, v) and the indices of the contour pixels they came from.
 
     Profiles are read from the 8-bit median-filtered main channel `img`.
@@ -98,8 +105,17 @@ def refine(img: np.ndarray, contour: np.ndarray, threshold: float, half: int = 4
     return pts, np.nonzero(ok)[0]
 
 
-def refine_colour(frame: np.ndarray, contour: np.ndarray, subset: np.ndarray, main: int, other: int,
-                  cut: float, half: int = 4, min_contrast: float = 20.0, max_shift: float = 1.5):
+def refine_colour(
+    frame: np.ndarray,
+    contour: np.ndarray,
+    subset: np.ndarray,
+    main: int,
+    other: int,
+    cut: float,
+    half: int = 4,
+    min_contrast: float = 20.0,
+    max_shift: float = 1.5,
+):
     """Like `refine`, on (main - other) of the raw colour frame: for the points glare took.
 
     Where a highlight on the ink beside the part is as bright as the part, the
@@ -144,26 +160,28 @@ def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 
     """
     n = len(pts)
     out = np.zeros(n, bool)
-    k = min(k, n // 16)             # a small loop curves too much over a wide window
+    k = min(k, n // 16)  # a small loop curves too much over a wide window
     if k < 4:
         return out
     # cheap screen: off the chord between the k-th neighbours (a smooth line of
     # radius > 4k px is within 0.5 px of it); only those get the quadratic test
     a, b = np.roll(pts, k, axis=0), np.roll(pts, -k, axis=0)
     c = b - a
-    off = np.abs(c[:, 0] * (pts[:, 1] - a[:, 1]) - c[:, 1] * (pts[:, 0] - a[:, 0])) / (np.hypot(c[:, 0], c[:, 1]) + 1e-9)
+    off = np.abs(c[:, 0] * (pts[:, 1] - a[:, 1]) - c[:, 1] * (pts[:, 0] - a[:, 0])) / (
+        np.hypot(c[:, 0], c[:, 1]) + 1e-9
+    )
     cand = np.nonzero(off > 0.5 * min_dev)[0]
     if len(cand) == 0:
         return out
     o = np.array([-2 * k, -(3 * k) // 2, -k, k, (3 * k) // 2, 2 * k])
-    Y = pts[(cand[:, None] + o[None, :]) % n]                               # (m, 6, 2)
+    Y = pts[(cand[:, None] + o[None, :]) % n]  # (m, 6, 2)
     chord = Y[:, -1] - Y[:, 0]
     u = chord / (np.hypot(*chord.T)[:, None] + 1e-9)
     v = np.column_stack([-u[:, 1], u[:, 0]])
     rel = Y - Y[:, :1]
     x = np.einsum("njc,nc->nj", rel, u)
     y = np.einsum("njc,nc->nj", rel, v)
-    A = np.stack([np.ones_like(x), x, x * x], axis=2)                        # (n, 6, 3)
+    A = np.stack([np.ones_like(x), x, x * x], axis=2)  # (n, 6, 3)
     M = np.einsum("nji,njk->nik", A, A) + 1e-6 * np.eye(3)
     coef = np.linalg.solve(M, np.einsum("nji,nj->ni", A, y)[..., None])[..., 0]
     resid = np.sqrt(np.mean((y - np.einsum("nji,ni->nj", A, coef)) ** 2, axis=1))

@@ -5,6 +5,7 @@ viewer, mm on the liquid plane); the first point is not repeated at the end.
 Orientation carries topology: an outer boundary of a part island runs
 counter-clockwise (positive signed area), a hole's boundary clockwise.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -15,7 +16,7 @@ import numpy as np
 @dataclass
 class Waterline:
     level_mm: float
-    loops: list = field(default_factory=list)     # list of (N, 2) float64 arrays, mm
+    loops: list = field(default_factory=list)  # list of (N, 2) float64 arrays, mm
 
     @property
     def points(self) -> np.ndarray:

@@ -9,4 +9,5 @@ See app.py for the config keys, demo.py for serving it with waitress.
 
 def create_app(service, config=None):
     from .app import create_app as _create
+
     return _create(service, config)

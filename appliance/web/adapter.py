@@ -18,6 +18,7 @@ when a service lacks them, so the UI can hide a feature instead of failing:
 If the daemon's real API drifts from the facade, the translation goes here
 and nowhere else.
 """
+
 from __future__ import annotations
 
 import copy
@@ -44,6 +45,7 @@ class WebService:
     staleness is invisible on a screen; any command (start, cancel, resume,
     settings) drops the cache so its effect shows at once.
     """
+
     STATE_TTL_S = 0.1
     FRAME_TTL_S = 0.2
 
@@ -163,7 +165,7 @@ class WebService:
         try:
             return self._optional("commission", step, action, values)
         finally:
-            self._drop_cache()          # a step changes the state message (and may start a scan)
+            self._drop_cache()  # a step changes the state message (and may start a scan)
 
     def export_commissioning(self):
         return self._optional("export_commissioning")
@@ -181,7 +183,7 @@ class WebService:
         try:
             return self._optional("import_scan", folder)
         finally:
-            self._drop_cache()          # the import starts processing: show it at once
+            self._drop_cache()  # the import starts processing: show it at once
 
     def usb_sticks(self) -> list[dict]:
         return list(self._optional("usb_sticks"))
@@ -208,7 +210,7 @@ class WebService:
         try:
             return self._optional(name, *args)
         finally:
-            self._drop_cache()          # its effect (a move, a new frame, a job gone) shows at once
+            self._drop_cache()  # its effect (a move, a new frame, a job gone) shows at once
 
     def preview(self):
         return self._command("preview")

@@ -6,6 +6,7 @@ Errors are JSON: {"error": "...", "where": "..."} with 400 (bad setting),
 404 (no such job/file), 409 (the bench is busy), 413 (upload too big),
 501 (the bench service lacks the feature).
 """
+
 from __future__ import annotations
 
 import json
@@ -117,6 +118,7 @@ def _json_body():
 
 # -- public ---------------------------------------------------------------------------
 
+
 @bp.get("/health")
 def health():
     return jsonify(ok=True)
@@ -128,6 +130,7 @@ def openapi():
 
 
 # -- state and live view ------------------------------------------------------------------
+
 
 def state_dict():
     st = svc().state()
@@ -211,7 +214,7 @@ def frame():
     """The last camera frame (waterline drawn by the daemon). Behind the login like everything."""
     got = svc().latest_frame()
     if got is None:
-        return Response(status=204)      # no frame yet: not an error a browser should log
+        return Response(status=204)  # no frame yet: not an error a browser should log
     data, meta = got
     etag = f'"{hash((meta.get("time"), len(data))) & 0xFFFFFFFF:08x}"'
     if request.headers.get("If-None-Match") == etag:
@@ -233,6 +236,7 @@ def live_heightmap():
 
 
 # -- scans ---------------------------------------------------------------------------
+
 
 @bp.post("/scan")
 def start_scan():
@@ -265,6 +269,7 @@ def jobs():
 
 # -- the machine panel: refused (409) while a scan, calibration or commissioning holds the bench --
 
+
 @bp.post("/machine/preview")
 def machine_preview():
     return jsonify(svc().preview())
@@ -286,6 +291,7 @@ def machine_goto():
 
 
 # -- the job manager --------------------------------------------------------------------------
+
 
 @bp.patch("/jobs/<job_id>")
 def rename_job(job_id):
@@ -326,6 +332,7 @@ def repost_job(job_id):
 def job_thumb(job_id):
     """A small picture of the height map (thumbs.py), for the job list."""
     from .thumbs import thumbnail
+
     path = _job_path(job_id, "heightmap.csv")
     png = thumbnail(path, Path(ext()["config"]["data_dir"]) / "web" / "thumbs", job_id)
     if png is None:
@@ -365,11 +372,25 @@ TEXT_TYPES = {".gcode", ".nc", ".ngc", ".tap", ".csv", ".md", ".json", ".txt", "
 @bp.get("/jobs/<job_id>/files/<name>")
 def job_file(job_id, name):
     path = _job_path(job_id, name)
-    inline = request.args.get("inline") == "1" and path.suffix.lower() in (".png", ".jpg", ".jpeg", ".json", ".md",
-                                                                          ".csv", ".gcode", ".nc", ".ngc")
+    inline = request.args.get("inline") == "1" and path.suffix.lower() in (
+        ".png",
+        ".jpg",
+        ".jpeg",
+        ".json",
+        ".md",
+        ".csv",
+        ".gcode",
+        ".nc",
+        ".ngc",
+    )
     mimetype = "text/plain; charset=utf-8" if path.suffix.lower() in TEXT_TYPES - {".json"} else None
-    resp = send_file(path, as_attachment=not inline, download_name=download_name(svc().job(job_id), name),
-                     mimetype=mimetype, max_age=0)
+    resp = send_file(
+        path,
+        as_attachment=not inline,
+        download_name=download_name(svc().job(job_id), name),
+        mimetype=mimetype,
+        max_age=0,
+    )
     resp.headers["Cache-Control"] = "private, no-cache"
     return resp
 
@@ -413,14 +434,18 @@ def job_zip(job_id):
             if FILE_NAME.match(name):
                 z.write(svc().job_file(job_id, name), f"{job_id}/{name}")
         for arc, path in _scan_files(job_id):
-            z.write(path, f"{job_id}/{arc}", compress_type=zipfile.ZIP_STORED if arc.endswith(".png") else None)
+            z.write(
+                path, f"{job_id}/{arc}", compress_type=zipfile.ZIP_STORED if arc.endswith(".png") else None
+            )
         z.writestr(f"{job_id}/job.json", json.dumps(info, indent=2, default=str))
     tmp.seek(0)
-    return send_file(tmp, mimetype="application/zip", as_attachment=True,
-                     download_name=download_name(info, "inkslice.zip"))
+    return send_file(
+        tmp, mimetype="application/zip", as_attachment=True, download_name=download_name(info, "inkslice.zip")
+    )
 
 
 # -- settings -------------------------------------------------------------------------------
+
 
 @bp.get("/settings")
 def get_settings():
@@ -433,6 +458,7 @@ def patch_settings():
 
 
 # -- calibration -------------------------------------------------------------------------------
+
 
 @bp.get("/calibration")
 def calibration():
@@ -448,6 +474,7 @@ def calibrate(step):
 
 # -- commissioning (daemon/commissioning.py; shapes in docs/api/README.md) ---------------------------
 
+
 @bp.get("/commissioning")
 def commissioning():
     return jsonify(svc().commissioning())
@@ -458,8 +485,11 @@ def commissioning_export():
     doc = svc().export_commissioning()
     body = json.dumps(doc, indent=2) + "\n"
     stamp = time.strftime("%Y%m%d", time.gmtime())
-    return Response(body, mimetype="application/json",
-                    headers={"Content-Disposition": f'attachment; filename="inkslice-commissioning-{stamp}.json"'})
+    return Response(
+        body,
+        mimetype="application/json",
+        headers={"Content-Disposition": f'attachment; filename="inkslice-commissioning-{stamp}.json"'},
+    )
 
 
 @bp.post("/commissioning/import")
@@ -483,6 +513,7 @@ def commission(step, action):
 
 # The daemon holds the sticks and does the copy (the web service has no device access).
 
+
 def _usb_offered() -> bool:
     return bool(ext()["config"].get("usb")) and svc().offers("export_to_usb")
 
@@ -497,15 +528,16 @@ def usb_sticks():
 def usb_export(job_id):
     body = _json_body()
     name = str(body.get("file") or "toolpath.gcode")
-    _job_path(job_id, name)                     # a known job and a file name the API serves
+    _job_path(job_id, name)  # a known job and a file name the API serves
     if not _usb_offered():
         raise NotOffered("usb", "USB export is switched off on this box")
     stick = body.get("stick")
-    result = svc().export_to_usb(job_id, name, str(stick) if stick else None)   # synced and unmounted after
+    result = svc().export_to_usb(job_id, name, str(stick) if stick else None)  # synced and unmounted after
     return jsonify(result)
 
 
 # -- uploads ---------------------------------------------------------------------------------------
+
 
 def incoming_dir(data_dir) -> Path:
     """Where uploads are received and unpacked: on the data disk (not /tmp, which may be RAM)."""
@@ -621,18 +653,23 @@ def _unpack_checked(z: zipfile.ZipFile, staging: Path, max_bytes: int, max_pixel
         if stat.S_IFMT(mode) not in (0, stat.S_IFREG, stat.S_IFDIR):
             raise _Refused(f"not a plain file in zip: {n!r}", 400)
         if not any(part.startswith((".", "__MACOSX")) for part in p.parts):
-            names.append(n)         # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
+            names.append(n)  # Finder's litter (.DS_Store, __MACOSX/) is skipped, not refused
     # scan.json at the top, or in a folder up to two deep (myscan/scan.json, or JOB/scan/scan.json
     # as in this box's own archive.zip); only that folder is unpacked
-    found = sorted((n for n in names if PurePosixPath(n).name == "scan.json" and len(PurePosixPath(n).parts) <= 3),
-                   key=lambda n: len(PurePosixPath(n).parts))
+    found = sorted(
+        (n for n in names if PurePosixPath(n).name == "scan.json" and len(PurePosixPath(n).parts) <= 3),
+        key=lambda n: len(PurePosixPath(n).parts),
+    )
     if not found:
         raise _Refused("no scan.json in the zip", 400)
     if len(found) > 1 and len(PurePosixPath(found[0]).parts) == len(PurePosixPath(found[1]).parts):
         raise _Refused(f"several scan.json in the zip ({found[0]}, {found[1]}): which scan?", 400)
     prefix = found[0][: -len("scan.json")]
-    wanted = [info for info in infos
-              if not info.is_dir() and info.filename in names and info.filename.startswith(prefix)]
+    wanted = [
+        info
+        for info in infos
+        if not info.is_dir() and info.filename in names and info.filename.startswith(prefix)
+    ]
     # the budget from the zip's own directory, before a byte is unpacked (zipfile then stops every
     # member at the size the directory declares, so a lying header cannot overrun it)
     declared = sum(info.file_size for info in wanted)
@@ -643,14 +680,18 @@ def _unpack_checked(z: zipfile.ZipFile, staging: Path, max_bytes: int, max_pixel
     if not isinstance(frames, list) or not frames:
         raise _Refused("scan.json has no frames", 400)
     for i, fr in enumerate(frames):
-        if not isinstance(fr, dict) or not isinstance(fr.get("file"), str) or prefix + fr["file"] not in names:
+        if (
+            not isinstance(fr, dict)
+            or not isinstance(fr.get("file"), str)
+            or prefix + fr["file"] not in names
+        ):
             raise _Refused(f"scan.json frames[{i}] names a file that is not in the zip", 400)
     for fr in frames:
         _check_frame_pixels(z, prefix + fr["file"], max_pixels)
     staging.mkdir(parents=True)
     total = 0
     for info in wanted:
-        dest = staging / info.filename[len(prefix):]
+        dest = staging / info.filename[len(prefix) :]
         dest.parent.mkdir(parents=True, exist_ok=True)
         with z.open(info) as src, open(dest, "wb") as out:
             while True:
@@ -688,13 +729,16 @@ def _check_frame_pixels(z, name, max_pixels):
 
 # -- the admin's own account -------------------------------------------------------------------------
 
+
 @bp.post("/password")
 def change_password():
     if g.auth != "session":
         return err("change the password from a logged-in browser session", 403)
     body = _json_body()
     creds = ext()["creds"]
-    ok, wait = auth.checked_password(ext()["limiter"], creds, "password:" + auth.client_address(), body.get("current", ""))
+    ok, wait = auth.checked_password(
+        ext()["limiter"], creds, "password:" + auth.client_address(), body.get("current", "")
+    )
     if ok is None:
         resp = jsonify(error=f"too many wrong passwords; try again in {int(wait) + 1} s", where="current")
         return resp, 429, {"Retry-After": str(int(wait) + 1)}
@@ -704,7 +748,7 @@ def change_password():
         gen = creds.set_password(body.get("new", ""))
     except ValueError as e:
         return err(str(e), 400, "new")
-    session["gen"] = gen            # this session stays in; every other one is logged out
+    session["gen"] = gen  # this session stays in; every other one is logged out
     ext()["sessions"].revoke_all(keep=session.get("sid"))
     auth.first_login_done(ext()["config"])
     return jsonify(ok=True)

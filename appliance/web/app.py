@@ -31,6 +31,7 @@ calls nothing else (docs/architecture.md). `config` is a plain dict:
 
 The first-run password, if one was just made, is in app.config["FIRST_RUN_PASSWORD"].
 """
+
 from __future__ import annotations
 
 import logging
@@ -69,8 +70,10 @@ DEFAULTS = {
 # liveness probe for systemd/monitoring, and the API's description (not secret).
 PUBLIC_ENDPOINTS = {"pages.login", "static", "pages.favicon", "api.health", "api.openapi", "pages.api_docs"}
 
-CSP = ("default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
-       "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+CSP = (
+    "default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
+    "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
+)
 
 
 def create_app(service, config: dict | None = None) -> Flask:
@@ -84,7 +87,7 @@ def create_app(service, config: dict | None = None) -> Flask:
     app.request_class = api.UploadRequest
     creds = auth.Credentials(web_dir)
     sessions = SessionStore(web_dir / "sessions.sqlite", float(cfg["session_hours"]) * 3600)
-    api.clean_incoming(cfg["data_dir"])       # left by a web that was killed mid-upload
+    api.clean_incoming(cfg["data_dir"])  # left by a web that was killed mid-upload
     first_password = creds.ensure_admin()
     if first_password is None and cfg.get("reset_password"):
         first_password = creds.reset_generated()
@@ -92,10 +95,13 @@ def create_app(service, config: dict | None = None) -> Flask:
     cfg.setdefault("bench_data_dir", cfg["data_dir"])
     if first_password is not None:
         try:
-            firstrun.hand_over(cfg["bench_data_dir"], first_password)     # the daemon shows it
+            firstrun.hand_over(cfg["bench_data_dir"], first_password)  # the daemon shows it
         except OSError as e:
             logging.getLogger("inkslice.web").warning(
-                "cannot leave the first-run password for the bench display in %s: %s", cfg["bench_data_dir"], e)
+                "cannot leave the first-run password for the bench display in %s: %s",
+                cfg["bench_data_dir"],
+                e,
+            )
     app.config.update(
         SECRET_KEY=auth.secret_key(web_dir),
         SESSION_COOKIE_NAME="inkslice_session",
@@ -112,8 +118,12 @@ def create_app(service, config: dict | None = None) -> Flask:
     app.extensions["inkslice"] = {
         "service": WebService(service),
         "creds": creds,
-        "limiter": auth.LoginLimiter(int(cfg["login_attempts"]), float(cfg["login_window_s"]),
-                                     int(cfg["login_global_attempts"]), int(cfg["login_hashes"])),
+        "limiter": auth.LoginLimiter(
+            int(cfg["login_attempts"]),
+            float(cfg["login_window_s"]),
+            int(cfg["login_global_attempts"]),
+            int(cfg["login_hashes"]),
+        ),
         "sessions": sessions,
         "may_send_body": lambda cookie, authorization: _logged_in(app, cookie, authorization),
         "eta": EtaSmoother(),
@@ -134,12 +144,12 @@ def create_app(service, config: dict | None = None) -> Flask:
             tok = ext["creds"].token_valid(header[7:].strip())
             if tok is None:
                 return _deny("invalid API token")
-            g.auth = "token"            # no CSRF for a header a browser never sends on its own
+            g.auth = "token"  # no CSRF for a header a browser never sends on its own
             return None
         if _session_valid(app, session):
             g.auth = "session"
         elif session.get("user"):
-            session.clear()             # logged out, expired or revoked elsewhere
+            session.clear()  # logged out, expired or revoked elsewhere
         if g.auth is None and request.endpoint not in PUBLIC_ENDPOINTS:
             return _deny("log in first")
         if request.method not in auth.SAFE_METHODS:
@@ -152,7 +162,9 @@ def create_app(service, config: dict | None = None) -> Flask:
     def _deny(why, code=401):
         if request.path.startswith("/api/") or request.method not in auth.SAFE_METHODS:
             return jsonify(error=why), code
-        return redirect(url_for("pages.login", next=request.full_path if request.query_string else request.path))
+        return redirect(
+            url_for("pages.login", next=request.full_path if request.query_string else request.path)
+        )
 
     @app.after_request
     def _headers(resp):
@@ -168,7 +180,7 @@ def create_app(service, config: dict | None = None) -> Flask:
     def _too_big(e):
         return jsonify(error=f"upload larger than {cfg['max_upload_bytes']} bytes"), 413
 
-    app.add_template_global(readable_statistics, "readable_statistics")     # the job page's report
+    app.add_template_global(readable_statistics, "readable_statistics")  # the job page's report
     app.add_template_global(picture_caption, "picture_caption")
 
     @app.template_filter("num")
@@ -182,17 +194,23 @@ def create_app(service, config: dict | None = None) -> Flask:
     def _ctx():
         if "csrf" not in session:
             session["csrf"] = auth.new_csrf()
-        return {"csrf_token": session["csrf"], "logged_in": g.get("auth") is not None,
-                "must_change": g.get("auth") == "session" and creds.must_change()}
+        return {
+            "csrf_token": session["csrf"],
+            "logged_in": g.get("auth") is not None,
+            "must_change": g.get("auth") == "session" and creds.must_change(),
+        }
 
     return app
 
 
 def _session_valid(app, sess) -> bool:
     ext = app.extensions["inkslice"]
-    return (sess.get("user") == "admin" and sess.get("gen") == ext["creds"].generation()
-            and sess.get("t", 0) + app.permanent_session_lifetime.total_seconds() >= time.time()
-            and ext["sessions"].valid(sess.get("sid")))
+    return (
+        sess.get("user") == "admin"
+        and sess.get("gen") == ext["creds"].generation()
+        and sess.get("t", 0) + app.permanent_session_lifetime.total_seconds() >= time.time()
+        and ext["sessions"].valid(sess.get("sid"))
+    )
 
 
 def _logged_in(app, cookie_header: str, authorization: str) -> bool:
@@ -206,7 +224,6 @@ def _logged_in(app, cookie_header: str, authorization: str) -> bool:
     serializer = app.session_interface.get_signing_serializer(app)
     try:
         sess = serializer.loads(value, max_age=int(app.permanent_session_lifetime.total_seconds()))
-    except Exception:           # itsdangerous: bad signature, expired, garbage
+    except Exception:  # itsdangerous: bad signature, expired, garbage
         return False
     return isinstance(sess, dict) and _session_valid(app, sess)
-

@@ -34,6 +34,7 @@ friends were about exactly that (anonymous control, an open webcam stream).
 - Sessions are also rows in DATA/web/sessions.sqlite (sessions.py): logout
   and a password change delete them, so a copied cookie stops working.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -58,7 +59,7 @@ SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 
 def _private_write_json(path: Path, obj):
     write_json(path, obj)
-    os.chmod(path, 0o600)       # mkstemp already makes 0600; say it explicitly for the reader
+    os.chmod(path, 0o600)  # mkstemp already makes 0600; say it explicitly for the reader
 
 
 class Credentials:
@@ -79,20 +80,32 @@ class Credentials:
         with self._lock:
             if self.admin_file.exists():
                 return None
-            password = "-".join(secrets.token_urlsafe(12)[i:i + 4] for i in (0, 4, 8))
-            _private_write_json(self.admin_file, {"hash": generate_password_hash(password, "scrypt"),
-                                                  "generation": 1, "must_change": True,
-                                                  "set": time.time()})
+            password = "-".join(secrets.token_urlsafe(12)[i : i + 4] for i in (0, 4, 8))
+            _private_write_json(
+                self.admin_file,
+                {
+                    "hash": generate_password_hash(password, "scrypt"),
+                    "generation": 1,
+                    "must_change": True,
+                    "set": time.time(),
+                },
+            )
             return password
 
     def reset_generated(self) -> str:
         """A fresh generated password (the demo prints one every start); old sessions end."""
         with self._lock:
             old = self._read_json(self.admin_file, None) or {"generation": 0}
-            password = "-".join(secrets.token_urlsafe(12)[i:i + 4] for i in (0, 4, 8))
-            _private_write_json(self.admin_file, {"hash": generate_password_hash(password, "scrypt"),
-                                                  "generation": int(old["generation"]) + 1,
-                                                  "must_change": True, "set": time.time()})
+            password = "-".join(secrets.token_urlsafe(12)[i : i + 4] for i in (0, 4, 8))
+            _private_write_json(
+                self.admin_file,
+                {
+                    "hash": generate_password_hash(password, "scrypt"),
+                    "generation": int(old["generation"]) + 1,
+                    "must_change": True,
+                    "set": time.time(),
+                },
+            )
             return password
 
     def _read_json(self, path: Path, default):
@@ -126,8 +139,12 @@ class Credentials:
             raise ValueError(f"the password needs at least {MIN_PASSWORD} characters")
         with self._lock:
             doc = self._admin()
-            doc.update(hash=generate_password_hash(new, "scrypt"), generation=int(doc["generation"]) + 1,
-                       must_change=False, set=time.time())
+            doc.update(
+                hash=generate_password_hash(new, "scrypt"),
+                generation=int(doc["generation"]) + 1,
+                must_change=False,
+                set=time.time(),
+            )
             _private_write_json(self.admin_file, doc)
             return doc["generation"]
 
@@ -138,8 +155,12 @@ class Credentials:
     def create_token(self, name: str) -> tuple[dict, str]:
         name = str(name or "").strip()[:60] or "script"
         token = "isk_" + secrets.token_urlsafe(32)
-        rec = {"id": secrets.token_hex(4), "name": name, "created": time.time(),
-               "sha256": hashlib.sha256(token.encode()).hexdigest()}
+        rec = {
+            "id": secrets.token_hex(4),
+            "name": name,
+            "created": time.time(),
+            "sha256": hashlib.sha256(token.encode()).hexdigest(),
+        }
         with self._lock:
             tokens = self._tokens()
             tokens.append(rec)
@@ -163,7 +184,7 @@ class Credentials:
             return None
         digest = hashlib.sha256(token.encode()).hexdigest()
         found = None
-        for t in self._tokens():          # compare all, constant time each
+        for t in self._tokens():  # compare all, constant time each
             if hmac.compare_digest(t["sha256"], digest):
                 found = t
         return found
@@ -213,8 +234,11 @@ class LoginLimiter:
         q = self._fails[who]
         self._trim(q, now)
         self._trim(self._all, now)
-        waits = [self.window_s - (now - d[0]) for d, cap in ((q, self.attempts), (self._all, self.global_attempts))
-                 if len(d) >= cap]
+        waits = [
+            self.window_s - (now - d[0])
+            for d, cap in ((q, self.attempts), (self._all, self.global_attempts))
+            if len(d) >= cap
+        ]
         return max(1.0, max(waits)) if waits else 0.0
 
     def retry_after(self, who: str) -> float:
@@ -240,14 +264,14 @@ class LoginLimiter:
     def _record(self, who, now):
         self._fails[who].append(now)
         self._all.append(now)
-        if len(self._fails) > 10000:        # bound memory against address-spraying
+        if len(self._fails) > 10000:  # bound memory against address-spraying
             for k in [k for k, v in self._fails.items() if not v][:5000]:
                 del self._fails[k]
 
     def succeeded(self, who: str):
         with self._lock:
             if self._fails.pop(who, None) and self._all:
-                self._all.pop()             # the attempt begin() counted was not a failure
+                self._all.pop()  # the attempt begin() counted was not a failure
 
     def try_hash(self) -> bool:
         """Take one of the password-check slots without waiting; release with done_hash()."""
@@ -257,7 +281,9 @@ class LoginLimiter:
         self._hashing.release()
 
 
-def checked_password(limiter: LoginLimiter, creds: Credentials, who: str, password) -> tuple[bool | None, float]:
+def checked_password(
+    limiter: LoginLimiter, creds: Credentials, who: str, password
+) -> tuple[bool | None, float]:
     """(True, 0) right, (False, 0) wrong, (None, seconds) not checked: locked out or hashes busy."""
     if not limiter.try_hash():
         return None, 1.0
@@ -278,7 +304,7 @@ def first_login_done(cfg: dict) -> None:
     try:
         firstrun.done(cfg.get("bench_data_dir") or cfg["data_dir"])
     except OSError:
-        pass                        # a read-only folder must not break the login
+        pass  # a read-only folder must not break the login
 
 
 def current_config() -> dict:

@@ -8,6 +8,7 @@ daemon to show on the bench's display, see daemon/firstrun.py). start() does
 the same in a background thread and returns a handle with .url, .password and
 .stop(), for tests and benches.
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -42,20 +43,28 @@ def _server(service, data_dir, host, port, threads, config):
     cfg.update(config or {})
     app = create_app(service, cfg)
     cfg = app.extensions["inkslice"]["config"]
-    server = create_server(app, host=host, port=port, **limits.server_settings(cfg["max_upload_bytes"], threads))
-    limits.gate_server(server, app.extensions["inkslice"]["may_send_body"],
-                       per_address=None if cfg.get("trusted_proxy") else limits.PER_ADDRESS)
+    server = create_server(
+        app, host=host, port=port, **limits.server_settings(cfg["max_upload_bytes"], threads)
+    )
+    limits.gate_server(
+        server,
+        app.extensions["inkslice"]["may_send_body"],
+        per_address=None if cfg.get("trusted_proxy") else limits.PER_ADDRESS,
+    )
     return server, app
 
 
 def banner(run: Running) -> str:
     lines = [f"InkSlice web UI: {run.url}/"]
-    if run.server.effective_host in ("0.0.0.0", "::"):        # on every address: say which a phone uses
+    if run.server.effective_host in ("0.0.0.0", "::"):  # on every address: say which a phone uses
         import socket
         from ..daemon.service import lan_address
+
         port = run.server.effective_port
-        lines.append(f"From a phone on the same network: http://{lan_address()}:{port}/ "
-                     f"(or http://{socket.gethostname()}.local:{port}/ where mDNS works)")
+        lines.append(
+            f"From a phone on the same network: http://{lan_address()}:{port}/ "
+            f"(or http://{socket.gethostname()}.local:{port}/ where mDNS works)"
+        )
     if run.password:
         lines.append(f"First-run admin password: {run.password}   (change it under Settings)")
     else:
@@ -64,7 +73,7 @@ def banner(run: Running) -> str:
 
 
 def _say(text):
-    print(text, flush=True)         # flushed: a supervisor or a test reads it through a pipe
+    print(text, flush=True)  # flushed: a supervisor or a test reads it through a pipe
 
 
 def serve(service, data_dir, host="127.0.0.1", port=8080, threads=THREADS, config=None, out=_say):

@@ -18,6 +18,7 @@ does:
    (if any) is shown as is, and so is its processing figure when processing
    starts (a new phase is news, not jitter).
 """
+
 from __future__ import annotations
 
 import threading
@@ -62,7 +63,7 @@ class EtaSmoother:
             daemon_eta = state.get("eta_s")
             changed = phase_changed = st != self.phase
             if changed and st == "scanning":
-                self.last_t = now           # homing time is not a level's time
+                self.last_t = now  # homing time is not a level's time
             self.phase = st
             if self.last_done is None:
                 self.last_done, self.last_t = done, now
@@ -72,12 +73,12 @@ class EtaSmoother:
                 dt = (now - self.last_t) / (done - self.last_done)
                 self.per_level = dt if self.per_level is None else ALPHA * dt + (1 - ALPHA) * self.per_level
                 self.last_done, self.last_t = done, now
-            elif done < self.last_done:         # resumed from an earlier level
+            elif done < self.last_done:  # resumed from an earlier level
                 self.last_done, self.last_t = done, now
                 changed = True
 
             if st == "processing" and daemon_eta is None:
-                self.shown = None           # a box with no finished job yet: "processing", not "0 s"
+                self.shown = None  # a box with no finished job yet: "processing", not "0 s"
                 return None
             if self.per_level is None:
                 raw = float(daemon_eta) if daemon_eta is not None else None

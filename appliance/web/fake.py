@@ -15,6 +15,7 @@ import_scan() for an uploaded scan folder.
 It is not a model of the daemon's internals: it exists so that the web room
 can be built and tested against the facade while the daemon is being built.
 """
+
 from __future__ import annotations
 
 import copy
@@ -35,15 +36,19 @@ from ..errors import DeviceError, InkSliceError, SettingError
 
 # The daemon's own settings schema: the fake refuses and accepts exactly what the daemon does.
 DEFAULT_SETTINGS = dict(S.DEFAULTS)
-DIALECT_FILES = {"linuxcnc": "toolpath-linuxcnc.ngc", "grbl": "toolpath-grbl.nc", "fanuc": "toolpath-fanuc.nc"}
-TANK_MM = 60.0          # the simulated camera sees a 60 x 60 mm patch
-DOME_H = 20.0           # dome height, mm
-DOME_R = 25.0           # dome footprint radius, mm
+DIALECT_FILES = {
+    "linuxcnc": "toolpath-linuxcnc.ngc",
+    "grbl": "toolpath-grbl.nc",
+    "fanuc": "toolpath-fanuc.nc",
+}
+TANK_MM = 60.0  # the simulated camera sees a 60 x 60 mm patch
+DOME_H = 20.0  # dome height, mm
+DOME_R = 25.0  # dome footprint radius, mm
 
 
 def dome(x, y):
     r2 = (x - TANK_MM / 2) ** 2 + (y - TANK_MM / 2) ** 2
-    return np.where(r2 < DOME_R ** 2, DOME_H * (1 - r2 / DOME_R ** 2), np.nan)
+    return np.where(r2 < DOME_R**2, DOME_H * (1 - r2 / DOME_R**2), np.nan)
 
 
 def validate_settings(current: dict, changes: dict) -> dict:
@@ -53,8 +58,9 @@ def validate_settings(current: dict, changes: dict) -> dict:
 class FakeBenchService:
     """Thread-safe; one scan at a time. `level_s` is the simulated time per level."""
 
-    def __init__(self, data_dir, level_s=0.15, home_s=0.3, process_s=0.3, frame_px=320, settings=None,
-                 usb=None):
+    def __init__(
+        self, data_dir, level_s=0.15, home_s=0.3, process_s=0.3, frame_px=320, settings=None, usb=None
+    ):
         """`usb`: what finds sticks and copies to them (hw.usb.UsbExporter, or a test's own), or None."""
         self.data_dir = Path(data_dir)
         self.usb = usb
@@ -71,7 +77,7 @@ class FakeBenchService:
         self._subscribers: list[queue.Queue] = []
         self._calibration = {"step": 0, "detected": None}
         self._live = None
-        self.scan_durations: list[float] = []      # seconds per finished scan, for the load bench
+        self.scan_durations: list[float] = []  # seconds per finished scan, for the load bench
 
     # -- facade ---------------------------------------------------------------
     def state(self) -> dict:
@@ -83,15 +89,27 @@ class FakeBenchService:
         with self._lock:
             if self._state["state"] in ("homing", "scanning", "processing"):
                 raise SettingError("scan", f"a scan is already running ({self._state['job_id']})")
-            settings = validate_settings(self._settings, {k: v for k, v in params.items() if k in DEFAULT_SETTINGS})
+            settings = validate_settings(
+                self._settings, {k: v for k, v in params.items() if k in DEFAULT_SETTINGS}
+            )
             unknown = [k for k in params if k not in DEFAULT_SETTINGS and k not in ("name",)]
             if unknown:
                 raise SettingError(unknown[0], "unknown scan parameter")
             job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(2)
             levels = self._levels(settings)
-            job = {"id": job_id, "name": str(params.get("name", ""))[:80], "status": "homing", "reason": "",
-                   "created": time.time(), "started": time.time(), "finished": None,
-                   "settings": settings, "outputs": [], "levels_total": len(levels), "levels_done": 0}
+            job = {
+                "id": job_id,
+                "name": str(params.get("name", ""))[:80],
+                "status": "homing",
+                "reason": "",
+                "created": time.time(),
+                "started": time.time(),
+                "finished": None,
+                "settings": settings,
+                "outputs": [],
+                "levels_total": len(levels),
+                "levels_done": 0,
+            }
             self._jobs[job_id] = job
             self._begin(job, levels, 0)
             return job_id
@@ -107,7 +125,9 @@ class FakeBenchService:
         with self._lock:
             job = self._get(job_id)
             if job["status"] not in ("cancelled", "failed"):
-                raise SettingError("job", f"job {job_id} is {job['status']}; only a cancelled or failed scan resumes")
+                raise SettingError(
+                    "job", f"job {job_id} is {job['status']}; only a cancelled or failed scan resumes"
+                )
             if self._state["state"] in ("homing", "scanning", "processing"):
                 raise SettingError("scan", "a scan is already running")
             levels = self._levels(job["settings"])
@@ -116,7 +136,9 @@ class FakeBenchService:
 
     def jobs(self) -> list[dict]:
         with self._lock:
-            return [self._public(j) for j in sorted(self._jobs.values(), key=lambda j: j["created"], reverse=True)]
+            return [
+                self._public(j) for j in sorted(self._jobs.values(), key=lambda j: j["created"], reverse=True)
+            ]
 
     def job(self, job_id: str) -> dict:
         with self._lock:
@@ -126,6 +148,7 @@ class FakeBenchService:
         """As the daemon does (daemon/repost.py): a new program from the job's height map."""
         from ..daemon import settings as S
         from ..daemon.repost import repost
+
         with self._lock:
             job = self._get(job_id)
             if job["status"] != "done":
@@ -155,7 +178,9 @@ class FakeBenchService:
     def export_to_usb(self, job_id: str, name: str = "toolpath.gcode", stick=None, release=True) -> dict:
         if self.usb is None:
             raise DeviceError("usb", "USB export is switched off on this box")
-        return self.usb.export(self.job_file(job_id, name), stick, f"{job_id}-{name}", release=release).to_json()
+        return self.usb.export(
+            self.job_file(job_id, name), stick, f"{job_id}-{name}", release=release
+        ).to_json()
 
     def settings(self) -> dict:
         with self._lock:
@@ -204,13 +229,16 @@ class FakeBenchService:
 
     def calibration(self) -> dict:
         with self._lock:
-            return {"steps": [{"id": s, "text": t} for s, t in self.CALIBRATION_STEPS],
-                    "step": self._calibration["step"], "detected": self._calibration["detected"],
-                    "holds_bench": self._calibration["step"] > 0}
+            return {
+                "steps": [{"id": s, "text": t} for s, t in self.CALIBRATION_STEPS],
+                "step": self._calibration["step"],
+                "detected": self._calibration["detected"],
+                "holds_bench": self._calibration["step"] > 0,
+            }
 
     def calibrate(self, step: str) -> dict:
         ids = [s for s, _ in self.CALIBRATION_STEPS]
-        if step == "cancel":                    # as the daemon: any step, back to "home", nothing stored
+        if step == "cancel":  # as the daemon: any step, back to "home", nothing stored
             with self._lock:
                 self._calibration = {"step": 0, "detected": None}
             return self.calibration()
@@ -223,8 +251,11 @@ class FakeBenchService:
             if step == "detect":
                 img, dots = self._calibration_frame()
                 self._frame = (img, {"level_mm": None, "time": time.time(), "what": "calibration"})
-                self._calibration["detected"] = {"dots": dots, "mm_per_px": round(TANK_MM / self.frame_px, 4),
-                                                 "rms_px": 0.21}
+                self._calibration["detected"] = {
+                    "dots": dots,
+                    "mm_per_px": round(TANK_MM / self.frame_px, 4),
+                    "rms_px": 0.21,
+                }
             self._calibration["step"] = (self._calibration["step"] + 1) % len(ids)
             if step == "accept":
                 self._calibration["detected"] = None
@@ -237,13 +268,23 @@ class FakeBenchService:
             if self._state["state"] in ("homing", "scanning", "processing"):
                 raise SettingError("scan", "a scan is running; import it afterwards")
             job_id = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(2)
-            job = {"id": job_id, "name": "uploaded scan", "status": "done", "reason": "",
-                   "created": time.time(), "started": time.time(), "finished": None,
-                   "settings": dict(self._settings), "outputs": [], "levels_total": len(meta["frames"]),
-                   "levels_done": len(meta["frames"])}
+            job = {
+                "id": job_id,
+                "name": "uploaded scan",
+                "status": "done",
+                "reason": "",
+                "created": time.time(),
+                "started": time.time(),
+                "finished": None,
+                "settings": dict(self._settings),
+                "outputs": [],
+                "levels_total": len(meta["frames"]),
+                "levels_done": len(meta["frames"]),
+            }
             self._jobs[job_id] = job
         import shutil
-        shutil.copytree(folder, self.jobs_dir / job_id / "scan")     # the service keeps its own copy
+
+        shutil.copytree(folder, self.jobs_dir / job_id / "scan")  # the service keeps its own copy
         job["outputs"] = self._write_outputs(job)
         job["finished"] = time.time()
         return job_id
@@ -270,9 +311,16 @@ class FakeBenchService:
         return out
 
     def _blank_state(self):
-        return {"state": "idle", "job_id": None, "level_mm": None, "levels_done": 0, "levels_total": 0,
-                "eta_s": None, "message": "ready",
-                "hardware": {"stage": "ok", "camera": "ok", "light": "ok", "display": "missing"}}
+        return {
+            "state": "idle",
+            "job_id": None,
+            "level_mm": None,
+            "levels_done": 0,
+            "levels_total": 0,
+            "eta_s": None,
+            "message": "ready",
+            "hardware": {"stage": "ok", "camera": "ok", "light": "ok", "display": "missing"},
+        }
 
     def _set(self, **kw):
         with self._lock:
@@ -289,31 +337,48 @@ class FakeBenchService:
         self._stop.clear()
         # The state says "homing" before start_scan returns, so a second start is refused at once.
         self._state = self._blank_state()
-        self._state.update(state="homing", job_id=job["id"], levels_total=len(levels), levels_done=first,
-                           message="homing the stage")
+        self._state.update(
+            state="homing",
+            job_id=job["id"],
+            levels_total=len(levels),
+            levels_done=first,
+            message="homing the stage",
+        )
         job["status"] = "homing"
         if first == 0:
             n = 40
-            self._live = {"x": [round(TANK_MM * (i + 0.5) / n, 3) for i in range(n)],
-                          "y": [round(TANK_MM * (i + 0.5) / n, 3) for i in range(n)],
-                          "z": [[None] * n for _ in range(n)]}
-        self._thread = threading.Thread(target=self._run, args=(job, levels, first), daemon=True,
-                                        name=f"fake-scan-{job['id']}")
+            self._live = {
+                "x": [round(TANK_MM * (i + 0.5) / n, 3) for i in range(n)],
+                "y": [round(TANK_MM * (i + 0.5) / n, 3) for i in range(n)],
+                "z": [[None] * n for _ in range(n)],
+            }
+        self._thread = threading.Thread(
+            target=self._run, args=(job, levels, first), daemon=True, name=f"fake-scan-{job['id']}"
+        )
         self._thread.start()
 
     def _run(self, job, levels, first):
         t0 = time.monotonic()
         try:
             job["status"] = "homing"
-            self._set(state="homing", job_id=job["id"], levels_total=len(levels), levels_done=first,
-                      message="homing the stage")
+            self._set(
+                state="homing",
+                job_id=job["id"],
+                levels_total=len(levels),
+                levels_done=first,
+                message="homing the stage",
+            )
             if self._stop.wait(self.home_s):
                 return self._end(job, "cancelled", "cancelled by the operator")
             job["status"] = "scanning"
             for i in range(first, len(levels)):
                 level = levels[i]
-                self._set(state="scanning", level_mm=level, message=f"level {level:.2f} mm",
-                          eta_s=round((len(levels) - i) * self.level_s + self.process_s, 1))
+                self._set(
+                    state="scanning",
+                    level_mm=level,
+                    message=f"level {level:.2f} mm",
+                    eta_s=round((len(levels) - i) * self.level_s + self.process_s, 1),
+                )
                 if self._stop.wait(self.level_s):
                     return self._end(job, "cancelled", "cancelled by the operator")
                 img = self._render(level)
@@ -323,13 +388,15 @@ class FakeBenchService:
                 job["levels_done"] = i + 1
                 self._set(levels_done=i + 1)
             job["status"] = "processing"
-            self._set(state="processing", message="building the height map and the toolpath", eta_s=self.process_s)
+            self._set(
+                state="processing", message="building the height map and the toolpath", eta_s=self.process_s
+            )
             if self._stop.wait(self.process_s):
                 return self._end(job, "cancelled", "cancelled by the operator")
             job["outputs"] = self._write_outputs(job)
             self._end(job, "done", "")
             self.scan_durations.append(time.monotonic() - t0)
-        except Exception as e:          # a crash in the simulation shows as a failed job, like the daemon's
+        except Exception as e:  # a crash in the simulation shows as a failed job, like the daemon's
             self._end(job, "failed", f"{type(e).__name__}: {e}")
 
     def _end(self, job, status, reason):
@@ -350,13 +417,13 @@ class FakeBenchService:
     def _render(self, level):
         n = self.frame_px
         img = np.zeros((n, n, 3), np.uint8)
-        img[:] = (70, 25, 10)                  # dark-blue ink (BGR)
+        img[:] = (70, 25, 10)  # dark-blue ink (BGR)
         r_mm = DOME_R * math.sqrt(max(0.0, 1 - level / DOME_H))
         c = n // 2
         r = int(round(r_mm / TANK_MM * n))
         if r > 0:
             cv2.circle(img, (c, c), r, (215, 220, 225), -1, cv2.LINE_AA)
-            cv2.circle(img, (c, c), r, (0, 0, 255), 2, cv2.LINE_AA)      # detected waterline
+            cv2.circle(img, (c, c), r, (0, 0, 255), 2, cv2.LINE_AA)  # detected waterline
         cv2.putText(img, f"{level:.2f} mm", (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
         ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 80])
         return buf.tobytes()
@@ -395,7 +462,7 @@ class FakeBenchService:
             if dialect == job["settings"]["dialect"]:
                 write_text(folder / "toolpath.gcode", text)
                 files.append("toolpath.gcode")
-        if "toolpath.gcode" not in files:           # a dialect the fake does not draw: linuxcnc's program
+        if "toolpath.gcode" not in files:  # a dialect the fake does not draw: linuxcnc's program
             write_text(folder / "toolpath.gcode", self._gcode(X, Y, Z, "linuxcnc"))
             files.append("toolpath.gcode")
         write_bytes(folder / "surface.stl", self._stl(X, Y, np.nan_to_num(Z)).encode())
@@ -403,13 +470,21 @@ class FakeBenchService:
         err = np.abs(np.sin(X / 5) * np.cos(Y / 7)) * 0.05
         err[~np.isfinite(Z)] = np.nan
         vis = np.nan_to_num(err / 0.05 * 255).astype(np.uint8)
-        png = cv2.applyColorMap(cv2.resize(vis, (240, 240), interpolation=cv2.INTER_NEAREST), cv2.COLORMAP_VIRIDIS)
+        png = cv2.applyColorMap(
+            cv2.resize(vis, (240, 240), interpolation=cv2.INTER_NEAREST), cv2.COLORMAP_VIRIDIS
+        )
         ok, buf = cv2.imencode(".png", png)
         write_bytes(folder / "error.png", buf.tobytes())
         files.append("error.png")
-        stats = {"rms_mm": round(float(np.sqrt(np.nanmean(err ** 2))), 4), "max_mm": round(float(np.nanmax(err)), 4),
-                 "levels": job["levels_total"], "cells": int(np.isfinite(Z).sum())}
-        write_json(folder / "report.json", {"job": job["id"], "statistics": stats, "settings": job["settings"]})
+        stats = {
+            "rms_mm": round(float(np.sqrt(np.nanmean(err**2))), 4),
+            "max_mm": round(float(np.nanmax(err)), 4),
+            "levels": job["levels_total"],
+            "cells": int(np.isfinite(Z).sum()),
+        }
+        write_json(
+            folder / "report.json", {"job": job["id"], "statistics": stats, "settings": job["settings"]}
+        )
         md = [f"# Scan {job['id']}", "", "| statistic | value |", "|---|---|"]
         md += [f"| {k} | {v} |" for k, v in stats.items()]
         md += ["", "Error picture: `error.png`"]
@@ -419,8 +494,11 @@ class FakeBenchService:
 
     @staticmethod
     def _gcode(X, Y, Z, dialect):
-        head = {"linuxcnc": ["G21 G90 G17", "F800"], "grbl": ["G21 G90", "F800"],
-                "fanuc": ["%", "O1000", "G21 G90 G17", "F800"]}[dialect]
+        head = {
+            "linuxcnc": ["G21 G90 G17", "F800"],
+            "grbl": ["G21 G90", "F800"],
+            "fanuc": ["%", "O1000", "G21 G90 G17", "F800"],
+        }[dialect]
         out = list(head) + ["G0 Z25.000"]
         safe = 25.0
         for r in range(X.shape[0]):
@@ -438,8 +516,12 @@ class FakeBenchService:
         out = ["solid surface"]
         for r in range(X.shape[0] - 1):
             for c in range(X.shape[1] - 1):
-                p = [(X[r, c], Y[r, c], Z[r, c]), (X[r, c + 1], Y[r, c + 1], Z[r, c + 1]),
-                     (X[r + 1, c], Y[r + 1, c], Z[r + 1, c]), (X[r + 1, c + 1], Y[r + 1, c + 1], Z[r + 1, c + 1])]
+                p = [
+                    (X[r, c], Y[r, c], Z[r, c]),
+                    (X[r, c + 1], Y[r, c + 1], Z[r, c + 1]),
+                    (X[r + 1, c], Y[r + 1, c], Z[r + 1, c]),
+                    (X[r + 1, c + 1], Y[r + 1, c + 1], Z[r + 1, c + 1]),
+                ]
                 for tri in ((p[0], p[1], p[2]), (p[1], p[3], p[2])):
                     out.append("facet normal 0 0 1\nouter loop")
                     out += [f"vertex {a:.4f} {b:.4f} {z:.4f}" for a, b, z in tri]

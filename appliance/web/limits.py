@@ -20,6 +20,7 @@ on the headers alone:
 server_settings() gives the waitress adjustments; gate_server() installs both
 checks on a server made by waitress.create_server.
 """
+
 from __future__ import annotations
 
 import resource
@@ -28,8 +29,8 @@ from waitress.channel import HTTPChannel
 from waitress.parser import HTTPRequestParser
 from waitress.utilities import Error
 
-ANON_BODY_BYTES = 64 * 1024         # the login form is a few hundred bytes
-MULTIPART_SLACK = 1024 * 1024       # form boundaries and fields around an upload's file
+ANON_BODY_BYTES = 64 * 1024  # the login form is a few hundred bytes
+MULTIPART_SLACK = 1024 * 1024  # form boundaries and fields around an upload's file
 CONNECTION_LIMIT = 1000
 PER_ADDRESS = 64
 OPEN_FILES = 4096
@@ -44,7 +45,7 @@ def server_settings(max_upload_bytes: int, threads: int) -> dict:
     return {
         "threads": threads,
         "max_request_body_size": int(max_upload_bytes) + MULTIPART_SLACK,
-        "inbuf_overflow": 512 * 1024,              # > ANON_BODY_BYTES: anonymous bodies stay in memory
+        "inbuf_overflow": 512 * 1024,  # > ANON_BODY_BYTES: anonymous bodies stay in memory
         # headers are held in memory until complete: 1000 half-sent ones at waitress's default
         # 256 KiB would be 256 MB; ours (a cookie, a token) fit in a few hundred bytes
         "max_request_header_size": 16 * 1024,
@@ -68,7 +69,7 @@ def raise_open_files(want: int = OPEN_FILES) -> int:
         try:
             resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
         except (OSError, ValueError):
-            return soft     # the unit's system-call filter forbids it: its LimitNOFILE= applies
+            return soft  # the unit's system-call filter forbids it: its LimitNOFILE= applies
         return target
     return soft
 
@@ -88,7 +89,7 @@ def gate_server(server, may_send_body, per_address: int | None = PER_ADDRESS):
             if was_in_headers and self.headers_finished and not self.error and self._refuse_body():
                 self.error = LoginFirst(f"log in before sending a body of more than {ANON_BODY_BYTES} bytes")
                 self.completed = True
-                self.expect_continue = False        # no "100 Continue": the body is not wanted
+                self.expect_continue = False  # no "100 Continue": the body is not wanted
                 if self.body_rcv is not None:
                     self.body_rcv.getbuf().close()
             return n
@@ -104,7 +105,7 @@ def gate_server(server, may_send_body, per_address: int | None = PER_ADDRESS):
         def __init__(self, srv, sock, addr, adj, map=None):
             super().__init__(srv, sock, addr, adj, map=map)
             if per_address is not None and _connections_from(map or {}, addr) > per_address:
-                self.will_close = True          # closed by the loop before anything is read
+                self.will_close = True  # closed by the loop before anything is read
 
     server.channel_class = Channel
     return server
@@ -112,5 +113,8 @@ def gate_server(server, may_send_body, per_address: int | None = PER_ADDRESS):
 
 def _connections_from(channels: dict, addr) -> int:
     host = addr[0] if isinstance(addr, tuple) else addr
-    return sum(1 for ch in channels.values()
-               if isinstance(ch, HTTPChannel) and isinstance(ch.addr, tuple) and ch.addr[0] == host)
+    return sum(
+        1
+        for ch in channels.values()
+        if isinstance(ch, HTTPChannel) and isinstance(ch.addr, tuple) and ch.addr[0] == host
+    )

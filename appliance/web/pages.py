@@ -1,5 +1,6 @@
 """The HTML pages. They are thin: the data comes from /api/ through static/app.js,
 so a page and a script see the same thing."""
+
 from __future__ import annotations
 
 import json
@@ -47,10 +48,15 @@ def login():
             resp.headers["Retry-After"] = str(int(wait) + 1)
             return resp
         if ok:
-            session.clear()             # a fresh session (and CSRF token) at every login
+            session.clear()  # a fresh session (and CSRF token) at every login
             session.permanent = True
-            session.update(user="admin", gen=ext["creds"].generation(), sid=ext["sessions"].open(),
-                           t=time.time(), csrf=auth.new_csrf())
+            session.update(
+                user="admin",
+                gen=ext["creds"].generation(),
+                sid=ext["sessions"].open(),
+                t=time.time(),
+                csrf=auth.new_csrf(),
+            )
             auth.first_login_done(ext["config"])
             return redirect(_safe_next(request.form.get("next")))
         error, code = "Wrong password.", 401
@@ -59,7 +65,7 @@ def login():
 
 @bp.post("/logout")
 def logout():
-    _ext()["sessions"].revoke(session.get("sid"))      # a copy of the cookie stops working too
+    _ext()["sessions"].revoke(session.get("sid"))  # a copy of the cookie stops working too
     session.clear()
     return redirect(url_for("pages.login"))
 
@@ -67,14 +73,18 @@ def logout():
 @bp.get("/")
 def dashboard():
     svc = _ext()["service"]
-    return render_template("dashboard.html", page="dashboard", defaults=svc.settings(), machine=svc.offers("preview"))
+    return render_template(
+        "dashboard.html", page="dashboard", defaults=svc.settings(), machine=svc.offers("preview")
+    )
 
 
 @bp.get("/jobs")
 def jobs():
     svc = _ext()["service"]
     sizes = svc.job_sizes()
-    return render_template("jobs.html", page="jobs", jobs=[_listed(j, sizes.get(j["id"])) for j in svc.jobs()])
+    return render_template(
+        "jobs.html", page="jobs", jobs=[_listed(j, sizes.get(j["id"])) for j in svc.jobs()]
+    )
 
 
 def _listed(job: dict, size) -> dict:
@@ -89,7 +99,11 @@ def _listed(job: dict, size) -> dict:
 
 def _duration(s: float) -> str:
     s = int(round(s))
-    return f"{s // 3600} h {s % 3600 // 60:02d} min" if s >= 3600 else (f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s")
+    return (
+        f"{s // 3600} h {s % 3600 // 60:02d} min"
+        if s >= 3600
+        else (f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s")
+    )
 
 
 def _bytes(n: int) -> str:
@@ -115,22 +129,32 @@ def job(job_id):
     gcode = [n for n in outputs if n.rsplit(".", 1)[-1] in ("gcode", "nc", "ngc", "tap")]
     images = [n for n in outputs if n.endswith(".png")]
     sizes = svc.job_sizes()
-    return render_template("job.html", page="job", job=_listed(info, sizes.get(job_id)), outputs=outputs,
-                           report=report, gcode=gcode, images=images,
-                           names={n: download_name(info, n) for n in outputs},
-                           manage=svc.offers("reprocess"), choices=_choices(),
-                           repost=svc.offers("repost") and "heightmap.csv" in outputs
-                           and info.get("status") == "done", materials=_materials())
+    return render_template(
+        "job.html",
+        page="job",
+        job=_listed(info, sizes.get(job_id)),
+        outputs=outputs,
+        report=report,
+        gcode=gcode,
+        images=images,
+        names={n: download_name(info, n) for n in outputs},
+        manage=svc.offers("reprocess"),
+        choices=_choices(),
+        repost=svc.offers("repost") and "heightmap.csv" in outputs and info.get("status") == "done",
+        materials=_materials(),
+    )
 
 
 def _materials() -> tuple:
     from ..cam.feeds import MATERIALS
+
     return tuple(MATERIALS)
 
 
 def _choices() -> dict:
     """The settings' fixed choices, for the re-process form's selects."""
     from ..daemon import settings as S
+
     out = {}
     for key in ("cutter_type", "dialect"):
         choices = getattr(S.BY_KEY.get(key), "choices", None) if hasattr(S, "BY_KEY") else S.CHOICES.get(key)
@@ -140,8 +164,13 @@ def _choices() -> dict:
 
 @bp.get("/settings")
 def settings():
-    return render_template("settings.html", page="settings", settings=_ext()["service"].settings(),
-                           schema=schema_json(), tokens=_ext()["creds"].list_tokens())
+    return render_template(
+        "settings.html",
+        page="settings",
+        settings=_ext()["service"].settings(),
+        schema=schema_json(),
+        tokens=_ext()["creds"].list_tokens(),
+    )
 
 
 @bp.get("/system")
@@ -152,22 +181,34 @@ def system():
 @bp.get("/calibration")
 def calibration():
     svc = _ext()["service"]
-    return render_template("calibration.html", page="calibration", offered=svc.offers("calibration"),
-                           board_text=describe(PRINTED))
+    return render_template(
+        "calibration.html",
+        page="calibration",
+        offered=svc.offers("calibration"),
+        board_text=describe(PRINTED),
+    )
 
 
 @bp.get("/commission")
 def commission():
     svc = _ext()["service"]
-    return render_template("commission.html", page="commission", offered=svc.offers("commissioning"),
-                           chessboard=_chessboard_files(), board_text=describe(PRINTED))
+    return render_template(
+        "commission.html",
+        page="commission",
+        offered=svc.offers("commissioning"),
+        chessboard=_chessboard_files(),
+        board_text=describe(PRINTED),
+    )
 
 
 def _chessboard_files() -> dict:
     """Links to the printable calibration board shipped in static/ (appliance/vision/printboard.py)."""
     static = Path(current_app.static_folder)
-    return {kind: url_for("static", filename=f"chessboard.{kind}")
-            for kind in ("pdf", "png") if (static / f"chessboard.{kind}").is_file()}
+    return {
+        kind: url_for("static", filename=f"chessboard.{kind}")
+        for kind in ("pdf", "png")
+        if (static / f"chessboard.{kind}").is_file()
+    }
 
 
 @bp.get("/favicon.ico")

@@ -6,6 +6,7 @@ working until it expires, logout or not. So every login opens a row here
 logout deletes the row, a password change deletes every row but the
 changer's. DATA/web/sessions.sqlite, mode 0600.
 """
+
 from __future__ import annotations
 
 import os

@@ -11,6 +11,7 @@ the settings schema the settings form is drawn from.
 
 Behind the login gate like the rest of /api/ (app.py).
 """
+
 from __future__ import annotations
 
 import io
@@ -68,8 +69,11 @@ def schema():
 
 
 def system_info() -> dict:
-    info = {"version": __version__, "web_started": _ext()["started"],
-            "web_uptime_s": round(time.time() - _ext()["started"], 1)}
+    info = {
+        "version": __version__,
+        "web_started": _ext()["started"],
+        "web_uptime_s": round(time.time() - _ext()["started"], 1),
+    }
     if _svc().offers("system"):
         info.update(_svc().system())
     return info
@@ -119,19 +123,28 @@ def support_bundle():
             z.writestr("calibration.json", json.dumps(svc.backup()["calibration"], indent=2))
         if svc.offers("events"):
             z.writestr("events.json", json.dumps(svc.events(None, 500), indent=2, default=str))
-        z.writestr("README.txt", "InkSlice support bundle: the daemon's and web's last log lines, the settings "
-                                 "(secrets left out), the calibration history, the box's figures and its recent "
-                                 "events. No passwords, tokens, scans or jobs.\n")
-    return Response(buf.getvalue(), mimetype="application/zip", headers={
-        "Content-Disposition": f'attachment; filename="inkslice-support-{_stamp()}.zip"'})
+        z.writestr(
+            "README.txt",
+            "InkSlice support bundle: the daemon's and web's last log lines, the settings "
+            "(secrets left out), the calibration history, the box's figures and its recent "
+            "events. No passwords, tokens, scans or jobs.\n",
+        )
+    return Response(
+        buf.getvalue(),
+        mimetype="application/zip",
+        headers={"Content-Disposition": f'attachment; filename="inkslice-support-{_stamp()}.zip"'},
+    )
 
 
 @bp.get("/backup")
 def backup():
     doc = _svc().backup()
     log.info("backup of settings and calibration downloaded")
-    return Response(json.dumps(doc, indent=2) + "\n", mimetype="application/json", headers={
-        "Content-Disposition": f'attachment; filename="inkslice-backup-{_stamp()}.json"'})
+    return Response(
+        json.dumps(doc, indent=2) + "\n",
+        mimetype="application/json",
+        headers={"Content-Disposition": f'attachment; filename="inkslice-backup-{_stamp()}.json"'},
+    )
 
 
 @bp.post("/restore")
