@@ -137,8 +137,8 @@ def extract_waterlines(scan):
     """Every frame's waterline, top level first. Each frame is read with the next lower
     ones beside it (exposure is monotone: what is part here is part below, so what they
     do not show is glare or flotsam); only those few frames are held at a time."""
-    from .vision.pipeline import WaterlineExtractor
     from .surface.slices import shows_waterline
+    from .vision.pipeline import WaterlineExtractor
 
     extractor = WaterlineExtractor(scan.camera, no_part="empty")  # a scan starts above the part
     frames = [ref for ref in _frames_top_down(scan) if shows_waterline(ref.level_mm)]
@@ -212,10 +212,10 @@ def pixel_mm(camera) -> float:
 
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
+    from .surface.base import stand_on_base
+    from .surface.meniscus import camera_centre_xy
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
     from .surface.slices import Perspective
-    from .surface.meniscus import camera_centre_xy
-    from .surface.base import stand_on_base
 
     waterlines = extract_waterlines(scan)
     bounds = _waterline_bounds(waterlines)

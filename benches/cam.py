@@ -39,16 +39,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from appliance.cam.cutters import parse_cutter  # noqa: E402
-from appliance.cam.dissertation import dissertation_gcode  # noqa: E402
-from appliance.cam.dropcutter import drop_grid, drop_lines  # noqa: E402
-from appliance.cam.dialects import check_fanuc, check_grbl  # noqa: E402
-from appliance.cam.jobs import finishing_gcode, finishing_gcodes, verify_gcode  # noqa: E402
-from appliance.cam.posts import DIALECT_NAMES  # noqa: E402
-from appliance.cam.sampling import Sampler  # noqa: E402
-from appliance.cam.zigzag import FinishSettings  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.surface.heightmap import HeightMap  # noqa: E402
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.dialects import check_fanuc, check_grbl
+from appliance.cam.dissertation import dissertation_gcode
+from appliance.cam.dropcutter import drop_grid, drop_lines
+from appliance.cam.jobs import finishing_gcode, finishing_gcodes, verify_gcode
+from appliance.cam.posts import DIALECT_NAMES
+from appliance.cam.sampling import Sampler
+from appliance.cam.zigzag import FinishSettings
+from appliance.sim import surfaces
+from appliance.surface.heightmap import HeightMap
 
 RS274 = "/usr/bin/rs274"
 # every dialect goes through LinuxCNC's interpreter (it reads them all, Fanuc's % and

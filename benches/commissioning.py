@@ -27,15 +27,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from appliance.daemon.processing import in_process  # noqa: E402
-from appliance.outputs import read_heightmap_csv  # noqa: E402
-from appliance.daemon.service import BenchService  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.fakes import SimulatedBenchFactory  # noqa: E402
-from appliance.sim.physics import meniscus_rise  # noqa: E402
-from appliance.sim.render import effects_preset  # noqa: E402
-from appliance.sim.rig import Rig  # noqa: E402
-from appliance.surface.stats import seed_statistics  # noqa: E402
+from appliance.daemon.processing import in_process
+from appliance.daemon.service import BenchService
+from appliance.outputs import read_heightmap_csv
+from appliance.sim import surfaces
+from appliance.sim.fakes import SimulatedBenchFactory
+from appliance.sim.physics import meniscus_rise
+from appliance.sim.render import effects_preset
+from appliance.sim.rig import Rig
+from appliance.surface.stats import seed_statistics
 
 TRUE_LEVEL_ZERO = 57.3
 

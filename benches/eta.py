@@ -27,9 +27,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from appliance.daemon.service import BenchService  # noqa: E402
-from appliance.sim.fakes import FakeBench  # noqa: E402
-from appliance.web.eta import EtaSmoother  # noqa: E402
+from appliance.daemon.service import BenchService
+from appliance.sim.fakes import FakeBench
+from appliance.web.eta import EtaSmoother
 
 TARGET = 0.20
 

@@ -32,9 +32,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from appliance.hw import protocol as P  # noqa: E402
-from appliance.hw.stage import SerialStage  # noqa: E402
-from appliance.sim.hil import SimulatedBench, build  # noqa: E402
+from appliance.hw.stage import SerialStage
+from appliance.sim.hil import SimulatedBench, build
 
 F_CPU = 16_000_000
 CYC_PER_TICK = 8  # Timer1 at clk/8

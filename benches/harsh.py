@@ -63,10 +63,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from meniscus import bench_folder, commission, described, scan_part  # noqa: E402
-from uncertainty import honesty  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.vision.refine import RESOLUTION_MM  # noqa: E402
+from meniscus import bench_folder, commission, described, scan_part
+from uncertainty import honesty
+
+from appliance.sim import surfaces
+from appliance.vision.refine import RESOLUTION_MM
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,plateau,ring"
 HELD_OUT = "crater,steep-front"  # shapes the uncertainty map was not tuned on

@@ -77,15 +77,16 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from appliance import process as proc  # noqa: E402
-from appliance.cli import main as cli  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.levels import sculpture_levels  # noqa: E402
-from appliance.sim.physics import meniscus_rise  # noqa: E402
-from appliance.sim.render import effects_preset  # noqa: E402
-from appliance.sim.scanrender import refine_scan, render_scan  # noqa: E402
-from appliance.vision.refine import RESOLUTION_MM  # noqa: E402
-from seed_table import calibrated_camera, use_camera  # noqa: E402
+from seed_table import calibrated_camera, use_camera
+
+from appliance import process as proc
+from appliance.cli import main as cli
+from appliance.sim import surfaces
+from appliance.sim.levels import sculpture_levels
+from appliance.sim.physics import meniscus_rise
+from appliance.sim.render import effects_preset
+from appliance.sim.scanrender import refine_scan, render_scan
+from appliance.vision.refine import RESOLUTION_MM
 
 PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
 

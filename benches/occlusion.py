@@ -41,15 +41,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
-from scipy import ndimage  # noqa: E402
+import numpy as np
+from scipy import ndimage
 
-from appliance import process as proc  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.scanrender import render_scan, scan_levels  # noqa: E402
+from appliance import process as proc
+from appliance.sim import surfaces
+from appliance.sim.scanrender import render_scan, scan_levels
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from seed_table import calibrated_camera, calibrated_meniscus, use_camera  # noqa: E402
+from seed_table import calibrated_camera, calibrated_meniscus, use_camera
 
 PARTS = ("stepped-block", "blade")
 

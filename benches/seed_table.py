@@ -31,13 +31,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from appliance import process as proc  # noqa: E402
-from appliance.cli import main as cli  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.levels import sculpture_levels  # noqa: E402
-from appliance.sim.physics import meniscus_rise  # noqa: E402
-from appliance.sim.scanrender import render_scan  # noqa: E402
-from appliance.surface.seedtables import TABLES, best_ea  # noqa: E402
+from appliance import process as proc
+from appliance.cli import main as cli
+from appliance.sim import surfaces
+from appliance.sim.levels import sculpture_levels
+from appliance.sim.physics import meniscus_rise
+from appliance.sim.scanrender import render_scan
+from appliance.surface.seedtables import TABLES, best_ea
 
 TABLE_KEY = {
     "seed:captured": "captured",

@@ -50,13 +50,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from appliance.cam.cutters import parse_cutter  # noqa: E402
-from appliance.cam.dialects import check_fanuc, check_grbl  # noqa: E402
-from appliance.cam.jobs import finishing_gcode, verify_gcode  # noqa: E402
-from appliance.cam.operations import Operation, parse_operations, plan_operations, post_operations  # noqa: E402
-from appliance.cam.tools import Tool, default_tools  # noqa: E402
-from appliance.cam.zigzag import FinishSettings  # noqa: E402
-from appliance.surface.heightmap import HeightMap  # noqa: E402
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.dialects import check_fanuc, check_grbl
+from appliance.cam.jobs import finishing_gcode, verify_gcode
+from appliance.cam.operations import Operation, parse_operations, plan_operations, post_operations
+from appliance.cam.tools import Tool, default_tools
+from appliance.cam.zigzag import FinishSettings
+from appliance.surface.heightmap import HeightMap
 
 SCALLOP = 0.05
 WALL_BAND_DEG = 55.0

@@ -26,13 +26,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.ideal import ideal_waterlines  # noqa: E402
-from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct  # noqa: E402
-from appliance.surface.seedtables import TABLES  # noqa: E402
-from appliance.surface.stats import seed_statistics  # noqa: E402
+from appliance.sim import surfaces
+from appliance.sim.ideal import ideal_waterlines
+from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
+from appliance.surface.seedtables import TABLES
+from appliance.surface.stats import seed_statistics
 
 
 def stats_for(surface, hm):
@@ -107,6 +107,7 @@ def rendered(quick, samples, preset, keep=None):
     """Render (renderer team), extract (vision team), reconstruct with and without corrections."""
     import json
     import tempfile
+
     from appliance.scanfile import load_scan, read_frame
     from appliance.sim.rig import Rig
     from appliance.sim.scanrender import render_scan
@@ -130,7 +131,7 @@ def rendered(quick, samples, preset, keep=None):
             for ref in sorted(scan.frames, key=lambda f: -f.level_mm):
                 try:
                     lines.append(ex.extract(read_frame(scan, ref), ref.level_mm))
-                except Exception as e:  # noqa: BLE001 - report and go on
+                except Exception as e:
                     print(f"  {name}: frame at {ref.level_mm} failed: {e}")
             t2 = time.perf_counter()
             tank = scan.extra.get("tank", {}).get("inner_area_mm2", 22500.0)

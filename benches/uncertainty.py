@@ -55,16 +55,16 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
-from scipy import ndimage  # noqa: E402
+import numpy as np
+from scipy import ndimage
 
-from appliance import process as proc  # noqa: E402
-from appliance.outputs import meniscus_model  # noqa: E402
-from appliance.scanfile import load_scan  # noqa: E402
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.scanrender import render_scan  # noqa: E402
-from appliance.surface.heightmap import HeightMap  # noqa: E402
-from appliance.surface.uncertainty import DEFAULT_UNCERTAIN_MM, SOURCES  # noqa: E402
+from appliance import process as proc
+from appliance.outputs import meniscus_model
+from appliance.scanfile import load_scan
+from appliance.sim import surfaces
+from appliance.sim.scanrender import render_scan
+from appliance.surface.heightmap import HeightMap
+from appliance.surface.uncertainty import DEFAULT_UNCERTAIN_MM, SOURCES
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,crater"
 BIG_MM = 0.1  # an error a machinist would feel; also the low-confidence threshold

@@ -32,11 +32,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from appliance.sim import surfaces  # noqa: E402
-from appliance.sim.render import Effects, PRESETS, render_frame  # noqa: E402
-from appliance.sim.rig import Rig  # noqa: E402
-from appliance.vision import seed  # noqa: E402
-from appliance.vision.pipeline import WaterlineExtractor  # noqa: E402
+from appliance.sim import surfaces
+from appliance.sim.render import PRESETS, Effects, render_frame
+from appliance.sim.rig import Rig
+from appliance.vision import seed
+from appliance.vision.pipeline import WaterlineExtractor
 
 
 def replace_effects(e, **kw):
@@ -301,6 +301,7 @@ def calibration_bench():
     compare where the two calibrations put each pixel on the liquid plane."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from test_vision_calibration import _rot, draw_board, pose_to_board, rays
+
     from appliance.scanfile import CameraModel
     from appliance.vision.calibration import Board, BoardPose, calibrate
 

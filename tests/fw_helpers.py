@@ -8,13 +8,12 @@ so the protocol tests can send exactly the bytes a spec case describes.
 
 import subprocess
 import time
-from pathlib import Path
 
 import pytest
 import serial
 
-from appliance.hw import protocol as P
 from appliance.firmware import build_dir
+from appliance.hw import protocol as P
 from appliance.sim.hil import FIRMWARE_DIR, SimulatedBench, build
 
 BUILD = build_dir()

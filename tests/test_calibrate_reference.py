@@ -9,8 +9,8 @@ import pytest
 
 from appliance.cli import main
 from appliance.outputs import read_heightmap_csv
-from appliance.sim.render import Effects
 from appliance.sim import surfaces
+from appliance.sim.render import Effects
 from appliance.sim.rig import Rig
 from appliance.sim.scanrender import render_scan
 

@@ -3,11 +3,11 @@
 import cv2
 import numpy as np
 import pytest
+from cam_helpers import grid_map
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.dropcutter import drop_grid, drop_lines, drop_points
 from appliance.cam.sampling import Sampler
-from cam_helpers import grid_map
 
 BALL, FLAT, BULL = parse_cutter("ball6"), parse_cutter("flat6"), parse_cutter("bull6r1")
 

@@ -7,6 +7,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from cam_helpers import grid_map
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.dialects import check_fanuc, check_grbl
@@ -19,7 +20,6 @@ from appliance.cam.sampling import Sampler
 from appliance.cam.zigzag import FinishSettings
 from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
-from cam_helpers import grid_map
 
 RS274 = "/usr/bin/rs274"
 

@@ -4,13 +4,13 @@ rescan), the file names, and the preview JSON beside every program."""
 import json
 
 import numpy as np
+from cam_helpers import grid_map
 
 from appliance.cam.dialects import check_grbl
 from appliance.cam.gcodeparse import parse_gcode
 from appliance.cam.preview import FORMAT, decode
 from appliance.cli import main
 from appliance.outputs import write_heightmap_csv
-from cam_helpers import grid_map
 
 
 def job_folder(tmp_path, name="bowl-job"):

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+from cam_helpers import grid_map
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.jobs import finishing_gcode, verify_gcode
 from appliance.cam.scallop import ball_scallop, ball_stepover, swept_offset
 from appliance.cam.zigzag import FinishSettings
-from cam_helpers import grid_map
 
 BALL = parse_cutter("ball6")
 

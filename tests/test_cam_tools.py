@@ -4,6 +4,8 @@ one file per tool for GRBL, and a verification of the whole job."""
 
 import numpy as np
 import pytest
+from cam_helpers import grid_map
+from test_cam_program import _rs274
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.dialects import check_fanuc, check_grbl
@@ -14,8 +16,6 @@ from appliance.cam.posts import render
 from appliance.cam.program import build_program
 from appliance.cam.tools import DEFAULT_TOOL_TABLE, default_tools, parse_tool_table
 from appliance.errors import SettingError
-from cam_helpers import grid_map
-from test_cam_program import _rs274
 
 
 def mesa(X, Y):

@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 import pytest
+from daemon_helpers import wait_final
 
 from appliance.daemon.processing import in_process
 from appliance.daemon.service import BenchService
 from appliance.errors import InkSliceError, SettingError
 from appliance.sim.fakes import FakeBench
-from daemon_helpers import wait_final
 
 TRUE_LEVEL_ZERO = 57.3  # the bench's truth; the daemon's setting starts at 60
 # a short scan of the cone with the dissertation's (fast) pipeline: these tests are about what
@@ -262,7 +262,7 @@ def test_export_then_import_on_a_fresh_box_gives_the_same_commissioning(commissi
         assert fresh.store.calibrations() == []  # a refused file changes nothing
         fresh.import_commissioning(doc)
         a, b = svc.commissioning(), fresh.commissioning()
-        strip = lambda c: [{k: v for k, v in s.items() if k != "method"} for s in c["steps"]]  # noqa: E731
+        strip = lambda c: [{k: v for k, v in s.items() if k != "method"} for s in c["steps"]]
         assert strip(a) == strip(b)
         assert fresh.settings()["level_at_home_mm"] == svc.settings()["level_at_home_mm"]
         assert fresh.export_commissioning()["results"] == doc["results"]

@@ -16,12 +16,12 @@ import sys
 
 import numpy as np
 import pytest
+from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
 from appliance.daemon.processing import child_process
 from appliance.daemon.recovery import audit
 from appliance.daemon.store import ACTIVE, DiskFull, Store
 from appliance.errors import DeviceError
-from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
 DISK_MB = 16  # a scan of the cone with its outputs takes ~1.5 MB
 

@@ -5,13 +5,13 @@ import time
 from pathlib import Path
 
 import pytest
+from daemon_helpers import SCAN, wait_final
 
 from appliance.daemon.service import BenchService
 from appliance.errors import DeviceError
 from appliance.hw.gpio import PressTimer
 from appliance.hw.usb import UsbExporter
 from appliance.sim.fakes import FakeBench
-from daemon_helpers import SCAN, wait_final
 
 
 def light_processor(scan_folder, out_folder, options, stop=None):

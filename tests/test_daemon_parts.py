@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from daemon_helpers import SCAN, service, wait_final
 
 from appliance.daemon import settings as S
 from appliance.daemon.levels import LevelPlan, waterline_change
@@ -17,7 +18,6 @@ from appliance.daemon.notify import notify, watchdog_interval
 from appliance.daemon.store import Store
 from appliance.errors import DeviceError, InkSliceError, SettingError
 from appliance.scanfile import FrameRef
-from daemon_helpers import SCAN, service, wait_final
 
 
 def frames_of(plan):

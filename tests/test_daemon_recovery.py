@@ -13,12 +13,12 @@ import time
 
 import numpy as np
 import pytest
+from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
 from appliance.daemon.recovery import audit
 from appliance.daemon.rpc import BenchClient
 from appliance.daemon.store import Store
 from appliance.errors import DeviceError
-from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
 # moves and settling take real time (a level ~0.3 s, homing ~0.5 s), so kills land in every phase
 SLOW_STAGE = {"stage": {"seconds_per_mm": 0.01}}

@@ -4,9 +4,9 @@ import socket
 import threading
 
 import pytest
+from daemon_helpers import service
 
 from appliance.daemon import rpc
-from daemon_helpers import service
 
 
 @pytest.fixture
@@ -29,7 +29,7 @@ def together(n, fn):
         gate.wait()
         try:
             fn(i)
-        except Exception as e:  # noqa: BLE001 - collected for the assertion
+        except Exception as e:
             errors.append(e)
 
     threads = [threading.Thread(target=run, args=(i,)) for i in range(n)]

@@ -2,17 +2,16 @@
 cancel and resume, and faults leaving the hardware safe with a clear reason."""
 
 import json
-import shutil
 
 import cv2
 import numpy as np
 import pytest
+from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
+from appliance.cli import main as cli_main
 from appliance.daemon.recovery import audit
 from appliance.errors import InkSliceError, SettingError
-from appliance.cli import main as cli_main
 from appliance.process import process_scan
-from daemon_helpers import SCAN, read_heightmap, service, wait_final
 
 
 def test_a_whole_scan_ends_done_and_matches_inkslice_process(tmp_path):

@@ -7,12 +7,12 @@ import shutil
 
 import numpy as np
 import pytest
+from daemon_helpers import read_heightmap, wait_final
 
+from appliance.cli import main as cli_main
 from appliance.daemon.processing import in_process
 from appliance.daemon.recovery import audit
 from appliance.daemon.service import BenchService
-from appliance.cli import main as cli_main
-from daemon_helpers import read_heightmap, wait_final
 
 pytestmark = [
     pytest.mark.simavr,

@@ -5,9 +5,9 @@ import re
 import subprocess
 
 import pytest
+from fw_helpers import BUILD, make
 
 from appliance.hw import protocol as P
-from fw_helpers import BUILD, make
 
 FUZZ_SECONDS = int(os.environ.get("INKSLICE_FUZZ_SECONDS", "60"))
 

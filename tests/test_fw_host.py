@@ -4,8 +4,9 @@ and the one code table both sides read."""
 import re
 import subprocess
 
-from appliance.hw import protocol as P
 from fw_helpers import BUILD, FIRMWARE_DIR, make
+
+from appliance.hw import protocol as P
 
 
 def test_host_unit_tests_of_planner_protocol_crc_and_settings_pass():

@@ -7,12 +7,12 @@ import threading
 import time
 
 import pytest
+from fw_helpers import RawLink, bench, err, fw_build, link  # noqa: F401  (fixtures)
 
 from appliance.errors import DeviceError, SettingError
 from appliance.hw import protocol as P
 from appliance.hw.stage import SerialStage
 from appliance.sim.hil import SimulatedBench
-from fw_helpers import RawLink, bench, err, fw_build, link  # noqa: F401  (fixtures)
 
 pytestmark = pytest.mark.simavr
 F_CPU = 16e6

@@ -22,17 +22,17 @@ import json
 import os
 import shutil
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
 import pytest
-
-from appliance.cli import main
 from cam_helpers import grid_map
 from scan_helpers import write_cone_scan
+
+from appliance.cli import main
 
 TRIED: list[str] = []
 # a lens for the hand-made cone's 240 x 240 frames (it has none: its homography is orthographic)

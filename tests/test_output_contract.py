@@ -213,8 +213,9 @@ def test_a_run_that_cannot_make_a_program_exits_2_and_leaves_the_old_set(cone_sc
 
 
 def test_the_daemon_fails_a_job_whose_processing_wrote_no_program_and_keeps_its_scan(tmp_path):
-    from appliance.atomicio import write_text
     from daemon_helpers import SCAN, service, wait_final
+
+    from appliance.atomicio import write_text
 
     def no_program(scan_folder, out_folder, options, stop=None):
         """What processing did before the contract: a height map, a note, no G-code."""
@@ -233,9 +234,10 @@ def test_the_daemon_fails_a_job_whose_processing_wrote_no_program_and_keeps_its_
 
 
 def test_a_daemon_job_folder_is_replaced_whole_but_its_scan_is_kept(tmp_path):
+    from scan_helpers import write_cone_scan
+
     from appliance.daemon.processing import JOB_OWN, checked_outputs, in_process, options_for
     from appliance.daemon.settings import DEFAULTS
-    from scan_helpers import write_cone_scan
 
     job = tmp_path / "job"
     write_cone_scan(job / "scan")
@@ -259,6 +261,7 @@ def test_a_scan_whose_last_frame_is_at_level_0_gets_its_program_and_the_clamp_is
     its outline in that last frame is not the part's waterline, the part is not that wide,
     and the set (with its finishing program) is written, the base plane counted."""
     import dataclasses
+
     from appliance.sim import surfaces
     from appliance.sim.render import Effects
     from appliance.sim.rig import Rig

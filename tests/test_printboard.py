@@ -6,6 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from web_helpers import login, make_app
 
 from appliance.daemon.calibration import BOARD
 from appliance.vision.calibration import find_corners
@@ -17,7 +18,6 @@ from appliance.vision.printboard import (
     describe,
     printed_size_mm,
 )
-from web_helpers import login, make_app
 
 STATIC = Path(__file__).resolve().parents[1] / "appliance" / "web" / "static"
 

@@ -5,14 +5,13 @@ a non-zero exit code, and leave what was already in OUT untouched.
 """
 
 import json
-import shutil
 
 import numpy as np
 import pytest
+from scan_helpers import write_cone_scan
 
 from appliance.cli import main
 from appliance.outputs import read_heightmap_csv
-from scan_helpers import write_cone_scan
 
 
 @pytest.fixture

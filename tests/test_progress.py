@@ -42,6 +42,7 @@ def test_nobody_listening_costs_nothing_and_prints_nothing(capsys):
 
 def test_toolpath_and_verify_say_their_stages_in_a_pipe(tmp_path, capsys):
     import numpy as np
+
     from appliance.outputs import write_heightmap_csv
     from appliance.surface.heightmap import HeightMap
 

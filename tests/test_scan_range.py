@@ -9,11 +9,11 @@ import json
 import shutil
 
 import pytest
+from daemon_helpers import read_heightmap, service, wait_final
 
 from appliance.daemon import settings as S
 from appliance.daemon.levels import LevelPlan, PartTooTall
 from appliance.scanfile import FrameRef
-from daemon_helpers import read_heightmap, service, wait_final
 
 
 def frame(target, shows_part, step=0.0, change=0.0):

@@ -2,14 +2,15 @@
 daemon, the web API and `inkslice settings` refuse the same bad value with the same sentence."""
 
 import pytest
+from daemon_helpers import service
+from web_helpers import login
 
 from appliance.cam.posts import DIALECT_NAMES
-from appliance.cli import build_parser, main as cli_main
+from appliance.cli import build_parser
+from appliance.cli import main as cli_main
 from appliance.daemon import settings as S
 from appliance.errors import SettingError
 from appliance.web import create_app
-from daemon_helpers import service
-from web_helpers import login
 
 
 @pytest.mark.parametrize("setting", S.SCHEMA, ids=lambda s: s.key)

@@ -13,7 +13,7 @@ from appliance.sim.render import Effects, render_frame
 from appliance.sim.rig import Rig
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_sim_render import _crossings, _gray, _to_plane  # noqa: E402
+from test_sim_render import _crossings, _gray, _to_plane
 
 
 def _cone_volume_above(L):
@@ -158,8 +158,9 @@ def test_rendered_second_model_is_the_contact_line_with_its_own_curvature():
     part) and in the crater (bending round the ink). Every edge point is the contact line
     at L + h(beta, kappa) seen from that height; the straight-line rise misses both
     flanks, in opposite directions."""
-    from appliance.sim.render import curvature_grid, surface_grid
     from scipy import ndimage
+
+    from appliance.sim.render import curvature_grid, surface_grid
 
     part, L, rig = S.get("crater"), 15.0, Rig()
     img = render_frame(part, L, rig, SECOND_INK)

@@ -1,14 +1,12 @@
 """The virtual bench's renderer: the waterline where the analytic level curve says,
 perspective as a pinhole camera says, and the effects deterministic."""
 
-import math
-
 import cv2
 import numpy as np
 import pytest
 
 from appliance.sim import surfaces as S
-from appliance.sim.render import Effects, PRESETS, part_layer, render_frame, surface_grid, trace
+from appliance.sim.render import PRESETS, Effects, render_frame, surface_grid, trace
 from appliance.sim.rig import Rig, pixel_map
 
 RIG = Rig()

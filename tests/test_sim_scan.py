@@ -3,7 +3,6 @@
 import json
 
 import numpy as np
-import pytest
 
 from appliance.cli import main
 from appliance.hw.base import Camera
@@ -11,9 +10,9 @@ from appliance.scanfile import load_scan, read_frame
 from appliance.sim import physics
 from appliance.sim import surfaces as S
 from appliance.sim.camera import VirtualCamera
+from appliance.sim.levels import sculpture_levels
 from appliance.sim.render import Effects, render_frame
 from appliance.sim.rig import Rig
-from appliance.sim.levels import sculpture_levels
 from appliance.sim.scanrender import render_scan, scan_levels, truth_path
 
 

@@ -11,7 +11,7 @@ from scipy.spatial import ConvexHull
 
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
-from appliance.surface.gridfit import Lattice, flat_faces, first_exposure, tilt_crossed_faces
+from appliance.surface.gridfit import Lattice, first_exposure, flat_faces, tilt_crossed_faces
 from appliance.surface.slices import (
     Perspective,
     check_waterlines,

@@ -283,7 +283,7 @@ def test_the_correction_takes_out_the_second_inks_bent_meniscus():
 
 def _hill_on_a_flat_face():
     """A hill (10 mm, sigma 6 mm) on a flat face 6 mm high, a disc of radius 30 mm."""
-    top = lambda x, y: 6.0 + 10.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / (2 * 6.0**2))  # noqa: E731
+    top = lambda x, y: 6.0 + 10.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / (2 * 6.0**2))
     return Surface(
         "hill", "a hill on a flat face", (20.0, 80.0, 20.0, 80.0), (Tier(disc_sdf(50, 50, 30), top),)
     )

@@ -7,6 +7,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from cam_helpers import grid_map
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.gcodeparse import parse_gcode
@@ -22,13 +23,12 @@ from appliance.surface.reconstruct import GridSpec, reconstruct
 from appliance.surface.uncertainty import (
     CLAMPED,
     EXTRAPOLATED,
-    _inradius,
     SOURCES,
+    _inradius,
     header_notes,
     low_confidence_regions,
     source_code,
 )
-from cam_helpers import grid_map
 
 # a paraboloid dome on a disc, 20 mm at its top (50, 50)
 DOME = Surface(

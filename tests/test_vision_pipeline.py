@@ -3,11 +3,11 @@
 import cv2
 import numpy as np
 import pytest
+from test_vision_synth import disc, draw, grid, pixel_camera, ring, to_pixels
 
 from appliance.errors import InkSliceError, ScanError
 from appliance.vision.pipeline import AllPartError, FrameError, NoPartError, WaterlineExtractor
 from appliance.vision.types import signed_area
-from test_vision_synth import disc, draw, grid, pixel_camera, ring, to_pixels
 
 W, H = 320, 240
 

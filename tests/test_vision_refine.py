@@ -1,7 +1,8 @@
 """Going back into a level step in which a face came out at once (vision/refine.py)."""
 
-import numpy as np
 from types import SimpleNamespace
+
+import numpy as np
 
 from appliance.vision.refine import face_bracket, mask_pixel_mm, next_refinement, surfaced_faces
 

@@ -3,11 +3,11 @@
 import cv2
 import numpy as np
 import pytest
+from test_vision_synth import INK, PART, draw, grid
 
 from appliance.vision.band import TileGrid
 from appliance.vision.frames import FrameError, best_channel, check_frame, hue_split, otsu_split, towards_ink
 from appliance.vision.subpixel import bumps, refine, sample_q8
-from test_vision_synth import INK, PART, draw, grid
 
 
 def test_otsu_split_finds_the_two_classes_and_ignores_clipped_glare():

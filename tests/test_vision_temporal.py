@@ -8,11 +8,11 @@ then gone, is glare or flotsam, whatever it looks like in its own frame.
 
 import cv2
 import numpy as np
+from scan_helpers import MM_PER_PX, H, W, camera
 
 from appliance.process import extract_waterlines
 from appliance.scanfile import CameraModel, FrameRef, Scan, load_scan, write_frame, write_scan_json
 from appliance.vision.pipeline import WaterlineExtractor
-from scan_helpers import H, MM_PER_PX, W, camera
 
 LEVELS = (19, 17, 15, 13, 11, 9, 7, 5)
 CENTRE = 30.0

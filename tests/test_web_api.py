@@ -7,9 +7,9 @@ import time
 import zipfile
 
 import pytest
+from web_helpers import login, make_app, wait_state
 
 from appliance.web.eta import EtaSmoother
-from web_helpers import login, make_app, wait_state
 
 
 @pytest.fixture

@@ -8,7 +8,6 @@ tests/artifacts/web/phone-commission-*.png.
 
 import os
 import shutil
-import time
 
 import pytest
 
@@ -16,11 +15,11 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 webdriver = pytest.importorskip("selenium.webdriver")
 from selenium.webdriver.common.by import By  # noqa: E402
+from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
+from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
 from appliance.web.demo import start  # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
-from test_web_real_service import light_processor  # noqa: E402
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)

@@ -4,13 +4,14 @@ import os
 import stat
 import time
 
+from daemon_helpers import SCAN, wait_final
+from test_daemon_panel import light_processor
+from web_helpers import csrf_of, login
+
 from appliance.daemon import firstrun
 from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
-from test_daemon_panel import light_processor
-from daemon_helpers import SCAN, wait_final
-from web_helpers import csrf_of, login
 
 
 def wait_lines(display, pred, timeout=5.0):

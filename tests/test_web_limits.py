@@ -19,8 +19,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
-
-from test_web_security import png_header, scan_zip, uploads_left
+from test_web_security import png_header, uploads_left
 from web_helpers import csrf_of, login, make_app
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -415,6 +414,7 @@ def test_a_web_killed_mid_upload_leaves_nothing_after_its_restart(tmp_path):
     import signal
     import subprocess
     import sys
+
     from appliance.web.auth import Credentials
 
     data = tmp_path / "data"

@@ -8,13 +8,13 @@ import shutil
 import time
 
 import pytest
+from test_web_real_service import light_processor
+from web_helpers import login
 
 from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
-from test_web_real_service import light_processor
-from web_helpers import login
 
 SCAN = {
     "name": "cone, left side",

@@ -6,13 +6,13 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from web_helpers import login, wait_state
 
 from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
+from appliance.hw.usb import UsbExporter
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
-from appliance.hw.usb import UsbExporter
-from web_helpers import login, wait_state
 
 SCAN = {
     "name": "cone",

@@ -4,7 +4,6 @@ byte as the job's files."""
 
 import os
 import time
-from pathlib import Path
 
 import pytest
 
@@ -13,10 +12,10 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]
 webdriver = pytest.importorskip("selenium.webdriver")
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select  # noqa: E402
+from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
 
 from appliance.web.demo import start  # noqa: E402
 from appliance.web.fake import FakeBenchService  # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
 
 if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
     pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)

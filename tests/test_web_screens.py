@@ -21,9 +21,9 @@ import json
 import os
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import pytest
 
@@ -34,12 +34,12 @@ from selenium.common.exceptions import WebDriverException  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
+from test_web_browser import SIZES, chromium_options  # noqa: E402
+from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
 from appliance.sim.fakes import FakeBench  # noqa: E402
 from appliance.web.demo import start  # noqa: E402
-from test_web_browser import SIZES, chromium_options  # noqa: E402
-from test_web_real_service import light_processor  # noqa: E402
 
 HERE = Path(__file__).parent
 ART = HERE / "artifacts" / "web"
@@ -119,7 +119,7 @@ def _previewing(d, box):
 def _jogging(d, box):
     """The panel's buttons move the stage: home, lift the base 1 mm, then go to a level."""
     _previewing(d, box)
-    status = lambda: d.find_element(By.ID, "machine-status").text  # noqa: E731
+    status = lambda: d.find_element(By.ID, "machine-status").text
     d.find_element(By.ID, "home").click()
     wait(d, lambda: "Ink level 60.00 mm" in status(), what="homed")
     d.find_element(By.CSS_SELECTOR, '.jogb[data-mm="1"]').click()

@@ -7,7 +7,6 @@ import stat
 import zipfile
 
 import pytest
-
 from web_helpers import csrf_of, login, make_app, wait_state
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}

@@ -7,13 +7,13 @@ import re
 import zipfile
 
 import pytest
+from daemon_helpers import service
+from web_helpers import login
 
 from appliance import logfiles
 from appliance.cam.posts import DIALECT_NAMES
 from appliance.daemon import settings as S
 from appliance.web import create_app
-from daemon_helpers import service
-from web_helpers import login
 
 
 def web_on(tmp_path, name="box"):
@@ -191,8 +191,8 @@ def test_the_report_shows_plain_names_with_units_and_an_explanation_on_tap():
 
 
 def test_the_job_page_shows_the_report_in_plain_words(web):
-    from test_web_real_service import SCAN, light_processor
     from daemon_helpers import wait_final
+    from test_web_real_service import SCAN, light_processor
 
     svc, c, _ = web
     svc.processor = light_processor

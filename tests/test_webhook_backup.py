@@ -6,12 +6,12 @@ import threading
 from http.server import BaseHTTPRequestHandler, HTTPServer
 
 import pytest
+from daemon_helpers import SCAN, service, wait_final
 
 from appliance.cli import main as cli_main
 from appliance.daemon import settings as S
 from appliance.daemon.commissioning import in_force
 from appliance.errors import InkSliceError, SettingError
-from daemon_helpers import SCAN, service, wait_final
 
 
 @pytest.fixture
@@ -165,8 +165,9 @@ def test_the_cli_backs_up_and_restores_a_data_folder(tmp_path, capsys):
 
 
 def test_the_settings_page_test_button_reaches_the_receiver_through_the_web(tmp_path, receiver):
-    from appliance.web import create_app
     from web_helpers import login
+
+    from appliance.web import create_app
 
     url, got = receiver
     svc, _ = service(tmp_path)

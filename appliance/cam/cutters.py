@@ -97,7 +97,7 @@ class Cutter:
             out = np.zeros(r.shape)
         return np.where(r <= self.radius + 1e-12, out, np.inf)
 
-    def offset(self, leave: float) -> "Cutter":
+    def offset(self, leave: float) -> Cutter:
         """The cutter grown by `leave` in every direction (for stock to leave).
 
         Its lower surface is the true cutter's, offset outward by `leave`, and

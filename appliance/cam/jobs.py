@@ -28,7 +28,6 @@ from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
 from .zigzag import FinishSettings, finishing
 
-
 # The lattice a plan or a simulation works on, at its resolution over the part's
 # bounding box: beyond this the run would take gigabytes (and hours), so it is refused
 # with the setting to change, before anything that size is allocated.

@@ -42,7 +42,6 @@ from .opening import REACH_TOL, Opening
 from .sampling import Sampler
 from .segments import min_over_segment
 
-
 # a rapid that lowers the stock by more than this is reported as a crash (grazing
 # contacts at the cutter's rim round to a few microns and are not crashes)
 CRASH_DEPTH = 0.002

@@ -37,19 +37,18 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from ..errors import SettingError
 from ..surface.heightmap import HeightMap
 from .dissertation import dissertation_gcode
 from .feeds import DEFAULT_MATERIAL
 from .limits import Machine, check_envelope, limit_feeds
-from .posts import DIALECT_NAMES, comment_lines, finish_lines, get_dialect, header_lines, motion_lines, _num
-from .program import DEFAULT_CLEARANCE, Program, build_program, check_frame
+from .posts import _num, comment_lines, finish_lines, get_dialect, header_lines, motion_lines
+from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
 from .tools import Tool
-from .waterline import DEFAULT_STEEP_DEG, SteepSettings, plan as steep_plan, plan_rest
+from .waterline import DEFAULT_STEEP_DEG, SteepSettings, plan_rest
+from .waterline import plan as steep_plan
 from .zigzag import FinishSettings, finishing
 
 OPERATION_KINDS = ("rough", "finish", "rest")

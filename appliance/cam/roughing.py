@@ -31,7 +31,6 @@ import numpy as np
 
 from ..errors import SettingError
 from .cutters import Cutter
-from .dropcutter import drop_grid
 from .sampling import Sampler
 from .zigzag import _true_runs, check_fits, reduce_polyline
 

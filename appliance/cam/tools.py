@@ -23,9 +23,8 @@ and P plunge in mm/min, S spindle rpm), read by `parse_tool_text`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import re
+from dataclasses import dataclass, field
 
 import numpy as np
 

@@ -58,10 +58,11 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import SettingError
-from .cutters import Cutter
 from .contact import polish
+from .cutters import Cutter
+from .dropcutter import DEFAULT_RESOLUTION
+from .dropcutter import drop_lines as _lattice_lines
 from .opening import Opening
-from .dropcutter import DEFAULT_RESOLUTION, drop_lines as _lattice_lines
 
 
 def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):

@@ -88,7 +88,8 @@ def make_factory(args):
 
 
 def run(args):
-    from ..daemon.main import run as run_daemon, setup_logging
+    from ..daemon.main import run as run_daemon
+    from ..daemon.main import setup_logging
     from ..daemon.processing import child_process, in_process
 
     setup_logging(args.log_level)

@@ -35,9 +35,8 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from ..sim.scanrender import render_scan, truth_path
-
     from .. import progress
+    from ..sim.scanrender import render_scan, truth_path
 
     def frames(i, n):
         if i <= 1:

@@ -50,6 +50,7 @@ def run(args):
 
     data = data_dir(args.data)
     import logging
+
     from ..logfiles import log_to_file
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")

@@ -146,8 +146,8 @@ def run(args):
         raise SettingError("-o", "give the program to write (or a job folder instead of a height map)")
     from ..cam.cutters import parse_cutter
     from ..cam.jobs import finishing_gcode, roughing_gcode
-    from ..cam.sampling import check_heightmap
     from ..cam.roughing import RoughSettings
+    from ..cam.sampling import check_heightmap
     from ..cam.zigzag import FinishSettings
 
     atomicio.check_output_file(args.out, "-o")  # before the work, not after it
@@ -215,6 +215,7 @@ def run(args):
 
 def _uncertain_mm(args):
     import math
+
     from ..errors import SettingError
     from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM
 
@@ -232,9 +233,10 @@ def _write(path, text):
 
 def _tool_table(args):
     import json
+    from pathlib import Path
+
     from ..cam.tools import default_tools, parse_tool_table
     from ..errors import InkSliceError
-    from pathlib import Path
 
     if not args.tools:
         return default_tools()
@@ -266,6 +268,7 @@ def run_job(args):
     """A job folder or --operations: the named programs (and previews) for another
     cutter, material, scallop or dialect, from the height map alone."""
     from pathlib import Path
+
     from ..cam.cutters import parse_cutter
     from ..cam.operations import parse_operations
     from ..cam.sampling import check_heightmap
@@ -295,6 +298,7 @@ def run_job(args):
 
 def _post_named(args, hm, ops, out_dir, only_name, job="job"):
     from pathlib import Path
+
     from ..cam.operations import plan_operations, post_operations
     from ..cam.preview import preview_json
 

@@ -64,9 +64,10 @@ def add_arguments(p):
 
 def run(args):
     import numpy as np
+
     from ..cam.jobs import verify_gcode
-    from ..cam.sampling import check_heightmap
     from ..cam.millsim import deviation_png
+    from ..cam.sampling import check_heightmap
 
     path = Path(args.gcode)
     if not path.is_file():

@@ -44,8 +44,10 @@ from ..errors import Cancelled, InkSliceError, SettingError
 from ..hw.base import Placement
 from ..scanfile import _camera
 from ..vision.calibration import Board, camera_json, find_corners, intrinsics, plane_homography
-from ..vision.printboard import describe as print_instructions, printed_size_mm
-from .calibration import BOARD, JIG, board_details as _board_details
+from ..vision.printboard import describe as print_instructions
+from ..vision.printboard import printed_size_mm
+from .calibration import BOARD, JIG
+from .calibration import board_details as _board_details
 
 FORMAT = "inkslice.commissioning/1"
 STEPS = ("level_zero", "camera", "tank", "meniscus")
@@ -573,8 +575,8 @@ class Commissioning:
                 }
         self._place(
             "board_flat",
-            f"Lay the board flat on the base, centred, its rows along the base's "
-            f"x side; the stage raises it to the ink line",
+            "Lay the board flat on the base, centred, its rows along the base's "
+            "x side; the stage raises it to the ink line",
             **_board_details(),
         )
         s.devices.stage.move_to(float(self.h.settings()["level_at_home_mm"]))

@@ -30,11 +30,10 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from ..errors import Cancelled, InkSliceError
-
 
 JOB_OWN = ("scan",)  # what a job folder holds besides the outputs
 PROGRAM = "toolpath.gcode"

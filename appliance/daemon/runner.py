@@ -26,10 +26,8 @@ import logging
 import shutil
 import threading
 import time
-from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
-import cv2
 import numpy as np
 
 from ..errors import Cancelled, DeviceError, InkSliceError

@@ -47,8 +47,8 @@ import shutil
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -65,10 +65,10 @@ from .calibration import GuidedCalibration
 from .commissioning import Commissioning, reference_processor
 from .eta import JobTimes
 from .firstrun import Pending
+from .levels import LevelPlan
 from .livemap import LiveMap
 from .manual import ManualSession
 from .notices import usb_notice
-from .levels import LevelPlan
 from .processing import PROGRAM, child_process
 from .recovery import recover
 from .runner import ScanRunner, free_mb

@@ -326,15 +326,15 @@ class FakeBench(_KnownPart, BenchFactory):
 
     def open(self, settings, params):
         from ..hw.devices import Devices
-        from .surfaces import get
         from .render import Effects
         from .staging import StagedCamera
+        from .surfaces import get
 
         stage = FakeStage(faults=self.faults.get("stage"))
         at_home = float(
             self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"]
         )
-        level = lambda: at_home - stage.position_mm  # noqa: E731
+        level = lambda: at_home - stage.position_mm
         if self.replay:
             camera = ReplayCamera(self.replay, level)
         else:
@@ -472,14 +472,14 @@ class SimulatedBenchFactory(_KnownPart, BenchFactory):
     def open(self, settings, params):
         from ..hw.devices import Devices
         from ..hw.stage import SerialStage
-        from .surfaces import get
         from .staging import StagedCamera
+        from .surfaces import get
 
         stage = SerialStage(self.bench.port, auto_rehome=False)
         at_home = float(
             self.level_at_home_mm if self.level_at_home_mm is not None else settings["level_at_home_mm"]
         )
-        level = lambda: at_home - self.bench.stage_position_mm()  # noqa: E731
+        level = lambda: at_home - self.bench.stage_position_mm()
         part = self._camera(get(params.get("surface") or self.surface), level)
         model = self.rig.camera_model(distorted=part.effects.lens_distortion)
         camera = StagedCamera(

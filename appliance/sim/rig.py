@@ -154,7 +154,7 @@ class Rig:
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> "Rig":
+    def from_json(cls, d: dict) -> Rig:
         fields = {
             k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in cls.__dataclass_fields__
         }

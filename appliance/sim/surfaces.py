@@ -19,8 +19,8 @@ Stepped parts are unions of tiers; a tier is a footprint with its own top.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -55,7 +55,6 @@ from ..errors import InkSliceError
 from .gridfit import FitProblem, Lattice, bilinear, fill_nearest
 from .slices import check_waterlines, mark_walls, polyline_distance
 
-
 CURVATURE_FLAT = 0.05  # slopes under ~3 deg: no level curve to take a curvature of
 CURVATURE_LIMIT = 1.0  # |kappa l_c| beyond which the first-order correction stops growing
 CURVATURE_CLIP = 0.5  # 1/mm: a tighter bend is a crest's kink, not a contact line's

@@ -55,7 +55,6 @@ from .meniscus import (
     place_dewetted_faces,
     top_from_apparent,
 )
-from .uncertainty import CellEvidence, node_uncertainty, to_output as uncertainty_to_output
 from .slices import (
     Perspective,
     check_waterlines,
@@ -64,6 +63,8 @@ from .slices import (
     outline_bounds,
     unproject_rims,
 )
+from .uncertainty import CellEvidence, node_uncertainty
+from .uncertainty import to_output as uncertainty_to_output
 
 METHODS = ("fit",) + seed_methods.METHODS
 PASSES = 3  # with walls seen in perspective or a tank given: each later fit takes the true

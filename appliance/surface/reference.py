@@ -56,7 +56,7 @@ class Ball:
         d2 = (np.asarray(x, float) - self.cx) ** 2 + (np.asarray(y, float) - self.cy) ** 2
         return np.where(d2 < r * r, r + np.sqrt(np.maximum(r * r - d2, 0.0)), 0.0)
 
-    def at(self, cx, cy) -> "Ball":
+    def at(self, cx, cy) -> Ball:
         return Ball(self.diameter_mm, float(cx), float(cy))
 
     def to_json(self) -> dict:

@@ -34,7 +34,7 @@ class Slice:
     hidden: np.ndarray = None  # (M,) bool: a silhouette - a face above the ink hides the waterline there
     rim: np.ndarray = None  # (M, 2): height bracket of the rim a silhouette point shows (NaN: none)
     _tree: cKDTree = field(default=None, repr=False)
-    _curve: "Slice" = field(default=None, repr=False)
+    _curve: Slice = field(default=None, repr=False)
 
     @property
     def empty(self):
@@ -46,7 +46,7 @@ class Slice:
             self._tree = cKDTree(self.P)
         return self._tree
 
-    def level_curve(self) -> "Slice":
+    def level_curve(self) -> Slice:
         """The slice without its wall points: only the stretches that are a level
         curve of the top surface (a segment with a wall end is dropped)."""
         if self._curve is None:
@@ -77,7 +77,7 @@ class Slice:
             None if self.hidden is None else self.hidden.copy(),
         )
 
-    def at_level(self, level) -> "Slice":
+    def at_level(self, level) -> Slice:
         """The same slice at another level (its point heights move with it)."""
         if abs(self.level - level) < 1e-12:
             return self

@@ -36,7 +36,7 @@ def heightmap_to_stl(hm: HeightMap, name: str = "inkslice") -> bytes:
     p01 = np.stack([X[j + 1, i], Y[j + 1, i], Z[j + 1, i]], -1)
     p11 = np.stack([X[j + 1, i + 1], Y[j + 1, i + 1], Z[j + 1, i + 1]], -1)
     tris = [np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)]  # top, CCW from above
-    flat = lambda p: p * np.array([1.0, 1.0, 0.0])  # noqa: E731
+    flat = lambda p: p * np.array([1.0, 1.0, 0.0])
     tris += [np.stack([flat(p00), flat(p11), flat(p10)], 1), np.stack([flat(p00), flat(p01), flat(p11)], 1)]
     # walls: a cell edge whose neighbour cell is not on the part
     pad = np.pad(cells, 1)

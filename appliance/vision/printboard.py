@@ -112,7 +112,7 @@ def board_image(board: Board, dpi: int = PNG_DPI) -> np.ndarray:
     w, h = printed_size_mm(board)
     m = board.square_mm
     img = np.full((round((h + 2 * m) * px), round((w + 2 * m) * px)), 255, np.uint8)
-    edge = lambda mm: round((m + mm) * px)  # noqa: E731 (mm from the board's corner)
+    edge = lambda mm: round((m + mm) * px)
     for i, j in _dark_squares(board):
         s = board.square_mm
         img[edge(j * s) : edge((j + 1) * s), edge(i * s) : edge((i + 1) * s)] = 0

@@ -46,9 +46,10 @@ from werkzeug.http import parse_cookie
 from ..daemon import firstrun
 from . import api, auth, pages, system
 from .adapter import WebService
-from .sessions import SessionStore
 from .eta import EtaSmoother
-from .report import picture_caption, readable as readable_statistics
+from .report import picture_caption
+from .report import readable as readable_statistics
+from .sessions import SessionStore
 
 DEFAULTS = {
     "https": False,

@@ -58,6 +58,7 @@ def banner(run: Running) -> str:
     lines = [f"InkSlice web UI: {run.url}/"]
     if run.server.effective_host in ("0.0.0.0", "::"):  # on every address: say which a phone uses
         import socket
+
         from ..daemon.service import lan_address
 
         port = run.server.effective_port
