@@ -19,7 +19,8 @@ want_test=0
 APT_RUN=(python3 python3-venv python3-dev build-essential pkg-config
          gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev)
 # Needed by the test suite and the benches on top of that.
-APT_TEST=(libcmocka-dev clang libclang-rt-14-dev chromium chromium-driver
+# clang-format checks the firmware's layout (`make lint`, tests/test_lint.py).
+APT_TEST=(libcmocka-dev clang libclang-rt-14-dev clang-format chromium chromium-driver
           systemd linuxcnc-uspace)
 # npm (for axe-core, below) only where no node toolchain is installed already
 [ "$want_test" = 1 ] && ! command -v npm >/dev/null 2>&1 && APT_TEST+=(npm)
