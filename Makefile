@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test setup setup-test bench clean install lock docs
+.PHONY: demo test setup setup-test bench clean install lock docs firmware-test
 
 # HOST=0.0.0.0 lets a phone on the same network reach the demo's web UI
 HOST ?= 127.0.0.1
@@ -18,6 +18,11 @@ setup:
 
 setup-test:
 	@scripts/setup.sh --test
+
+# The firmware's cmocka host tests (ASan/UBSan) and a short libFuzzer run of its line parser
+# (FUZZ_SECONDS=20); needs cc, clang and libcmocka-dev, no Python
+firmware-test:
+	$(MAKE) -C appliance/firmware/stepper test
 
 bench: setup-test
 	for b in benches/*.py; do $(PY) $$b --quick || exit 1; done

@@ -32,7 +32,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
       char reply[REPLY_MAX];
       uint8_t n = proto_put_i32(reply, 0, REPLY_MAX, c.seq);
       n = proto_put_i32(reply, n, REPLY_MAX, (int32_t)err);
-      if (c.argc) for (const char *p = c.arg[0]; *p && n < REPLY_MAX - 10; p++) reply[n++] = *p;
+      if (c.argc)
+        for (const char *p = c.arg[0]; *p && n < REPLY_MAX - 10; p++) reply[n++] = *p;
       uint8_t sealed = proto_seal(reply, n, REPLY_MAX);
       if (sealed > REPLY_MAX) abort();
       linebuf_init(&lb);

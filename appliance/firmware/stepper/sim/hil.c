@@ -75,7 +75,7 @@
 #define LIMIT_PORT 'C'
 #define LIM_BOTTOM_PIN 0
 #define LIM_TOP_PIN 1
-#define POLL_CYCLES 4000      /* check the pty and stdin every 250 us of simulated time */
+#define POLL_CYCLES 4000 /* check the pty and stdin every 250 us of simulated time */
 
 static avr_t *avr;
 static int pty_master = -1, pty_slave = -1;
@@ -84,8 +84,8 @@ static double pace_wall0;
 static uint64_t pace_cycle0;
 
 /* the stage */
-static int64_t stage_pos = 64000;              /* 40 mm at 1600 steps/mm */
-static int64_t top_switch = 156800;            /* 98 mm */
+static int64_t stage_pos = 64000;   /* 40 mm at 1600 steps/mm */
+static int64_t top_switch = 156800; /* 98 mm */
 static int64_t mech_min = -3200, mech_max = 160000;
 static int dir_level, step_level;
 static uint64_t steps_up, steps_down, stalls;
@@ -95,16 +95,16 @@ static int dir_changed_since_step;
 static avr_irq_t *irq_lim_bottom, *irq_lim_top, *irq_uart_in;
 static int lim_bottom_level = -1, lim_top_level = -1;
 static FILE *rec;
-static FILE *ctl_out;                         /* our stdout; simavr's chatter goes to stderr */
+static FILE *ctl_out; /* our stdout; simavr's chatter goes to stderr */
 
 /* the wire */
-static uint32_t rate[2][3];                    /* [rx/tx][drop/corrupt/dup] in ppm */
+static uint32_t rate[2][3]; /* [rx/tx][drop/corrupt/dup] in ppm */
 static uint64_t count[2][3], bytes[2];
 static uint64_t rng = 0x9E3779B97F4A7C15ULL;
 static uint8_t inq[4096];
 static size_t inq_head, inq_len;
 static int uart_xoff;
-static avr_uart_t *uart0;                      /* simavr's UART, to see its receive FIFO */
+static avr_uart_t *uart0; /* simavr's UART, to see its receive FIFO */
 static uint64_t next_feed_cycle, rx_overruns;
 static uint64_t estop_feed_cycle, resets;
 
@@ -117,7 +117,9 @@ static double wall_now(void)
 
 static uint64_t rand64(void)
 {
-  rng ^= rng << 13; rng ^= rng >> 7; rng ^= rng << 17;
+  rng ^= rng << 13;
+  rng ^= rng >> 7;
+  rng ^= rng << 17;
   return rng;
 }
 
@@ -125,14 +127,20 @@ static uint64_t rand64(void)
 static void update_limits(void)
 {
   int b = stage_pos <= 0 ? 0 : 1, t = stage_pos >= top_switch ? 0 : 1;
-  if (b != lim_bottom_level) { lim_bottom_level = b; avr_raise_irq(irq_lim_bottom, b); }
-  if (t != lim_top_level) { lim_top_level = t; avr_raise_irq(irq_lim_top, t); }
+  if (b != lim_bottom_level) {
+    lim_bottom_level = b;
+    avr_raise_irq(irq_lim_bottom, b);
+  }
+  if (t != lim_top_level) {
+    lim_top_level = t;
+    avr_raise_irq(irq_lim_top, t);
+  }
 }
 
 static void record(uint8_t pin, uint8_t level)
 {
   if (!rec) return;
-  uint8_t r[16] = {0};
+  uint8_t r[16] = { 0 };
   uint64_t c = avr->cycle;
   memcpy(r, &c, 8);
   r[8] = pin;
@@ -142,7 +150,8 @@ static void record(uint8_t pin, uint8_t level)
 
 static void on_step(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-  (void)irq; (void)param;
+  (void)irq;
+  (void)param;
   int v = value ? 1 : 0;
   if (v == step_level) return;
   step_level = v;
@@ -157,7 +166,8 @@ static void on_step(struct avr_irq_t *irq, uint32_t value, void *param)
     int64_t next = stage_pos + (dir_level ? 1 : -1);
     if (next < mech_min || next > mech_max) stalls++;
     else stage_pos = next;
-    if (dir_level) steps_up++; else steps_down++;
+    if (dir_level) steps_up++;
+    else steps_down++;
     last_step_cycle = avr->cycle;
     update_limits();
   } else {
@@ -168,7 +178,8 @@ static void on_step(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void on_dir(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-  (void)irq; (void)param;
+  (void)irq;
+  (void)param;
   int v = value ? 1 : 0;
   if (v == dir_level) return;
   dir_level = v;
@@ -186,24 +197,48 @@ static int wire(int dirn, uint8_t *c)
   bytes[dirn]++;
   uint32_t r = (uint32_t)(rand64() % 1000000);
   uint32_t d = rate[dirn][F_DROP], k = d + rate[dirn][F_CORRUPT], u = k + rate[dirn][F_DUP];
-  if (r < d) { count[dirn][F_DROP]++; return 0; }
-  if (r < k) { count[dirn][F_CORRUPT]++; *c ^= (uint8_t)(1 + rand64() % 255); return 1; }
-  if (r < u) { count[dirn][F_DUP]++; return 2; }
+  if (r < d) {
+    count[dirn][F_DROP]++;
+    return 0;
+  }
+  if (r < k) {
+    count[dirn][F_CORRUPT]++;
+    *c ^= (uint8_t)(1 + rand64() % 255);
+    return 1;
+  }
+  if (r < u) {
+    count[dirn][F_DUP]++;
+    return 2;
+  }
   return 1;
 }
 
 static void on_uart_out(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-  (void)irq; (void)param;
+  (void)irq;
+  (void)param;
   uint8_t c = (uint8_t)value;
   int n = wire(1, &c);
   for (int i = 0; i < n; i++) {
-    if (write(pty_master, &c, 1) < 0 && errno != EAGAIN) { /* nobody listening: lost, like a wire */ }
+    ssize_t sent = write(pty_master, &c, 1); /* nobody listening: lost, like a byte on a wire */
+    (void)sent;
   }
 }
 
-static void on_xon(struct avr_irq_t *irq, uint32_t value, void *param) { (void)irq; (void)value; (void)param; uart_xoff = 0; }
-static void on_xoff(struct avr_irq_t *irq, uint32_t value, void *param) { (void)irq; (void)value; (void)param; uart_xoff = 1; }
+static void on_xon(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+  (void)irq;
+  (void)value;
+  (void)param;
+  uart_xoff = 0;
+}
+static void on_xoff(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+  (void)irq;
+  (void)value;
+  (void)param;
+  uart_xoff = 1;
+}
 
 /* The wire delivers one byte per frame time, and the real chip holds at most
  * two received bytes (UDR0 and one more) while a third shifts in.  simavr's
@@ -221,7 +256,7 @@ static unsigned unread_bytes(void)
   return (unsigned)(uart0->input.write - uart0->input.read) & (uart_fifo_fifo_size - 1);
 }
 
-static int dup_pending = -1;                   /* a duplicated byte, due one frame later */
+static int dup_pending = -1; /* a duplicated byte, due one frame later */
 
 static void feed_uart(void)
 {
@@ -230,7 +265,7 @@ static void feed_uart(void)
   if (uart0 && unread_bytes() >= 3) rx_overruns++;
   next_feed_cycle = avr->cycle + frame_cycles();
   uint8_t c;
-  if (dup_pending >= 0) {                      /* the copy takes its own frame on the wire */
+  if (dup_pending >= 0) { /* the copy takes its own frame on the wire */
     c = (uint8_t)dup_pending;
     dup_pending = -1;
   } else {
@@ -285,7 +320,10 @@ static void mcu_reset(void)
 static void eeprom_rw(int addr, int value)
 {
   avr_eeprom_desc_t d = { .ee = NULL, .offset = (uint16_t)addr, .size = 1 };
-  if (addr < 0 || addr >= 1024) { reply("err eeprom address %d outside 0..1023", addr); return; }
+  if (addr < 0 || addr >= 1024) {
+    reply("err eeprom address %d outside 0..1023", addr);
+    return;
+  }
   if (value >= 0) {
     uint8_t b = (uint8_t)value;
     d.ee = &b;
@@ -313,9 +351,15 @@ static void control(char *line)
     int d = !strcmp(a, "fault") && !strcmp(b, "rx") ? 0 : !strcmp(b, "tx") ? 1 : -1;
     char kind[32] = "";
     unsigned long ppm = 0;
-    if (d < 0 || sscanf(line, "%*s %*s %31s %lu", kind, &ppm) != 2) { reply("err fault: want fault <rx|tx> <drop|corrupt|dup> <ppm>"); return; }
+    if (d < 0 || sscanf(line, "%*s %*s %31s %lu", kind, &ppm) != 2) {
+      reply("err fault: want fault <rx|tx> <drop|corrupt|dup> <ppm>");
+      return;
+    }
     int k = !strcmp(kind, "drop") ? F_DROP : !strcmp(kind, "corrupt") ? F_CORRUPT : !strcmp(kind, "dup") ? F_DUP : -1;
-    if (k < 0 || ppm > 1000000) { reply("err fault: unknown kind '%s' or ppm > 1000000", kind); return; }
+    if (k < 0 || ppm > 1000000) {
+      reply("err fault: unknown kind '%s' or ppm > 1000000", kind);
+      return;
+    }
     rate[d][k] = (uint32_t)ppm;
     reply("ok");
   } else if (!strcmp(a, "seed") && args >= 2) {
@@ -325,10 +369,16 @@ static void control(char *line)
     mcu_reset();
     reply("ok %llu", (unsigned long long)avr->cycle);
   } else if (!strcmp(a, "record") && args >= 2) {
-    if (rec) { fclose(rec); rec = NULL; }
+    if (rec) {
+      fclose(rec);
+      rec = NULL;
+    }
     if (strcmp(b, "off")) {
       char path[256];
-      if (sscanf(line, "%*s %255s", path) != 1 || !(rec = fopen(path, "wb"))) { reply("err record: cannot open %s: %s", b, strerror(errno)); return; }
+      if (sscanf(line, "%*s %255s", path) != 1 || !(rec = fopen(path, "wb"))) {
+        reply("err record: cannot open %s: %s", b, strerror(errno));
+        return;
+      }
     }
     reply("ok");
   } else if (!strcmp(a, "stats")) {
@@ -340,13 +390,12 @@ static void control(char *line)
           (unsigned long long)avr->cycle, (long long)stage_pos, (unsigned long long)steps_up,
           (unsigned long long)steps_down, (unsigned long long)stalls,
           min_pulse == UINT64_MAX ? -1LL : (long long)min_pulse,
-          min_dir_setup == UINT64_MAX ? -1LL : (long long)min_dir_setup,
-          (unsigned long long)last_step_cycle, (unsigned long long)estop_feed_cycle,
-          (unsigned long long)bytes[0], (unsigned long long)count[0][F_DROP],
-          (unsigned long long)count[0][F_CORRUPT], (unsigned long long)count[0][F_DUP],
-          (unsigned long long)bytes[1], (unsigned long long)count[1][F_DROP],
-          (unsigned long long)count[1][F_CORRUPT], (unsigned long long)count[1][F_DUP],
-          (unsigned long long)resets, !lim_bottom_level, !lim_top_level, (unsigned long long)rx_overruns);
+          min_dir_setup == UINT64_MAX ? -1LL : (long long)min_dir_setup, (unsigned long long)last_step_cycle,
+          (unsigned long long)estop_feed_cycle, (unsigned long long)bytes[0], (unsigned long long)count[0][F_DROP],
+          (unsigned long long)count[0][F_CORRUPT], (unsigned long long)count[0][F_DUP], (unsigned long long)bytes[1],
+          (unsigned long long)count[1][F_DROP], (unsigned long long)count[1][F_CORRUPT],
+          (unsigned long long)count[1][F_DUP], (unsigned long long)resets, !lim_bottom_level, !lim_top_level,
+          (unsigned long long)rx_overruns);
   } else if (!strcmp(a, "speed") && args >= 2) {
     speed = atof(b);
     pace_wall0 = wall_now();
@@ -368,7 +417,10 @@ static size_t ctl_len;
 static void read_control(void)
 {
   ssize_t n = read(0, ctl_buf + ctl_len, sizeof ctl_buf - 1 - ctl_len);
-  if (n <= 0) { if (rec) fflush(rec); _exit(0); }     /* the parent is gone */
+  if (n <= 0) {
+    if (rec) fflush(rec);
+    _exit(0);
+  } /* the parent is gone */
   ctl_len += (size_t)n;
   char *nl;
   while ((nl = memchr(ctl_buf, '\n', ctl_len))) {
@@ -399,14 +451,24 @@ static void poll_io(double timeout)
 
 static void pace(void)
 {
-  if (speed <= 0) { poll_io(0); return; }
+  if (speed <= 0) {
+    poll_io(0);
+    return;
+  }
   double ahead = pace_wall0 + (double)(avr->cycle - pace_cycle0) / (double)F_CPU / speed - wall_now();
   if (ahead > 0.010) ahead = 0.010;
   poll_io(ahead > 0.0002 ? ahead : 0);
-  if (ahead < -0.5) { pace_wall0 = wall_now(); pace_cycle0 = avr->cycle; }  /* fell behind: do not sprint */
+  if (ahead < -0.5) {
+    pace_wall0 = wall_now();
+    pace_cycle0 = avr->cycle;
+  } /* fell behind: do not sprint */
 }
 
-static void no_sleep(avr_t *a, avr_cycle_count_t how_long) { (void)a; (void)how_long; }
+static void no_sleep(avr_t *a, avr_cycle_count_t how_long)
+{
+  (void)a;
+  (void)how_long;
+}
 
 static int open_pty(void)
 {
@@ -428,21 +490,33 @@ static int open_pty(void)
 
 int main(int argc, char **argv)
 {
-  if (argc < 2) { fprintf(stderr, "usage: hil FIRMWARE.elf [--speed X] [--stage STEPS] [--seed N]\n"); return 2; }
+  if (argc < 2) {
+    fprintf(stderr, "usage: hil FIRMWARE.elf [--speed X] [--stage STEPS] [--seed N]\n");
+    return 2;
+  }
   for (int i = 2; i + 1 < argc; i += 2) {
     if (!strcmp(argv[i], "--speed")) speed = atof(argv[i + 1]);
     else if (!strcmp(argv[i], "--stage")) stage_pos = atoll(argv[i + 1]);
     else if (!strcmp(argv[i], "--seed")) rng = (uint64_t)atoll(argv[i + 1]) * 0x9E3779B97F4A7C15ULL + 1;
     else if (!strcmp(argv[i], "--top-switch")) top_switch = atoll(argv[i + 1]);
-    else { fprintf(stderr, "hil: unknown option %s\n", argv[i]); return 2; }
+    else {
+      fprintf(stderr, "hil: unknown option %s\n", argv[i]);
+      return 2;
+    }
   }
   ctl_out = fdopen(dup(1), "w");
   dup2(2, 1);
   elf_firmware_t fw;
   memset(&fw, 0, sizeof fw);
-  if (elf_read_firmware(argv[1], &fw)) { fprintf(stderr, "hil: cannot read firmware %s\n", argv[1]); return 2; }
+  if (elf_read_firmware(argv[1], &fw)) {
+    fprintf(stderr, "hil: cannot read firmware %s\n", argv[1]);
+    return 2;
+  }
   avr = avr_make_mcu_by_name("atmega328p");
-  if (!avr) { fprintf(stderr, "hil: simavr has no atmega328p\n"); return 2; }
+  if (!avr) {
+    fprintf(stderr, "hil: simavr has no atmega328p\n");
+    return 2;
+  }
   avr_init(avr);
   avr->log = 0;
   avr->frequency = (uint32_t)F_CPU;
@@ -469,7 +543,10 @@ int main(int argc, char **argv)
   if (!uart0) fprintf(stderr, "hil: simavr's UART0 not found: overruns will not be detected\n");
   update_limits();
 
-  if (open_pty()) { fprintf(stderr, "hil: cannot open a pty: %s\n", strerror(errno)); return 2; }
+  if (open_pty()) {
+    fprintf(stderr, "hil: cannot open a pty: %s\n", strerror(errno));
+    return 2;
+  }
   pace_wall0 = wall_now();
   pace_cycle0 = avr->cycle;
   uint64_t next_poll = 0;
@@ -483,7 +560,8 @@ int main(int argc, char **argv)
     if (avr->cycle >= next_poll) {
       pace();
       /* while bytes wait for the wire, come back once per frame */
-      next_poll = avr->cycle + ((inq_len || dup_pending >= 0) && frame_cycles() < POLL_CYCLES ? frame_cycles() : POLL_CYCLES);
+      next_poll =
+          avr->cycle + ((inq_len || dup_pending >= 0) && frame_cycles() < POLL_CYCLES ? frame_cycles() : POLL_CYCLES);
     }
   }
 }

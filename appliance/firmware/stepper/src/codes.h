@@ -2,13 +2,14 @@
 #ifndef CODES_H
 #define CODES_H
 
-#define CODE_ERR(num, name, text)   ERR_##name = num,
+#define CODE_ERR(num, name, text) ERR_##name = num,
 #define CODE_STATE(num, name, text)
 #define CODE_FLAG(num, name, text)
 #define CODE_ALARM(num, name, text)
 #define CODE_RESET(num, name, text)
 #define CODE(kind, num, name, text) CODE_##kind(num, name, text)
-enum err_code { ERR_none = 0,
+enum err_code {
+  ERR_none = 0,
 #include "../codes.def"
 };
 #undef CODE_ERR

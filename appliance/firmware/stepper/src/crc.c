@@ -5,8 +5,7 @@
 uint16_t crc16_update(uint16_t crc, uint8_t byte)
 {
   crc ^= (uint16_t)byte << 8;
-  for (uint8_t i = 0; i < 8; i++)
-    crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+  for (uint8_t i = 0; i < 8; i++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
   return crc;
 }
 

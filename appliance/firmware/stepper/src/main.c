@@ -172,27 +172,42 @@ static void home_step(void)
   uint8_t bottom = limits_pressed() & 1;
   switch (home_phase) {
   case H_CLEAR:
-    if (bottom || hit) { raise_alarm(STATE_alarm, ALARM_home_switch_stuck); return; }
+    if (bottom || hit) {
+      raise_alarm(STATE_alarm, ALARM_home_switch_stuck);
+      return;
+    }
     home_seek();
     return;
   case H_SEEK:
-    if (!hit) { raise_alarm(STATE_alarm, ALARM_home_switch_not_found); return; }
+    if (!hit) {
+      raise_alarm(STATE_alarm, ALARM_home_switch_not_found);
+      return;
+    }
     home_phase = H_BACKOFF;
     start_move(stepper_position() + cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_fast]);
     return;
   case H_BACKOFF:
-    if (bottom || hit) { raise_alarm(STATE_alarm, ALARM_home_switch_stuck); return; }
+    if (bottom || hit) {
+      raise_alarm(STATE_alarm, ALARM_home_switch_stuck);
+      return;
+    }
     home_phase = H_LOCATE;
     start_move(stepper_position() - 2 * cfg.v[SET_home_backoff], (uint32_t)cfg.v[SET_home_slow]);
     return;
   case H_LOCATE:
-    if (!hit) { raise_alarm(STATE_alarm, ALARM_home_switch_not_found); return; }
+    if (!hit) {
+      raise_alarm(STATE_alarm, ALARM_home_switch_not_found);
+      return;
+    }
     stepper_set_position(0);
     home_phase = H_PULLOFF;
     start_move(cfg.v[SET_home_pulloff], (uint32_t)cfg.v[SET_home_fast]);
     return;
   case H_PULLOFF:
-    if (hit) { raise_alarm(STATE_alarm, ALARM_hard_limit_top); return; }
+    if (hit) {
+      raise_alarm(STATE_alarm, ALARM_hard_limit_top);
+      return;
+    }
     home_phase = H_NONE;
     homed = 1;
     state = STATE_idle;
@@ -203,7 +218,10 @@ static void home_step(void)
 static void motion_poll(void)
 {
   if (stepper_running) return;
-  if (state == STATE_homing) { home_step(); return; }
+  if (state == STATE_homing) {
+    home_step();
+    return;
+  }
   if (state == STATE_moving) {
     if (stepper_stop_reason() == STOP_LIMIT) {
       raise_alarm(STATE_alarm, target > stepper_position() ? ALARM_hard_limit_top : ALARM_hard_limit_bottom);
@@ -217,9 +235,8 @@ static void motion_poll(void)
 static uint8_t flags(void)
 {
   uint8_t lim = limits_pressed();
-  return (uint8_t)((homed ? FLAG_homed : 0) | ((lim & 1) ? FLAG_limit_bottom : 0) |
-                   ((lim & 2) ? FLAG_limit_top : 0) | (settings_defaulted ? FLAG_settings_defaulted : 0) |
-                   (fresh ? FLAG_fresh_boot : 0));
+  return (uint8_t)((homed ? FLAG_homed : 0) | ((lim & 1) ? FLAG_limit_bottom : 0) | ((lim & 2) ? FLAG_limit_top : 0) |
+                   (settings_defaulted ? FLAG_settings_defaulted : 0) | (fresh ? FLAG_fresh_boot : 0));
 }
 
 /* "<state> <position> <flags hex> <alarm>", shared by STATUS and '?' */
@@ -260,10 +277,13 @@ static uint8_t begin_reply(uint16_t seq, uint8_t err)
 /* Driver presets: (pulse_us, dir_setup_us) from the datasheets' minimum
  * STEP high time and DIR setup time, rounded up to whole microseconds. */
 static const char drv_a4988[] PROGMEM = "a4988", drv_drv8825[] PROGMEM = "drv8825", drv_tmc2209[] PROGMEM = "tmc2209";
-static const struct { const char *name; uint8_t pulse, setup; } drivers[] PROGMEM = {
-  { drv_a4988, 1, 1 },     /* 1 us high, 200 ns setup */
-  { drv_drv8825, 2, 1 },   /* 1.9 us high, 650 ns setup */
-  { drv_tmc2209, 1, 1 },   /* 100 ns high, 20 ns setup */
+static const struct {
+  const char *name;
+  uint8_t pulse, setup;
+} drivers[] PROGMEM = {
+  { drv_a4988, 1, 1 },   /* 1 us high, 200 ns setup */
+  { drv_drv8825, 2, 1 }, /* 1.9 us high, 650 ns setup */
+  { drv_tmc2209, 1, 1 }, /* 100 ns high, 20 ns setup */
 };
 
 static uint8_t cmd_set(uint8_t id, int32_t value)
@@ -355,7 +375,7 @@ static void handle_line(char *text, uint8_t len)
 {
   command_t c;
   uint8_t reboot = 0;
-  if (len == 0) return;                      /* the host's leading '\n' */
+  if (len == 0) return; /* the host's leading '\n' */
   uint8_t err = proto_parse(text, len, &c);
   if (c.crc && c.seq && c.seq == last_seq && c.crc == last_crc) {
     serial_write(last_reply, last_reply_len); /* a resend: answer, do not execute */
@@ -364,7 +384,7 @@ static void handle_line(char *text, uint8_t len)
   uint8_t n = err ? begin_reply(c.seq, err) : execute(&c, &reboot);
   n = proto_seal(reply, n, REPLY_MAX);
   serial_write(reply, n);
-  if (c.seq) {                               /* the line was intact: remember it */
+  if (c.seq) { /* the line was intact: remember it */
     fresh = 0;
     last_seq = c.seq;
     last_crc = c.crc;
@@ -410,7 +430,7 @@ int main(void)
    * whole simulation a hundredfold.) */
   TCCR0A = _BV(WGM01);
   OCR0A = 155;
-  TCCR0B = _BV(CS02) | _BV(CS00);               /* clk/1024: 16 MHz / 1024 / 156 = 100.2 Hz */
+  TCCR0B = _BV(CS02) | _BV(CS00); /* clk/1024: 16 MHz / 1024 / 156 = 100.2 Hz */
   TIMSK0 = _BV(OCIE0A);
   set_sleep_mode(SLEEP_MODE_IDLE);
   banner();
@@ -418,14 +438,21 @@ int main(void)
   for (;;) {
     wdt_reset();
     uint8_t rt;
-    cli(); rt = rt_requests; rt_requests = 0; sei();
+    cli();
+    rt = rt_requests;
+    rt_requests = 0;
+    sei();
     if (rt & RT_REQ_ESTOP) raise_alarm(STATE_estop, ALARM_emergency_stop);
     motion_poll();
     if (rt & RT_REQ_STATUS) send_realtime_status();
     int16_t c;
     while ((c = serial_read()) >= 0) {
       uint8_t r = linebuf_feed(&line, (uint8_t)c);
-      if (r == LB_LINE) { handle_line(line.buf, line.len); linebuf_init(&line); break; }
+      if (r == LB_LINE) {
+        handle_line(line.buf, line.len);
+        linebuf_init(&line);
+        break;
+      }
       if (r == LB_OVERFLOW) {
         uint8_t n = proto_seal(reply, begin_reply(0, ERR_line_too_long), REPLY_MAX);
         serial_write(reply, n);

@@ -18,13 +18,17 @@ void ramp_build(ramp_t *r, uint32_t max_rate, uint32_t accel)
 {
   const uint64_t v = max_rate, a = accel ? accel : 1, K = RAMP_SEGMENTS;
   uint64_t prev_s = 0;
-  uint8_t prev_end = 0;  /* slices consumed so far */
+  uint8_t prev_end = 0; /* slices consumed so far */
   r->top_interval = interval_for_rate(max_rate);
   for (uint8_t i = 0; i < RAMP_SEGMENTS; i++) {
     uint64_t n = (uint64_t)(i + 1) * (i + 1) * v * v;
     uint64_t s = (n + a * K * K) / (2 * a * K * K);
     uint64_t steps = s - prev_s;
-    if (steps == 0) { r->steps[i] = 0; r->interval[i] = MAX_INTERVAL; continue; }
+    if (steps == 0) {
+      r->steps[i] = 0;
+      r->interval[i] = MAX_INTERVAL;
+      continue;
+    }
     if (steps > 65535u) steps = 65535u;
     uint64_t slices = (uint64_t)(i + 1 - prev_end);
     uint64_t iv = (slices * TICK_HZ * v + (a * K * steps) / 2) / (a * K * steps);
@@ -46,8 +50,7 @@ void plan_move(const ramp_t *r, uint32_t distance, uint32_t rate, plan_t *p)
   if (want < r->top_interval) want = r->top_interval;
   uint32_t climbed = 0;
   uint8_t m = 0;
-  while (m < RAMP_SEGMENTS && r->interval[m] > want &&
-         2 * (climbed + r->steps[m]) <= distance) {
+  while (m < RAMP_SEGMENTS && r->interval[m] > want && 2 * (climbed + r->steps[m]) <= distance) {
     climbed += r->steps[m];
     m++;
   }
@@ -66,8 +69,14 @@ void plan_move(const ramp_t *r, uint32_t distance, uint32_t rate, plan_t *p)
 
 uint32_t plan_block(const ramp_t *r, const plan_t *p, uint8_t k, uint16_t *interval)
 {
-  if (k < p->nseg) { *interval = r->interval[k]; return r->steps[k]; }
-  if (k == p->nseg) { *interval = p->cruise_interval; return p->cruise_steps; }
+  if (k < p->nseg) {
+    *interval = r->interval[k];
+    return r->steps[k];
+  }
+  if (k == p->nseg) {
+    *interval = p->cruise_interval;
+    return p->cruise_steps;
+  }
   if (k <= 2 * p->nseg) {
     uint8_t i = (uint8_t)(2 * p->nseg - k);
     *interval = r->interval[i];

@@ -27,13 +27,13 @@
 
 #define RAMP_SEGMENTS 48
 #define TICK_HZ 2000000UL
-#define MIN_INTERVAL 40u      /* 20 us: 50 kHz, the fastest the ISR is allowed */
+#define MIN_INTERVAL 40u /* 20 us: 50 kHz, the fastest the ISR is allowed */
 #define MAX_INTERVAL 65535u
 
 typedef struct {
-  uint16_t interval[RAMP_SEGMENTS];  /* timer ticks between steps in slice i */
-  uint16_t steps[RAMP_SEGMENTS];     /* steps in slice i (0 = slice merged into the next) */
-  uint16_t top_interval;             /* interval at max_rate */
+  uint16_t interval[RAMP_SEGMENTS]; /* timer ticks between steps in slice i */
+  uint16_t steps[RAMP_SEGMENTS];    /* steps in slice i (0 = slice merged into the next) */
+  uint16_t top_interval;            /* interval at max_rate */
 } ramp_t;
 
 /* One move, as the interrupt walks it: blocks 0..nseg-1 accelerate,

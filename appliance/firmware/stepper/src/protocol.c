@@ -3,7 +3,11 @@
 #include "crc.h"
 #include "pgm.h"
 
-void linebuf_init(linebuf_t *lb) { lb->len = 0; lb->overflow = 0; }
+void linebuf_init(linebuf_t *lb)
+{
+  lb->len = 0;
+  lb->overflow = 0;
+}
 
 /* '\n' ends a line, '\r' is ignored (terminals send it).  Bytes past
  * LINE_MAX are thrown away and the line is reported as overflowed when its
@@ -16,10 +20,16 @@ uint8_t linebuf_feed(linebuf_t *lb, uint8_t c)
     uint8_t over = lb->overflow;
     lb->buf[lb->len] = 0;
     lb->overflow = 0;
-    if (over) { lb->len = 0; return LB_OVERFLOW; }
-    return LB_LINE;   /* caller reads buf/len, then calls linebuf_init */
+    if (over) {
+      lb->len = 0;
+      return LB_OVERFLOW;
+    }
+    return LB_LINE; /* caller reads buf/len, then calls linebuf_init */
   }
-  if (lb->len >= LINE_MAX) { lb->overflow = 1; return LB_NONE; }
+  if (lb->len >= LINE_MAX) {
+    lb->overflow = 1;
+    return LB_NONE;
+  }
   lb->buf[lb->len++] = (char)c;
   return LB_NONE;
 }
@@ -50,17 +60,21 @@ uint8_t proto_parse_i32(const char *s, int32_t *out)
 
 /* Verbs and how many arguments each takes: data, not code. */
 static const char v_id[] PROGMEM = "ID", v_status[] PROGMEM = "STATUS", v_home[] PROGMEM = "HOME",
-  v_move[] PROGMEM = "MOVE", v_stop[] PROGMEM = "STOP", v_get[] PROGMEM = "GET", v_set[] PROGMEM = "SET",
-  v_driver[] PROGMEM = "DRIVER", v_defaults[] PROGMEM = "DEFAULTS", v_reboot[] PROGMEM = "REBOOT";
-static const char *const verb_names[V_COUNT] PROGMEM = {
-  v_id, v_status, v_home, v_move, v_stop, v_get, v_set, v_driver, v_defaults, v_reboot };
+                         v_move[] PROGMEM = "MOVE", v_stop[] PROGMEM = "STOP", v_get[] PROGMEM = "GET",
+                         v_set[] PROGMEM = "SET", v_driver[] PROGMEM = "DRIVER", v_defaults[] PROGMEM = "DEFAULTS",
+                         v_reboot[] PROGMEM = "REBOOT";
+static const char *const verb_names[V_COUNT] PROGMEM = { v_id,  v_status, v_home,   v_move,     v_stop,
+                                                         v_get, v_set,    v_driver, v_defaults, v_reboot };
 static const uint8_t verb_args[V_COUNT] PROGMEM = { 0, 0, 0, 1, 0, 1, 2, 1, 0, 0 };
 
 /* "<seq> <VERB> [arg [arg]]*XXXX": the checksum is checked first and
  * nothing else is trusted before it passes; only then is the seq believed. */
 uint8_t proto_parse(char *line, uint8_t len, command_t *cmd)
 {
-  cmd->seq = 0; cmd->crc = 0; cmd->verb = V_COUNT; cmd->argc = 0;
+  cmd->seq = 0;
+  cmd->crc = 0;
+  cmd->verb = V_COUNT;
+  cmd->argc = 0;
   cmd->arg[0] = cmd->arg[1] = 0;
   if (len < 6 || line[len - 5] != '*') return ERR_bad_checksum;
   uint16_t want = 0;
@@ -87,7 +101,10 @@ uint8_t proto_parse(char *line, uint8_t len, command_t *cmd)
   if (n < 2 || !proto_parse_i32(tok[0], &seq) || seq < 1 || seq > 65535) return ERR_bad_syntax;
   cmd->seq = (uint16_t)seq;
   for (uint8_t v = 0; v < V_COUNT; v++) {
-    if (strcmp_P(tok[1], PGM_PTR(&verb_names[v])) == 0) { cmd->verb = v; break; }
+    if (strcmp_P(tok[1], PGM_PTR(&verb_names[v])) == 0) {
+      cmd->verb = v;
+      break;
+    }
   }
   if (cmd->verb == V_COUNT) return ERR_unknown_command;
   if (n - 2 != pgm_read_byte(&verb_args[cmd->verb])) return ERR_bad_argument;
@@ -113,7 +130,10 @@ uint8_t proto_put_i32(char *buf, uint8_t len, uint8_t cap, int32_t v)
   char tmp[12];
   uint8_t n = 0;
   uint32_t u = v < 0 ? (uint32_t)0 - (uint32_t)v : (uint32_t)v;
-  do { tmp[n++] = (char)('0' + u % 10); u /= 10; } while (u);
+  do {
+    tmp[n++] = (char)('0' + u % 10);
+    u /= 10;
+  } while (u);
   if (v < 0) tmp[n++] = '-';
   while (n && len < cap) buf[len++] = tmp[--n];
   return len;

@@ -7,10 +7,10 @@
 #include "codes.h"
 
 #define PROTO_VERSION 1
-#define LINE_MAX 48          /* characters before '\n' */
-#define REPLY_MAX 96         /* characters of a reply including "*XXXX\n" */
-#define RT_STATUS '?'        /* real-time: send a status report */
-#define RT_ESTOP 0x18        /* real-time: emergency stop (Ctrl-X) */
+#define LINE_MAX 48   /* characters before '\n' */
+#define REPLY_MAX 96  /* characters of a reply including "*XXXX\n" */
+#define RT_STATUS '?' /* real-time: send a status report */
+#define RT_ESTOP 0x18 /* real-time: emergency stop (Ctrl-X) */
 
 typedef struct {
   char buf[LINE_MAX + 1];
@@ -23,17 +23,17 @@ enum { LB_NONE = 0, LB_LINE, LB_OVERFLOW };
 enum verb { V_ID, V_STATUS, V_HOME, V_MOVE, V_STOP, V_GET, V_SET, V_DRIVER, V_DEFAULTS, V_REBOOT, V_COUNT };
 
 typedef struct {
-  uint16_t seq;       /* 0 when the line could not be trusted */
-  uint16_t crc;       /* the line's checksum, part of the duplicate check */
+  uint16_t seq; /* 0 when the line could not be trusted */
+  uint16_t crc; /* the line's checksum, part of the duplicate check */
   uint8_t verb;
   uint8_t argc;
   char *arg[2];
 } command_t;
 
 void linebuf_init(linebuf_t *lb);
-uint8_t linebuf_feed(linebuf_t *lb, uint8_t c);       /* LB_*; LB_LINE: lb->buf holds it */
-uint8_t proto_parse(char *line, uint8_t len, command_t *cmd);   /* 0 or ERR_* */
-uint8_t proto_parse_i32(const char *s, int32_t *out);            /* 1 when s is a whole int32 */
+uint8_t linebuf_feed(linebuf_t *lb, uint8_t c);               /* LB_*; LB_LINE: lb->buf holds it */
+uint8_t proto_parse(char *line, uint8_t len, command_t *cmd); /* 0 or ERR_* */
+uint8_t proto_parse_i32(const char *s, int32_t *out);         /* 1 when s is a whole int32 */
 /* Append "*XXXX\n" (the CRC of buf[0..len)) and return the new length,
  * or 0 when it does not fit in cap bytes. */
 uint8_t proto_seal(char *buf, uint8_t len, uint8_t cap);

@@ -34,7 +34,7 @@ void serial_init(void)
   uint16_t ubrr = ubrr_u2x(F_CPU, BAUD);
   UBRR0H = (uint8_t)(ubrr >> 8);
   UBRR0L = (uint8_t)ubrr;
-  UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);              /* 8N1 */
+  UCSR0C = _BV(UCSZ01) | _BV(UCSZ00); /* 8N1 */
   UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
@@ -46,10 +46,20 @@ ISR(USART_RX_vect)
    * line, to prove the simavr bench notices the overruns it would cause */
   _delay_us(TEST_SLOW_RX_US);
 #endif
-  if (c == RT_ESTOP) { stepper_halt_now(); rt_requests |= RT_REQ_ESTOP; return; }
-  if (c == RT_STATUS) { rt_requests |= RT_REQ_STATUS; return; }
+  if (c == RT_ESTOP) {
+    stepper_halt_now();
+    rt_requests |= RT_REQ_ESTOP;
+    return;
+  }
+  if (c == RT_STATUS) {
+    rt_requests |= RT_REQ_STATUS;
+    return;
+  }
   uint8_t h = rx_head, next = (uint8_t)((h + 1) & (RX_SIZE - 1));
-  if (next != rx_tail) { rx_buf[h] = c; rx_head = next; }
+  if (next != rx_tail) {
+    rx_buf[h] = c;
+    rx_head = next;
+  }
   /* else: dropped; the line's checksum will fail and the host resends */
 }
 
@@ -77,7 +87,7 @@ void serial_write(const char *buf, uint8_t len)
 {
   while (len--) {
     uint8_t h = tx_head, next = (uint8_t)((h + 1) & (TX_SIZE - 1));
-    while (next == tx_tail) { /* full: the UDRE interrupt drains it */ }
+    while (next == tx_tail) continue; /* full: the UDRE interrupt drains it */
     tx_buf[h] = (uint8_t)*buf++;
     tx_head = next;
     UCSR0B |= _BV(UDRIE0);
@@ -87,5 +97,7 @@ void serial_write(const char *buf, uint8_t len)
 void serial_flush(void)
 {
   while (tx_head != tx_tail) {}
-  while (!(UCSR0A & _BV(TXC0)) && (UCSR0B & _BV(TXEN0))) { if (UCSR0A & _BV(UDRE0)) break; }
+  while (!(UCSR0A & _BV(TXC0)) && (UCSR0B & _BV(TXEN0))) {
+    if (UCSR0A & _BV(UDRE0)) break;
+  }
 }

@@ -50,8 +50,7 @@ void settings_encode(const settings_t *s, uint8_t *blob)
 
 uint8_t settings_decode(const uint8_t *blob, settings_t *s)
 {
-  if (blob[0] != SETTINGS_MAGIC || blob[1] != SETTINGS_LAYOUT || blob[2] != SETTING_COUNT)
-    return SETTINGS_BAD_HEADER;
+  if (blob[0] != SETTINGS_MAGIC || blob[1] != SETTINGS_LAYOUT || blob[2] != SETTING_COUNT) return SETTINGS_BAD_HEADER;
   uint16_t crc = crc16(blob, SETTINGS_BLOB_SIZE - 2);
   if ((uint8_t)crc != blob[SETTINGS_BLOB_SIZE - 2] || (uint8_t)(crc >> 8) != blob[SETTINGS_BLOB_SIZE - 1])
     return SETTINGS_BAD_CRC;

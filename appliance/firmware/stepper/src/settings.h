@@ -17,15 +17,17 @@
 #define SETTINGS_LAYOUT 1
 #define SETTINGS_BLOB_SIZE (3 + 4 * SETTING_COUNT + 2)
 
-typedef struct { int32_t v[SETTING_COUNT]; } settings_t;
+typedef struct {
+  int32_t v[SETTING_COUNT];
+} settings_t;
 
 enum settings_load { SETTINGS_OK = 0, SETTINGS_BAD_HEADER, SETTINGS_BAD_CRC, SETTINGS_BAD_VALUE };
 
 void settings_defaults(settings_t *s);
 void settings_encode(const settings_t *s, uint8_t *blob);
-uint8_t settings_decode(const uint8_t *blob, settings_t *s);  /* enum settings_load */
-int8_t settings_find(const char *name);                        /* id or -1 */
-const char *settings_name(uint8_t id);                         /* flash pointer on AVR */
-uint8_t settings_check_value(uint8_t id, int32_t value);       /* 0 or ERR_* */
-uint8_t settings_check_all(const settings_t *s);               /* 0 or ERR_* */
+uint8_t settings_decode(const uint8_t *blob, settings_t *s); /* enum settings_load */
+int8_t settings_find(const char *name);                      /* id or -1 */
+const char *settings_name(uint8_t id);                       /* flash pointer on AVR */
+uint8_t settings_check_value(uint8_t id, int32_t value);     /* 0 or ERR_* */
+uint8_t settings_check_all(const settings_t *s);             /* 0 or ERR_* */
 #endif

@@ -39,14 +39,14 @@ static const ramp_t *st_ramp;
 static plan_t st_plan;
 static uint8_t st_block;
 static uint32_t st_left;
-static uint16_t st_interval;   /* ticks from this rise to the next */
-static uint16_t st_rise;       /* timer time of the last rising edge */
-static uint8_t st_high;        /* the next compare is the fall */
+static uint16_t st_interval; /* ticks from this rise to the next */
+static uint16_t st_rise;     /* timer time of the last rising edge */
+static uint8_t st_high;      /* the next compare is the fall */
 static int8_t st_dir;
-static uint8_t st_limit_mask, st_limit_xor;   /* (PIN ^ xor) & mask != 0: switch ahead pressed */
+static uint8_t st_limit_mask, st_limit_xor; /* (PIN ^ xor) & mask != 0: switch ahead pressed */
 static uint8_t pulse_ticks = 4, dir_setup = 1, invert_bits;
 
-#define LATE_MARGIN 6          /* ticks: time to write OCR1A before the counter passes it */
+#define LATE_MARGIN 6 /* ticks: time to write OCR1A before the counter passes it */
 
 void stepper_init(void)
 {
@@ -54,8 +54,9 @@ void stepper_init(void)
   STEP_DDR |= _BV(STEP_BIT);
   DIR_DDR |= _BV(DIR_BIT);
   EN_DDR |= _BV(EN_BIT);
-  LIMIT_DDR &= (uint8_t)~(_BV(LIMIT_BOTTOM_BIT) | _BV(LIMIT_TOP_BIT));
-  LIMIT_PORT |= _BV(LIMIT_BOTTOM_BIT) | _BV(LIMIT_TOP_BIT);     /* pull-ups */
+  const uint8_t limits = _BV(LIMIT_BOTTOM_BIT) | _BV(LIMIT_TOP_BIT);
+  LIMIT_DDR &= (uint8_t)~limits;
+  LIMIT_PORT |= limits; /* pull-ups */
   TCCR1A = 0;
   TCCR1B = 0;
   TIMSK1 = _BV(OCIE1A);
@@ -68,7 +69,8 @@ void stepper_configure(uint8_t pulse_us, uint8_t dir_setup_us, uint8_t invert)
   invert_bits = invert;
   /* the driver stays enabled: the lead screw and the holding torque keep
    * the base where the last step left it */
-  if (invert & 4) EN_PORT |= _BV(EN_BIT); else EN_PORT &= (uint8_t)~_BV(EN_BIT);
+  if (invert & 4) EN_PORT |= _BV(EN_BIT);
+  else EN_PORT &= (uint8_t)~_BV(EN_BIT);
 }
 
 uint8_t limits_pressed(void)
@@ -96,31 +98,35 @@ void stepper_start(const ramp_t *r, const plan_t *p, int8_t dir)
   st_plan = *p;
   st_dir = dir;
   uint8_t up = dir > 0;
-  if (up ^ (invert_bits & 1)) DIR_PORT |= _BV(DIR_BIT); else DIR_PORT &= (uint8_t)~_BV(DIR_BIT);
+  if (up ^ (invert_bits & 1)) DIR_PORT |= _BV(DIR_BIT);
+  else DIR_PORT &= (uint8_t)~_BV(DIR_BIT);
   st_limit_mask = up ? _BV(LIMIT_TOP_BIT) : _BV(LIMIT_BOTTOM_BIT);
   st_limit_xor = (invert_bits & 2) ? 0 : (_BV(LIMIT_TOP_BIT) | _BV(LIMIT_BOTTOM_BIT));
   stop_reason = STOP_DONE;
   st_block = 0;
   load_next_block();
   if (!st_left) return;
-  if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) { stop_reason = STOP_LIMIT; return; }
+  if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) {
+    stop_reason = STOP_LIMIT;
+    return;
+  }
   for (uint8_t i = 0; i < dir_setup; i++) _delay_us(1);
   /* reset the OC1A latch to low (FOC1A with "clear on match"), then toggle mode */
   TCCR1A = _BV(COM1A1);
   TCCR1C = _BV(FOC1A);
   TCCR1A = _BV(COM1A0);
   st_high = 0;
-  st_rise = st_interval;                     /* the first rise, one interval after start */
+  st_rise = st_interval; /* the first rise, one interval after start */
   TCNT1 = 0;
   OCR1A = st_rise;
   TIFR1 = _BV(OCF1A);
   stepper_running = 1;
-  TCCR1B = _BV(CS11);                        /* normal mode, clk/8 = 2 MHz */
+  TCCR1B = _BV(CS11); /* normal mode, clk/8 = 2 MHz */
 }
 
 ISR(TIMER1_COMPA_vect)
 {
-  if (!st_high) {                            /* STEP rose at st_rise */
+  if (!st_high) { /* STEP rose at st_rise */
     st_high = 1;
     /* one tick (0.5 us) beyond the setting: pulse_us is the driver's
      * minimum, and an edge may land a few cycles off its compare (the
@@ -131,15 +137,21 @@ ISR(TIMER1_COMPA_vect)
     OCR1A = ((int16_t)(fall - soonest) > 0) ? fall : soonest;
     return;
   }
-  st_high = 0;                               /* STEP fell: the step is done */
+  st_high = 0; /* STEP fell: the step is done */
   position += st_dir;
   if (--st_left == 0) {
     st_block++;
     load_next_block();
-    if (!st_left) { TCCR1B = 0; TCCR1A = 0; stepper_running = 0; return; }
+    if (!st_left) {
+      TCCR1B = 0;
+      TCCR1A = 0;
+      stepper_running = 0;
+      return;
+    }
   }
   if ((LIMIT_PIN ^ st_limit_xor) & st_limit_mask) {
-    TCCR1B = 0; TCCR1A = 0;
+    TCCR1B = 0;
+    TCCR1A = 0;
     stepper_running = 0;
     stop_reason = STOP_LIMIT;
     return;

@@ -14,9 +14,9 @@ extern volatile uint8_t stepper_running;
  * further compare match, so no further step. */
 static inline void stepper_halt_now(void)
 {
-  TCCR1B = 0;                              /* no clock: no further compare match */
-  TCCR1A = 0;                              /* hand the pin back to PORTB ... */
-  STEP_PORT &= (uint8_t)~_BV(STEP_BIT);    /* ... which holds it low */
+  TCCR1B = 0;                           /* no clock: no further compare match */
+  TCCR1A = 0;                           /* hand the pin back to PORTB ... */
+  STEP_PORT &= (uint8_t)~_BV(STEP_BIT); /* ... which holds it low */
   stepper_running = 0;
 }
 
@@ -28,5 +28,5 @@ void stepper_start(const ramp_t *r, const plan_t *p, int8_t dir);
 uint8_t stepper_stop_reason(void);
 int32_t stepper_position(void);
 void stepper_set_position(int32_t pos);
-uint8_t limits_pressed(void);   /* bit 0 bottom, bit 1 top */
+uint8_t limits_pressed(void); /* bit 0 bottom, bit 1 top */
 #endif

@@ -10,8 +10,5 @@ static inline uint16_t ubrr_u2x(uint32_t f_cpu, uint32_t baud)
   return (uint16_t)((f_cpu + 4 * baud) / (8 * baud) - 1);
 }
 /* actual baud rate for a divider, to bound the error */
-static inline uint32_t baud_of_ubrr_u2x(uint32_t f_cpu, uint16_t ubrr)
-{
-  return f_cpu / (8UL * (ubrr + 1UL));
-}
+static inline uint32_t baud_of_ubrr_u2x(uint32_t f_cpu, uint16_t ubrr) { return f_cpu / (8UL * (ubrr + 1UL)); }
 #endif

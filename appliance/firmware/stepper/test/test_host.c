@@ -20,7 +20,7 @@
 static void crc_matches_the_catalogue_check_value(void **state)
 {
   (void)state;
-  assert_int_equal(crc16("123456789", 9), 0x29B1);   /* CRC-16/CCITT-FALSE check value */
+  assert_int_equal(crc16("123456789", 9), 0x29B1); /* CRC-16/CCITT-FALSE check value */
   assert_int_equal(crc16("", 0), 0xFFFF);
 }
 
@@ -41,7 +41,7 @@ static void crc_catches_every_single_bit_flip(void **state)
 static void ubrr_for_115200_at_16mhz_is_16_within_2_5_percent(void **state)
 {
   (void)state;
-  assert_int_equal(ubrr_u2x(16000000UL, 115200), 16);     /* datasheet table, U2X=1 */
+  assert_int_equal(ubrr_u2x(16000000UL, 115200), 16); /* datasheet table, U2X=1 */
   assert_int_equal(ubrr_u2x(16000000UL, 9600), 207);
   assert_int_equal(ubrr_u2x(16000000UL, 250000), 7);
   uint32_t actual = baud_of_ubrr_u2x(16000000UL, 16);
@@ -75,7 +75,7 @@ static void ramp_reaches_the_distance_v2_over_2a(void **state)
   (void)state;
   ramp_t r;
   ramp_build(&r, 16000, 80000);
-  assert_int_equal(ramp_total(&r), 1600);            /* 16000^2 / (2 * 80000) */
+  assert_int_equal(ramp_total(&r), 1600); /* 16000^2 / (2 * 80000) */
   assert_int_equal(r.top_interval, 125);
 }
 
@@ -234,7 +234,7 @@ static void a_sealed_reply_carries_its_crc(void **state)
   char want[16];
   snprintf(want, sizeof want, "5 ok*%04X\n", crc16("5 ok", 4));
   assert_memory_equal(b, want, 10);
-  assert_int_equal(proto_seal(b, 28, sizeof b), 0);     /* no room: refused, not overrun */
+  assert_int_equal(proto_seal(b, 28, sizeof b), 0); /* no room: refused, not overrun */
 }
 
 /* ---- settings image ---- */
