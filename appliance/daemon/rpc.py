@@ -8,8 +8,9 @@ subscribe() streams {"event": state} lines and ends with {"end": true}.
 latest_frame's JPEG travels as base64; job_file returns the path (both
 services share the data folder's group).
 
-BenchClient has the facade's methods and raises the same error types, so
-the web UI cannot tell it from an in-process BenchService.
+The methods are those of facade.Bench (METHODS is derived from it). BenchClient
+implements the same protocol and raises the same error types, so the web UI cannot
+tell it from an in-process BenchService.
 
 Connections: the server reads requests off a connection until the client
 closes it, so BenchClient keeps a few connections open and reuses them
@@ -30,48 +31,14 @@ import socket
 import socketserver
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from .. import errors
+from . import facade
 
 log = logging.getLogger("inkslice.rpc")
-METHODS = (
-    "state",
-    "start_scan",
-    "cancel",
-    "resume",
-    "jobs",
-    "job",
-    "job_file",
-    "latest_frame",
-    "settings",
-    "update_settings",
-    "events",
-    "live_heightmap",
-    "calibration",
-    "calibrate",
-    "import_scan",
-    "commissioning",
-    "commission",
-    "export_commissioning",
-    "import_commissioning",
-    "ink_changed",
-    "usb_sticks",
-    "export_to_usb",
-    "backup",
-    "restore",
-    "system",
-    "preview",
-    "home_stage",
-    "jog",
-    "goto_level",
-    "rename_job",
-    "delete_job",
-    "reprocess",
-    "job_sizes",
-    "repost",
-    "test_webhook",
-)
+METHODS = facade.calls()  # what the socket serves: the facade, less subscribe (streamed) and close
 BACKLOG = 128  # pending connections the kernel queues (Linux caps it at somaxconn)
 MAX_CONNECTIONS = 6  # a BenchClient's open connections (calls in flight) at most
 SLOW_CALLS = {
@@ -194,7 +161,7 @@ class _Conn:
 
 
 class BenchClient:
-    """The BenchService facade, spoken over the daemon's socket. Thread-safe.
+    """The facade (facade.Bench), spoken over the daemon's socket. Thread-safe.
 
     At most `max_connections` calls are in flight at once, each on a connection
     kept open for the next call; a caller that finds them all busy waits up to
@@ -294,113 +261,115 @@ class BenchClient:
             raise _ERRORS.get(e["type"], errors.InkSliceError)(e["where"], e["problem"])
         return reply["result"]
 
-    def state(self):
+    def state(self) -> dict:
         return self._call("state")
 
-    def start_scan(self, params):
+    def start_scan(self, params: dict) -> str:
         return self._call("start_scan", params)
 
-    def cancel(self):
+    def cancel(self) -> None:
         return self._call("cancel")
 
-    def resume(self, job_id):
+    def resume(self, job_id: str) -> str:
         return self._call("resume", job_id)
 
-    def jobs(self):
+    def jobs(self) -> list[dict]:
         return self._call("jobs")
 
-    def job(self, job_id):
+    def job(self, job_id: str) -> dict:
         return self._call("job", job_id)
 
-    def job_file(self, job_id, name):
+    def job_file(self, job_id: str, name: str) -> Path:
         return Path(self._call("job_file", job_id, name))
 
-    def settings(self):
+    def settings(self) -> dict:
         return self._call("settings")
 
-    def update_settings(self, changes):
+    def update_settings(self, changes: dict) -> dict:
         return self._call("update_settings", changes)
 
-    def events(self, job_id=None, limit=200):
+    def events(self, job_id: str | None = None, limit: int = 200) -> list[dict]:
         return self._call("events", job_id, limit)
 
-    def live_heightmap(self):
+    def live_heightmap(self) -> dict | None:
         return self._call("live_heightmap")
 
-    def calibration(self):
+    def calibration(self) -> dict:
         return self._call("calibration")
 
-    def calibrate(self, step):
+    def calibrate(self, step: str) -> dict:
         return self._call("calibrate", step)
 
-    def import_scan(self, folder):
+    def import_scan(self, folder: str | Path) -> str:
         return self._call("import_scan", str(folder))
 
-    def commissioning(self):
+    def commissioning(self) -> dict:
         return self._call("commissioning")
 
-    def commission(self, step, action, values=None):
+    def commission(self, step: str, action: str, values: dict | None = None) -> dict:
         return self._call("commission", step, action, values)
 
-    def export_commissioning(self):
+    def export_commissioning(self) -> dict:
         return self._call("export_commissioning")
 
-    def import_commissioning(self, doc):
+    def import_commissioning(self, doc: dict) -> dict:
         return self._call("import_commissioning", doc)
 
-    def ink_changed(self):
+    def ink_changed(self) -> dict:
         return self._call("ink_changed")
 
-    def usb_sticks(self):
+    def usb_sticks(self) -> list[dict]:
         return self._call("usb_sticks")
 
-    def backup(self):
+    def backup(self) -> dict:
         return self._call("backup")
 
-    def restore(self, doc):
+    def restore(self, doc: dict) -> dict:
         return self._call("restore", doc)
 
-    def system(self):
+    def system(self) -> dict:
         return self._call("system")
 
-    def test_webhook(self):
+    def test_webhook(self) -> dict:
         return self._call("test_webhook")
 
-    def preview(self):
+    def preview(self) -> dict:
         return self._call("preview")
 
-    def home_stage(self):
+    def home_stage(self) -> dict:
         return self._call("home_stage")
 
-    def jog(self, mm):
+    def jog(self, mm: float) -> dict:
         return self._call("jog", mm)
 
-    def goto_level(self, level_mm):
+    def goto_level(self, level_mm: float) -> dict:
         return self._call("goto_level", level_mm)
 
-    def rename_job(self, job_id, name):
+    def rename_job(self, job_id: str, name: str) -> dict:
         return self._call("rename_job", job_id, name)
 
-    def delete_job(self, job_id):
+    def delete_job(self, job_id: str) -> None:
         return self._call("delete_job", job_id)
 
-    def reprocess(self, job_id, changes=None):
+    def reprocess(self, job_id: str, changes: dict | None = None) -> str:
         return self._call("reprocess", job_id, changes)
 
-    def repost(self, job_id, options=None):
+    def repost(self, job_id: str, options: dict | None = None) -> list[str]:
         return self._call("repost", job_id, options)
 
-    def job_sizes(self):
+    def job_sizes(self) -> dict[str, int]:
         return self._call("job_sizes")
 
-    def export_to_usb(self, job_id, name="toolpath.gcode", stick=None, release=True):
+    def export_to_usb(
+        self, job_id: str, name: str = "toolpath.gcode", stick: str | None = None, release: bool = True
+    ) -> dict:
         return self._call("export_to_usb", job_id, name, stick, release)
 
-    def latest_frame(self):
+    def latest_frame(self) -> tuple[bytes, dict] | None:
         r = self._call("latest_frame")
         return None if r is None else (base64.b64decode(r["jpeg"]), r["info"])
 
-    def subscribe(self, timeout: float = 30.0):
+    def subscribe(self, timeout: float = 30.0) -> Iterator[dict]:
         with self._connect(timeout + 10) as s, s.makefile("rwb") as f:
             f.write((json.dumps({"method": "subscribe", "args": [timeout]}) + "\n").encode())
             f.flush()
@@ -410,7 +379,7 @@ class BenchClient:
                     return
                 yield msg["event"]
 
-    def close(self):
+    def close(self) -> None:
         with self._lock:
             idle, self._idle = self._idle, []
         for conn in idle:

@@ -1,6 +1,6 @@
-"""BenchService: the daemon's public face. The web UI, the CLI and the tests
-use only this class (or its socket client, rpc.BenchClient, which has the same
-methods).
+"""BenchService: the daemon's public face. It implements facade.Bench (daemon/facade.py, the
+one list of what the daemon offers, with each method's meaning); the web UI, the CLI and the
+tests use only those methods, in-process or over the socket (rpc.BenchClient).
 
     service = BenchService(data_dir, factory)      # factory: devices.py / sim.fakes
     job_id = service.start_scan({"name": "mouse", "level_step_mm": 1.0})
@@ -13,21 +13,6 @@ LED and display. The button: a short press starts or stops a scan, a long
 press (held ~2 s, see hw/gpio.py) copies the newest job's G-code to the USB
 stick (hw/usb.py) in a thread of its own; the outcome is shown on the display,
 in state()["notice"] (the web UI's dashboard) and in the event log.
-
-Beyond the facade, what the web UI offers when a service has it:
-    live_heightmap()        the height map so far (livemap.py), None before a scan
-    calibration(), calibrate(step)   guided plane calibration (calibration.py)
-    commissioning(), commission(step, action, values), export_commissioning(),
-    import_commissioning(doc), ink_changed()   the box's commissioning (commissioning.py)
-    import_scan(folder)     a scan folder from elsewhere becomes a job that is
-                            processed (importing.py checks and copies it)
-    usb_sticks(), export_to_usb(job_id, name, stick)   the sticks plugged in, and a verified
-                            copy of a job's file onto one (the web has no device access)
-    backup(), restore(doc)  the settings and calibration history as one document (backup.py)
-    system()                version, uptime, the data disk, the last webhook delivery
-    preview(), home_stage(), jog(mm), goto_level(level_mm)   the bench page's machine panel between
-                            scans (manual.py); refused while a scan, calibration or commissioning runs
-    rename_job(job_id, name), delete_job(job_id), reprocess(job_id, changes)   the job manager
 
 A job that ends done or failed, and an interrupted scan found at start, are also sent to the
 webhook setting's address (webhook.py).

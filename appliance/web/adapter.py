@@ -1,38 +1,28 @@
-"""The one place that knows how the daemon's BenchService is spelled.
+"""The web's view of the daemon: a facade.Bench (daemon/facade.py), in-process or over
+the socket, with the caching and the small shape fixes the routes want.
 
-The routes call only this wrapper. It passes the agreed facade through
-(state, start_scan, cancel, resume, jobs, job, job_file, latest_frame,
-settings, update_settings) and turns the optional extras into "not offered"
-when a service lacks them, so the UI can hide a feature instead of failing:
-
-  live_heightmap()       the height map so far (dashboard)
-  calibration(), calibrate(step)   guided calibration
-  commissioning(), commission(step, action, values), export_commissioning(),
-  import_commissioning(doc), ink_changed()   commissioning (daemon/commissioning.py)
-  import_scan(folder)    an uploaded scan folder becomes a job
-  usb_sticks(), export_to_usb(job_id, name, stick)   the daemon copies a job's file to a stick
-  backup(), restore(doc), system()   the system page (daemon/backup.py, BenchService.system)
-  preview(), home_stage(), jog(mm), goto_level(level_mm)   the bench page's machine panel
-  rename_job(job_id, name), delete_job(job_id), reprocess(job_id, changes), job_sizes()   the job manager
-
-If the daemon's real API drifts from the facade, the translation goes here
-and nowhere else.
+The routes call only this wrapper. What the daemon offers, and what each method means,
+is written once in daemon/facade.py; here are only the web's own concerns: state and
+frames cached for a moment, the cache dropped after a command, job records with the
+keys the templates read.
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import threading
 import time
 from pathlib import Path
 
+from ..daemon.facade import Bench
 from ..errors import InkSliceError
 
 ACTIVE = ("homing", "scanning", "processing")
 
 
 class NotOffered(InkSliceError):
-    """The service has no such feature (the route answers 501)."""
+    """This box has the feature switched off (the route answers 501), e.g. USB export."""
 
 
 class WebService:
@@ -49,7 +39,7 @@ class WebService:
     STATE_TTL_S = 0.1
     FRAME_TTL_S = 0.2
 
-    def __init__(self, service, clock=time.monotonic):
+    def __init__(self, service: Bench, clock=time.monotonic):
         self.inner = service
         self.clock = clock
         self._cache: dict[str, tuple[float, object]] = {}
@@ -74,7 +64,6 @@ class WebService:
         with self._cache_lock:
             self._cache.clear()
 
-    # -- the agreed facade -----------------------------------------------------------
     def state(self) -> dict:
         return copy.deepcopy(self._cached("state", self.STATE_TTL_S, self._fetch_state))
 
@@ -91,22 +80,16 @@ class WebService:
         return st
 
     def start_scan(self, params: dict) -> str:
-        try:
+        with self._command():
             return self.inner.start_scan(params)
-        finally:
-            self._drop_cache()
 
-    def cancel(self):
-        try:
+    def cancel(self) -> None:
+        with self._command():
             return self.inner.cancel()
-        finally:
-            self._drop_cache()
 
     def resume(self, job_id: str) -> str:
-        try:
+        with self._command():
             return self.inner.resume(job_id)
-        finally:
-            self._drop_cache()
 
     def jobs(self) -> list[dict]:
         return [self._job(j) for j in self.inner.jobs()]
@@ -117,7 +100,7 @@ class WebService:
     def job_file(self, job_id: str, name: str) -> Path:
         return Path(self.inner.job_file(job_id, name))
 
-    def latest_frame(self):
+    def latest_frame(self) -> tuple[bytes, dict] | None:
         return self._cached("frame", self.FRAME_TTL_S, self._fetch_frame)
 
     def _fetch_frame(self):
@@ -131,116 +114,108 @@ class WebService:
         return dict(self.inner.settings())
 
     def update_settings(self, changes: dict) -> dict:
-        try:
+        with self._command():
             return dict(self.inner.update_settings(changes))
-        finally:
-            self._drop_cache()
 
-    # -- optional extras ---------------------------------------------------------------
     def offers(self, name: str) -> bool:
+        """Whether the service has this facade method (a BenchService has them all)."""
         return callable(getattr(self.inner, name, None))
 
-    def _optional(self, name, *args):
-        fn = getattr(self.inner, name, None)
-        if not callable(fn):
-            raise NotOffered("bench", f"this bench service does not offer {name}")
-        return fn(*args)
-
-    def live_heightmap(self):
-        return self._optional("live_heightmap")
-
-    def calibration(self):
-        return self._optional("calibration")
-
-    def calibrate(self, step: str):
+    @contextlib.contextmanager
+    def _command(self):
+        """Around a call that changes the bench: its effect (a move, a frame, a job gone) shows at once."""
         try:
-            return self._optional("calibrate", step)
+            yield
         finally:
             self._drop_cache()
 
-    def commissioning(self):
-        return self._optional("commissioning")
+    def live_heightmap(self) -> dict | None:
+        return self.inner.live_heightmap()
 
-    def commission(self, step: str, action: str, values: dict | None = None):
-        try:
-            return self._optional("commission", step, action, values)
-        finally:
-            self._drop_cache()  # a step changes the state message (and may start a scan)
+    def calibration(self) -> dict:
+        return self.inner.calibration()
 
-    def export_commissioning(self):
-        return self._optional("export_commissioning")
+    def calibrate(self, step: str) -> dict:
+        with self._command():
+            return self.inner.calibrate(step)
 
-    def import_commissioning(self, doc: dict):
-        try:
-            return self._optional("import_commissioning", doc)
-        finally:
-            self._drop_cache()
+    def commissioning(self) -> dict:
+        return self.inner.commissioning()
 
-    def ink_changed(self):
-        return self._optional("ink_changed")
+    def commission(self, step: str, action: str, values: dict | None = None) -> dict:
+        with self._command():  # a step changes the state message (and may start a scan)
+            return self.inner.commission(step, action, values)
+
+    def export_commissioning(self) -> dict:
+        return self.inner.export_commissioning()
+
+    def import_commissioning(self, doc: dict) -> dict:
+        with self._command():
+            return self.inner.import_commissioning(doc)
+
+    def ink_changed(self) -> dict:
+        return self.inner.ink_changed()
 
     def import_scan(self, folder: Path) -> str:
-        try:
-            return self._optional("import_scan", folder)
-        finally:
-            self._drop_cache()  # the import starts processing: show it at once
+        with self._command():  # the import starts processing: show it at once
+            return self.inner.import_scan(folder)
 
     def usb_sticks(self) -> list[dict]:
-        return list(self._optional("usb_sticks"))
+        return list(self.inner.usb_sticks())
 
     def export_to_usb(self, job_id: str, name: str, stick: str | None) -> dict:
-        return self._optional("export_to_usb", job_id, name, stick)
+        return self.inner.export_to_usb(job_id, name, stick)
 
     def backup(self) -> dict:
-        return self._optional("backup")
+        return self.inner.backup()
 
     def restore(self, doc: dict) -> dict:
-        try:
-            return self._optional("restore", doc)
-        finally:
-            self._drop_cache()
+        with self._command():
+            return self.inner.restore(doc)
 
     def system(self) -> dict:
-        return self._optional("system")
+        return self.inner.system()
 
     def test_webhook(self) -> dict:
-        return self._optional("test_webhook")
+        return self.inner.test_webhook()
 
-    def _command(self, name, *args):
-        try:
-            return self._optional(name, *args)
-        finally:
-            self._drop_cache()  # its effect (a move, a new frame, a job gone) shows at once
+    def preview(self) -> dict:
+        with self._command():
+            return self.inner.preview()
 
-    def preview(self):
-        return self._command("preview")
+    def home_stage(self) -> dict:
+        with self._command():
+            return self.inner.home_stage()
 
-    def home_stage(self):
-        return self._command("home_stage")
+    def jog(self, mm: float) -> dict:
+        with self._command():
+            return self.inner.jog(mm)
 
-    def jog(self, mm: float):
-        return self._command("jog", mm)
-
-    def goto_level(self, level_mm: float):
-        return self._command("goto_level", level_mm)
+    def goto_level(self, level_mm: float) -> dict:
+        with self._command():
+            return self.inner.goto_level(level_mm)
 
     def rename_job(self, job_id: str, name: str) -> dict:
-        return self._job(self._command("rename_job", job_id, name))
+        with self._command():
+            return self._job(self.inner.rename_job(job_id, name))
 
-    def delete_job(self, job_id: str):
-        return self._command("delete_job", job_id)
+    def delete_job(self, job_id: str) -> None:
+        with self._command():
+            self.inner.delete_job(job_id)
 
     def reprocess(self, job_id: str, changes: dict) -> str:
-        return self._command("reprocess", job_id, changes)
+        with self._command():
+            return self.inner.reprocess(job_id, changes)
 
-    def repost(self, job_id: str, options: dict) -> list:
-        return self._command("repost", job_id, options)
+    def repost(self, job_id: str, options: dict) -> list[str]:
+        with self._command():
+            return self.inner.repost(job_id, options)
 
-    def job_sizes(self) -> dict:
-        return dict(self._optional("job_sizes")) if self.offers("job_sizes") else {}
+    def job_sizes(self) -> dict[str, int]:
+        return dict(self.inner.job_sizes())
 
-    def events(self, job_id=None, limit=200) -> list[dict]:
-        return self._optional("events", job_id, limit)
+    def events(self, job_id: str | None = None, limit: int = 200) -> list[dict]:
+        return self.inner.events(job_id, limit)
 
     @staticmethod
     def _job(j: dict) -> dict:

@@ -1,6 +1,6 @@
 """The Flask application factory: create_app(service, config).
 
-`service` is the daemon's BenchService (or FakeBenchService); the web room
+`service` is a daemon.facade.Bench (BenchService in-process, or rpc.BenchClient); the web room
 calls nothing else (docs/architecture.md). `config` is a plain dict:
 
   data_dir          folder for the web's own files (web/admin.json, tokens, key); required
@@ -44,6 +44,7 @@ from flask import Flask, g, jsonify, redirect, request, session, url_for
 from werkzeug.http import parse_cookie
 
 from ..daemon import firstrun
+from ..daemon.facade import Bench
 from . import api, auth, pages, system
 from .adapter import WebService
 from .eta import EtaSmoother
@@ -77,7 +78,7 @@ CSP = (
 )
 
 
-def create_app(service, config: dict | None = None) -> Flask:
+def create_app(service: Bench, config: dict | None = None) -> Flask:
     cfg = dict(DEFAULTS)
     cfg.update(config or {})
     if not cfg.get("data_dir"):
