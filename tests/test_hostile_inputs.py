@@ -698,8 +698,8 @@ def test_verify_passes_a_program_that_stays_clear_of_the_part(work, capsys):
     "key, value, says",
     [
         ("min_free_mb", 0, "must be at least 50"),
-        ("feed_mm_min", 1e308, "at most 100000"),
-        ("feed_mm_min", 0, "at least 1"),
+        ("steep_angle_deg", 1e308, "at most 85"),
+        ("envelope_z_mm", 0, "at least 1"),
         ("envelope_z_mm", 1e9, "at most 10000"),
         ("adaptive_change", 2.0, "at most 1"),
         ("settle_s", 1e6, "at most 600"),

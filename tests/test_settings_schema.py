@@ -107,3 +107,36 @@ def test_the_cli_changes_a_setting_as_the_web_would(tmp_path, capsys):
         and "grid = 40  [cells a side]" in shown
         and "auto_resume = true" in shown
     )
+
+
+def test_every_setting_is_read_somewhere_outside_the_schema():
+    """A setting validated but never read is a promise the box does not keep (a cross-check in
+    settings.validate, like envelope_z_mm capping the top level, counts as a use)."""
+    import re
+    from pathlib import Path
+
+    root = Path(S.__file__).resolve().parents[1]
+    sources = [
+        p.read_text()
+        for p in root.rglob("*")
+        if p.suffix in (".py", ".html", ".js") and p.name != "settings_schema.py"
+    ]
+    unread = [key for key in S.DEFAULTS if not any(re.search(rf"\b{key}\b", text) for text in sources)]
+    assert unread == []
+
+
+def test_a_settings_file_holding_removed_settings_still_loads_without_them(tmp_path, caplog):
+    svc, _ = service(tmp_path)
+    try:
+        svc.store.save_settings(
+            {"stepover_mm": 1.5, "feed_mm_min": 700.0, "envelope_x_mm": 300.0, "dialect": "grbl"}
+        )
+        with caplog.at_level("INFO", logger="inkslice.settings"):
+            settings = svc.settings()
+        assert settings["dialect"] == "grbl"  # what it still knows is kept
+        assert not {"stepover_mm", "feed_mm_min", "envelope_x_mm", "envelope_y_mm"} & settings.keys()
+        assert "'stepover_mm' is not one this version has" in caplog.text
+        assert svc.update_settings({"level_step_mm": 0.5})["level_step_mm"] == 0.5  # and takes changes
+        assert "stepover_mm" not in S.validate(settings, {})
+    finally:
+        svc.close()
