@@ -6,6 +6,8 @@ import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from web_helpers import bench_service
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -41,13 +43,12 @@ def test_a_real_install_names_the_host_inkslice_and_starts_avahi():
 def test_the_demo_can_listen_on_the_lan_and_says_where_a_phone_finds_it(tmp_path):
     from appliance.cli import build_parser
     from appliance.web.demo import banner, start
-    from appliance.web.fake import FakeBenchService
 
     args = build_parser().parse_args(["demo", "--serve-only", "--host", "0.0.0.0"])
     assert args.host == "0.0.0.0"
     assert build_parser().parse_args(["demo"]).host == "127.0.0.1"  # this machine only, unless asked
     assert "--host $(HOST)" in (REPO / "Makefile").read_text()
-    svc = FakeBenchService(tmp_path / "bench")
+    svc = bench_service(tmp_path / "bench")
     run = start(svc, tmp_path / "data", host="0.0.0.0")
     try:
         text = banner(run)

@@ -1,14 +1,19 @@
-"""The JSON API against the fake bench: scans, jobs, downloads, settings, live view, docs."""
+"""The JSON API on the daemon's BenchService driving the in-memory bench (a cone): scans, jobs,
+downloads, settings, live view, docs."""
 
 import io
 import json
+import math
 import re
 import time
 import zipfile
 
+import numpy as np
 import pytest
-from web_helpers import login, make_app, wait_state
+from test_web_real_service import ChessboardBench
+from web_helpers import QUICK, login, make_app, wait_state
 
+from appliance.sim.surfaces import get as get_surface
 from appliance.web.eta import EtaSmoother
 
 
@@ -42,17 +47,17 @@ def test_openapi_describes_exactly_the_api_routes(client):
 def test_a_scan_from_start_to_downloads(client):
     c, svc, app = client
     assert c.get("/api/state").get_json()["state"] == "idle"
-    svc.home_s = 0.5  # long enough for the second start below to meet a running scan
     r = c.post("/api/scan", json={"level_step_mm": 1.0})
     assert r.status_code == 201
     job_id = r.get_json()["job_id"]
     assert c.post("/api/scan", json={}).status_code == 409  # one at a time
     st = wait_state(c, {"done"})
-    assert st["job_id"] == job_id and st["levels_done"] == st["levels_total"] == 21
+    # 24 mm down to 6 mm in 1 mm steps: 19 levels, every one of them captured
+    assert st["job_id"] == job_id and st["levels_done"] == st["levels_total"] == 19
     jobs = c.get("/api/jobs").get_json()["jobs"]
     assert jobs[0]["id"] == job_id
     info = c.get(f"/api/jobs/{job_id}").get_json()
-    assert {"toolpath.gcode", "surface.stl", "heightmap.csv", "report.json", "error.png"} <= set(
+    assert {"toolpath.gcode", "heightmap.csv", "report.json", "error_inkslice_fit.png"} <= set(
         info["outputs"]
     )
     for name in info["outputs"]:
@@ -61,17 +66,22 @@ def test_a_scan_from_start_to_downloads(client):
         assert r.data == svc.job_file(job_id, name).read_bytes(), name
         assert r.headers["Content-Disposition"].startswith("attachment")
     assert (
-        c.get(f"/api/jobs/{job_id}/files/error.png?inline=1")
+        c.get(f"/api/jobs/{job_id}/files/error_inkslice_fit.png?inline=1")
         .headers["Content-Disposition"]
         .startswith("inline")
     )
     z = zipfile.ZipFile(io.BytesIO(c.get(f"/api/jobs/{job_id}/archive.zip").data))
-    assert sorted(n.split("/", 1)[1] for n in z.namelist()) == sorted(info["outputs"] + ["job.json"])
+    frames = [f"scan/{f['file']}" for f in json.loads(z.read(f"{job_id}/scan/scan.json"))["frames"]]
+    assert len(frames) == 19  # the outputs, the record, and the scan itself: scan.json and every frame
+    assert sorted(n.split("/", 1)[1] for n in z.namelist()) == sorted(
+        info["outputs"] + ["job.json", "scan/scan.json"] + frames
+    )
     assert z.read(f"{job_id}/toolpath.gcode") == svc.job_file(job_id, "toolpath.gcode").read_bytes()
     assert c.get(f"/api/jobs/{job_id}/files/nothere.gcode").status_code == 404
     assert c.get("/api/jobs/19990101-000000-0000").status_code == 404
     page = c.get(f"/jobs/{job_id}").get_data(as_text=True)
-    assert "rms_mm" in page and 'id="view3d"' in page and "toolpath-grbl.nc" in page
+    assert "0.0722" in page and 'id="view3d"' in page  # the report's statistics, the 3D view
+    assert all(f'data-file="{name}"' in page for name in info["outputs"])  # every download
 
 
 def test_cancel_and_resume(tmp_path):
@@ -114,18 +124,21 @@ def test_live_view_frame_and_heightmap_and_sse(client):
     c.post("/api/scan", json={})
     wait_state(c, {"done"})
     r = c.get("/api/frame.jpg")
-    assert r.status_code == 200 and r.data[:2] == b"\xff\xd8" and r.headers["X-Level-mm"] == "0.0"
+    assert r.status_code == 200 and r.data[:2] == b"\xff\xd8"
+    assert r.headers["X-Level-mm"] == str(QUICK["levels_from_mm"])  # the scan's last level
     assert c.get("/api/frame.jpg", headers={"If-None-Match": r.headers["ETag"]}).status_code == 304
     hm = c.get("/api/heightmap/live").get_json()
-    from appliance.web.fake import dome
-
+    cone = get_surface("cone")
+    # one cell of the coarse map spans this much of the cone's 30-degree slope
+    cell_rise = (hm["x"][1] - hm["x"][0]) * math.tan(math.radians(30))
     seen = 0
     for j, y in enumerate(hm["y"]):
         for i, x in enumerate(hm["x"]):
             z = hm["z"][j][i]
             if z is not None:  # each cell holds the highest level at which it stood above the ink
                 seen += 1
-                assert 0 <= float(dome(x, y)) - z < 0.5 + 1e-9
+                true = float(cone.height(np.array(x), np.array(y)))
+                assert -cell_rise <= true - z < QUICK["level_step_mm"] + cell_rise
     assert seen > 100
     app.extensions["inkslice"]["config"]["sse_max_s"] = 0.6
     body = c.get("/api/events").get_data(as_text=True)
@@ -137,16 +150,19 @@ def test_live_view_frame_and_heightmap_and_sse(client):
     assert st["state"] == "done" and "eta_display_s" in st
 
 
-def test_calibration_steps(client):
-    c, svc, app = client
+def test_calibration_steps(tmp_path):
+    app, svc = make_app(tmp_path, factory=ChessboardBench("cone"))  # the printed board on the base
+    c = app.test_client()
+    c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
     cal = c.get("/api/calibration").get_json()
     assert [s["id"] for s in cal["steps"]] == ["home", "target", "detect", "accept"] and cal["step"] == 0
     assert c.post("/api/calibration/detect").status_code == 400  # out of order
     c.post("/api/calibration/home")
     c.post("/api/calibration/target")
     cal = c.post("/api/calibration/detect").get_json()
-    assert cal["detected"]["dots"] == 49
+    assert cal["detected"]["corners"] == 9 * 6  # every inner corner of the board
     assert c.get("/api/frame.jpg").status_code == 200  # the preview
+    svc.close()
 
 
 def test_usb_export_switched_off_in_the_web_hides_the_sticks_and_refuses_a_copy(tmp_path):

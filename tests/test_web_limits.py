@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 from test_web_security import png_header, uploads_left
-from web_helpers import csrf_of, login, make_app
+from web_helpers import bench_service, csrf_of, login, make_app
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,9 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def server(tmp_path):
     from appliance.web.auth import Credentials
     from appliance.web.demo import start
-    from appliance.web.fake import FakeBenchService
 
-    svc = FakeBenchService(tmp_path / "bench")
+    svc = bench_service(tmp_path / "bench")
     run = start(svc, tmp_path / "data", config={"usb": None, "max_upload_bytes": 4 * 1024 * 1024})
     token = Credentials(tmp_path / "data" / "web").create_token("t")[1]
     run.port = int(run.url.rsplit(":", 1)[1])

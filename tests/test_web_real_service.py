@@ -3,10 +3,9 @@
 import io
 import json
 import zipfile
-from pathlib import Path
 
 import pytest
-from web_helpers import login, wait_state
+from web_helpers import light_processor, login, wait_state
 
 from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
@@ -22,32 +21,6 @@ SCAN = {
     "level_step_mm": 2.0,
     "settle_s": 0.0,
 }
-
-
-def light_processor(scan_folder, out_folder, options, stop=None):
-    """Stands in for process_scan: the web's concern is the facade, not the science (the daemon's
-    tests run the real pipeline), and the pipeline's cost must not set this test's pace.
-    It writes what process_scan writes, shaped the same way, from the real scan folder."""
-    from appliance.atomicio import write_bytes, write_json, write_text
-
-    frames = json.loads((Path(scan_folder) / "scan.json").read_text())["frames"]
-    out = Path(out_folder)
-    rows = ["x,y,z"] + [
-        f"{x}.0000,{y}.0000,{min(x, y, 4 - x, 4 - y) * 1.5:.4f}" for x in range(5) for y in range(5)
-    ]
-    write_text(out / "heightmap.csv", "\n".join(rows) + "\n")
-    write_text(
-        out / "toolpath.gcode", "G21 G90\nF800\n" + "".join(f"G1 X{x} Y0 Z1\n" for x in range(5)) + "M2\n"
-    )
-    write_json(
-        out / "report.json",
-        {"statistics": {"inkslice:fit": {"n": len(frames), "Ea": 0.0722, "sigma": 0.144}}},
-    )
-    write_text(out / "report.md", "# report\n")
-    write_bytes(out / "error_inkslice_fit.png", Path(scan_folder, frames[0]["file"]).read_bytes())
-    return {
-        "outputs": ["error_inkslice_fit.png", "heightmap.csv", "report.json", "report.md", "toolpath.gcode"]
-    }
 
 
 class ChessboardBench(FakeBench):

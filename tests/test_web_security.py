@@ -7,7 +7,7 @@ import stat
 import zipfile
 
 import pytest
-from web_helpers import csrf_of, login, make_app, wait_state
+from web_helpers import csrf_of, login, make_app, wait_job, wait_state
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}
 SAMPLE = {
@@ -351,10 +351,10 @@ def test_uploads_valid_ones_become_jobs(tmp_path):
     )
     assert r.status_code == 201, r.get_json()
     job_id = r.get_json()["job_id"]
-    assert svc.job(job_id)["status"] == "done"
+    assert wait_job(svc, job_id)["status"] == "done"
     # the service keeps its own copy of the scan; the web's unpacked upload is gone
     assert uploads_left(tmp_path) == []
-    assert (svc.jobs_dir / job_id / "scan" / "frames" / "0001.png").is_file()
+    assert svc.job_file(job_id, "scan/frames/0001.png").is_file()
     svc.close()
 
 

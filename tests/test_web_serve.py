@@ -1,4 +1,5 @@
-"""`inkslice serve --fake` as a real process: prints the URL and the first-run password, serves over HTTP."""
+"""`inkslice serve --fake` as a real process (the daemon's BenchService on the in-memory bench, in
+the web's process): prints the URL and the first-run password, serves over HTTP."""
 
 import http.cookiejar
 import re
@@ -9,6 +10,7 @@ import urllib.parse
 import urllib.request
 
 import pytest
+from web_helpers import bench_service
 
 
 def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
@@ -57,9 +59,11 @@ def test_serve_prints_url_and_password_and_the_password_logs_in(tmp_path):
             sys.executable,
             "-c",
             "from appliance.web.app import create_app;"
-            "from appliance.web.fake import FakeBenchService as F;"
-            f"a=create_app(F({str(tmp_path / 'x')!r}),{{'data_dir':{str(tmp_path)!r},'usb':None}});"
-            "print(a.config['FIRST_RUN_PASSWORD'])",
+            "from appliance.daemon.service import BenchService;"
+            "from appliance.sim.fakes import FakeBench;"
+            f"s=BenchService({str(tmp_path / 'x')!r},FakeBench('cone'));"
+            f"a=create_app(s,{{'data_dir':{str(tmp_path)!r},'usb':None}});"
+            "print(a.config['FIRST_RUN_PASSWORD']);s.close()",
         ],
         capture_output=True,
         text=True,
@@ -73,9 +77,8 @@ def test_a_closed_live_stream_frees_its_slot_under_waitress(tmp_path):
 
     from appliance.web.auth import Credentials
     from appliance.web.demo import start
-    from appliance.web.fake import FakeBenchService
 
-    svc = FakeBenchService(tmp_path / "bench")
+    svc = bench_service(tmp_path / "bench")
     run = start(svc, tmp_path / "data", config={"usb": None, "max_streams": 1})
     token = Credentials(tmp_path / "data" / "web").create_token("t")[1]
     port = int(run.url.rsplit(":", 1)[1])

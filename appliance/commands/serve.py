@@ -2,8 +2,9 @@
 
 By default it talks to the running daemon over its Unix socket
 (rpc.BenchClient), so the web server needs no device access and can run as
-its own, less privileged service. --fake serves the web room's simulated
-bench instead (UI work, demos without the daemon).
+its own, less privileged service. --fake runs the daemon's BenchService in this
+process instead, on the in-memory bench (sim.fakes.FakeBench: a cone under a virtual
+camera), its data in DATA/fake-bench: UI work and demos without a daemon or devices.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ def add_arguments(p):
     p.add_argument(
         "--fake",
         action="store_true",
-        help="serve the simulated FakeBenchService instead of the daemon (UI work, demos)",
+        help="run the daemon's BenchService here on the in-memory bench instead of talking to "
+        "the daemon (UI work, demos)",
     )
     p.add_argument("--no-usb", action="store_true", help="hide USB stick export")
     p.add_argument(
@@ -56,9 +58,10 @@ def run(args):
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     log_to_file(data, "web")  # the system page shows the last lines
     if args.fake:
-        from ..web.fake import FakeBenchService
+        from ..daemon.service import BenchService
+        from ..sim.fakes import FakeBench
 
-        service = FakeBenchService(Path(data) / "fake-bench", level_s=0.5)
+        service = BenchService(Path(data) / "fake-bench", FakeBench("cone"))
     else:
         from ..daemon.rpc import BenchClient
         from ..errors import DeviceError
@@ -68,6 +71,8 @@ def run(args):
             raise DeviceError(sock, "no daemon socket here; start `inkslice daemon` first (or use --fake)")
         service = BenchClient(sock)
     config = {"https": args.https, "reset_password": args.new_password}
+    if args.fake:
+        config["bench_data_dir"] = str(Path(data) / "fake-bench")  # its display shows the password
     if args.no_usb:
         config["usb"] = False
     try:
