@@ -219,7 +219,7 @@ def meniscus_json(model) -> dict:
 
 def meniscus_model(doc, camera, where="meniscus"):
     """A MeniscusModel for one scan from a meniscus.json document and the scan's camera."""
-    from .surface.meniscus import MeniscusModel, camera_centre_xy
+    from .surface.meniscus import MeniscusModel
 
     try:
         lc = float(doc["capillary_length_mm"])
@@ -235,5 +235,4 @@ def meniscus_model(doc, camera, where="meniscus"):
             f"impossible meniscus: capillary length {lc} mm, contact angle {theta} deg, "
             f"contact line curvature weight {curvature}",
         )
-    centre = camera_centre_xy(camera.K, camera.homography) if camera.K is not None else None
-    return MeniscusModel(lc, float(np.radians(theta)), centre, camera.height_mm, curvature)
+    return MeniscusModel(lc, float(np.radians(theta)), camera.centre_xy(), camera.height_mm, curvature)

@@ -105,7 +105,7 @@ def _part_outline_mm(lowest, camera):
         (labels == biggest).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
     )
     outline = np.vstack([c.reshape(-1, 2) for c in contours]).astype(float)
-    return seed_vision.pixels_to_mm(outline, camera)
+    return camera.pixels_to_mm(outline)
 
 
 def run_seed(scan, grid_n=50):
@@ -120,7 +120,7 @@ def run_seed(scan, grid_n=50):
         raise ScanError(scan.folder, "no waterline found in any frame (is the part in view?)")
     x, y = seed_methods.seed_grid(_part_outline_mm(slices[-1], scan.camera), grid_n)
     X, Y = np.meshgrid(x, y)
-    grid_px = seed_vision.mm_to_pixels(np.column_stack([X.ravel(), Y.ravel()]), scan.camera)
+    grid_px = scan.camera.mm_to_pixels(np.column_stack([X.ravel(), Y.ravel()]))
     exposed = np.stack([seed_vision.exposed_at(s.binary, grid_px).reshape(X.shape) for s in slices])
     levels = [s.level_mm for s in slices]
     return {f"seed:{m}": seed_methods.run_method(m, x, y, pts, levels, exposed) for m in seed_methods.METHODS}
@@ -146,7 +146,7 @@ def extract_waterlines(scan):
     out = []
     above = deque(maxlen=REREAD_ABOVE)  # the last frames, while none has shown the part
     progress.stage("waterlines", total=len(frames))
-    for i, ref in enumerate(frames):
+    for i in range(len(frames)):
         progress.step(i)
         while len(ahead) < CONFIRMING_FRAMES + 1 and i + len(ahead) < len(frames):
             nxt = frames[i + len(ahead)]
@@ -191,29 +191,9 @@ def meniscus_model(scan, meniscus):
     return outputs.meniscus_model(doc, scan.camera, path)
 
 
-def pixel_mm(camera) -> float:
-    """The camera's pixel on the liquid plane at the frame's centre, mm (the side of the
-    square of equal area): how finely a waterline can be placed."""
-    H = np.asarray(camera.homography, float)
-    c = (
-        np.array(
-            [
-                [camera.width / 2, camera.height / 2, 1.0],
-                [camera.width / 2 + 1, camera.height / 2, 1.0],
-                [camera.width / 2, camera.height / 2 + 1, 1.0],
-            ]
-        )
-        @ H.T
-    )
-    p = c[:, :2] / c[:, 2:3]
-    a, b = p[1] - p[0], p[2] - p[0]
-    return float(np.sqrt(abs(a[0] * b[1] - a[1] * b[0])))
-
-
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
     from .surface.base import stand_on_base
-    from .surface.meniscus import camera_centre_xy
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
     from .surface.slices import Perspective
 
@@ -224,7 +204,7 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
     tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
     model = meniscus_model(scan, meniscus)
     view = (
-        Perspective(camera_centre_xy(scan.camera.K, scan.camera.homography), scan.camera.height_mm)
+        Perspective(scan.camera.centre_xy(), scan.camera.height_mm)
         if scan.camera.height_mm and scan.camera.K is not None
         else None
     )
@@ -235,7 +215,11 @@ def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, m
             waterlines,
             grid,
             ReconstructOptions(
-                method=m, tank_area_mm2=tank, meniscus=model, perspective=view, pixel_mm=pixel_mm(scan.camera)
+                method=m,
+                tank_area_mm2=tank,
+                meniscus=model,
+                perspective=view,
+                pixel_mm=scan.camera.pixel_mm(),
             ),
         )
         bounds = rec.diagnostics.get("bounds", bounds)

@@ -10,9 +10,8 @@ Unknown keys in scan.json are kept (in `Scan.extra` and per frame in
 Everything is checked here, before any computation, for type, finiteness,
 range and consistency, so that a hostile or broken scan.json is one clear
 ScanError and never a traceback, a gigabyte allocation or a wrong part:
-the camera must be a camera (an invertible K, a lens the pipeline can undo,
-a homography that maps the whole frame onto the liquid plane, whatever its
-scale), the levels must be where the stage can put the liquid (at or above
+the camera must be a camera (vision/camera_block.py checks its block and
+vision/camera.py is the model), the levels must be where the stage can put the liquid (at or above
 the base top, below the level with the stage at home, each once), and the
 calibration blocks processing reads must have the types it expects.
 `check_frames` then checks the frames' files without decoding them.
@@ -21,7 +20,6 @@ calibration blocks processing reads must have the types it expects.
 from __future__ import annotations
 
 import json
-import math
 import os
 import stat
 import struct
@@ -33,6 +31,9 @@ import numpy as np
 
 from . import atomicio
 from .errors import ScanError
+from .jsoncheck import number, optional_positive, positive_up_to, short
+from .vision.camera import CameraModel
+from .vision.camera_block import read_camera
 
 FORMAT = "inkslice.scan/1"
 
@@ -41,40 +42,12 @@ FORMAT = "inkslice.scan/1"
 # an out-of-memory kill or a part milled from nonsense.
 MAX_SCAN_JSON_BYTES = 16 * 1024**2
 MAX_DEPTH = 32  # nesting of objects and lists in scan.json
-MAX_SIDE_PX = 20000
-MAX_PIXELS = 100_000_000  # per frame
 MAX_FRAMES = 10000
 MAX_LEVEL_MM = 1000.0  # no bench box moves its liquid a metre
-MAX_CAMERA_HEIGHT_MM = 10000.0
-MAX_DIST_COEF = 1000.0  # lens distortion coefficients are of order 1
 MAX_TANK_AREA_MM2 = 1e7  # 10 m²
 LEVEL_EPS_MM = 1e-6  # two levels closer than this are one level
 PNG_SIG = b"\x89PNG\r\n\x1a\n"
 JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
-
-
-@dataclass
-class CameraModel:
-    width: int
-    height: int
-    homography: np.ndarray  # undistorted pixel (u, v, 1) -> liquid plane (x, y, 1), mm
-    K: np.ndarray | None = None  # OpenCV camera matrix
-    dist: np.ndarray | None = None  # OpenCV distortion coefficients
-    height_mm: float | None = None  # camera centre above the liquid plane
-    extra: dict = field(default_factory=dict)
-
-    def to_json(self):
-        out = dict(self.extra)
-        out.update(
-            width=self.width, height=self.height, homography=np.asarray(self.homography, float).tolist()
-        )
-        if self.K is not None:
-            out["K"] = np.asarray(self.K, float).tolist()
-        if self.dist is not None:
-            out["dist"] = np.asarray(self.dist, float).ravel().tolist()
-        if self.height_mm is not None:
-            out["height_mm"] = float(self.height_mm)
-        return out
 
 
 @dataclass
@@ -110,35 +83,6 @@ class Scan:
 # -- validation helpers: each names the file and the key that is wrong --------
 
 
-def _matrix(where, obj, key, shape):
-    try:
-        m = np.asarray(obj, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        raise ScanError(where, f"{key} is not a matrix of numbers") from None
-    if m.shape != shape:
-        raise ScanError(where, f"{key} must be {shape[0]}x{shape[1]}, got shape {m.shape}")
-    if not np.all(np.isfinite(m)):
-        raise ScanError(where, f"{key} has a non-finite entry")
-    return m
-
-
-def _number(where, value, key):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScanError(where, f"{key} is not a number: {_short(value)}")
-    try:
-        value = float(value)
-    except OverflowError:
-        raise ScanError(where, f"{key} is not finite: {_short(value)}") from None
-    if not math.isfinite(value):
-        raise ScanError(where, f"{key} is not finite: {value!r}")
-    return value
-
-
-def _short(value, n=40):
-    text = repr(value)
-    return text if len(text) <= n else text[:n] + "..."
-
-
 def _depth_over(doc, limit) -> bool:
     """Whether objects and lists nest deeper than `limit` (iterative: no recursion to exhaust)."""
     stack = [(doc, 1)]
@@ -151,201 +95,40 @@ def _depth_over(doc, limit) -> bool:
     return False
 
 
-def _check_homography(where, H, w, h):
-    """The whole frame must map onto the liquid plane: judged on the matrix scaled to its
-    largest entry (a homography and any multiple of it are the same mapping)."""
-    top = float(np.max(np.abs(H)))
-    if top == 0:
-        raise ScanError(where, "camera.homography is all zeros")
-    Hs = H / top
-    corners = np.array([[-0.5, -0.5, 1], [w - 0.5, -0.5, 1], [w - 0.5, h - 0.5, 1], [-0.5, h - 0.5, 1]])
-    p = corners @ Hs.T
-    wz = p[:, 2]
-    # the denominator is linear in (u, v): same sign at the corners = same sign on the whole frame
-    if not (np.all(wz > 0) or np.all(wz < 0)) or np.min(np.abs(wz)) < 1e-3 * np.max(np.abs(wz)):
-        raise ScanError(
-            where,
-            "camera.homography puts the liquid plane's horizon across (or at the edge "
-            "of) the image: part of the frame would map to infinity or behind the camera",
-        )
-    quad = p[:, :2] / wz[:, None]
-    edge = np.roll(quad, -1, axis=0) - quad
-    nxt = np.roll(edge, -1, axis=0)
-    cross = edge[:, 0] * nxt[:, 1] - edge[:, 1] * nxt[:, 0]
-    lengths = np.hypot(edge[:, 0], edge[:, 1]) * np.hypot(nxt[:, 0], nxt[:, 1])
-    if (
-        not np.all(np.isfinite(quad))
-        or np.any(np.abs(cross) <= 1e-9 * lengths)
-        or not (np.all(cross > 0) or np.all(cross < 0))
-    ):
-        raise ScanError(where, "camera.homography is singular: it maps the frame onto a line or a point")
-    area = 0.5 * abs(
-        float(np.sum(quad[:, 0] * np.roll(quad[:, 1], -1) - np.roll(quad[:, 0], -1) * quad[:, 1]))
-    )
-    mm_per_px = math.sqrt(area / (w * h))
-    if not 1e-4 <= mm_per_px <= 100:
-        raise ScanError(
-            where,
-            f"camera.homography gives {mm_per_px:.3g} mm per pixel; a camera over a "
-            "bench box sees between 0.0001 and 100 mm per pixel",
-        )
-
-
-def _check_K(where, K, w, h):
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    if not (fx > 0 and fy > 0):
-        raise ScanError(
-            where,
-            f"camera.K must have focal lengths fx, fy > 0 (it is not invertible "
-            f"otherwise), got fx = {fx:g}, fy = {fy:g}",
-        )
-    if np.max(np.abs(K[2] - (0, 0, 1))) > 1e-9 or abs(K[1, 0]) > 1e-9:
-        raise ScanError(where, "camera.K must have the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
-    side = max(w, h)
-    for name, f in (("fx", fx), ("fy", fy)):
-        if not 0.05 * side <= f <= 1000 * side:
-            raise ScanError(
-                where,
-                f"camera.K's {name} = {f:g} px is no lens for a {w}x{h} image "
-                f"(expected {0.05 * side:g}..{1000 * side:g} px)",
-            )
-    if not (-0.5 * w <= cx <= 1.5 * w and -0.5 * h <= cy <= 1.5 * h):
-        raise ScanError(
-            where, f"camera.K's principal point ({cx:g}, {cy:g}) is far outside the {w}x{h} image"
-        )
-    if abs(K[0, 1]) > fx:
-        raise ScanError(where, f"camera.K's skew {K[0, 1]:g} is larger than its focal length")
-
-
-def _border_points(w, h, n=9):
-    t = np.linspace(0, 1, n)
-    u, v = t * (w - 1), t * (h - 1)
-    pts = np.concatenate(
-        [
-            np.column_stack([u, np.zeros(n)]),
-            np.column_stack([u, np.full(n, h - 1.0)]),
-            np.column_stack([np.zeros(n), v]),
-            np.column_stack([np.full(n, w - 1.0), v]),
-            np.column_stack([u, v]),
-        ]
-    )
-    return pts.reshape(-1, 1, 2)
-
-
-def _check_distortion(where, K, dist, w, h):
-    """The pipeline undistorts waterline points (cv2.undistortPoints): the lens model must be
-    one that this undoes, across the whole frame, to well under a pixel."""
-    biggest = float(np.max(np.abs(dist)))
-    if biggest > MAX_DIST_COEF:
-        raise ScanError(
-            where,
-            f"camera.dist has a coefficient of {biggest:g}: lens distortion coefficients "
-            f"are of order 1 (at most {MAX_DIST_COEF:g})",
-        )
-    pts = _border_points(w, h)
-    with np.errstate(all="ignore"):
-        norm = cv2.undistortPoints(pts, K, dist)
-        ok = np.all(np.isfinite(norm))
-        if ok:
-            rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
-            back, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K, dist)
-            miss = float(np.max(np.hypot(*(back.reshape(-1, 2) - pts.reshape(-1, 2)).T)))
-            ok = math.isfinite(miss) and miss <= 0.5
-    if not ok:
-        raise ScanError(
-            where,
-            "camera.dist is not a lens that can be undone over the frame (undistorting "
-            "its border and distorting it back misses by more than half a pixel)",
-        )
-
-
-def _camera(where, cam):
-    if not isinstance(cam, dict):
-        raise ScanError(where, "'camera' must be an object")
-    known = {"width", "height", "homography", "K", "dist", "height_mm"}
-    for key in ("width", "height", "homography"):
-        if key not in cam:
-            raise ScanError(where, f"camera.{key} is missing")
-    w, h = cam["width"], cam["height"]
-    if not (type(w) is int and type(h) is int and w > 0 and h > 0):
-        raise ScanError(
-            where, f"camera.width/height must be positive integers, got {_short(w)} x {_short(h)}"
-        )
-    if w > MAX_SIDE_PX or h > MAX_SIDE_PX or w * h > MAX_PIXELS:
-        raise ScanError(
-            where,
-            f"camera.width/height of {_short(w)} x {_short(h)} pixels is more than a frame may "
-            f"have ({MAX_SIDE_PX} a side, {MAX_PIXELS // 1_000_000} megapixels)",
-        )
-    H = _matrix(where, cam["homography"], "camera.homography", (3, 3))
-    _check_homography(where, H, w, h)
-    K = _matrix(where, cam["K"], "camera.K", (3, 3)) if cam.get("K") is not None else None
-    if K is not None:
-        _check_K(where, K, w, h)
-    dist = None
-    if cam.get("dist") is not None:
-        try:
-            dist = np.asarray(cam["dist"], dtype=float).ravel()
-        except (TypeError, ValueError, OverflowError):
-            dist = np.zeros(0)
-        if dist.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
-            raise ScanError(where, "camera.dist must be 4, 5, 8, 12 or 14 finite numbers")
-        if K is not None:
-            _check_distortion(where, K, dist, w, h)
-    hmm = None
-    if cam.get("height_mm") is not None:
-        hmm = _positive_up_to(
-            where,
-            cam["height_mm"],
-            "camera.height_mm",
-            MAX_CAMERA_HEIGHT_MM,
-            f"the camera must be above the liquid (0 < height <= {MAX_CAMERA_HEIGHT_MM:g} mm)",
-        )
-    return CameraModel(w, h, H, K, dist, hmm, {k: v for k, v in cam.items() if k not in known})
-
-
-def _positive_up_to(where, value, key, top, why):
-    """A finite number in (0, top]; otherwise `KEY is X: WHY`."""
-    x = _number(where, value, key)
-    if not 0 < x <= top:
-        raise ScanError(where, f"{key} is {x:g}: {why}")
-    return x
-
-
 def _optional_number(where, obj, key, label):
     if isinstance(obj, dict) and obj.get(key) is not None:
-        return _number(where, obj[key], f"{label}.{key}")
+        return number(where, obj[key], f"{label}.{key}")
     return None
 
 
 def _object(where, value, label):
     if value is not None and not isinstance(value, dict):
-        raise ScanError(where, f"{label} must be an object, got {type(value).__name__} {_short(value)}")
+        raise ScanError(where, f"{label} must be an object, got {type(value).__name__} {short(value)}")
     return value or {}
 
 
 def _check_extras(where, doc):
     """The blocks processing and its report read: their types and physical ranges."""
-    top = MAX_LEVEL_MM
-    if doc.get("level_at_home_mm") is not None:
-        top = _positive_up_to(
-            where,
-            doc["level_at_home_mm"],
-            "level_at_home_mm",
-            MAX_LEVEL_MM,
-            f"the liquid with the stage at home must be above the base top, at most {MAX_LEVEL_MM:g} mm",
-        )
+    top = optional_positive(
+        where,
+        doc,
+        "level_at_home_mm",
+        "level_at_home_mm",
+        MAX_LEVEL_MM,
+        f"the liquid with the stage at home must be above the base top, at most {MAX_LEVEL_MM:g} mm",
+        default=MAX_LEVEL_MM,
+    )
     if "tank" in doc and doc["tank"] is not None:
         tank = doc["tank"]
         if not isinstance(tank, dict):
             raise ScanError(
                 where,
                 f'tank must be an object like {{"inner_area_mm2": 31400}}, got '
-                f"{type(tank).__name__} {_short(tank)}",
+                f"{type(tank).__name__} {short(tank)}",
             )
         if tank.get("inner_area_mm2") is None:
             raise ScanError(where, "tank.inner_area_mm2 is missing")
-        _positive_up_to(
+        positive_up_to(
             where,
             tank["inner_area_mm2"],
             "tank.inner_area_mm2",
@@ -357,7 +140,7 @@ def _check_extras(where, doc):
         for key in ("capillary_length_mm", "contact_angle_deg"):
             if key not in men:
                 raise ScanError(where, f"meniscus.{key} is missing")
-            _number(where, men[key], f"meniscus.{key}")
+            number(where, men[key], f"meniscus.{key}")
     cal = _object(where, doc.get("calibration"), "calibration")
     _optional_number(where, cal, "ink_changed", "calibration")
     for what, entry in cal.items():
@@ -377,10 +160,10 @@ def _frame(where, i, fr, top):
         raise ScanError(where, f"frames[{i}] needs 'file' and 'level_mm'")
     rel = fr["file"]
     if not isinstance(rel, str) or not rel.strip():
-        raise ScanError(where, f"frames[{i}].file must be a file name, got {_short(rel)}")
+        raise ScanError(where, f"frames[{i}].file must be a file name, got {short(rel)}")
     if Path(rel).is_absolute() or ".." in Path(rel).parts:
         raise ScanError(where, f"frames[{i}].file must be a path inside the scan folder: {rel!r}")
-    level = _number(where, fr["level_mm"], f"frames[{i}].level_mm")
+    level = number(where, fr["level_mm"], f"frames[{i}].level_mm")
     if level < 0:
         raise ScanError(
             where,
@@ -395,7 +178,7 @@ def _frame(where, i, fr, top):
         )
     for key in ("target_mm", "step_mm", "change"):  # the daemon's resume reads these
         if fr.get(key) is not None:
-            _number(where, fr[key], f"frames[{i}].{key}")
+            number(where, fr[key], f"frames[{i}].{key}")
     return FrameRef(rel, level, {k: v for k, v in fr.items() if k not in ("file", "level_mm")})
 
 
@@ -436,19 +219,19 @@ def load_scan(folder) -> Scan:
     except RecursionError:
         raise ScanError(where, f"nests objects or lists deeper than {MAX_DEPTH} levels") from None
     except (UnicodeDecodeError, ValueError) as e:  # ValueError: JSON errors, a number of 5000 digits
-        raise ScanError(where, f"not valid JSON ({_short(str(e), 120)})") from None
+        raise ScanError(where, f"not valid JSON ({short(str(e), 120)})") from None
     if _depth_over(doc, MAX_DEPTH):
         raise ScanError(where, f"nests objects or lists deeper than {MAX_DEPTH} levels")
     if not isinstance(doc, dict):
         raise ScanError(where, "top level must be an object")
     fmt = doc.get("format")
     if fmt is not None and not str(fmt).startswith("inkslice.scan/"):
-        raise ScanError(where, f"unknown format {_short(fmt)}")
+        raise ScanError(where, f"unknown format {short(fmt)}")
     if doc.get("units", "mm") != "mm":
-        raise ScanError(where, f"units must be 'mm', got {_short(doc.get('units'))}")
+        raise ScanError(where, f"units must be 'mm', got {short(doc.get('units'))}")
     if "camera" not in doc:
         raise ScanError(where, "'camera' is missing")
-    camera = _camera(where, doc["camera"])
+    camera = read_camera(where, doc["camera"])
     top = _check_extras(where, doc)
     frames_doc = doc.get("frames")
     if not isinstance(frames_doc, list) or not frames_doc:

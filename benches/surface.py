@@ -97,12 +97,6 @@ def ideal(quick):
             )
 
 
-def camera_centre(cam):
-    from appliance.surface.meniscus import camera_centre_xy
-
-    return camera_centre_xy(cam.K, cam.homography)
-
-
 def rendered(quick, samples, preset, keep=None):
     """Render (renderer team), extract (vision team), reconstruct with and without corrections."""
     import json
@@ -139,7 +133,7 @@ def rendered(quick, samples, preset, keep=None):
             model = MeniscusModel(
                 men["capillary_length_mm"],
                 np.radians(men["contact_angle_deg"]),
-                camera_centre(scan.camera),
+                scan.camera.centre_xy(),
                 scan.camera.height_mm,
             )
             g = GridSpec(s.bounds, n=(50, 50))

@@ -302,8 +302,8 @@ def calibration_bench():
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from test_vision_calibration import _rot, draw_board, pose_to_board, rays
 
-    from appliance.scanfile import CameraModel
     from appliance.vision.calibration import Board, BoardPose, calibrate
+    from appliance.vision.camera import CameraModel
 
     rig = Rig()
     size, K, dist = (rig.width, rig.height), rig.K(), rig.dist_coeffs()
@@ -332,7 +332,7 @@ def calibration_bench():
     )
     u, v = np.meshgrid(np.linspace(20, rig.width - 20, 41), np.linspace(20, rig.height - 20, 31))
     uv = np.column_stack([u.ravel(), v.ravel()])
-    e = np.hypot(*(seed.pixels_to_mm(uv, est) - seed.pixels_to_mm(uv, rig.camera_model(distorted=True))).T)
+    e = np.hypot(*(est.pixels_to_mm(uv) - rig.camera_model(distorted=True).pixels_to_mm(uv)).T)
     print(
         f"Calibration: corner reprojection {rep['reprojection_rms_px']:.3f} px; liquid-plane error over the "
         f"field max {e.max() * 1000:.1f} um, RMS {np.sqrt(np.mean(e**2)) * 1000:.1f} um (target 20 um); "

@@ -7,7 +7,8 @@ The edge is anti-aliased by a linear ramp so its 50 % grey crossing is exact.
 
 import numpy as np
 
-from appliance.scanfile import CameraModel, FrameRef, Scan, write_frame, write_scan_json
+from appliance.scanfile import FrameRef, Scan, write_frame, write_scan_json
+from appliance.vision.camera import CameraModel
 
 MM_PER_PX = 0.25
 W, H = 240, 240

@@ -641,16 +641,13 @@ def test_a_full_disk_while_writing_the_outputs_is_one_line_and_keeps_the_old_set
 def test_a_homography_is_judged_whatever_its_scale(valid, tmp_path, scale):
     # a homography and any multiple of it are one mapping: once refused as "singular" at 1e-5
     from appliance.scanfile import load_scan
-    from appliance.vision.pipeline import WaterlineExtractor
 
     shutil.copytree(valid / "scan", tmp_path / "scan")
     camera(homography=(np.array(CONE_H) * scale).tolist())(tmp_path)
     scaled = load_scan(tmp_path / "scan")
     plain = load_scan(valid / "scan")
     uv = np.array([[0.0, 0.0], [239.0, 17.5], [120.0, 239.0]])
-    assert np.allclose(
-        WaterlineExtractor(scaled.camera).to_mm(uv), WaterlineExtractor(plain.camera).to_mm(uv)
-    )
+    assert np.allclose(scaled.camera.pixels_to_mm(uv), plain.camera.pixels_to_mm(uv))
 
 
 def test_real_cameras_and_the_edges_of_the_ranges_are_accepted(valid, tmp_path):

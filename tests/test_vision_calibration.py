@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 
 from appliance.cli import main as cli_main
-from appliance.scanfile import CameraModel
-from appliance.vision import seed
 from appliance.vision.calibration import (
     Board,
     BoardPose,
@@ -22,6 +20,7 @@ from appliance.vision.calibration import (
     find_corners,
     plane_points,
 )
+from appliance.vision.camera import CameraModel
 
 W, H = 800, 600
 K = np.array([[700.0, 0, 404.0], [0, 700.0, 297.0], [0, 0, 1]])
@@ -126,14 +125,14 @@ def field_error_mm(cam_json):
     )
     u, v = np.meshgrid(np.linspace(20, W - 20, 25), np.linspace(20, H - 20, 19))
     uv = np.column_stack([u.ravel(), v.ravel()])
-    return np.abs(seed.pixels_to_mm(uv, est) - seed.pixels_to_mm(uv, truth)).max()
+    return np.abs(est.pixels_to_mm(uv) - truth.pixels_to_mm(uv)).max()
 
 
 def test_corners_are_ordered_from_the_top_left_and_land_on_the_pose(views):
     _, plane = views
     c = find_corners(plane, BOARD)
     assert c[0].sum() < c[-1].sum()
-    xy = seed.pixels_to_mm(c, true_camera())
+    xy = true_camera().pixels_to_mm(c)
     assert np.abs(xy - plane_points(BOARD, POSE)).max() < 0.05
 
 

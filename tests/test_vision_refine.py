@@ -1,9 +1,8 @@
 """Going back into a level step in which a face came out at once (vision/refine.py)."""
 
-from types import SimpleNamespace
-
 import numpy as np
 
+from appliance.vision.camera import CameraModel
 from appliance.vision.refine import face_bracket, mask_pixel_mm, next_refinement, surfaced_faces
 
 PX = 0.5  # mm per mask pixel
@@ -70,5 +69,5 @@ def test_refinement_off_or_done_asks_for_nothing():
 
 
 def test_mask_pixels_are_the_frame_pixels_scaled_to_the_mask():
-    camera = SimpleNamespace(width=2048, height=1536, homography=np.diag([0.08, 0.08, 1.0]))
+    camera = CameraModel(2048, 1536, np.diag([0.08, 0.08, 1.0]))
     assert np.isclose(mask_pixel_mm(camera, (192, 256)), 0.08 * 2048 / 256)

@@ -7,7 +7,7 @@ crossing lies exactly on d = 0. Colours: dark-blue ink, a light grey part.
 
 import numpy as np
 
-from appliance.scanfile import CameraModel
+from appliance.vision.camera import CameraModel
 
 INK = np.array([90.0, 30.0, 12.0])  # BGR: dark blue
 PART = np.array([200.0, 205.0, 210.0])

@@ -11,7 +11,8 @@ import numpy as np
 from scan_helpers import MM_PER_PX, H, W, camera
 
 from appliance.process import extract_waterlines
-from appliance.scanfile import CameraModel, FrameRef, Scan, load_scan, write_frame, write_scan_json
+from appliance.scanfile import FrameRef, Scan, load_scan, write_frame, write_scan_json
+from appliance.vision.camera import CameraModel
 from appliance.vision.pipeline import WaterlineExtractor
 
 LEVELS = (19, 17, 15, 13, 11, 9, 7, 5)

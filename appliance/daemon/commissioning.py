@@ -42,8 +42,8 @@ import numpy as np
 
 from ..errors import Cancelled, InkSliceError, SettingError
 from ..hw.base import Placement
-from ..scanfile import _camera
 from ..vision.calibration import Board, camera_json, find_corners, intrinsics, plane_homography
+from ..vision.camera_block import read_camera
 from ..vision.printboard import describe as print_instructions
 from ..vision.printboard import printed_size_mm
 from .calibration import BOARD, JIG
@@ -797,7 +797,7 @@ def _check_export(doc) -> dict:
                 raise SettingError(where, f"{kind}: {key} is missing")
         if kind == "camera":
             try:
-                _camera(where, r["camera"])
+                read_camera(where, r["camera"])
             except InkSliceError as e:
                 raise SettingError(where, f"camera: {e.problem}") from None
     ink = doc.get("ink_changed")

@@ -3,7 +3,7 @@
 Levels run from the top down, so the first level at which a point of the
 plane is seen standing out of the ink is (to within one step) its height. A
 coarse regular grid in mm over the camera's field (the image corners mapped
-through scan.json's homography) is looked up in each frame's part mask
+through the camera model's homography) is looked up in each frame's part mask
 (vision/part.py, the mask the level planner already has) and every cell seen
 for the first time gets that level.
 
@@ -17,25 +17,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scanfile import CameraModel
+from ..vision.camera import CameraModel
 
 CELLS = 40
 
 
 class LiveMap:
     def __init__(self, camera: CameraModel, n: int = CELLS):
-        H = np.asarray(camera.homography, float)
         w, h = camera.width, camera.height
-        corners = np.array([[0, 0, 1], [w, 0, 1], [0, h, 1], [w, h, 1]], float) @ H.T
-        xy = corners[:, :2] / corners[:, 2:]
+        xy = camera.undistorted_to_mm([[0, 0], [w, 0], [0, h], [w, h]])
         (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
         self.xs = x0 + (np.arange(n) + 0.5) * (x1 - x0) / n
         self.ys = y0 + (np.arange(n) + 0.5) * (y1 - y0) / n
         X, Y = np.meshgrid(self.xs, self.ys)
-        uvw = np.stack([X, Y, np.ones_like(X)], axis=-1) @ np.linalg.inv(H).T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            self.u = uvw[..., 0] / uvw[..., 2] / w  # 0..1 across the image
-            self.v = uvw[..., 1] / uvw[..., 2] / h
+        uv = camera.mm_to_undistorted(np.column_stack([X.ravel(), Y.ravel()])).reshape(n, n, 2)
+        self.u = uv[..., 0] / w  # 0..1 across the image
+        self.v = uv[..., 1] / h
         self.inside = (
             np.isfinite(self.u)
             & np.isfinite(self.v)

@@ -32,16 +32,9 @@ import numpy as np
 
 from ..errors import Cancelled, DeviceError, InkSliceError
 from ..hw.devices import Devices
-from ..scanfile import (
-    CameraModel,
-    FrameRef,
-    Scan,
-    _camera,
-    load_scan,
-    read_frame,
-    write_frame,
-    write_scan_json,
-)
+from ..scanfile import FrameRef, Scan, load_scan, read_frame, write_frame, write_scan_json
+from ..vision.camera import CameraModel
+from ..vision.camera_block import read_camera
 from ..vision.part import find_part
 from ..vision.refine import mask_pixel_mm, next_refinement, surfaced_faces
 from . import processing
@@ -195,7 +188,7 @@ class ScanRunner:
         """The commissioned camera; without one, the model the devices bring (if any)."""
         stored = stored_camera(self.store)
         if stored is not None:
-            return _camera("calibration", stored)
+            return read_camera("calibration", stored)
         if self.dev.camera_model is not None:
             return self.dev.camera_model
         raise DeviceError("camera", "no camera calibration stored: commission the camera before scanning")

@@ -50,7 +50,7 @@ class Devices:
 
     stage: object
     camera: object
-    camera_model: object = None  # scanfile.CameraModel, or None: use the calibration
+    camera_model: object = None  # vision.camera.CameraModel, or None: use the calibration
     light: object = None
     led: object = None
     display: object = None

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..scanfile import CameraModel
+from ..vision.camera import CameraModel
 
 
 def _rot_x(a):

@@ -137,17 +137,6 @@ class MeniscusModel:
         return P + (C - P) * (h / self.camera_height_mm)[:, None]
 
 
-def camera_centre_xy(K, homography):
-    """Camera centre over the base (x, y, mm) from the camera matrix K and the scan's
-    homography (undistorted pixel -> liquid plane): the meniscus' perspective needs it."""
-    M = np.linalg.inv(np.asarray(K, float)) @ np.linalg.inv(np.asarray(homography, float))
-    M = M / np.linalg.norm(M[:, 0])  # ~ [r1 r2 t] of the plane in the camera
-    r1, r2, t = M[:, 0], M[:, 1], M[:, 2]
-    R = np.column_stack([r1, r2, np.cross(r1, r2)])
-    C = -R.T @ t
-    return float(C[0]), float(C[1])
-
-
 def _outline_distance(slices, P):
     lowest = next(s for s in reversed(slices) if not s.empty)
     return polyline_distance(lowest, P)[0]

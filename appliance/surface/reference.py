@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InkSliceError
-from .meniscus import calibrate_meniscus, camera_centre_xy
+from .meniscus import calibrate_meniscus
 
 BALL_DIAMETER_MM = 25.4  # the default reference: a one-inch precision ball
 
@@ -106,9 +106,12 @@ def fit_meniscus(scan, part, waterlines):
     if isinstance(part, Ball):
         part = locate_ball(waterlines, part)
     cam = scan.camera
-    centre = camera_centre_xy(cam.K, cam.homography) if cam.K is not None else None
     model = calibrate_meniscus(
-        waterlines, part, tank_area_mm2=_tank(scan), camera_xy_mm=centre, camera_height_mm=cam.height_mm
+        waterlines,
+        part,
+        tank_area_mm2=_tank(scan),
+        camera_xy_mm=cam.centre_xy(),
+        camera_height_mm=cam.height_mm,
     )
     return model, part
 

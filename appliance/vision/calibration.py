@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from ..errors import InkSliceError
+from .camera import CameraModel, undistort_points
 
 
 class CalibrationError(InkSliceError):
@@ -149,18 +150,12 @@ def plane_points(board: Board, pose: BoardPose) -> np.ndarray:
     return np.array([pose.x0, pose.y0]) + p[:, :1] * along + p[:, 1:] * down
 
 
-def undistort(uv, K, dist):
-    if K is None or dist is None:
-        return np.asarray(uv, np.float64)
-    return cv2.undistortPoints(np.asarray(uv, np.float64).reshape(-1, 1, 2), K, dist, P=K).reshape(-1, 2)
-
-
 def plane_homography(image, board: Board, pose: BoardPose, K=None, dist=None, where="plane image"):
     """Homography undistorted pixel -> object-frame mm on the liquid plane, and the camera height.
 
     Returns (H, height_mm, rms_mm); height_mm is None without K.
     """
-    uv = undistort(find_corners(image, board, where), K, dist)
+    uv = undistort_points(find_corners(image, board, where), K, dist)
     xy = plane_points(board, pose)
     Hm, _ = cv2.findHomography(uv, xy, 0)
     if Hm is None:
@@ -180,14 +175,7 @@ def plane_homography(image, board: Board, pose: BoardPose, K=None, dist=None, wh
 
 def camera_json(size, Hm, K=None, dist=None, height_mm=None) -> dict:
     """Exactly scan.json's "camera" block."""
-    out = {"width": int(size[0]), "height": int(size[1]), "homography": np.asarray(Hm, float).tolist()}
-    if K is not None:
-        out["K"] = np.asarray(K, float).tolist()
-    if dist is not None:
-        out["dist"] = np.asarray(dist, float).ravel().tolist()
-    if height_mm is not None:
-        out["height_mm"] = float(height_mm)
-    return out
+    return CameraModel(int(size[0]), int(size[1]), Hm, K, dist, height_mm).to_json()
 
 
 def calibrate(

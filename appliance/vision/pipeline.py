@@ -52,6 +52,7 @@ import numpy as np
 
 from ..errors import SettingError
 from .band import TileGrid
+from .camera import CameraModel
 from .frames import (
     AllPartError,
     FrameError,
@@ -108,7 +109,7 @@ class WaterlineExtractor:
         a frame with no part above the liquid - a scan's top frames are like that.
     """
 
-    def __init__(self, camera, **options):
+    def __init__(self, camera: CameraModel, **options):
         self.camera = camera
         self.width, self.height = int(camera.width), int(camera.height)
         opts = dict(
@@ -136,9 +137,6 @@ class WaterlineExtractor:
         self.roi = self._check_roi(opts["roi"])
         self.grid = TileGrid(self.roi, int(opts["tile_px"]), apron=1)
         self.channel = None if opts["channel"] == "auto" else int(opts["channel"])
-        self.K = None if camera.K is None else np.asarray(camera.K, np.float64)
-        self.dist = None if camera.dist is None else np.asarray(camera.dist, np.float64)
-        self.H = np.asarray(camera.homography, np.float64)
         # full-size 8-bit buffers reused for every frame: the median-filtered
         # channel (sampled by the sub-pixel step) and the binary part mask
         self._smooth = np.zeros((self.height, self.width), np.uint8)
@@ -606,7 +604,7 @@ class WaterlineExtractor:
         }
         if not bad:
             return loops, refined
-        for i in bad:
+        for _ in bad:
             self.events.append(Event(level_mm, "rejected-island", "edged by glare all round"))
         keep = [i for i, lp in enumerate(loops) if i not in bad and not (lp.hole and lp.parent in bad)]
         return [loops[i] for i in keep], [refined[i] for i in keep]
@@ -720,17 +718,9 @@ class WaterlineExtractor:
         self.outline = [(lp.pixels, lp.hole) for lp, _ in loops]
         out = []
         for lp, pts in loops:
-            mm = self.to_mm(pts)
+            mm = self.camera.pixels_to_mm(pts)
             area = signed_area(mm)
             if (area < 0) != lp.hole:  # outer CCW (area > 0), holes CW
                 mm = mm[::-1].copy()
             out.append(mm)
         return Waterline(float(level_mm), out)
-
-    def to_mm(self, uv: np.ndarray) -> np.ndarray:
-        """Distorted pixel positions -> mm on the liquid plane (undistort the points, not the frame)."""
-        uv = np.asarray(uv, np.float64).reshape(-1, 2)
-        if self.K is not None and self.dist is not None and len(uv):
-            uv = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, P=self.K).reshape(-1, 2)
-        h = uv @ self.H[:, :2].T + self.H[:, 2]
-        return h[:, :2] / h[:, 2:3]

@@ -85,10 +85,4 @@ def next_refinement(
 def mask_pixel_mm(camera, mask_shape) -> float:
     """The size on the liquid plane of one pixel of a part mask `mask_shape` (find_part's,
     scaled from the camera's frame), at the frame's centre."""
-    H = np.asarray(camera.homography, float)
-    cx, cy = 0.5 * camera.width, 0.5 * camera.height
-    pts = np.array([[cx, cy, 1.0], [cx + 1, cy, 1.0], [cx, cy + 1, 1.0]]) @ H.T
-    xy = pts[:, :2] / pts[:, 2:]
-    (ax, ay), (bx, by) = xy[1] - xy[0], xy[2] - xy[0]
-    frame_px_mm = float(np.sqrt(abs(ax * by - ay * bx)))
-    return frame_px_mm * camera.width / mask_shape[1]
+    return camera.pixel_mm() * camera.width / mask_shape[1]

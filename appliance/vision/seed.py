@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .camera import CameraModel
+
 
 @dataclass
 class SeedSlice:
@@ -39,39 +41,9 @@ def edge_pixels(binary: np.ndarray) -> np.ndarray:
     return np.column_stack([u, v]).astype(np.float64)
 
 
-def undistort_pixels(uv: np.ndarray, camera) -> np.ndarray:
-    if camera.K is None or camera.dist is None or uv.size == 0:
-        return uv
-    pts = cv2.undistortPoints(uv.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K)
-    return pts.reshape(-1, 2)
-
-
-def pixels_to_mm(uv: np.ndarray, camera) -> np.ndarray:
-    """Distorted image pixels -> (x, y) mm on the liquid plane."""
-    uv = undistort_pixels(np.asarray(uv, np.float64), camera)
-    if uv.size == 0:
-        return np.zeros((0, 2))
-    h = np.column_stack([uv, np.ones(len(uv))]) @ np.asarray(camera.homography).T
-    return h[:, :2] / h[:, 2:3]
-
-
-def mm_to_pixels(xy: np.ndarray, camera) -> np.ndarray:
-    """(x, y) mm on the liquid plane -> distorted image pixels (where the camera sees them)."""
-    xy = np.asarray(xy, np.float64).reshape(-1, 2)
-    Hinv = np.linalg.inv(np.asarray(camera.homography))
-    h = np.column_stack([xy, np.ones(len(xy))]) @ Hinv.T
-    uv = h[:, :2] / h[:, 2:3]
-    if camera.K is None or camera.dist is None:
-        return uv
-    K = np.asarray(camera.K)
-    norm = np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))])
-    proj, _ = cv2.projectPoints(norm.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.asarray(camera.dist))
-    return proj.reshape(-1, 2)
-
-
-def seed_slice(frame: np.ndarray, level_mm: float, camera) -> SeedSlice:
+def seed_slice(frame: np.ndarray, level_mm: float, camera: CameraModel) -> SeedSlice:
     binary = binarise(frame)
-    return SeedSlice(level_mm, pixels_to_mm(edge_pixels(binary), camera), binary)
+    return SeedSlice(level_mm, camera.pixels_to_mm(edge_pixels(binary)), binary)
 
 
 def exposed_at(binary: np.ndarray, pixels: np.ndarray) -> np.ndarray:
