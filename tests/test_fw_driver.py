@@ -26,6 +26,23 @@ def test_a_command_is_framed_with_a_leading_newline_and_its_crc():
         P.encode_command(1, "SET", "x" * 40, 1)
 
 
+def test_the_driver_refuses_a_verb_or_an_argument_count_the_table_does_not_know():
+    with pytest.raises(ValueError, match="not a verb"):
+        P.encode_command(1, "JUMP")
+    with pytest.raises(ValueError, match="MOVE takes 1"):
+        P.encode_command(1, "MOVE")
+    assert P.encode_command(1, "JUMP", check=False).endswith(b"\n")  # for tests of the firmware's refusal
+
+
+def test_a_protocol_table_without_its_constants_is_refused_not_half_read(tmp_path):
+    table = (P.codes_path()).read_text()
+    damaged = tmp_path / "codes.def"
+    damaged.write_text("\n".join(l for l in table.splitlines() if not l.startswith("CONSTANT(LINE_MAX")))
+    with pytest.raises(DeviceError, match="defines no LINE_MAX"):
+        P.load_table(damaged)
+    assert P.load_table(P.codes_path()).constants["LINE_MAX"] == P.LINE_MAX
+
+
 def test_replies_status_reports_and_banners_parse():
     r = P.parse_line(P.seal("17 error:7") + b"\n")
     assert (r.seq, r.ok, r.error_name) == (17, False, "soft_limit")

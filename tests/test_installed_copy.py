@@ -158,13 +158,14 @@ def test_the_installed_copy_imports_from_its_own_venv_and_reads_the_protocol_tab
         import appliance, appliance.hw.protocol as P
         from appliance.firmware import codes_path
         print(json.dumps({"appliance": appliance.__file__, "cwd": os.getcwd(), "path": sys.path,
-                          "codes": str(codes_path()), "settings": len(P.SETTINGS)}))""",
+                          "codes": str(codes_path()), "settings": len(P.SETTINGS),
+                          "verbs": list(P.VERBS), "line_max": P.LINE_MAX}))""",
     )
     assert r.returncode == 0, r.stderr
     got = json.loads(r.stdout)
     assert Path(got["appliance"]).is_relative_to(installed.site)
     assert Path(got["codes"]).is_relative_to(installed.site) and Path(got["codes"]).name == "codes.def"
-    assert got["settings"] > 0
+    assert got["settings"] > 0 and "MOVE" in got["verbs"] and got["line_max"] > 0
     assert not Path(got["cwd"]).is_relative_to(REPO)
     # the one path into the checkout allowed is the shared dependencies' site-packages (in CI the
     # test venv lives in the checkout): it holds numpy and friends, never a copy of `appliance`

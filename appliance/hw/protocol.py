@@ -1,10 +1,13 @@
 """The host side of the stepper controller's line protocol (appliance/firmware/stepper/PROTOCOL.md).
 
 Pure functions and data, no serial port: framing a command, checking and
-splitting a reply or a status report.  The codes (errors, states, flags,
-alarms, reset reasons, settings) are not repeated here: they are read at
-import from appliance/firmware/stepper/codes.def, the same X-macro table the
-firmware is compiled from, so the two sides cannot drift apart.
+splitting a reply or a status report.  Nothing the firmware must agree with
+is written here: the protocol version, the line length, the real-time bytes,
+the verbs and their argument counts, and the codes (errors, states, flags,
+alarms, reset reasons, settings) are read at import from
+appliance/firmware/stepper/codes.def, the same X-macro table the firmware is
+compiled from, so the two sides cannot drift apart (tests/test_fw_host.py
+compares this module with what the C compiler made of the table).
 """
 
 from __future__ import annotations
@@ -17,17 +20,19 @@ from pathlib import Path
 from appliance.errors import DeviceError
 from appliance.firmware import codes_path
 
-PROTO_VERSION = 1
-LINE_MAX = 48  # characters the firmware buffers before '\n'
-RT_STATUS = b"?"  # real-time: status report
-RT_ESTOP = b"\x18"  # real-time: emergency stop (Ctrl-X)
-
 
 @dataclass(frozen=True)
 class Code:
     kind: str
     number: int
     name: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Verb:
+    name: str
+    args: int  # exactly this many arguments
     text: str
 
 
@@ -41,35 +46,71 @@ class Setting:
     text: str
 
 
-_CODE_RE = re.compile(r'^CODE\((\w+),\s*(\d+),\s*(\w+),\s*"([^"]*)"\)\s*$')
-_SETTING_RE = re.compile(r'^SETTING\((\d+),\s*(\w+),\s*(-?\d+),\s*(-?\d+),\s*(-?\d+),\s*"([^"]*)"\)\s*$')
+@dataclass
+class Table:
+    """Everything codes.def defines, by kind."""
+
+    constants: dict[str, int] = field(default_factory=dict)
+    realtime: dict[str, bytes] = field(default_factory=dict)
+    verbs: dict[str, Verb] = field(default_factory=dict)
+    codes: dict[str, dict[int, Code]] = field(default_factory=dict)
+    settings: dict[str, Setting] = field(default_factory=dict)
 
 
-def load_codes(path: Path | None = None) -> tuple[dict[str, dict[int, Code]], dict[str, Setting]]:
+_NUM = r"(-?\d+|0x[0-9A-Fa-f]+)"
+_TEXT = r'"([^"]*)"'
+_CONSTANT_RE = re.compile(rf"^CONSTANT\((\w+),\s*{_NUM},\s*{_TEXT}\)\s*$")
+_REALTIME_RE = re.compile(rf"^REALTIME\((\w+),\s*{_NUM},\s*{_TEXT}\)\s*$")
+_VERB_RE = re.compile(rf"^VERB\((\w+),\s*(\d+),\s*{_TEXT}\)\s*$")
+_CODE_RE = re.compile(rf"^CODE\((\w+),\s*(\d+),\s*(\w+),\s*{_TEXT}\)\s*$")
+_SETTING_RE = re.compile(rf"^SETTING\((\d+),\s*(\w+),\s*{_NUM},\s*{_NUM},\s*{_NUM},\s*{_TEXT}\)\s*$")
+_NEEDED = {
+    "constants": ("PROTO_VERSION", "LINE_MAX"),
+    "realtime": ("RT_STATUS", "RT_ESTOP"),
+    "codes": ("ERR", "STATE", "FLAG", "ALARM", "RESET"),
+}
+
+
+def _read_entry(line: str, table: Table) -> None:
+    if m := _CONSTANT_RE.match(line):
+        table.constants[m[1]] = int(m[2], 0)
+    elif m := _REALTIME_RE.match(line):
+        table.realtime[m[1]] = bytes([int(m[2], 0)])
+    elif m := _VERB_RE.match(line):
+        table.verbs[m[1]] = Verb(m[1], int(m[2]), m[3])
+    elif m := _CODE_RE.match(line):
+        c = Code(m[1], int(m[2]), m[3], m[4])
+        table.codes.setdefault(c.kind, {})[c.number] = c
+    elif m := _SETTING_RE.match(line):
+        s = Setting(int(m[1]), m[2], int(m[3], 0), int(m[4], 0), int(m[5], 0), m[6])
+        table.settings[s.name] = s
+
+
+def load_table(path: Path | None = None) -> Table:
     path = path or codes_path()
     try:
         text = path.read_text()
     except OSError as e:
-        raise DeviceError(path, f"cannot read the protocol code table: {e.strerror}") from None
-    codes: dict[str, dict[int, Code]] = {}
-    settings: dict[str, Setting] = {}
+        raise DeviceError(path, f"cannot read the protocol table: {e.strerror}") from None
+    table = Table()
     for line in text.splitlines():
-        m = _CODE_RE.match(line)
-        if m:
-            c = Code(m[1], int(m[2]), m[3], m[4])
-            codes.setdefault(c.kind, {})[c.number] = c
-            continue
-        m = _SETTING_RE.match(line)
-        if m:
-            s = Setting(int(m[1]), m[2], int(m[3]), int(m[4]), int(m[5]), m[6])
-            settings[s.name] = s
-    for kind in ("ERR", "STATE", "FLAG", "ALARM", "RESET"):
-        if kind not in codes:
-            raise DeviceError(path, f"the code table defines no {kind} codes")
-    return codes, settings
+        _read_entry(line, table)
+    for kind, names in _NEEDED.items():
+        missing = [n for n in names if n not in getattr(table, kind)]
+        if missing:
+            raise DeviceError(path, f"the protocol table defines no {', '.join(missing)}")
+    if not table.verbs:
+        raise DeviceError(path, "the protocol table defines no verbs")
+    return table
 
 
-CODES, SETTINGS = load_codes()
+TABLE = load_table()
+PROTO_VERSION = TABLE.constants["PROTO_VERSION"]
+LINE_MAX = TABLE.constants["LINE_MAX"]  # characters the firmware buffers before '\n'
+RT_STATUS = TABLE.realtime["RT_STATUS"]  # real-time: status report
+RT_ESTOP = TABLE.realtime["RT_ESTOP"]  # real-time: emergency stop (Ctrl-X)
+VERBS = TABLE.verbs
+CODES, SETTINGS = TABLE.codes, TABLE.settings
 ERRORS = CODES["ERR"]
 STATES = CODES["STATE"]
 ALARMS = CODES["ALARM"]
@@ -91,11 +132,17 @@ def seal(body: str) -> bytes:
     return f"{body}*{crc16(body.encode('ascii')):04X}".encode("ascii")
 
 
-def encode_command(seq: int, verb: str, *args) -> bytes:
+def encode_command(seq: int, verb: str, *args, check: bool = True) -> bytes:
     """The bytes to send for one command.  The leading '\\n' ends whatever
-    junk a damaged earlier line left in the firmware's line buffer."""
+    junk a damaged earlier line left in the firmware's line buffer.  A verb
+    the table does not know, or the wrong number of arguments, is refused
+    unless check is False (tests that send the firmware what it must reject)."""
     if not 1 <= seq <= 65535:
         raise ValueError(f"sequence number {seq} outside 1..65535")
+    if check and verb not in VERBS:
+        raise ValueError(f"'{verb}' is not a verb of the protocol ({', '.join(VERBS)})")
+    if check and len(args) != VERBS[verb].args:
+        raise ValueError(f"{verb} takes {VERBS[verb].args} argument(s), not {len(args)}")
     body = " ".join([str(seq), verb, *map(str, args)])
     line = seal(body)
     if len(line) > LINE_MAX:

@@ -2,6 +2,25 @@
 #ifndef CODES_H
 #define CODES_H
 
+#define CONSTANT(name, value, text) name = value,
+enum proto_constant {
+#include "../codes.def"
+};
+#undef CONSTANT
+
+#define REALTIME(name, byte, text) name = byte,
+enum realtime_byte {
+#include "../codes.def"
+};
+#undef REALTIME
+
+#define VERB(name, args, text) V_##name,
+enum verb {
+#include "../codes.def"
+  V_COUNT
+};
+#undef VERB
+
 #define CODE_ERR(num, name, text) ERR_##name = num,
 #define CODE_STATE(num, name, text)
 #define CODE_FLAG(num, name, text)

@@ -58,14 +58,20 @@ uint8_t proto_parse_i32(const char *s, int32_t *out)
   return 1;
 }
 
-/* Verbs and how many arguments each takes: data, not code. */
-static const char v_id[] PROGMEM = "ID", v_status[] PROGMEM = "STATUS", v_home[] PROGMEM = "HOME",
-                         v_move[] PROGMEM = "MOVE", v_stop[] PROGMEM = "STOP", v_get[] PROGMEM = "GET",
-                         v_set[] PROGMEM = "SET", v_driver[] PROGMEM = "DRIVER", v_defaults[] PROGMEM = "DEFAULTS",
-                         v_reboot[] PROGMEM = "REBOOT";
-static const char *const verb_names[V_COUNT] PROGMEM = { v_id,  v_status, v_home,   v_move,     v_stop,
-                                                         v_get, v_set,    v_driver, v_defaults, v_reboot };
-static const uint8_t verb_args[V_COUNT] PROGMEM = { 0, 0, 0, 1, 0, 1, 2, 1, 0, 0 };
+/* Verbs and how many arguments each takes, from codes.def: data, not code. */
+#define VERB(name, args, text) static const char verb_##name[] PROGMEM = #name;
+#include "../codes.def"
+#undef VERB
+#define VERB(name, args, text) verb_##name,
+const char *const proto_verb_names[V_COUNT] PROGMEM = {
+#include "../codes.def"
+};
+#undef VERB
+#define VERB(name, args, text) args,
+const uint8_t proto_verb_args[V_COUNT] PROGMEM = {
+#include "../codes.def"
+};
+#undef VERB
 
 /* "<seq> <VERB> [arg [arg]]*XXXX": the checksum is checked first and
  * nothing else is trusted before it passes; only then is the seq believed. */
@@ -101,13 +107,13 @@ uint8_t proto_parse(char *line, uint8_t len, command_t *cmd)
   if (n < 2 || !proto_parse_i32(tok[0], &seq) || seq < 1 || seq > 65535) return ERR_bad_syntax;
   cmd->seq = (uint16_t)seq;
   for (uint8_t v = 0; v < V_COUNT; v++) {
-    if (strcmp_P(tok[1], PGM_PTR(&verb_names[v])) == 0) {
+    if (strcmp_P(tok[1], PGM_PTR(&proto_verb_names[v])) == 0) {
       cmd->verb = v;
       break;
     }
   }
   if (cmd->verb == V_COUNT) return ERR_unknown_command;
-  if (n - 2 != pgm_read_byte(&verb_args[cmd->verb])) return ERR_bad_argument;
+  if (n - 2 != pgm_read_byte(&proto_verb_args[cmd->verb])) return ERR_bad_argument;
   cmd->argc = (uint8_t)(n - 2);
   for (uint8_t i = 0; i < cmd->argc; i++) cmd->arg[i] = tok[2 + i];
   return 0;

@@ -6,11 +6,8 @@
 #include <stdint.h>
 #include "codes.h"
 
-#define PROTO_VERSION 1
-#define LINE_MAX 48   /* characters before '\n' */
-#define REPLY_MAX 96  /* characters of a reply including "*XXXX\n" */
-#define RT_STATUS '?' /* real-time: send a status report */
-#define RT_ESTOP 0x18 /* real-time: emergency stop (Ctrl-X) */
+/* PROTO_VERSION, LINE_MAX, the real-time bytes RT_* and enum verb come from codes.def (codes.h) */
+#define REPLY_MAX 96 /* characters of a reply including "*XXXX\n" */
 
 typedef struct {
   char buf[LINE_MAX + 1];
@@ -19,8 +16,6 @@ typedef struct {
 } linebuf_t;
 
 enum { LB_NONE = 0, LB_LINE, LB_OVERFLOW };
-
-enum verb { V_ID, V_STATUS, V_HOME, V_MOVE, V_STOP, V_GET, V_SET, V_DRIVER, V_DEFAULTS, V_REBOOT, V_COUNT };
 
 typedef struct {
   uint16_t seq; /* 0 when the line could not be trusted */
@@ -41,4 +36,7 @@ uint8_t proto_seal(char *buf, uint8_t len, uint8_t cap);
 uint8_t proto_put_i32(char *buf, uint8_t len, uint8_t cap, int32_t v);
 uint8_t proto_put_hex2(char *buf, uint8_t len, uint8_t cap, uint8_t v);
 uint8_t proto_put_P(char *buf, uint8_t len, uint8_t cap, const char *flash_str);
+/* The verbs' names (in flash) and argument counts, indexed by enum verb. */
+extern const char *const proto_verb_names[V_COUNT];
+extern const uint8_t proto_verb_args[V_COUNT];
 #endif
