@@ -1,6 +1,6 @@
 """The harsh bench: does a waterline survive what a bad day at the bench throws at it?
 
-The `harsh` effects preset (sim/render.py) puts on every frame glare that drifts, jitters,
+The `harsh` effects preset (sim/effects.py) puts on every frame glare that drifts, jitters,
 flickers and vanishes from frame to frame, drifting dust and bubbles, salt and pepper, JPEG
 q85, 1.5 % lamp flicker, up to 0.05 mm of lateral stage wobble, a rippling surface, and a
 meniscus that is not the first model's. As a user would, the bench calibrates the camera

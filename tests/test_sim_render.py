@@ -256,9 +256,9 @@ def test_effects_are_deterministic_and_do_something():
 
 def _lit(effects, level, i):
     """Where glare (much brighter than the ink) and anything else (not the ink's colour) lie in frame i."""
-    from appliance.sim.render import _liquid_layer
+    from appliance.sim.effects import liquid_layer
 
-    ink = _liquid_layer(RIG, effects, level, np.random.default_rng([1, i]))
+    ink = liquid_layer(RIG, effects, level, np.random.default_rng([1, i]))
     plain = np.asarray(RIG.ink_bgr, np.float32)
     diff = np.abs(ink - plain).max(axis=2)
     return diff > 40, diff > 5
@@ -290,13 +290,13 @@ def test_harsh_glare_and_dust_move_and_flicker_from_frame_to_frame():
 
 
 def test_harsh_stage_wobble_and_lamp_flicker_differ_per_frame():
-    from appliance.sim.render import _wobbled, camera_effects
+    from appliance.sim.effects import camera_effects, wobbled
 
     harsh = PRESETS["harsh"]
     pm = pixel_map(RIG, True)
     shifts = []
     for i in range(12):
-        w = _wobbled(pm, harsh, np.random.default_rng([1, i]))
+        w = wobbled(pm, harsh, np.random.default_rng([1, i]))
         shifts.append((float(pm.x0[0, 0] - w.x0[0, 0]), float(pm.y0[0, 0] - w.y0[0, 0])))
     r = np.hypot(*np.array(shifts).T)
     assert r.max() <= 0.05 + 1e-5 and r.max() > 0.02

@@ -81,7 +81,7 @@ def make_factory(args):
             raise SettingError("--faults", f"not valid JSON ({e})") from None
         return FakeBench(args.surface, rig, faults, replay=args.replay, level_at_home_mm=args.level_zero)
     if args.effects is not None:
-        from ..sim.render import effects_preset
+        from ..sim.effects import effects_preset
 
         effects_preset(args.effects)  # SettingError naming the presets
     return SimulatedBenchFactory(args.surface, rig, effects=args.effects, level_at_home_mm=args.level_zero)

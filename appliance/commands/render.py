@@ -10,7 +10,7 @@ ORDER = 60
 
 
 def add_arguments(p):
-    from ..sim.render import PRESETS
+    from ..sim.effects import PRESETS
     from ..sim.surfaces import SURFACES
 
     p.add_argument("surface", choices=sorted(SURFACES), help="known part to scan")

@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import atomicio
 from ..scanfile import write_frame
-from .render import Effects, camera_effects
+from .effects import Effects, camera_effects
 from .rig import Rig, _rot_x, _rot_y, _rot_z, pixel_map
 
 

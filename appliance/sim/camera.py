@@ -21,7 +21,8 @@ import numpy as np
 
 from ..hw.base import Camera
 from . import surfaces as _surfaces
-from .render import Effects, effects_preset, render_frame
+from .effects import Effects, effects_preset
+from .render import render_frame
 from .rig import Rig
 
 

@@ -326,7 +326,7 @@ class FakeBench(_KnownPart, BenchFactory):
 
     def open(self, settings, params):
         from ..hw.devices import Devices
-        from .render import Effects
+        from .effects import Effects
         from .staging import StagedCamera
         from .surfaces import get
 

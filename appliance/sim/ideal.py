@@ -81,8 +81,8 @@ class _MeniscusView:
         )
 
     def _curvature(self, x, y):
-        """The contact line's curvature as the renderer takes it (render.curvature_grid)."""
-        from .render import curvature_grid, surface_grid
+        """The contact line's curvature as the renderer takes it (partgrid.curvature_grid)."""
+        from .partgrid import curvature_grid, surface_grid
 
         grid = surface_grid(self.s)
         k = np.asarray(curvature_grid(self.s)[0][..., 0], float)

@@ -22,7 +22,9 @@ from ..scanfile import FrameRef, Scan, load_scan, read_frame, write_frame, write
 from ..vision.part import find_part
 from ..vision.refine import RESOLUTION_MM, mask_pixel_mm, next_refinement, surfaced_faces
 from . import surfaces as _surfaces
-from .render import Effects, curvature_grid, effects_preset, liquid_level, render_frame, surface_grid
+from .effects import Effects, effects_preset
+from .partgrid import curvature_grid, surface_grid
+from .render import liquid_level, render_frame
 from .rig import Rig, pixel_map
 from .truth import truth_path
 

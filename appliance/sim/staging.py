@@ -79,7 +79,7 @@ class StagedCamera(Camera):
 
     def _board(self, p: Placement) -> np.ndarray:
         from .boards import Board, Pose, render_board
-        from .render import Effects
+        from .effects import Effects
 
         d = p.details
         cols, rows = d["inner_corners"]
