@@ -104,7 +104,7 @@ def parsed(spec):
 def summary(title, rows, targets=True):
     print(f"\n{title}")
     print(f"  {'part':<14} {'Ea':>7} {'p99 in':>7} {'max':>7} {'honest':>7} {'marked':>7}")
-    for label, ea, p99, mx, share, big, marked in rows:
+    for label, ea, p99, mx, share, _big, marked in rows:
         over = [k for k, v in zip(TARGETS, (ea, p99, mx)) if targets and v > TARGETS[k]]
         print(
             f"  {label:<14} {ea:7.4f} {p99:7.3f} {mx:7.3f} {100 * share:6.0f}% {100 * marked:6.1f}%"

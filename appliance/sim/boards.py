@@ -197,7 +197,7 @@ def _vision_board_pose(board: Board, plane: Pose, plane_xy, rig: Rig) -> dict:
     first = int(np.argmin(np.hypot(uv[:, 0], uv[:, 1])))
     x0, y0 = plane_xy[first]
     # the row through that corner, in the direction that runs right in the image
-    i, j = first % board.cols, first // board.cols
+    i = first % board.cols
     nb = first + 1 if i + 1 < board.cols else first - 1
     d = plane_xy[nb] - plane_xy[first]
     if uv[nb, 0] < uv[first, 0]:

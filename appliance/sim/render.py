@@ -31,7 +31,7 @@ import numpy as np
 
 from . import physics
 from . import surfaces as _surfaces
-from .effects import PRESETS, Effects, camera_effects, liquid_layer, wobbled
+from .effects import PRESETS, Effects, camera_effects, effects_preset, liquid_layer, wobbled
 from .partgrid import curvature_grid, lookup, surface_grid
 from .rig import PixelMap, Rig, pixel_map
 from .trace import trace, trace_image
@@ -43,6 +43,7 @@ __all__ = [
     "PRESETS",
     "Effects",
     "curvature_grid",
+    "effects_preset",
     "liquid_level",
     "part_layer",
     "part_layer_roi",
