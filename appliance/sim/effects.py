@@ -192,6 +192,18 @@ def _drifting_dust(W, H, effects, rng, level_mm):
         )
 
 
+def _window(cx, cy, r, W, H):
+    """The frame's pixels within r of (cx, cy): ((ya, yb, xa, xb), u, v), u and v the
+    columns' and rows' offsets from the centre; None when none is in the frame."""
+    xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
+    ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
+    if xa >= xb or ya >= yb:
+        return None
+    u = np.arange(xa, xb, dtype=np.float32) - cx
+    v = np.arange(ya, yb, dtype=np.float32) - cy
+    return (ya, yb, xa, xb), u, v
+
+
 def liquid_layer(rig, effects, level_mm, rng):
     """The ink as the camera sees it: flat dark blue, plus glare and dust on it."""
     H, W = rig.height, rig.width
@@ -200,24 +212,18 @@ def liquid_layer(rig, effects, level_mm, rng):
     glare = _drifting_glare if effects.drifting else _fresh_glare
     for cx, cy, sx, sy, peak in glare(W, H, effects, rng, level_mm):
         # a specular highlight: a soft, slightly elongated blob of the lamp's colour
-        r = int(3.5 * max(sx, sy))
-        xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
-        ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
-        if xa >= xb or ya >= yb:
+        win = _window(cx, cy, int(3.5 * max(sx, sy)), W, H)
+        if win is None:
             continue
-        u = np.arange(xa, xb, dtype=np.float32) - cx
-        v = np.arange(ya, yb, dtype=np.float32) - cy
+        (ya, yb, xa, xb), u, v = win
         blob = peak * np.exp(-0.5 * ((v[:, None] / sy) ** 2 + (u[None, :] / sx) ** 2))
         ink[ya:yb, xa:xb] += blob[..., None] * np.array([1.0, 0.97, 0.95], np.float32)
     dust = _drifting_dust if effects.drifting else _fresh_dust
     for cx, cy, rad, bubble, shade in dust(W, H, effects, rng, level_mm):
-        r = int(rad + 3)
-        xa, xb = int(max(0, cx - r)), int(min(W, cx + r + 1))
-        ya, yb = int(max(0, cy - r)), int(min(H, cy + r + 1))
-        if xa >= xb or ya >= yb:
+        win = _window(cx, cy, int(rad + 3), W, H)
+        if win is None:
             continue
-        u = np.arange(xa, xb, dtype=np.float32) - cx
-        v = np.arange(ya, yb, dtype=np.float32) - cy
+        (ya, yb, xa, xb), u, v = win
         d = np.sqrt(v[:, None] ** 2 + u[None, :] ** 2)
         cover = np.clip(rad + 0.5 - d, 0, 1)[..., None]
         if bubble:
