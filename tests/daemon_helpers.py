@@ -1,8 +1,7 @@
 """Shared bits of the daemon tests: a small fast scan on the fake bench."""
 
-import time
-
 import numpy as np
+from polling import wait_until
 
 from appliance.daemon.processing import in_process
 from appliance.daemon.service import BenchService
@@ -30,13 +29,13 @@ def service(tmp_path, faults=None, processor=in_process, **kw):
 
 
 def wait_final(svc, job_id, timeout=60.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+    """The job once it and the bench have finished (done, failed or cancelled)."""
+
+    def finished():
         job = svc.job(job_id)
-        if job["status"] in FINAL and svc.state()["state"] in FINAL:
-            return job
-        time.sleep(0.02)
-    raise AssertionError(f"job {job_id} did not finish in {timeout} s: {svc.job(job_id)}")
+        return job if job["status"] in FINAL and svc.state()["state"] in FINAL else None
+
+    return wait_until(finished, timeout, what=f"job {job_id} to finish")
 
 
 def read_heightmap(path):

@@ -1,7 +1,7 @@
 """Shared pieces of the firmware tests (tests/test_fw_*.py).
 
-The fixtures build everything they need with make (CI starts from a clean
-clone): the AVR ELF and the simavr harness once per session, the cmocka and
+The fixtures (in conftest.py) build everything they need with make (CI starts from
+a clean clone): the AVR ELF and the simavr harness once per session, the cmocka and
 fuzzer binaries in their own tests.  RawLink speaks the line protocol by hand
 so the protocol tests can send exactly the bytes a spec case describes.
 """
@@ -9,12 +9,12 @@ so the protocol tests can send exactly the bytes a spec case describes.
 import subprocess
 import time
 
-import pytest
 import serial
+from polling import wait_until
 
 from appliance.firmware import build_dir
 from appliance.hw import protocol as P
-from appliance.sim.hil import FIRMWARE_DIR, SimulatedBench, build
+from appliance.sim.hil import FIRMWARE_DIR
 
 BUILD = build_dir()
 
@@ -27,19 +27,6 @@ def make(*targets, check=True):
     if check and r.returncode != 0:
         raise AssertionError(f"make {' '.join(targets)} failed:\n{r.stdout}\n{r.stderr}")
     return r
-
-
-@pytest.fixture(scope="session")
-def fw_build():
-    """The firmware ELF and the HIL harness, built once."""
-    return build()
-
-
-@pytest.fixture
-def bench(fw_build):
-    """A fresh simulated bench running flat out, stage 40 mm above the switch."""
-    with SimulatedBench(speed=0) as b:
-        yield b
 
 
 class RawLink:
@@ -88,24 +75,14 @@ class RawLink:
                 return item
 
     def wait_idle(self, timeout=120.0) -> P.Status:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+        def settled():
             st = self.status()
-            if st.state != "moving" and st.state != "homing":
-                return st
-            time.sleep(0.005)
-        raise AssertionError("the controller never became idle")
+            return st if st.state not in ("moving", "homing") else None
+
+        return wait_until(settled, timeout, what="the controller to be idle", every=0.005)
 
     def close(self):
         self.ser.close()
-
-
-@pytest.fixture
-def link(bench):
-    l = RawLink(bench.port)
-    yield l
-    l.close()
-    assert bench.stats()["rx_overruns"] == 0, "the firmware let its 2-byte receive FIFO overflow"
 
 
 def err(name):

@@ -4,11 +4,11 @@ scan without it warned about; every step cancellable with the bench free afterwa
 whole commissioning carried to a fresh box as one file; an ink change marking results stale."""
 
 import json
-import time
 
 import numpy as np
 import pytest
 from daemon_helpers import wait_final
+from polling import wait_until
 
 from appliance.daemon.processing import in_process
 from appliance.daemon.service import BenchService
@@ -34,15 +34,6 @@ SHORT = {"levels_to_mm": 28.0, "levels_from_mm": 22.0}
 def box(tmp_path, name="data"):
     bench = FakeBench("cone", level_at_home_mm=TRUE_LEVEL_ZERO)
     return BenchService(tmp_path / name, bench, processor=in_process, panel_interval_s=0.02), bench
-
-
-def wait_for(condition, timeout=5.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def step(c, sid):
@@ -302,8 +293,9 @@ def test_the_web_process_commissions_over_the_daemons_socket(tmp_path):
         c = client.commission("level_zero", "start")
         assert c["active"]["holds_bench"] and c["active"]["prompt"].startswith("Take everything off the base")
         assert svc.state()["message"] == c["active"]["prompt"]  # the page says it, the display in short
-        assert wait_for(
-            lambda: bench.panel.display.lines[:3] == ["SETUP LEVEL 0", "EMPTY THE BASE", "see the phone"]
+        wait_until(
+            lambda: bench.panel.display.lines[:3] == ["SETUP LEVEL 0", "EMPTY THE BASE", "see the phone"],
+            what="the display's set-up prompt",
         )
         assert client.commission("level_zero", "cancel")["active"] is None
         doc = client.export_commissioning()

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 from daemon_helpers import SCAN, wait_final
+from polling import wait_until
 
 from appliance.daemon.service import BenchService
 from appliance.errors import DeviceError
@@ -22,16 +23,6 @@ def light_processor(scan_folder, out_folder, options, stop=None):
     write_text(Path(out_folder) / "toolpath.gcode", f"G21 G90\nF800\n(levels {n})\nG1 X1 Y2 Z3\nM2\n")
     write_text(Path(out_folder) / "heightmap.csv", "x,y,z\n0.0000,0.0000,1.0000\n")
     return {"outputs": ["heightmap.csv", "toolpath.gcode"]}
-
-
-def wait_for(pred, timeout=10.0, what="condition"):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        got = pred()
-        if got:
-            return got
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def test_press_timer_tells_short_from_long():
@@ -72,7 +63,7 @@ def notice_code(svc):
 def long_press(svc, panel):
     before = svc.state()["notice"]
     panel.button.long_press()
-    wait_for(lambda: svc.state()["notice"] not in (None, before) and notice_code(svc), what="a USB outcome")
+    wait_until(lambda: svc.state()["notice"] not in (None, before) and notice_code(svc), what="a USB outcome")
     return svc.state()["notice"]
 
 
@@ -81,7 +72,7 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     # nothing finished yet
     n = long_press(svc, panel)
     assert (n["code"], n["ok"]) == ("no_gcode", False)
-    wait_for(lambda: panel.display.lines[:1] == ["USB: NOTHING"], what="the display")
+    wait_until(lambda: panel.display.lines[:1] == ["USB: NOTHING"], what="the display")
     assert svc.state()["state"] == "idle"  # a long press never starts a scan
 
     job_id = svc.start_scan(SCAN)
@@ -91,7 +82,7 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     # no stick in
     n = long_press(svc, panel)
     assert n["code"] == "no_stick" and "no USB stick" in n["text"]
-    wait_for(lambda: panel.display.lines[:1] == ["USB: NO STICK"], what="the display")
+    wait_until(lambda: panel.display.lines[:1] == ["USB: NO STICK"], what="the display")
 
     # a stick in: copied, verified, unmounted, and the operator is told it is safe to pull it
     mounts.write_text(f"/dev/sdb1 {stick} vfat rw,relatime 0 0\n")
@@ -101,7 +92,7 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
     assert (stick / "inkslice" / name).read_bytes() == gcode
     assert n["text"] == f"copied {name} to the USB stick and unmounted it, safe to remove"
     assert mounts.read_text() == ""
-    lines = wait_for(
+    lines = wait_until(
         lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display"
     )
     assert lines[1] == name[:18] and lines[2] == "safe to remove"
@@ -114,8 +105,8 @@ def test_long_press_copies_the_latest_gcode_to_the_stick_and_says_so(bench):
 
     # a short press gives the display back to the bench and starts a scan as before
     panel.button.press()
-    wait_for(lambda: svc.state()["state"] in ("homing", "scanning", "processing", "done"), what="a scan")
-    wait_for(lambda: panel.display.lines[0] != "USB COPY OK", what="the display back")
+    wait_until(lambda: svc.state()["state"] in ("homing", "scanning", "processing", "done"), what="a scan")
+    wait_until(lambda: panel.display.lines[0] != "USB COPY OK", what="the display back")
     svc.cancel()
 
 
@@ -143,7 +134,7 @@ def test_long_press_during_a_scan_copies_and_does_not_stop_it(bench):
     assert wait_final(svc, first)["status"] == "done"
     mounts.write_text(f"/dev/sdb1 {stick} vfat rw 0 0\n")
     second = svc.start_scan({**SCAN, "settle_s": 0.2})
-    wait_for(lambda: svc.state()["state"] == "scanning", what="scanning")
+    wait_until(lambda: svc.state()["state"] == "scanning", what="scanning")
     n = long_press(svc, panel)
     assert n["code"] == "copied" and first in n["text"]
     assert svc.state()["state"] in ("scanning", "processing", "done")  # still going
@@ -164,7 +155,7 @@ def test_a_stick_that_will_not_unmount_is_not_called_safe_to_remove(bench):
     assert (n["code"], n["ok"]) == ("still_mounted", False)
     assert (stick / "inkslice" / f"{job_id}-toolpath.gcode").is_file()  # the copy itself is there
     assert "could not unmount it (systemctl: Job for" in n["text"] and "safe to remove" not in n["text"]
-    lines = wait_for(
+    lines = wait_until(
         lambda: panel.display.lines[0] == "USB COPY OK" and panel.display.lines, what="the display"
     )
     assert lines[2] == "NOT unmounted"

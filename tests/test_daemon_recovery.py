@@ -13,7 +13,8 @@ import time
 
 import numpy as np
 import pytest
-from daemon_helpers import SCAN, read_heightmap, service, wait_final
+from daemon_helpers import FINAL, SCAN, read_heightmap, service, wait_final
+from polling import wait_until
 
 from appliance.daemon.recovery import audit
 from appliance.daemon.rpc import BenchClient
@@ -47,15 +48,13 @@ class Daemon:
         ]
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=self.log)
         self.client = BenchClient(self.sock, timeout=10)
-        end = time.monotonic() + 30
-        while True:
-            try:
-                self.client.state()
-                return
-            except DeviceError:
-                if self.proc.poll() is not None or time.monotonic() > end:
-                    raise AssertionError(f"daemon did not come up: {(tmp_path / 'daemon.log').read_text()}")
-                time.sleep(0.05)
+
+        def up():
+            if self.proc.poll() is not None:
+                raise AssertionError(f"the daemon exited: {(tmp_path / 'daemon.log').read_text()}")
+            return self.client.state()
+
+        wait_until(up, 30, what="the daemon to answer", every=0.05, ignoring=DeviceError)
 
     def kill(self):
         self.proc.send_signal(signal.SIGKILL)
@@ -69,13 +68,13 @@ class Daemon:
 
 
 def wait_job(client, job_id, timeout=60):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+    """The job once it has finished and the bench says so too."""
+
+    def finished():
         job = client.job(job_id)
-        if job["status"] in ("done", "failed", "cancelled") and client.state()["state"] == job["status"]:
-            return job
-        time.sleep(0.05)
-    raise AssertionError(f"job not finished: {client.job(job_id)}")
+        return job if job["status"] in FINAL and client.state()["state"] == job["status"] else None
+
+    return wait_until(finished, timeout, what=f"job {job_id} to finish", every=0.05)
 
 
 @pytest.fixture(scope="module")
@@ -226,12 +225,14 @@ def test_sigkill_mid_import_leaves_a_stray_folder_that_audit_counts_and_a_restar
     daemon = Daemon(tmp_path)
     jobs = daemon.data / "jobs"
     threading.Thread(
-        target=lambda: pytest.raises(Exception, daemon.client.import_scan, source), daemon=True
+        target=lambda: pytest.raises(DeviceError, daemon.client.import_scan, source), daemon=True
     ).start()
-    end = time.monotonic() + 60
-    while not [d for d in jobs.glob(".import-*") if len(list(d.glob("scan/frames/*"))) >= 100]:
-        assert time.monotonic() < end, "the import never started copying"
-        time.sleep(0.002)
+    wait_until(
+        lambda: [d for d in jobs.glob(".import-*") if len(list(d.glob("scan/frames/*"))) >= 100],
+        60,
+        what="the import to copy 100 frames",
+        every=0.002,
+    )
     daemon.kill()
     stray = list(jobs.glob(".import-*"))
     assert len(stray) == 1 and not list(jobs.glob("2*")), "killed after the copy was complete"

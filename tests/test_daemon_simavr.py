@@ -3,7 +3,6 @@ firmware under simavr behind the real SerialStage, and the renderer's
 VirtualCamera looking at where the simulated stage really is."""
 
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -16,10 +15,7 @@ from appliance.daemon.service import BenchService
 
 pytestmark = [
     pytest.mark.simavr,
-    pytest.mark.skipif(
-        shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-        reason="needs gcc-avr and simavr (scripts/setup.sh)",
-    ),
+    pytest.mark.needs("simavr"),
 ]
 PARAMS = {
     "name": "cone on simavr",

@@ -5,7 +5,6 @@ script lays everything out."""
 
 import json
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -15,10 +14,7 @@ from appliance.hw.devices import WIRING, load_wiring
 
 REPO = Path(__file__).resolve().parents[1]
 UNITS = ("inkslice-daemon.service", "inkslice-web.service")
-pytestmark = pytest.mark.skipif(
-    shutil.which("systemd-analyze") is None,
-    reason="systemd-analyze missing (scripts/setup.sh --test installs systemd)",
-)
+pytestmark = pytest.mark.needs("systemd")
 
 
 @pytest.fixture
@@ -248,7 +244,7 @@ def test_unmount_syncs_first_and_removes_the_mount_point(stick_tools):
     assert r.returncode == 0 and calls == []
 
 
-@pytest.mark.skipif(shutil.which("node") is None, reason="node runs the polkit rule (JavaScript)")
+@pytest.mark.needs("node")  # it runs the polkit rule (JavaScript)
 def test_the_polkit_rule_lets_the_inkslice_user_stop_stick_units_and_nothing_else():
     from appliance.hw.usb import Stick, _unmount_command
 

@@ -2,7 +2,6 @@
 (tests/test_installed_copy.py does the same from an installed wheel.)"""
 
 import os
-import shutil
 import sys
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import pytest
 from appliance import firmware
 from appliance.cli import main as cli_main
 
-needs_avr = pytest.mark.skipif(shutil.which("avr-gcc") is None, reason="needs gcc-avr (scripts/setup.sh)")
+needs_avr = pytest.mark.needs("avr-gcc")
 
 
 def test_the_build_goes_to_a_cache_folder_of_its_own_never_into_the_sources(monkeypatch, tmp_path):

@@ -7,7 +7,7 @@ import threading
 import time
 
 import pytest
-from fw_helpers import RawLink, bench, err, fw_build, link  # noqa: F401  (fixtures)
+from fw_helpers import RawLink, err
 
 from appliance.errors import DeviceError, SettingError
 from appliance.hw import protocol as P

@@ -15,7 +15,6 @@ import threading
 import time
 
 import pytest
-from fw_helpers import fw_build  # noqa: F401  (fixture)
 
 from appliance.hw.stage import ATTEMPTS, MAX_WAIT_S, SerialStage
 from appliance.sim.hil import SimulatedBench

@@ -49,10 +49,7 @@ REPO = Path(__file__).resolve().parents[1]
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.simavr,
-    pytest.mark.skipif(
-        shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-        reason="needs gcc-avr and simavr (scripts/setup.sh)",
-    ),
+    pytest.mark.needs("simavr"),
 ]
 
 

@@ -6,7 +6,6 @@ The demo's own part is the 30 mm sphere and the default range starts at
 20 mm: with default settings its first scan must still capture the top."""
 
 import json
-import shutil
 
 import pytest
 from daemon_helpers import read_heightmap, service, wait_final
@@ -107,10 +106,7 @@ def test_a_part_taller_than_the_stage_can_clear_fails_the_scan_with_the_reason(t
 
 @pytest.mark.slow
 @pytest.mark.simavr
-@pytest.mark.skipif(
-    shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-    reason="needs gcc-avr and simavr (scripts/setup.sh)",
-)
+@pytest.mark.needs("simavr")
 def test_the_demos_first_scan_with_default_settings_matches_its_sphere(tmp_path):
     """What `inkslice demo --serve` does on the first scan: the firmware under simavr, the
     sphere, a 640 x 480 virtual camera, every setting at its default (about 2.5 minutes)."""

@@ -6,23 +6,19 @@ dashboard, which the bench must take (no step may keep the bench). Screenshots g
 tests/artifacts/web/phone-commission-*.png.
 """
 
-import os
 import shutil
 
 import pytest
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.needs("chromium")]
 
 webdriver = pytest.importorskip("selenium.webdriver")
 from selenium.webdriver.common.by import By  # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
+from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
 from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
 from appliance.web.demo import start  # noqa: E402
-
-if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-    pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
 
 # a short scan: the dashboard's Start takes the bench, the test stops it again
 SHORT_SCAN = {

@@ -2,9 +2,9 @@
 
 import os
 import stat
-import time
 
 from daemon_helpers import SCAN, wait_final
+from polling import wait_until
 from test_daemon_panel import light_processor
 from web_helpers import csrf_of, login
 
@@ -15,12 +15,11 @@ from appliance.web import create_app
 
 
 def wait_lines(display, pred, timeout=5.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if display.lines and pred(display.lines):
-            return display.lines
-        time.sleep(0.02)
-    raise AssertionError(f"the display shows {display.lines}")
+    """The display's lines once `pred` holds for them."""
+    try:
+        return wait_until(lambda: display.lines if display.lines and pred(display.lines) else None, timeout)
+    except AssertionError:
+        raise AssertionError(f"the display shows {display.lines}") from None
 
 
 def test_first_run_password_is_shown_on_the_bench_until_the_first_login(tmp_path):

@@ -4,7 +4,6 @@ a scan runs; rename, delete, process again, sizes, thumbnails, downloads named f
 ETA that learns from past jobs and covers processing; the stage-fault chip's text."""
 
 import re
-import shutil
 import time
 
 import pytest
@@ -13,6 +12,7 @@ from web_helpers import login
 
 from appliance.daemon import rpc
 from appliance.daemon.service import BenchService
+from appliance.errors import DeviceError
 from appliance.sim.fakes import FakeBench
 from appliance.web import create_app
 
@@ -171,7 +171,7 @@ def test_a_stage_fault_chip_reads_the_problem_not_a_cut_word(tmp_path):
     bench = FakeBench("cone", faults={"stage": {"unplug_after_moves": 0}})
     svc = BenchService(tmp_path / "data", bench, processor=light_processor, panel_interval_s=0.05)
     try:
-        with pytest.raises(Exception):
+        with pytest.raises(DeviceError):
             svc.home_stage()
         chip = svc.state()["hardware"]["stage"]
         assert chip == "fault: no reply from the controller (unplugged?)", chip
@@ -180,10 +180,7 @@ def test_a_stage_fault_chip_reads_the_problem_not_a_cut_word(tmp_path):
 
 
 @pytest.mark.simavr
-@pytest.mark.skipif(
-    shutil.which("avr-gcc") is None or shutil.which("simavr") is None,
-    reason="needs gcc-avr and simavr (scripts/setup.sh)",
-)
+@pytest.mark.needs("simavr")
 def test_the_panel_jogs_the_simulated_stage_firmware_under_simavr(tmp_path):
     """Through the web API to the real SerialStage and the stepper firmware under simavr: the
     position the firmware's STEP edges add up to is where the panel said it put the base."""

@@ -2,23 +2,19 @@
 dialect from the job's height map (no rescan), twice, and both download byte for
 byte as the job's files."""
 
-import os
 import time
 
 import pytest
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.needs("chromium")]
 
 webdriver = pytest.importorskip("selenium.webdriver")
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select  # noqa: E402
-from test_web_browser import ART, CHROMIUM, DRIVER, make_driver, shot, wait  # noqa: E402
+from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
 
 from appliance.web.demo import start  # noqa: E402
 from appliance.web.fake import FakeBenchService  # noqa: E402
-
-if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-    pytest.skip("Debian chromium/chromium-driver not installed", allow_module_level=True)
 
 
 @pytest.fixture(scope="module")

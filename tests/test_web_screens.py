@@ -18,7 +18,6 @@ A new screen is one more Screen(...) in SCREENS: a name, its path, and what "rea
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -27,14 +26,13 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.needs("chromium", "axe-core")]
 
 webdriver = pytest.importorskip("selenium.webdriver")
 from selenium.common.exceptions import WebDriverException  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
-from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
-from test_web_browser import SIZES, chromium_options  # noqa: E402
+from test_web_browser import SIZES, chromium_options, wait  # noqa: E402
 from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
@@ -55,20 +53,6 @@ SCAN = {
     "level_step_mm": 2.0,
     "settle_s": 0.5,
 }
-
-if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-    pytest.skip(
-        "Debian chromium/chromium-driver not installed (scripts/setup.sh --test installs them)",
-        allow_module_level=True,
-    )
-if not AXE.is_file():
-    pytest.skip(
-        "axe-core not installed in tests/a11y (scripts/setup.sh --test installs it)", allow_module_level=True
-    )
-
-
-def wait(d, cond, timeout=20, what=""):
-    return WebDriverWait(d, timeout, poll_frequency=0.05).until(lambda _: cond(), message=what)
 
 
 def loaded_img(d, css):

@@ -7,6 +7,7 @@ from http.server import BaseHTTPRequestHandler, HTTPServer
 
 import pytest
 from daemon_helpers import SCAN, service, wait_final
+from polling import wait_until
 
 from appliance.cli import main as cli_main
 from appliance.daemon import settings as S
@@ -41,15 +42,6 @@ def receiver():
     server.shutdown()
 
 
-def wait_for(got, n, timeout=10.0):
-    import time
-
-    end = time.monotonic() + timeout
-    while len(got) < n and time.monotonic() < end:
-        time.sleep(0.02)
-    return got
-
-
 def test_a_webhook_receives_finished_and_failed_events(tmp_path, receiver):
     url, got = receiver
     outcome = {"fail": False}
@@ -66,11 +58,11 @@ def test_a_webhook_receives_finished_and_failed_events(tmp_path, receiver):
         svc.update_settings({"webhook_url": url, "webhook_token": "s3cret"})
         done = wait_final(svc, svc.start_scan(SCAN))
         assert done["status"] == "done"
-        wait_for(got, 1)
+        wait_until(lambda: len(got) >= 1, what="the first webhook call")
         outcome["fail"] = True
         failed = wait_final(svc, svc.start_scan({**SCAN, "name": "second"}))
         assert failed["status"] == "failed"
-        wait_for(got, 2)
+        wait_until(lambda: len(got) >= 2, what="the second webhook call")
     finally:
         svc.close()
     assert [g["body"]["event"] for g in got] == ["finished", "failed"]

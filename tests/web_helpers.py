@@ -7,8 +7,9 @@ seconds; the daemon's own tests run the real pipeline."""
 
 import json
 import re
-import time
 from pathlib import Path
+
+from polling import wait_until
 
 from appliance.daemon.service import BenchService
 from appliance.sim.fakes import FakeBench
@@ -78,21 +79,20 @@ def login(client, password, addr="127.0.0.1"):
 
 
 def wait_state(client, states, timeout=20.0, headers=None):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+    """/api/state once the bench is in one of `states`."""
+
+    def state():
         st = client.get("/api/state", headers=headers or {}).get_json()
-        if st["state"] in states:
-            return st
-        time.sleep(0.02)
-    raise AssertionError(f"bench never reached {states}: {st}")
+        return st if st["state"] in states else None
+
+    return wait_until(state, timeout, what=f"the bench in {states}")
 
 
 def wait_job(svc, job_id, timeout=20.0):
     """The job's record once it has ended (done, failed or cancelled)."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+
+    def ended():
         job = svc.job(job_id)
-        if job["status"] in ("done", "failed", "cancelled"):
-            return job
-        time.sleep(0.02)
-    raise AssertionError(f"job {job_id} never ended: {svc.job(job_id)}")
+        return job if job["status"] in ("done", "failed", "cancelled") else None
+
+    return wait_until(ended, timeout, what=f"job {job_id} to end")
