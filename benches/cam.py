@@ -149,7 +149,9 @@ def bench_fullmap(quick):
     # itself (ten times the edge segments along its boundary)
     for step in (1.0, 0.1):
         sampler = Sampler(sample_map("sample3", step), edge_step=0.05)
-        t, g = median_time(lambda: drop_grid(sampler, cutter, 0.0, 0.0, 1001, 1001, 0.1), 1 if quick else 3)
+        t, g = median_time(
+            lambda sampler=sampler: drop_grid(sampler, cutter, 0.0, 0.0, 1001, 1001, 0.1), 1 if quick else 3
+        )
         print(f"sample3 map at {step:g} mm: 1001 x 1001 tool heights in {t:.2f} s (median)")
 
 

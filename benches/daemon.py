@@ -64,7 +64,7 @@ def levels_of(params):
 def render(folder, levels, rig, surface):
     folder.mkdir(parents=True, exist_ok=True)
     for level in levels:
-        cam = LevelSeededCamera(surface, rig, lambda: level)
+        cam = LevelSeededCamera(surface, rig, lambda level=level: level)
         cv2.imwrite(str(folder / replay_name(level)), cam.capture(), [cv2.IMWRITE_PNG_COMPRESSION, 1])
 
 

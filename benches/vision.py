@@ -117,7 +117,7 @@ def speed(rig, quick):
     )
     frames = [render_frame(surf, lv, rig, eff, np.random.default_rng(k)) for k, lv in enumerate(levels)]
     reps = 15 if quick else 40
-    f0, f1 = frames[0], frames[1]
+    f0 = frames[0]
 
     def first():
         WaterlineExtractor(cam).extract(f0, levels[0])
@@ -188,7 +188,7 @@ def speed(rig, quick):
             f"({wall[key] / wall['memcpy']:.1f}x)"
         )
     print(
-        f"  {'ours over a %d-frame scan, %.2f mm steps' % (len(levels), step):44s} "
+        f"  {f'ours over a {len(levels)}-frame scan, {step:.2f} mm steps':44s} "
         f"{np.median(scan_ts[1:]) * 1e3:8.2f} {'':8s}   median of frames 2..; {full_reads} fell back to a full read"
     )
     print(f"  {'dissertation pipeline, OpenCV (seed.py)':44s} {wall['seed']:8.2f} {cpu['seed']:8.2f}")

@@ -65,7 +65,6 @@ def test_rendered_meniscus_is_the_contact_line_in_perspective():
     img = render_frame(cone, L, rig, Effects(meniscus=True))
     uv = np.vstack([_crossings(_gray(img), 1), _crossings(_gray(img), 0)])
     P0 = _to_plane(rig, uv)
-    r = np.hypot(P0[:, 0] - 50, P0[:, 1] - 50)
     assert uv.shape[0] > 500
     h = float(physics.meniscus_rise(math.radians(30)))
     C = rig.centre

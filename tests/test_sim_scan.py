@@ -34,7 +34,7 @@ def test_a_bench_scan_from_above_starts_with_a_frame_that_shows_no_part():
 
 def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):
     folder = tmp_path / "scan"
-    scan = render_scan(
+    render_scan(
         "cone",
         folder,
         levels=[24.0, 15.0, 6.0],

@@ -336,7 +336,6 @@ def test_stl_is_watertight_and_encloses_the_volume(dome_lines):
     assert all(c == 1 for c in edges.values())
     assert all((b, a) in edges for (a, b) in edges)
     vol = np.sum(np.einsum("ij,ij->i", V[:, 0], np.cross(V[:, 1], V[:, 2]))) / 6
-    cells = np.isfinite(hm.z)
     dx, dy = hm.spacing
     assert vol > 0
     assert abs(vol - np.nansum(hm.z) * dx * dy) / vol < 0.1

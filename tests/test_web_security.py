@@ -72,7 +72,7 @@ def test_every_state_changing_route_refuses_a_session_without_csrf(env):
     app, svc, pw = env
     c = app.test_client()
     good = login(c, pw)
-    for method, url, endpoint in unsafe_routes(app):
+    for method, url, _endpoint in unsafe_routes(app):
         for headers in ({}, {"X-CSRF-Token": "wrong-" + good}):
             r = c.open(url, method=method, json={}, headers=headers)
             assert r.status_code == 403, (method, url, headers, r.status_code)

@@ -49,8 +49,8 @@ class Stage(abc.ABC):
         """The lowest and highest positions a move may ask for (the soft limits), mm above home.
         The lowest sets the highest level a scan can start at (see daemon/levels.py)."""
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 (optional: a device with nothing to release keeps it)
+        """Release the device; the default has nothing to release."""
 
 
 class Camera(abc.ABC):
@@ -60,8 +60,8 @@ class Camera(abc.ABC):
     def capture(self) -> np.ndarray:
         """One fresh 8-bit BGR frame taken after the last move settled."""
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 (optional: a device with nothing to release keeps it)
+        """Release the device; the default has nothing to release."""
 
 
 class OutputLine(abc.ABC):
@@ -151,5 +151,5 @@ class BenchFactory(abc.ABC):
 
         return UsbExporter()
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 (optional: a device with nothing to release keeps it)
+        """Release the device; the default has nothing to release."""
