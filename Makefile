@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test setup setup-test bench clean install lock docs firmware-test
+.PHONY: demo test setup setup-test bench clean install lock docs firmware-test lint
 
 # HOST=0.0.0.0 lets a phone on the same network reach the demo's web UI
 HOST ?= 127.0.0.1
@@ -23,6 +23,14 @@ setup-test:
 # (FUZZ_SECONDS=20); needs cc, clang and libcmocka-dev, no Python
 firmware-test:
 	$(MAKE) -C appliance/firmware/stepper test
+
+# ruff (lint and layout) on the Python tree, mypy on the typed rooms (pyproject.toml's
+# [tool.mypy] files), clang-format on the firmware's C; CI runs the same through tests/test_lint.py
+lint: setup-test
+	$(VENV)/bin/ruff check
+	$(VENV)/bin/ruff format --check
+	$(VENV)/bin/mypy
+	$(MAKE) -s -C appliance/firmware/stepper format-check
 
 bench: setup-test
 	for b in benches/*.py; do $(PY) $$b --quick || exit 1; done
