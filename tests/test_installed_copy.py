@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from polling import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 pytestmark = [
@@ -397,11 +398,13 @@ def commission(client: WebClient) -> dict:
     act(client, "meniscus", "start", {"diameter_mm": 25.4})
     c = act(client, "meniscus", "scan")
     assert c["active"]["stage"] == "scanning", c["active"]
-    end = time.monotonic() + COMMISSION_TIMEOUT
-    while c["active"]["stage"] == "scanning" and time.monotonic() < end:  # the page polls the same way
-        time.sleep(1.0)
+
+    def scanned():  # the page polls the same way
         status, c = client.get("/api/commissioning")
         assert status == 200, c
+        return c if c["active"]["stage"] != "scanning" else None
+
+    c = wait_until(scanned, COMMISSION_TIMEOUT, what="the meniscus scan", every=1.0)
     assert c["active"]["stage"] == "check", c["active"]
     return act(client, "meniscus", "accept")
 
@@ -410,13 +413,13 @@ def scan(client: WebClient, params: dict, timeout: float = 900.0) -> dict:
     status, body = client.post("/api/scan", params)
     assert status == 201, body
     job_id = body["job_id"]
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+
+    def ended():
         status, st = client.get("/api/state")
         assert status == 200, st
-        if st["state"] in ("done", "failed") and st.get("job_id", job_id) == job_id:
-            break
-        time.sleep(0.5)
+        return st["state"] in ("done", "failed") and st.get("job_id", job_id) == job_id
+
+    wait_until(ended, timeout, what=f"job {job_id} to end", every=0.5)
     status, job = client.get(f"/api/jobs/{job_id}")
     assert status == 200, job
     return job

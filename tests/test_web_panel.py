@@ -7,6 +7,7 @@ import re
 import time
 
 import pytest
+from polling import wait_until
 from test_web_real_service import light_processor
 from web_helpers import login
 
@@ -49,10 +50,7 @@ def web(tmp_path, request):
 
 def finished_scan(c, h, svc, params=SCAN):
     job_id = c.post("/api/scan", json=params, headers=h).get_json()["job_id"]
-    end = time.monotonic() + 30
-    while svc.state()["state"] != "done" and time.monotonic() < end:
-        time.sleep(0.05)
-    assert svc.state()["state"] == "done"
+    wait_until(lambda: svc.state()["state"] == "done", 30, what="the scan to be done", every=0.05)
     return job_id
 
 
@@ -94,9 +92,7 @@ def test_the_panel_is_refused_while_a_scan_runs_and_a_scan_takes_the_devices_bac
     c.post("/api/machine/preview", headers=h)
     panel_light = bench.last.light
     c.post("/api/scan", json={**SCAN, "settle_s": 0.3}, headers=h)
-    end = time.monotonic() + 10
-    while svc.state()["state"] != "scanning" and time.monotonic() < end:
-        time.sleep(0.02)
+    wait_until(lambda: svc.state()["state"] == "scanning", what="the scan to start")
     assert not panel_light.on  # the panel's session was closed first
     for path, body in (
         ("/api/machine/home", None),
@@ -137,9 +133,12 @@ def test_the_job_manager_renames_sizes_thumbnails_names_downloads_reprocesses_an
     assert (
         c.post(f"/api/jobs/{job_id}/reprocess", json={"settings": {"grid": 30}}, headers=h).status_code == 202
     )
-    end = time.monotonic() + 30
-    while (svc.job(job_id)["status"], svc.state()["state"]) != ("done", "done") and time.monotonic() < end:
-        time.sleep(0.05)
+    wait_until(
+        lambda: (svc.job(job_id)["status"], svc.state()["state"]) == ("done", "done"),
+        30,
+        what="the reprocessing to be done",
+        every=0.05,
+    )
     assert svc.job(job_id)["settings"]["grid"] == 30 and "toolpath.gcode" in svc.job(job_id)["outputs"]
 
     folder = svc.store.job_dir(job_id)

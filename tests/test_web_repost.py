@@ -2,13 +2,12 @@
 dialect from the job's height map (no rescan), twice, and both download byte for
 byte as the job's files."""
 
-import time
-
 import pytest
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.needs("chromium")]
 
 webdriver = pytest.importorskip("selenium.webdriver")
+from polling import wait_until  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select  # noqa: E402
 from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
@@ -24,10 +23,7 @@ def finished_job(tmp_path_factory):
     run = start(svc, tmp / "data")
     ART.mkdir(parents=True, exist_ok=True)
     job_id = svc.start_scan({})
-    end = time.monotonic() + 60
-    while svc.job(job_id)["status"] != "done":
-        assert time.monotonic() < end, svc.job(job_id)
-        time.sleep(0.1)
+    wait_until(lambda: svc.job(job_id)["status"] == "done", 60, what="the scan to be done", every=0.1)
     yield {"url": run.url, "password": run.password, "svc": svc, "job": job_id}
     run.stop()
     svc.close()

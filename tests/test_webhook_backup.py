@@ -81,11 +81,7 @@ def test_no_webhook_address_sends_nothing_and_a_dead_receiver_fails_no_job(tmp_p
         svc.update_settings({"webhook_url": "http://127.0.0.1:9/nobody-listens"})
         job = wait_final(svc, svc.start_scan(SCAN))
         assert job["status"] == "done"
-        import time
-
-        end = time.monotonic() + 10
-        while svc.webhook.last() is None and time.monotonic() < end:
-            time.sleep(0.05)
+        wait_until(svc.webhook.last, 10, what="the webhook's attempt", every=0.05)
         assert svc.webhook.last()["ok"] is False and svc.webhook.last()["problem"]
     finally:
         svc.close()
