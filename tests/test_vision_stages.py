@@ -6,7 +6,7 @@ import pytest
 from test_vision_synth import INK, PART, draw, grid
 
 from appliance.vision.band import TileGrid
-from appliance.vision.frames import FrameError, best_channel, check_frame, hue_split, otsu_split, towards_ink
+from appliance.vision.frames import FrameError, best_channel, check_image, hue_split, otsu_split, towards_ink
 from appliance.vision.subpixel import bumps, refine, sample_q8
 
 
@@ -41,15 +41,15 @@ def test_hue_cut_sits_between_blue_ink_and_the_grey_part():
     assert hue_split(img[:, :, 2], 2, s) is None  # gray frames: no colour test
 
 
-def test_check_frame_names_the_problem():
+def test_check_image_names_the_problem():
     ok = np.full((10, 20, 3), 30, np.uint8)
-    check_frame(ok, 20, 10)
+    check_image(ok, 20, 10)
     with pytest.raises(FrameError, match="truncated"):
-        check_frame(ok[:5], 20, 10)
+        check_image(ok[:5], 20, 10)
     with pytest.raises(FrameError, match="8-bit"):
-        check_frame(ok.astype(np.float32), 20, 10)
+        check_image(ok.astype(np.float32), 20, 10)
     with pytest.raises(FrameError, match="20x10"):
-        check_frame(ok[:, :15], 20, 10)
+        check_image(ok[:, :15], 20, 10)
 
 
 def test_bilinear_q8_samples_are_exact_on_a_ramp():

@@ -32,7 +32,7 @@ class AllPartError(FrameError):
     """The part fills the view: no ink, so no waterline."""
 
 
-def check_frame(frame, width: int, height: int, where="frame"):
+def check_image(frame, width: int, height: int, where="frame"):
     """Raise FrameError unless `frame` is an 8-bit gray/BGR(A) image of the camera size."""
     if not isinstance(frame, np.ndarray):
         raise FrameError(where, f"frame must be a numpy array, got {type(frame).__name__}")
@@ -117,8 +117,8 @@ def towards_ink(split: Split, fraction: float) -> Split:
     )
 
 
-def part_mask(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
-    """0/255 part mask: at or above the threshold, and below `glare_cut`.
+def threshold_part(smooth: np.ndarray, split: Split, glare_cut: int, out=None):
+    """0/255 binary image of the part: at or above the threshold, and below `glare_cut`.
 
     Specular glare on the liquid clips at the top of the range while a diffuse
     part does not; pixels at or above `glare_cut` (256 disables it) count as
@@ -198,6 +198,47 @@ def hue_split(sample_bgr: np.ndarray, main: int, split: Split, min_gap: float = 
             top = float(np.percentile(part_o, 99)) if part_o.size >= 16 else 0.0
             best = (gap, c, cut, SATURATED if top < SATURATED - 10 else 256)
     return Hue(best[1], best[2], best[3]) if best else None
+
+
+def not_glare(other: np.ndarray, main: np.ndarray, hue: Hue) -> np.ndarray:
+    """255 where (other - main) <= cut and other < clip: not the ink's blue, so neither ink
+    nor glare on it."""
+    ok = cv2.threshold(cv2.subtract(other, main), hue.cut, 255, cv2.THRESH_BINARY_INV)[1]
+    if hue.clip < 256:
+        cv2.bitwise_and(ok, cv2.threshold(other, hue.clip - 1, 255, cv2.THRESH_BINARY_INV)[1], ok)
+    return ok
+
+
+def glare_free(hist: np.ndarray, main: np.ndarray, not_glare_mask: np.ndarray) -> np.ndarray:
+    """The histogram as if every blue pixel (ink, with or without glare on it) were plain ink.
+
+    Big highlights on the ink would otherwise make a third class between ink
+    and part and drag Otsu's split. Blue pixels count at the ink level: the
+    lower quartile of their grey levels (glare only ever brightens).
+    """
+    ok = cv2.calcHist([main], [0], not_glare_mask, [256], [0, 256]).ravel()
+    blue = hist - ok
+    n = blue.sum()
+    if n > 0:
+        ink = int(np.searchsorted(np.cumsum(blue), 0.25 * n))
+        ok[ink] += n
+    return ok
+
+
+def check_split(split: Split, before: Split | None, min_contrast: float, where) -> None:
+    """Refuse a frame whose histogram has no ink/part split (all ink, all part, blank).
+    `before`: the split of the frames before, which tells all ink from all part."""
+    two_classes = (
+        split.separability >= 0.75 and split.contrast >= min_contrast and 1e-4 < split.part_fraction < 0.995
+    )
+    if two_classes:
+        return
+    mean = split.ink * (1 - split.part_fraction) + split.part * split.part_fraction
+    if not 0 < split.part_fraction < 1:
+        mean = split.part if split.part_fraction >= 1 else split.ink
+    if mean < (0.5 * (before.ink + before.part) if before else 100):
+        raise NoPartError(where, "all ink: no part above the liquid at this level")
+    raise AllPartError(where, "no ink in view: the part fills the frame (or the frame is blank/overexposed)")
 
 
 def histogram(img: np.ndarray) -> np.ndarray:
