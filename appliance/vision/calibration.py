@@ -121,7 +121,7 @@ def intrinsics(images, board: Board, names=None) -> Intrinsics:
         raise CalibrationError(
             "calibration", f"need at least 3 board images for intrinsics, got {len(images)}"
         )
-    size = None
+    size: tuple[int, int] | None = None
     img_pts, obj_pts = [], []
     for image, name in zip(images, names):
         s = (image.shape[1], image.shape[0])
@@ -137,6 +137,7 @@ def intrinsics(images, board: Board, names=None) -> Intrinsics:
         obj_pts.append(board_points(board).astype(np.float32))
     # k3 stays 0: with a handful of views it only buys overfitting at the
     # corners of the field, where the waterline of a big part lies
+    assert size is not None  # at least 3 images
     rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=cv2.CALIB_FIX_K3)
     return Intrinsics(K, dist.ravel()[:5], float(rms), size)
 

@@ -57,8 +57,8 @@ class IslandTracker:
         if hierarchy is None:
             return []
         hier = hierarchy.reshape(-1, 4)
-        keep = {}
-        loops = []
+        keep: dict[int, int] = {}
+        loops: list[Loop] = []
         for i, c in enumerate(contours):
             if hier[i, 3] >= 0 or len(c) < 8:
                 continue

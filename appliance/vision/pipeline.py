@@ -79,7 +79,7 @@ class WaterlineExtractor:
         # channel (sampled by the sub-pixel step) and the binary part mask
         self._smooth = np.zeros((self.height, self.width), np.uint8)
         self._binary = np.zeros((self.height, self.width), np.uint8)
-        self._bufs = {}
+        self._bufs: dict[str, np.ndarray] = {}
         self._decimated = None
         self.hue: Hue | None = None  # colour test against glare, learned on the first frame showing it
         self.reset()

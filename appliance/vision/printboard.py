@@ -124,9 +124,9 @@ def _chunk(kind: bytes, data: bytes) -> bytes:
 
 
 def board_png(board: Board, dpi: int = PNG_DPI) -> bytes:
-    ok, png = cv2.imencode(".png", board_image(board, dpi))
+    ok, encoded = cv2.imencode(".png", board_image(board, dpi))
     assert ok
-    png = png.tobytes()
+    png = encoded.tobytes()
     ppm = round(dpi / 0.0254)
     phys = _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))  # unit 1: pixels per metre
     ihdr_end = 8 + 8 + 13 + 4  # signature, IHDR length+type, data, CRC

@@ -43,7 +43,7 @@ def surfaced_faces(
     faces = []
     for i in range(1, n + 1):
         piece = labels == i
-        inscribed = 2.0 * ndimage.distance_transform_edt(np.pad(piece, 1)).max() * pixel_mm
+        inscribed = 2.0 * float(np.max(ndimage.distance_transform_edt(np.pad(piece, 1)))) * pixel_mm
         if inscribed >= min_width_mm:
             faces.append(piece)
     return faces
@@ -53,7 +53,7 @@ def face_bracket(face: np.ndarray, upper: float, lower: float, seen) -> tuple[fl
     """(lo, hi): the face's apparent height lies in (lo, hi], from the bracket's own frames
     (out at `lower`, under at `upper`) and the refinement frames `seen` [(level, mask)]."""
     lo, hi = lower, upper
-    area = max(np.count_nonzero(face), 1)
+    area = max(int(np.count_nonzero(face)), 1)
     for level, mask in seen:
         if not lower < level < upper:
             continue
