@@ -211,11 +211,22 @@ def load_scan(folder) -> Scan:
         raise ScanError(where, "missing (a scan folder needs scan.json)")
     if not _inside(folder, where):
         raise ScanError(where, "is a link to a file outside the scan folder")
-    size = where.stat().st_size
+    check_scan_json_size(where, where.stat().st_size)
+    return scan_from_json(folder, where.read_bytes(), where)
+
+
+def check_scan_json_size(where, size: int):
+    """Refuse a scan.json too big to be one before it is read (the web asks with a zip member's size)."""
     if size > MAX_SCAN_JSON_BYTES:
         raise ScanError(where, f"is {size} bytes; a scan.json is at most {MAX_SCAN_JSON_BYTES} bytes")
+
+
+def scan_from_json(folder, raw: bytes, where) -> Scan:
+    """A Scan of `folder` from scan.json's bytes, with every check load_scan makes (the web checks
+    an uploaded zip's scan.json with it before unpacking anything). `where` names it in errors."""
+    check_scan_json_size(where, len(raw))
     try:
-        doc = json.loads(where.read_text(encoding="utf-8"))
+        doc = json.loads(raw.decode("utf-8"))
     except RecursionError:
         raise ScanError(where, f"nests objects or lists deeper than {MAX_DEPTH} levels") from None
     except (UnicodeDecodeError, ValueError) as e:  # ValueError: JSON errors, a number of 5000 digits
@@ -241,7 +252,7 @@ def load_scan(folder) -> Scan:
     frames = [_frame(where, i, fr, top) for i, fr in enumerate(frames_doc)]
     _check_levels(where, frames)
     extra = {k: v for k, v in doc.items() if k not in ("format", "units", "camera", "frames")}
-    return Scan(folder, camera, frames, extra)
+    return Scan(Path(folder), camera, frames, extra)
 
 
 def _inside(folder: Path, path: Path) -> bool:
@@ -293,13 +304,16 @@ def check_frames(scan: Scan):
             raise ScanError(path, "is a link to a file outside the scan folder; frames must be inside it")
         if not stat.S_ISREG(st.st_mode):
             raise ScanError(path, "is not a plain file")
-        w, h, bits = image_header(path)
-        if (w, h) != (scan.camera.width, scan.camera.height):
-            raise ScanError(
-                path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}"
-            )
-        if bits != 8:
-            raise ScanError(path, f"frame must be 8-bit, it has {bits} bits per sample")
+        check_frame_header(path, image_header(path), scan.camera)
+
+
+def check_frame_header(where, header: tuple[int, int, int], camera: CameraModel):
+    """A frame's (width, height, bits) from its header, against the camera scan.json describes."""
+    w, h, bits = header
+    if (w, h) != (camera.width, camera.height):
+        raise ScanError(where, f"frame is {w}x{h}, scan.json says {camera.width}x{camera.height}")
+    if bits != 8:
+        raise ScanError(where, f"frame must be 8-bit, it has {bits} bits per sample")
 
 
 def read_frame(scan: Scan, ref: FrameRef) -> np.ndarray:

@@ -339,7 +339,8 @@ def test_scan_folder_import_on_the_daemon(web, tmp_path):
         assert sorted(p.name for p in jobs_dir.iterdir()) == sorted(j["id"] for j in svc.jobs())
         assert not uploads.exists() or list(uploads.iterdir()) == []
 
-    # refused by the daemon's own checks, after the web's zip checks passed
+    # refused by the scan format's checks (scanfile: the web makes them before unpacking, the
+    # daemon again on the unpacked folder), after the web's zip checks passed
     import cv2
     import numpy as np
 

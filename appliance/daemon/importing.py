@@ -24,7 +24,7 @@ import stat
 from pathlib import Path
 
 from ..errors import ScanError
-from ..scanfile import Scan, image_header, load_scan, read_image_header  # noqa: F401 (the web's)
+from ..scanfile import Scan, check_frame_header, image_header, load_scan
 
 MAX_FRAMES = 5000
 MAX_BYTES = 4 * 1024**3
@@ -55,13 +55,7 @@ def check(folder) -> Scan:
         total += st.st_size
         if total > MAX_BYTES:
             raise ScanError(folder, f"the frames add up to more than {MAX_BYTES} bytes")
-        w, h, bits = image_header(path)
-        if (w, h) != (scan.camera.width, scan.camera.height):
-            raise ScanError(
-                path, f"frame is {w}x{h}, scan.json says {scan.camera.width}x{scan.camera.height}"
-            )
-        if bits != 8:
-            raise ScanError(path, f"frame must be 8-bit, it has {bits} bits per sample")
+        check_frame_header(path, image_header(path), scan.camera)
     return scan
 
 

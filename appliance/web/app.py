@@ -45,7 +45,7 @@ from werkzeug.http import parse_cookie
 
 from ..daemon import firstrun
 from ..daemon.facade import Bench
-from . import api, auth, pages, system
+from . import account, api, auth, jobs, pages, system, uploads
 from .adapter import WebService
 from .eta import EtaSmoother
 from .report import picture_caption
@@ -86,10 +86,10 @@ def create_app(service: Bench, config: dict | None = None) -> Flask:
     web_dir = Path(cfg["data_dir"]) / "web"
 
     app = Flask(__name__)
-    app.request_class = api.UploadRequest
+    app.request_class = uploads.UploadRequest
     creds = auth.Credentials(web_dir)
     sessions = SessionStore(web_dir / "sessions.sqlite", float(cfg["session_hours"]) * 3600)
-    api.clean_incoming(cfg["data_dir"])  # left by a web that was killed mid-upload
+    uploads.clean_incoming(cfg["data_dir"])  # left by a web that was killed mid-upload
     first_password = creds.ensure_admin()
     if first_password is None and cfg.get("reset_password"):
         first_password = creds.reset_generated()
@@ -134,8 +134,8 @@ def create_app(service: Bench, config: dict | None = None) -> Flask:
         "started": time.time(),
     }
     app.register_blueprint(pages.bp)
-    app.register_blueprint(api.bp, url_prefix="/api")
-    app.register_blueprint(system.bp, url_prefix="/api")
+    for room in (api, jobs, uploads, account, system):
+        app.register_blueprint(room.bp, url_prefix="/api")
 
     @app.before_request
     def _gate():

@@ -14,7 +14,8 @@ from ..daemon.settings import schema_json
 from ..errors import InkSliceError
 from ..vision.printboard import PRINTED, describe
 from . import auth
-from .api import FILE_NAME, JOB_ID, download_name
+from .apicore import FILE_NAME, JOB_ID
+from .jobs import download_name
 from .system import system_info
 
 bp = Blueprint("pages", __name__)
