@@ -42,7 +42,7 @@ def test_a_real_install_names_the_host_inkslice_and_starts_avahi():
 
 def test_the_demo_can_listen_on_the_lan_and_says_where_a_phone_finds_it(tmp_path):
     from appliance.cli import build_parser
-    from appliance.web.demo import banner, start
+    from appliance.web.server import banner, start
 
     args = build_parser().parse_args(["demo", "--serve-only", "--host", "0.0.0.0"])
     assert args.host == "0.0.0.0"

@@ -22,8 +22,8 @@ from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 
 from appliance.hw.usb import UsbExporter  # noqa: E402
-from appliance.web.demo import start  # noqa: E402
 from appliance.web.fake import FakeBenchService  # noqa: E402
+from appliance.web.server import start  # noqa: E402
 
 ART = Path(__file__).parent / "artifacts" / "web"
 CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"

@@ -18,7 +18,7 @@ from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
 from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
-from appliance.web.demo import start  # noqa: E402
+from appliance.web.server import start  # noqa: E402
 
 # a short scan: the dashboard's Start takes the bench, the test stops it again
 SHORT_SCAN = {

@@ -12,8 +12,8 @@ from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select  # noqa: E402
 from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
 
-from appliance.web.demo import start  # noqa: E402
 from appliance.web.fake import FakeBenchService  # noqa: E402
+from appliance.web.server import start  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -76,7 +76,7 @@ def test_a_closed_live_stream_frees_its_slot_under_waitress(tmp_path):
     import http.client
 
     from appliance.web.auth import Credentials
-    from appliance.web.demo import start
+    from appliance.web.server import start
 
     svc = bench_service(tmp_path / "bench")
     run = start(svc, tmp_path / "data", config={"usb": None, "max_streams": 1})

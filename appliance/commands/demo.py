@@ -92,7 +92,7 @@ def serve_appliance(out: Path, part: str, port: int, host: str = "127.0.0.1"):
     from ..daemon.service import BenchService
     from ..sim import surfaces
     from ..sim.fakes import SimulatedBenchFactory, small_rig
-    from ..web.demo import serve
+    from ..web.server import serve
 
     surfaces.get(part)
     data = out / "appliance"

@@ -48,7 +48,7 @@ def add_arguments(p):
 
 def run(args):
     from ..daemon.main import data_dir
-    from ..web.demo import serve
+    from ..web.server import serve
 
     data = data_dir(args.data)
     import logging

@@ -3,7 +3,7 @@
     from appliance.web import create_app
     app = create_app(bench_service, {"data_dir": "/var/lib/inkslice"})
 
-See app.py for the config keys, demo.py for serving it with waitress.
+See app.py for the config keys, server.py for serving it with waitress.
 """
 
 

@@ -1,6 +1,7 @@
-"""Serve the web UI with waitress: what `inkslice serve` and `make demo` call.
+"""Serve the web UI with waitress: the production server (`inkslice serve`, which the
+inkslice-web unit runs) and what `make demo` calls.
 
-    from appliance.web.demo import serve
+    from appliance.web.server import serve
     serve(bench_service, data_dir="var/demo")          # blocks; Ctrl-C stops it
 
 prints the URL and, on first run, the admin password (also left for the
