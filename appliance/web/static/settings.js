@@ -44,11 +44,18 @@
     else if (!bar.classList.contains("saved")) say("All changes saved.", null);
   }
   fields.forEach((div) => { saved[div.dataset.key] = valueOf(div); });
-  // a group chip (or a link to #group-x) opens its group
+  // a link to #group-x (or to something inside a group, like #password) opens that group
   function openHash() {
-    const g = location.hash ? document.getElementById(location.hash.slice(1)) : null;
-    if (g && g.matches("details.group")) g.open = true;
+    const target = location.hash ? document.getElementById(location.hash.slice(1)) : null;
+    const g = target && target.closest("details.group");
+    if (g) { g.open = true; target.scrollIntoView(); }
   }
+  // "?" beside a setting shows what it does (and its range and default) under it
+  document.querySelectorAll("button.helpq").forEach((b) => b.addEventListener("click", () => {
+    const help = document.getElementById(b.getAttribute("aria-controls"));
+    help.hidden = !help.hidden;
+    b.setAttribute("aria-expanded", String(!help.hidden));
+  }));
   window.addEventListener("hashchange", openHash);
   openHash();
   const hook = document.getElementById("webhook-test");
