@@ -29,7 +29,7 @@ import pytest
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.needs("chromium", "axe-core")]
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.common.exceptions import WebDriverException  # noqa: E402
+from selenium.common.exceptions import TimeoutException, WebDriverException  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from test_web_browser import SIZES, chromium_options, wait  # noqa: E402
@@ -37,7 +37,7 @@ from test_web_real_service import light_processor  # noqa: E402
 
 from appliance.daemon.service import BenchService  # noqa: E402
 from appliance.sim.fakes import FakeBench  # noqa: E402
-from appliance.web.demo import start  # noqa: E402
+from appliance.web.server import start  # noqa: E402
 
 HERE = Path(__file__).parent
 ART = HERE / "artifacts" / "web"
@@ -155,6 +155,21 @@ def _playing(d):
     assert d.find_element(By.ID, "play").text == "Pause"
 
 
+def _done_shown(d, box):
+    """The bench page, opened after the job ended, says done; if not, the fault names what it showed."""
+
+    def shown():
+        return d.execute_script("const b = document.querySelector('#state'); return b ? b.innerText : null")
+
+    try:
+        wait(d, lambda: (shown() or "").lower() == "done", what="done shown")
+    except TimeoutException:
+        raise AssertionError(
+            f"the bench page at {d.current_url} shows {shown()!r}, the daemon says "
+            f"{state_of(box)!r}; browser log: {d.get_log('browser')}"
+        ) from None
+
+
 def _refused_setting(d, box):
     """A bad value typed and saved: the refusal shows beside its field, the save bar says so."""
     d.find_element(By.ID, "settings-form")
@@ -200,13 +215,7 @@ SCREENS = [
             wait(d, lambda: loaded_img(d, "#frame"), what="a camera frame"),
         ),
     ),
-    Screen(
-        "bench-done",
-        "/",
-        ready=lambda d, box: wait(
-            d, lambda: d.find_element(By.ID, "state").text.lower() == "done", what="done shown"
-        ),
-    ),
+    Screen("bench-done", "/", ready=_done_shown),
     Screen(
         "jobs", "/jobs", ready=lambda d, box: wait(d, lambda: loaded_img(d, "img.thumb"), what="thumbnails")
     ),

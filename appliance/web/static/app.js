@@ -214,6 +214,11 @@
       es.onopen = () => { if (fallback) { clearInterval(fallback); fallback = null; } };
       es.onerror = () => startPolling();
     } else startPolling();
+    // A safety net under the stream: the state read every 10 s, and at once when the tab is shown
+    // again, so a stream that stalls without an error (a phone that slept, a buffering proxy)
+    // cannot leave the page showing a scan that has ended.
+    setInterval(() => { if (!fallback && !document.hidden) poll(); }, 10000);
+    document.addEventListener("visibilitychange", () => { if (!document.hidden) poll(); });
     poll().then(preview); refreshFrame();
   }
 
