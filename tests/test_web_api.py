@@ -10,7 +10,6 @@ import zipfile
 
 import numpy as np
 import pytest
-from test_web_real_service import ChessboardBench
 from web_helpers import QUICK, login, make_app, wait_state
 
 from appliance.sim.surfaces import get as get_surface
@@ -150,10 +149,8 @@ def test_live_view_frame_and_heightmap_and_sse(client):
     assert st["state"] == "done" and "eta_display_s" in st
 
 
-def test_calibration_steps(tmp_path):
-    app, svc = make_app(tmp_path, factory=ChessboardBench("cone"))  # the printed board on the base
-    c = app.test_client()
-    c.environ_base["HTTP_X_CSRF_TOKEN"] = login(c, app.config["FIRST_RUN_PASSWORD"])
+def test_calibration_steps(client):
+    c, svc, app = client  # the simulated hand lays the printed board on the base when asked
     cal = c.get("/api/calibration").get_json()
     assert [s["id"] for s in cal["steps"]] == ["home", "target", "detect", "accept"] and cal["step"] == 0
     assert c.post("/api/calibration/detect").status_code == 400  # out of order
@@ -162,7 +159,6 @@ def test_calibration_steps(tmp_path):
     cal = c.post("/api/calibration/detect").get_json()
     assert cal["detected"]["corners"] == 9 * 6  # every inner corner of the board
     assert c.get("/api/frame.jpg").status_code == 200  # the preview
-    svc.close()
 
 
 def test_usb_export_switched_off_in_the_web_hides_the_sticks_and_refuses_a_copy(tmp_path):

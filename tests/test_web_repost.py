@@ -11,15 +11,15 @@ from polling import wait_until  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select  # noqa: E402
 from test_web_browser import ART, make_driver, shot, wait  # noqa: E402
+from web_helpers import bench_service, part_processor  # noqa: E402
 
-from appliance.web.fake import FakeBenchService  # noqa: E402
 from appliance.web.server import start  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def finished_job(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("repost")
-    svc = FakeBenchService(tmp / "bench", level_s=0.02, home_s=0.05, process_s=0.1, frame_px=120)
+    svc = bench_service(tmp / "bench", processor=part_processor)
     run = start(svc, tmp / "data")
     ART.mkdir(parents=True, exist_ok=True)
     job_id = svc.start_scan({})

@@ -19,16 +19,18 @@ CSRF_RE = re.compile(r'name="csrf-token" content="([^"]+)"')
 QUICK = {"levels_to_mm": 24.0, "levels_from_mm": 6.0, "level_step_mm": 2.0, "settle_s": 0.0}
 
 
-def light_processor(scan_folder, out_folder, options, stop=None):
+def light_processor(scan_folder, out_folder, options, stop=None, size=5):
     """Stands in for process_scan: the web's concern is the facade, not the science (the daemon's
     tests run the real pipeline), and the pipeline's cost must not set this test's pace.
-    It writes what process_scan writes, shaped the same way, from the real scan folder."""
+    It writes what process_scan writes, shaped the same way, from the real scan folder; the
+    height map is a pyramid on a `size` x `size` grid of 1 mm cells."""
     from appliance.atomicio import write_bytes, write_json, write_text
 
     frames = json.loads((Path(scan_folder) / "scan.json").read_text())["frames"]
     out = Path(out_folder)
+    top = size - 1
     rows = ["x,y,z"] + [
-        f"{x}.0000,{y}.0000,{min(x, y, 4 - x, 4 - y) * 1.5:.4f}" for x in range(5) for y in range(5)
+        f"{x}.0000,{y}.0000,{min(x, y, top - x, top - y) * 1.5:.4f}" for x in range(size) for y in range(size)
     ]
     write_text(out / "heightmap.csv", "\n".join(rows) + "\n")
     write_text(
@@ -45,10 +47,15 @@ def light_processor(scan_folder, out_folder, options, stop=None):
     }
 
 
-def bench_service(folder, settle_s=0.0, usb=None, factory=None):
+def part_processor(scan_folder, out_folder, options, stop=None):
+    """light_processor with a height map a cutter fits on (a 21 mm pyramid), for re-posting."""
+    return light_processor(scan_folder, out_folder, options, stop, size=21)
+
+
+def bench_service(folder, settle_s=0.0, usb=None, factory=None, processor=light_processor):
     """The real BenchService on the in-memory bench, its scans QUICK (`settle_s` per level)."""
     svc = BenchService(
-        Path(folder), factory or FakeBench("cone"), processor=light_processor, panel_interval_s=0.05, usb=usb
+        Path(folder), factory or FakeBench("cone"), processor=processor, panel_interval_s=0.05, usb=usb
     )
     svc.update_settings({**QUICK, "settle_s": settle_s})
     return svc
