@@ -18,6 +18,11 @@ only what the daemon itself put there (JOB_OWN: the scan; a processor may add to
 `keep`, as the simulated bench does for its truth file),
 so no output of an earlier run is left beside the new ones. A job ends `done`
 only with its finishing program (`checked_outputs`); otherwise `failed`.
+
+Words: "processing" is this step, a scan folder to a job's outputs. Its work is
+`inkslice process`'s (appliance/process.py); a "process" here is the operating
+system's: the daemon's own (`in_process`) or a child (`child_process`, whose main
+is processing_child.py).
 """
 
 from __future__ import annotations
@@ -104,9 +109,9 @@ def child_process(
     options,
     stop=None,
     poll_s: float = 0.2,
-    module: str = "appliance.daemon.process_child",
+    module: str = "appliance.daemon.processing_child",
 ) -> dict:
-    """`module`: the child's main (process_child.py, or one that adds to it with the same protocol)."""
+    """`module`: the child's main (processing_child.py, or one that adds to it with the same protocol)."""
     cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(

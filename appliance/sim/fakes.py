@@ -262,7 +262,7 @@ class _KnownPart:
             options = {**options, "keep": [*options.get("keep", ()), truth_path(scan_folder).name]}
             if inner is child_process:
                 return child_process(
-                    scan_folder, out_folder, options, stop, module="appliance.sim.process_child"
+                    scan_folder, out_folder, options, stop, module="appliance.sim.processing_child"
                 )
             from ..process import process_scan
 

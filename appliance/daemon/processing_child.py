@@ -1,4 +1,4 @@
-"""python -m appliance.daemon.process_child SCAN OUT OPTIONS_JSON (see processing.py)."""
+"""python -m appliance.daemon.processing_child SCAN OUT OPTIONS_JSON (see processing.py)."""
 
 import errno
 import json
