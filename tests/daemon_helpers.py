@@ -35,7 +35,7 @@ def wait_final(svc, job_id, timeout=60.0):
         job = svc.job(job_id)
         return job if job["status"] in FINAL and svc.state()["state"] in FINAL else None
 
-    return wait_until(finished, timeout, what=f"job {job_id} to finish")
+    return wait_until(finished, timeout, what=lambda: f"job {job_id} to finish: {svc.job(job_id)}")
 
 
 def read_heightmap(path):

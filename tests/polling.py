@@ -3,8 +3,8 @@
 A test never sleeps a fixed time and hopes: it asks `wait_until` to call a condition
 every few hundredths of a second until it gives a truthy value, and gets that value back
 (the job that finished, the lines on the display, ...). If the time runs out the test
-fails with what it was waiting for and the condition's last value, so the failure says
-how far things got.
+fails with what it was waiting for and the condition's last value; `what` may be a function,
+called then, so the failure can say how far things got (the job's record, the display).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ T = TypeVar("T")
 def wait_until(
     condition: Callable[[], T],
     timeout: float = 10.0,
-    what: str = "the condition",
+    what: str | Callable[[], str] = "the condition",
     every: float = 0.02,
     ignoring: type[BaseException] | tuple[type[BaseException], ...] = (),
 ) -> T:
@@ -36,5 +36,6 @@ def wait_until(
             if last:
                 return last
         if time.monotonic() >= end:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what} (last: {last!r})")
+            said = what() if callable(what) else what
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {said} (last: {last!r})")
         time.sleep(every)

@@ -74,7 +74,9 @@ def wait_job(client, job_id, timeout=60):
         job = client.job(job_id)
         return job if job["status"] in FINAL and client.state()["state"] == job["status"] else None
 
-    return wait_until(finished, timeout, what=f"job {job_id} to finish", every=0.05)
+    return wait_until(
+        finished, timeout, what=lambda: f"job {job_id} to finish: {client.job(job_id)}", every=0.05
+    )
 
 
 @pytest.fixture(scope="module")

@@ -16,10 +16,11 @@ from appliance.web import create_app
 
 def wait_lines(display, pred, timeout=5.0):
     """The display's lines once `pred` holds for them."""
-    try:
-        return wait_until(lambda: display.lines if display.lines and pred(display.lines) else None, timeout)
-    except AssertionError:
-        raise AssertionError(f"the display shows {display.lines}") from None
+    return wait_until(
+        lambda: display.lines if display.lines and pred(display.lines) else None,
+        timeout,
+        what=lambda: f"other lines on the display than {display.lines}",
+    )
 
 
 def test_first_run_password_is_shown_on_the_bench_until_the_first_login(tmp_path):

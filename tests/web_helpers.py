@@ -102,4 +102,4 @@ def wait_job(svc, job_id, timeout=20.0):
         job = svc.job(job_id)
         return job if job["status"] in ("done", "failed", "cancelled") else None
 
-    return wait_until(ended, timeout, what=f"job {job_id} to end")
+    return wait_until(ended, timeout, what=lambda: f"job {job_id} to end: {svc.job(job_id)}")
