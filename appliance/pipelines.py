@@ -62,7 +62,7 @@ class Job:
 def label(key: str) -> str:
     pipeline, method = key.split(":")
     if pipeline == "seed":
-        return f"{LABELS[method]} (dissertation)"
+        return f"{LABELS[method]} (seed)"
     return LABELS[method] if method == "fit" else f"{LABELS[method]} (our waterlines)"
 
 
@@ -70,7 +70,7 @@ def _frames_top_down(scan):
     return sorted(scan.frames, key=lambda f: -f.level_mm)
 
 
-# -- the dissertation's pipeline ---------------------------------------------------
+# -- the seed method ----------------------------------------------------------------
 
 
 def _part_outline_mm(lowest, camera):
@@ -91,8 +91,8 @@ def _part_outline_mm(lowest, camera):
 
 
 def run_seed(scan, grid_n=50):
-    """All dissertation methods on one scan -> {"seed:method": HeightMap}."""
-    progress.stage("the dissertation's pipeline")
+    """The seed method with each of its surface methods on one scan -> {"seed:method": HeightMap}."""
+    progress.stage("the seed method")
     slices = [
         seed_vision.seed_slice(read_frame(scan, ref), ref.level_mm, scan.camera)
         for ref in _frames_top_down(scan)

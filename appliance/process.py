@@ -89,7 +89,7 @@ def process(
     job = Job(scan_folder, pipeline, method, {}, truth=surface.name if surface else None, reference=surface)
     from .calibration_used import describe
 
-    ours = pipeline == "inkslice" or compare  # the dissertation's pipeline corrects neither
+    ours = pipeline == "inkslice" or compare  # the seed method corrects neither
     if ours:
         meniscus_model(scan, meniscus)  # a bad model fails now, not after the vision
     job.calibration = describe(scan, displacement and ours, meniscus if ours else False)

@@ -14,7 +14,7 @@ def report_markdown(job: Job) -> str:
     what = (
         "InkSlice (sub-pixel waterlines, regularised fit)"
         if job.pipeline == "inkslice"
-        else "the dissertation's (Canny edge pixels, 50 x 50 grid)"
+        else "the seed method's (Canny edge pixels, 50 x 50 grid)"
     )
     lines = [
         f"# InkSlice report: {job.scan_folder.name}",
@@ -129,6 +129,6 @@ def uncertainty_markdown(job: Job, most=8) -> list[str]:
 
 
 def png_name(key):
-    """error_lsq3.png for the dissertation's methods (its figures 5-1..5-16), error_inkslice_fit.png for ours."""
+    """error_lsq3.png for the seed method (the dissertation's figures 5-1..5-16), error_inkslice_fit.png for ours."""
     pipeline, method = key.split(":")
     return f"error_{method}.png" if pipeline == "seed" else f"error_{pipeline}_{method}.png"

@@ -2,7 +2,7 @@
 
 For samples 1-4: render a scan (2048 x 1536, the levels the dissertation
 took: from the first frame showing the top down to the top's lowest point),
-then on the same frames run the dissertation's pipeline with each of its
+then on the same frames run the seed method with each of its
 surface methods and ours, and print Ea / sigma / Ep (table form) / degree of
 matching beside the dissertation's printed numbers.
 

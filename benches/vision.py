@@ -8,9 +8,9 @@ Speed (one thread, cv2.setNumThreads(1), medians of repeats, all in this run):
     frame k-1's waterline is read, plus a 1-in-8 lattice over the rest that
     catches new islands; a waterline that leaves the band makes a full read),
   - ours over a short scan (levels stepping down), with how many frames were read in full,
-  - the dissertation's pipeline the float way (float64 as MATLAB would:
+  - the seed method's pipeline the float way (float64 as MATLAB would:
     rgb2gray, 3x3 median, Otsu, Canny - scikit-image/scipy, extra `bench`),
-  - the dissertation's pipeline in OpenCV (appliance/vision/seed.py), for reference,
+  - the seed method's pipeline in OpenCV (appliance/vision/seed.py), for reference,
   - a memcpy of the 9.4 MB frame.
 Peak memory: tracemalloc's peak of Python/numpy/OpenCV-returned allocations in one call.
 
@@ -191,14 +191,14 @@ def speed(rig, quick):
         f"  {f'ours over a {len(levels)}-frame scan, {step:.2f} mm steps':44s} "
         f"{np.median(scan_ts[1:]) * 1e3:8.2f} {'':8s}   median of frames 2..; {full_reads} fell back to a full read"
     )
-    print(f"  {'dissertation pipeline, OpenCV (seed.py)':44s} {wall['seed']:8.2f} {cpu['seed']:8.2f}")
+    print(f"  {'seed method, OpenCV (seed.py)':44s} {wall['seed']:8.2f} {cpu['seed']:8.2f}")
     # The float pipeline runs in its own interleaved rounds (5 x 1-3 s); its 227 MB
     # also evicts our buffers, so the steady state measured beside it is cache-cold.
     # Its ratio to ours goes through the memcpy measured in both sets (load-normalised).
     ratio_c = fc["float"] / fc["memcpy"] * cpu["memcpy"] / cpu["steady"]
     ratio_w = fw["float"] / fw["memcpy"] * wall["memcpy"] / wall["steady"]
     print(
-        f"  {'dissertation pipeline, float64 MATLAB-style':44s} {fw['float']:8.1f} {fc['float']:8.1f}   "
+        f"  {'seed method, float64 MATLAB-style':44s} {fw['float']:8.1f} {fc['float']:8.1f}   "
         f"{ratio_c:5.0f}x ours steady ({ratio_w:.0f}x), {ratio_c * cpu['steady'] / cpu['first']:.0f}x ours first "
         f"({ratio_w * wall['steady'] / wall['first']:.0f}x)"
     )

@@ -10,7 +10,7 @@ from appliance.sim.fakes import FakeBench
 FINAL = ("done", "failed", "cancelled")
 # the cone: a wall 3 mm high, then a 30-degree slope up to 23.2 mm; the first level is
 # above its tip (a first frame showing the part makes the scan start higher, see levels.py)
-# The dissertation's pipeline: our finishing toolpath takes minutes on a busy 2-core box,
+# The seed method: our finishing toolpath takes minutes on a busy 2-core box,
 # and these tests are about the daemon, not the CAM.
 SCAN = {
     "name": "cone",

@@ -16,7 +16,7 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim.fakes import FakeBench
 
 TRUE_LEVEL_ZERO = 57.3  # the bench's truth; the daemon's setting starts at 60
-# a short scan of the cone with the dissertation's (fast) pipeline: these tests are about what
+# a short scan of the cone with the seed method (fast): these tests are about what
 # goes into scan.json and the report, not the science. It starts above the cone's tip (23.2 mm,
 # with the ink 2.7 mm below the setting's level): a first frame showing the part would make the
 # scan start higher (daemon/levels.py)
@@ -116,7 +116,7 @@ def test_the_scan_carries_the_calibration_in_force(commissioned):
         assert used[sid]["date"] == step(c, sid)["date"], sid
     report = json.loads(svc.job_file(job["id"], "report.json").read_text())
     assert report["calibration"]["warnings"] == []
-    # the dissertation's pipeline (these tests' choice for speed) corrects neither effect
+    # the seed method (these tests' choice for speed) corrects neither effect
     assert "switched off" in report["calibration"]["used"]["tank"]
     md = svc.job_file(job["id"], "report.md").read_text()
     assert "## Calibration" in md and "commissioned camera (measured, " in md

@@ -595,7 +595,7 @@ def test_hostile_input_is_one_line_and_keeps_the_outputs(case, work, capsys):
 def test_a_full_disk_while_writing_the_outputs_is_one_line_and_keeps_the_old_set(work):
     # issue 19: a full disk left 2 of 6 outputs new and 4 old, after a traceback. The real
     # `inkslice` in a child whose files may not grow past 20 kB (RLIMIT_FSIZE: a disk that
-    # fills during the writing); the dissertation's pipeline, to be quick
+    # fills during the writing); the seed method, to be quick
     import resource
     import signal
     import subprocess

@@ -180,7 +180,7 @@ def test_the_report_shows_plain_names_with_units_and_an_explanation_on_tap():
     )
     assert [g["title"] for g in groups] == [
         "InkSlice regularised fit",
-        "Least squares, degree 3 (dissertation)",
+        "Least squares, degree 3 (seed)",
     ]
     rows = {r["key"]: r for r in groups[0]["rows"]}
     assert [r["name"] for r in groups[0]["rows"]][:2] == ["Mean error", "Largest error"]
@@ -213,6 +213,6 @@ def test_the_job_pictures_say_what_they_show():
         picture_caption("error_inkslice_fit.png")
         == "Where InkSlice regularised fit differs from the true part (error in mm, scale on the right)"
     )
-    assert "Least squares, degree 3 (dissertation)" in picture_caption("error_lsq3.png")
+    assert "Least squares, degree 3 (seed)" in picture_caption("error_lsq3.png")
     assert picture_caption("uncertainty.png").startswith("How sure each cell")
     assert picture_caption("error.png") == "error.png"  # a picture we do not know keeps its name

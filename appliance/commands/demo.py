@@ -140,7 +140,7 @@ def run(args):
     render_scan(surface, scan_dir, levels=levels, effects=args.effects, seed=1, workers=2)
     t1 = time.perf_counter()
     print(
-        f"  rendered in {t1 - t0:.1f} s. Processing with ours and with the dissertation's pipeline ...",
+        f"  rendered in {t1 - t0:.1f} s. Processing with ours and with the seed method ...",
         flush=True,
     )
     job = proc.process(scan_dir, compare=True, truth=surface)

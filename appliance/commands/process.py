@@ -18,7 +18,7 @@ def add_arguments(p):
         "--pipeline",
         default="inkslice",
         choices=PIPELINES,
-        help="inkslice (ours, default) or seed (the dissertation's Canny pipeline)",
+        help="inkslice (ours, default) or seed (the seed method: the 2013 dissertation's Canny pipeline)",
     )
     p.add_argument(
         "--method",
@@ -31,7 +31,7 @@ def add_arguments(p):
     p.add_argument(
         "--compare",
         action="store_true",
-        help="also run the dissertation's methods on the same frames, for the report",
+        help="also run the other pipeline's methods on the same frames, for the report",
     )
     p.add_argument(
         "--truth",

@@ -203,8 +203,8 @@ SCHEMA = (
         "scanning",
         "Processing",
         choices=pipelines,
-        help="Which processing a finished scan gets: empty for ours, `seed` for the dissertation's "
-        "(faster, much less accurate).",
+        help="Which processing a finished scan gets: empty for ours, `seed` for the seed method, the "
+        "dissertation's (faster, much less accurate).",
     ),
     Setting(
         "method",
@@ -214,7 +214,7 @@ SCHEMA = (
         "Surface method",
         choices=surface_methods,
         help="The surface method: empty for the pipeline's own (`fit` for ours, `lsq3` for the "
-        "dissertation's), or another one to compare (the dissertation's methods run on our waterlines).",
+        "seed method), or another one to compare (the seed method's surface methods run on our waterlines).",
     ),
     Setting(
         "grid",

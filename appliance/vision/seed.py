@@ -1,4 +1,4 @@
-"""The dissertation's image pipeline (figure 4-21), kept as the baseline.
+"""The seed method's image pipeline (the dissertation's figure 4-21): our baseline.
 
 read image -> grayscale -> 3x3 median -> threshold -> binary -> Canny edges
 -> (x, y) of every edge pixel -> a slice at the frame's level.
