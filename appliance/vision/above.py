@@ -11,7 +11,6 @@ The extractor is copied for this and left as it was.
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -19,14 +18,12 @@ import numpy as np
 from .frames import NoPartError, check_image
 from .types import Waterline
 
-if TYPE_CHECKING:
-    from .pipeline import WaterlineExtractor
 
-
-def read_above(extractor: WaterlineExtractor, above, below=()) -> list[Waterline]:
+def read_above(extractor, above, below=()) -> list[Waterline]:
     """The waterlines of the frames `above` that show the part's top, nearest first.
 
-    `extractor` has just read the first frame showing the part. above: (level_mm, frame)
+    `extractor` (a pipeline.WaterlineExtractor: not imported, pipeline imports this) has
+    just read the first frame showing the part. above: (level_mm, frame)
     pairs going up, nearest first; below: the frames below the one above them all,
     (level_mm, frame), nearest first, that first frame included."""
     if extractor.split is None or not extractor.islands.islands:
