@@ -176,8 +176,8 @@ def meniscus_model(scan, meniscus):
 def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
     from .surface.base import stand_on_base
+    from .surface.perspective import Perspective
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
-    from .surface.slices import Perspective
 
     waterlines = extract_waterlines(scan)
     bounds = _waterline_bounds(waterlines)

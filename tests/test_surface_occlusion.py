@@ -2,7 +2,7 @@
 
 The camera sees the rim of such a face (its silhouette), which moves outward frame after
 frame as the ink drops. Read as a waterline it claims the part stands where there is ink.
-These tests pin the rule that tells a silhouette from a waterline (slices.silhouettes),
+These tests pin the rule that tells a silhouette from a waterline (silhouettes.silhouettes),
 and that the bench's two occluding parts render and reconstruct."""
 
 import numpy as np
@@ -11,15 +11,12 @@ from scipy.spatial import ConvexHull
 
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
-from appliance.surface.gridfit import Lattice, first_exposure, flat_faces, tilt_crossed_faces
-from appliance.surface.slices import (
-    Perspective,
-    check_waterlines,
-    make_slice,
-    mark_silhouettes,
-    mark_walls,
-    silhouettes,
-)
+from appliance.surface.exposure import first_exposure
+from appliance.surface.flatfaces import flat_faces, tilt_crossed_faces
+from appliance.surface.lattice import Lattice
+from appliance.surface.perspective import Perspective, mark_walls
+from appliance.surface.silhouettes import mark_silhouettes, silhouettes
+from appliance.surface.slices import check_waterlines, make_slice
 from appliance.vision.types import Waterline
 
 CAMERA = Perspective((0.0, 0.0), 300.0)

@@ -131,7 +131,7 @@ def test_emerged_volume_counts_the_strip_between_the_outline_and_the_nodes():
     each node by its cell's share inside the outline gives the true levels back."""
     from appliance.sim import physics
     from appliance.surface.displacement import levels_from_surface
-    from appliance.surface.gridfit import Lattice, area_weights
+    from appliance.surface.lattice import Lattice, area_weights
     from appliance.surface.slices import make_slice
 
     part = surfaces.get("sample1")
@@ -178,8 +178,8 @@ def test_top_from_the_apparent_surface_is_the_top(top, extent):
     """Exact apparent surfaces give back the top. On sample 4's saddle plain Gauss-Newton
     (the meniscus switched on at once) grows a 2.6 mm bump in the flat corner, and the
     old iteration (the rise from the fit's slope, refitted) ran away there."""
-    from appliance.surface.gridfit import Lattice
-    from appliance.surface.meniscus import top_from_apparent
+    from appliance.surface.contact_lines import top_from_apparent
+    from appliance.surface.lattice import Lattice
 
     model = MeniscusModel(2.7, 0.0)
     x = np.linspace(*extent, 61)
@@ -202,8 +202,8 @@ def test_the_apparent_surface_at_the_rim_is_not_trusted():
     """A plane rising at 0.7 to a wall at x = 0. The fit's outline nodes come from the
     wall's waterline, a level step wide: here 1 mm off. The top inside must not follow them
     (the equation carries an error at a rim the top rises to inwards, over ~l_c)."""
-    from appliance.surface.gridfit import Lattice
-    from appliance.surface.meniscus import top_from_apparent
+    from appliance.surface.contact_lines import top_from_apparent
+    from appliance.surface.lattice import Lattice
 
     model = MeniscusModel(2.7, 0.0)
     x = np.linspace(0.0, 20.0, 41)
@@ -216,7 +216,7 @@ def test_the_apparent_surface_at_the_rim_is_not_trusted():
 def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it():
     """A node first out at 36 mm under a meniscus may stand up to the largest rise above
     the levels that still covered it (sample 4's 39 mm summit rim was clamped to 36)."""
-    from appliance.surface.reconstruct import _bracket
+    from appliance.surface.fitpass import bracket
     from appliance.surface.slices import check_waterlines
     from appliance.vision.types import Waterline
 
@@ -230,8 +230,8 @@ def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it
     first = np.array([4, 4])  # both came out in the 36 mm frame
     rise = MeniscusModel(2.7, 0.0).rise(np.linspace(0.0, np.pi / 2, 91)).max()
     # no meniscus: under at 37, two levels of slack (BRACKET_SLACK_LEVELS) -> at most 39
-    assert list(_bracket(z, first, slices)) == [39.0, 36.5]
-    assert list(_bracket(z, first, slices, rise)) == [39.5, 36.5]
+    assert list(bracket(z, first, slices)) == [39.0, 36.5]
+    assert list(bracket(z, first, slices, rise)) == [39.5, 36.5]
 
 
 SECOND = dict(capillary_length_mm=2.3, contact_angle_rad=np.radians(35.0))
@@ -311,7 +311,7 @@ def test_a_flat_face_under_a_depression_is_placed_in_the_middle_of_its_bracket(p
 
 def test_the_first_ink_wets_flat_faces_and_keeps_its_correction():
     """The first ink commissions to ~0 deg: no depression, nothing placed or re-marked."""
-    from appliance.surface.meniscus import depression_depth
+    from appliance.surface.dewetted import depression_depth
 
     assert depression_depth(MeniscusModel(2.704, np.radians(0.04))) == 0.0
     assert abs(depression_depth(MeniscusModel(**SECOND)) - 1.383) < 0.001

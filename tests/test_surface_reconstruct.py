@@ -9,8 +9,9 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
+from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
-from appliance.surface.slices import Perspective, check_waterlines, mark_walls
+from appliance.surface.slices import check_waterlines
 from appliance.surface.stl import heightmap_to_stl
 from appliance.vision.types import Waterline
 
@@ -153,7 +154,7 @@ def test_walls_seen_by_their_raised_edges_are_put_back():
 def _wedge_put_back(glitch):
     """The wedge 60 mm off the camera's foot seen at 15, 14 .. 5 mm, `glitch(seen)` done to
     its waterlines, then walls found and put back."""
-    from appliance.surface.slices import unproject_rims
+    from appliance.surface.perspective import unproject_rims
 
     camera = Perspective((-20.0, 45.0), 300.0)
     levels = [15.0, 14.0, 13.0, 12.0, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
@@ -223,7 +224,7 @@ def test_the_outline_where_the_lowest_frame_lost_part_of_the_part():
     """The lowest frames can see less of the part than the ones above: sample 2's far
     wall leaves the camera's view and that stretch of their loop is a chord. The outline
     (bounds and footprint area) comes from every frame's walls, not the lowest alone."""
-    from appliance.surface.gridfit import Lattice, area_weights
+    from appliance.surface.lattice import Lattice, area_weights
     from appliance.surface.slices import make_slice, outline_bounds
 
     lines = ideal_waterlines(WEDGE, [15.0, 13.5, 12.5, 11.5, 10.5, 9.0, 7.0, 5.0], 0.1)
@@ -249,8 +250,8 @@ def test_the_rim_height_is_the_surface_continued_from_inside():
     """The fit's nodes at its outline are its least sure; a rim read from them fed a loop
     (a low rim puts the edge further out, the outline grows, lower nodes come in). Read
     from two nodes in and continued, a plane with its outer nodes 2 mm low is exact."""
-    from appliance.surface.gridfit import Lattice
-    from appliance.surface.reconstruct import _rim_height
+    from appliance.surface.corrections import rim_height
+    from appliance.surface.lattice import Lattice
 
     lat = Lattice(np.linspace(0, 10, 51), np.linspace(0, 8, 41))
     X, Y = np.meshgrid(lat.x, lat.y)
@@ -259,7 +260,7 @@ def test_the_rim_height_is_the_surface_continued_from_inside():
     z[[0, -1], :] -= 2.0
     z[:, [0, -1]] -= 2.0
     edge = np.array([[10.0, 4.0], [5.0, 8.0], [0.0, 0.0], [10.05, 3.0], [5.0, 4.0]])
-    got = _rim_height(lat, z)(edge)
+    got = rim_height(lat, z)(edge)
     assert got == pytest.approx(20 + 0.5 * edge[:, 0] - 0.25 * edge[:, 1], abs=1e-9)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SettingError
-from .gridfit import fill_nearest
+from .lattice import fill_nearest
 
 
 def emerged_volumes(levels, areas, gap_above=None):
@@ -86,7 +86,7 @@ def levels_from_surface(nominal, z, cell_area_mm2, tank_area_mm2, iterations=100
     meniscus: the contact line encloses the level curve L + h, not L), so once a
     fit exists its volume is the better measure.
 
-    `weights`: each node's share of its cell on the part (gridfit.area_weights from the
+    `weights`: each node's share of its cell on the part (lattice.area_weights from the
     outline); nodes just off the fit then take their nearest fitted height. Without them
     the trapezoid rule over the nodes on the part."""
     z = np.asarray(z, float)

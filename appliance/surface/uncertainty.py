@@ -48,6 +48,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from .lattice import Lattice, bilinear, fill_nearest
+from .slices import polyline_distance
+
 # the sources, in the order of their codes (HeightMap.source holds the codes)
 SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled")
 SEEN, INTERPOLATED, EXTRAPOLATED, OCCLUDED, WALL, CLAMPED, FILLED = range(len(SOURCES))
@@ -67,7 +70,7 @@ def source_code(name: str) -> int:
 class CellEvidence:
     """What the lattice fit knows per node, the inputs of `node_uncertainty`."""
 
-    lat: object  # gridfit.Lattice
+    lat: Lattice
     z: np.ndarray  # the fitted heights (NaN off the part)
     z_fe: np.ndarray  # first-exposure heights (NaN where the fit filled in)
     first: np.ndarray  # index of the level where each node came out of the ink
@@ -95,7 +98,6 @@ def _frames_disagree(ev: CellEvidence, lv):
     spacing of the lower frame's waterline is on its edge, where the raster's side is not
     sure: that is no contradiction, nor is a node that never comes out again (the lowest
     frames can lose the part's edge from their view)."""
-    from .slices import polyline_distance
 
     K = len(ev.slices)
     lat = ev.lat
@@ -154,7 +156,6 @@ def _inradius(region, d, floor):
 
 def _fit_residual(ev: CellEvidence, pts, zp):
     """Local RMS of the fit's misfit at the waterline points around each node."""
-    from .gridfit import bilinear
 
     lat = ev.lat
     if len(pts) == 0:
@@ -176,24 +177,23 @@ def _fit_residual(ev: CellEvidence, pts, zp):
 def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
     """-> (source codes, uncertainty in mm) on the lattice, NO_SOURCE / NaN off the part.
     `explain`, a dict, receives each term's field (for benches and the curious)."""
-    from .gridfit import fill_nearest
 
     lat = ev.lat
     h = min(lat.hx, lat.hy)
     lv, step = _levels_and_steps(ev.slices)
     K = len(ev.slices)
     top = next(k for k, s in enumerate(ev.slices) if not s.empty)
-    curve_pts, curve_z, wall_pts = [], [], []
+    on_curve, on_curve_z, on_wall = [], [], []
     for s in ev.slices:
         if s.empty:
             continue
         wall = s.wall if s.wall is not None else np.zeros(len(s.P), bool)
-        curve_pts.append(s.P[~wall])
-        curve_z.append(s.z[~wall])
-        wall_pts.append(s.P[wall])
-    curve_pts = np.vstack(curve_pts) if curve_pts else np.zeros((0, 2))
-    curve_z = np.concatenate(curve_z) if curve_z else np.zeros(0)
-    wall_pts = np.vstack(wall_pts) if wall_pts else np.zeros((0, 2))
+        on_curve.append(s.P[~wall])
+        on_curve_z.append(s.z[~wall])
+        on_wall.append(s.P[wall])
+    curve_pts = np.vstack(on_curve) if on_curve else np.zeros((0, 2))
+    curve_z = np.concatenate(on_curve_z) if on_curve_z else np.zeros(0)
+    wall_pts = np.vstack(on_wall) if on_wall else np.zeros((0, 2))
     d_seen = _nearest_distance(curve_pts, lat)
     d_wall = _nearest_distance(wall_pts, lat)
 
@@ -286,7 +286,6 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
 def to_output(lat, src, u, r, xo, yo):
     """Lattice fields on the output grid: the nearest node's source, the uncertainty
     bilinear (and never below the nearest node's: a wall node must not be averaged away)."""
-    from .gridfit import fill_nearest
 
     if r is not None:
         return src[::r, ::r].copy(), u[::r, ::r].copy()

@@ -1,0 +1,97 @@
+"""The lattice the surface is fitted on, and what is read and written on it.
+
+A Lattice is a regular grid of nodes (x columns, y rows, mm). exposed_mask says which nodes
+a frame showed out of the ink (inside its waterline, holes left out); area_weights each
+node's share of the part's footprint; bilinear and fill_nearest read and pad lattice
+fields.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from .slices import Slice, polyline_distance
+
+_SHIFT = 8  # fillPoly sub-pixel bits
+
+
+@dataclass
+class Lattice:
+    x: np.ndarray
+    y: np.ndarray
+
+    @property
+    def hx(self):
+        return float(self.x[1] - self.x[0])
+
+    @property
+    def hy(self):
+        return float(self.y[1] - self.y[0])
+
+    @property
+    def shape(self):
+        return (self.y.size, self.x.size)
+
+    def to_index(self, pts):
+        return (pts[:, 0] - self.x[0]) / self.hx, (pts[:, 1] - self.y[0]) / self.hy
+
+
+def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarray:
+    """Nodes inside the slice's waterline (even-odd over its loops: holes stay out)."""
+    m = np.zeros(lat.shape, np.uint8)
+    if sl.empty:
+        return m.astype(bool)
+    polys = []
+    for lp in sl.loops:
+        fi, fj = lat.to_index(lp)
+        polys.append(np.round(np.column_stack([fi, fj]) * (1 << _SHIFT)).astype(np.int32))
+    cv2.fillPoly(m, polys, 1, lineType=cv2.LINE_8, shift=_SHIFT)
+    # fillPoly also paints the pixels the outline passes through: within a node or two of
+    # the waterline the exact side of the nearest segment decides instead
+    near = np.zeros(lat.shape, np.uint8)
+    cv2.polylines(near, polys, True, 1, thickness=3, lineType=cv2.LINE_8, shift=_SHIFT)
+    jj, ii = np.nonzero(near)
+    if jj.size and exact_edges:
+        sd, _ = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
+        m[jj, ii] = sd > 0
+    return m.astype(bool)
+
+
+def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
+    """Each node's share of the part's footprint: the fraction of its cell (the node +-
+    half a spacing) inside any of the slices' waterlines, from sub x sub samples per cell.
+
+    The nodes inside a waterline undercount its area by a strip of about half a spacing
+    all round (2.5 % of a 100 mm block on a 1 mm lattice); an emerged volume summed over
+    them alone put the ink 0.13 mm off its true level. The footprint is the union of
+    every frame's exposed region, not the lowest frame's alone: where the part has left
+    the view in the lowest frames their loop cuts a chord across it (sample 2: 73 mm^2
+    short, the lowest levels 0.15 mm high)."""
+    off = (np.arange(sub) + 0.5) / sub - 0.5
+    fine = Lattice(
+        np.ravel(lat.x[:, None] + lat.hx * off[None, :]), np.ravel(lat.y[:, None] + lat.hy * off[None, :])
+    )
+    inside = np.zeros(fine.shape, bool)
+    for sl in slices:
+        if not sl.empty:
+            inside |= exposed_mask(fine, sl, exact_edges=True)
+    return inside.reshape(lat.y.size, sub, lat.x.size, sub).mean(axis=(1, 3))
+
+
+def fill_nearest(z):
+    """z with its gaps (NaN) filled by the nearest value (all-NaN: zeros)."""
+    nan = ~np.isfinite(z)
+    if not nan.any() or nan.all():
+        return np.where(nan, 0.0, z)
+    _, (jj, ii) = ndimage.distance_transform_edt(nan, return_indices=True)
+    return z[jj, ii]
+
+
+def bilinear(lat: Lattice, zgrid, pts):
+    """Bilinear interpolation of a lattice field at points (NaN outside)."""
+    fi, fj = lat.to_index(pts)
+    return ndimage.map_coordinates(zgrid, [fj, fi], order=1, mode="constant", cval=np.nan)

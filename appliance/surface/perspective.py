@@ -1,0 +1,264 @@
+"""Walls as the camera sees them, and their edges put back where the walls are.
+
+A vertical wall facing away from the camera is hidden by its own top edge, and that edge
+stands higher above the ink at every lower level: its image moves away from the camera's
+foot, frame after frame. A wall facing the camera shows its foot and stays put. mark_walls
+finds both (waterline stretches that stay put, or move as the perspective says, between
+levels); unproject_rims follows each edge up the frames to where it first showed, brackets
+its height, and moves it back to where the wall is. Level-curve points lie on the ink and
+stay where they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .slices import Slice, polyline_distance
+
+
+@dataclass(frozen=True)
+class Perspective:
+    """Where the camera is: its foot on the base (x, y, mm) and its height above the ink.
+
+    A point standing h above the ink at plane position x is seen at
+    C + (x - C) H / (H - h): the higher, the further from the camera's foot.
+    """
+
+    xy: tuple
+    height_mm: float
+
+    def true_xy(self, P, h):
+        """Plane positions of points seen at P that stand h above the ink."""
+        C = np.asarray(self.xy, float)
+        return C + (P - C) * ((self.height_mm - np.asarray(h, float)) / self.height_mm)[..., None]
+
+
+def mark_walls(
+    slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None, step_range=(1.0, 1.0)
+) -> int:
+    """Mark points whose waterline stays put to the next level down (or up): walls.
+
+    On a sculptured top the level curve moves by step / slope between levels;
+    on a wall it does not move at all. A point is a wall point when the
+    neighbouring waterline passes within `wall_tol_mm` of it.
+
+    Seen from a camera over the tank, a wall facing away from it is hidden by
+    its own top edge, and that edge stands higher above the ink at every lower
+    level: its image moves away from the camera's foot by |x - C| dL / H per
+    level step dL (0.17 mm at 50 mm from the foot, 300 mm up, 1 mm steps).
+    With the camera given, the neighbour is looked for where that move puts it.
+    The true step may differ from the given one by the factors in `step_range`
+    (before the displacement is known: 1 to 2.5, the ink dropping further as
+    the part comes out): the neighbour is looked for along that stretch of ray.
+    """
+    total = 0
+    top = next((s.level for s in slices if not s.empty), 0.0)
+    for k, s in enumerate(slices):
+        if s.empty:
+            continue
+        static = np.zeros(len(s.P), bool)  # a wall facing the camera shows its foot: no move
+        raised = np.zeros(len(s.P), bool)
+        for j in (k - 1, k + 1):
+            if not (0 <= j < len(slices)) or slices[j].empty:
+                continue
+            static |= polyline_distance(slices[j], s.P)[0] < wall_tol_mm
+            if camera is not None:
+                dl = s.level - slices[j].level  # > 0: the neighbour is lower
+                # the edge's height above the ink is unknown (0 .. top - level): take the
+                # middle and widen the tolerance by what the rest of the range moves it
+                h_max = max(top - s.level, 0.0) + abs(dl)
+                raised |= _ray_match(
+                    camera,
+                    s.P,
+                    slices[j],
+                    dl,
+                    0.5 * h_max,
+                    step_range[1] * 0.5 * h_max,
+                    wall_tol_mm,
+                    step_range,
+                )[1]
+        s.wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
+        # a raised edge moves as the perspective says (near the camera's foot it also
+        # looks static: the move is then too small to matter)
+        s.edge = (
+            s.wall & _close_gaps(s, raised, WALL_GAP_POINTS)
+            if camera is not None
+            else np.zeros(len(s.P), bool)
+        )
+        s._curve = None
+        total += int(s.wall.sum())
+    return total
+
+
+EDGE_HISTORY = 2  # a wall point may continue an edge seen this many frames up
+WALL_GAP_POINTS = 4  # a run of up to this many non-wall points between wall points is wall
+
+
+def _close_gaps(s: Slice, wall, n):
+    """A few points along a wall that missed the test (noise) are wall all the same:
+    left as a level curve they would claim the ink's level a wall's height away."""
+    left = np.zeros_like(wall)
+    right = np.zeros_like(wall)
+    a, b = np.arange(len(wall)), np.arange(len(wall))
+    for _ in range(n):
+        a, b = s.prv[a], s.nxt[b]
+        left |= wall[a]
+        right |= wall[b]
+    return wall | (left & right)
+
+
+def _edge_moved(camera: Perspective, P, dl, h):
+    """Where an edge seen at P, standing h above the ink, appears when the ink is dl lower."""
+    C = np.asarray(camera.xy, float)
+    H = camera.height_mm
+    f = np.asarray((H - h) / (H - h - dl), float)
+    return C + (P - C) * (f[:, None] if f.ndim else f)
+
+
+def _along_ray(camera: Perspective, P, other: Slice, dl, h, step_range):
+    """Distance (and nearest vertex) from `other` to where edges seen at P appear when the
+    ink is dl lower, the true step being dl times a factor in step_range."""
+    lo, hi = step_range
+    d, i = np.full(len(P), np.inf), np.zeros(len(P), int)
+    for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
+        df, i_f = polyline_distance(other, _edge_moved(camera, P, f * dl, h))
+        better = df < d
+        d, i = np.where(better, df, d), np.where(better, i_f, i)
+    return d, i
+
+
+def unproject_rims(
+    slices: list[Slice],
+    camera: Perspective,
+    wall_tol_mm: float,
+    rim_height=None,
+    rise_max: float = 0.0,
+    step_range=(1.0, 1.0),
+) -> list[Slice]:
+    """Move each wall point from where the camera sees its top edge to where the wall is.
+
+    A wall's top edge at height z0 first shows at the highest level below z0,
+    hardly raised; at every lower level it stands z0 - L above the ink and is
+    seen further out. Going down the levels, a wall point inherits the edge
+    height of the wall point it continues (found where the perspective puts it
+    in the frame above or two above; of two, the edge that showed first); a wall
+    point with none above is a new edge: z0 lies between this level and the one
+    above (plus the meniscus' rise, if any) - unless its neighbours along the wall
+    continue an edge, when it is a glitch of this frame and takes theirs. Every
+    point with a bracket comes back marked as an edge.
+    Level-curve points lie on the ink and stay where they are.
+    """
+    spans = _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range)
+    out = []
+    for s, span in zip(slices, spans):
+        if span is None:
+            out.append(s)
+            continue
+        if s.rim is not None:
+            # a silhouette's rim is bracketed along its own ray (rim_brackets) where that
+            # finds it higher up than the frame-to-frame chain did (a chain broken by a frame
+            # a pixel off starts afresh, low): the edge that showed first wins
+            own = np.isfinite(s.rim[:, 0]) & ~(span[:, 0] >= s.rim[:, 0])
+            span = span.copy()
+            span[own] = s.rim[own] + np.array([0.0, rise_max])
+            span[own, 1] = np.where(np.isfinite(span[own, 1]), span[own, 1], span[own, 0] + 1.0 + rise_max)
+        edge = np.isfinite(span[:, 0])
+        w = np.flatnonzero(edge)
+        z0 = span.mean(axis=1)
+        h = np.where(np.isfinite(z0), np.maximum(z0 - s.level, 0.0), 0.0)
+        P = camera.true_xy(s.P, h)
+        if rim_height is not None and w.size:
+            # a surer edge height: the fitted surface at the edge, within the bracket
+            zr = rim_height(P[w])
+            ok = np.isfinite(zr)
+            zr = np.clip(zr, span[w, 0], span[w, 1])
+            h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
+            P = camera.true_xy(s.P, h)
+        t = s.moved(P, s.z)
+        t.edge = edge
+        out.append(t)
+    return out
+
+
+def _ray_match(camera, P, frame: Slice, dl, h, h_spread, wall_tol_mm, step_range):
+    """(nearest vertex, within tolerance) in `frame` of the edges seen at P, standing h
+    above the ink, where the ink is dl lower there (< 0: a frame above). The tolerance
+    grows by what an edge h_spread higher or lower would move differently."""
+    d, i = _along_ray(camera, P, frame, dl, h, step_range)
+    r = np.hypot(*(P - np.asarray(camera.xy, float)).T)
+    return i, d < wall_tol_mm + r * abs(dl) * h_spread / camera.height_mm**2
+
+
+def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
+    """Per frame: each wall point's edge height as a bracket (lo, hi) - where it first
+    showed - (None for a frame without wall points)."""
+    spans, above = [], []  # above: the last EDGE_HISTORY frames and their brackets
+    for s in slices:
+        if s.empty or s.edge is None or not s.edge.any():
+            spans.append(None)
+            above = (above + [(s, np.full((len(s.P), 2), np.nan))])[-EDGE_HISTORY:] if not s.empty else []
+            continue
+        step_up = (above[-1][0].level - s.level) if above else 1.0
+        span = np.full((len(s.P), 2), np.nan)
+        w = np.flatnonzero(s.edge)
+        # (a meniscus keeps the edge under until the ink is its rise below it: up to rise_max)
+        span[w] = (s.level, s.level + step_up + rise_max)
+        for frame, span_above in above:
+            # where the edge was a level up, or two (one frame's edge can be a pixel off, and
+            # the chain would start afresh below it; the true step may be the given one times
+            # step_range: the match looks along that stretch of ray). Of two matches the
+            # edge that showed first wins: a point continuing a frame's glitch (itself a
+            # "new" edge) would otherwise carry the glitch's bracket all the way down
+            dl = s.level - frame.level
+            i, near = _ray_match(
+                camera,
+                s.P[w],
+                frame,
+                dl,
+                0.5 * abs(dl),
+                0.5 * max(slices[0].level - s.level, 1.0),
+                wall_tol_mm,
+                step_range,
+            )
+            cand = span_above[i]
+            older = near & (cand[:, 0] > span[w, 0])  # NaN (no edge there) compares False
+            span[w[older]] = cand[older]
+        span = _mend_along_wall(s, span)
+        spans.append(span)
+        above = (above + [(s, span)])[-EDGE_HISTORY:]  # matched against the frames as seen
+    return spans
+
+
+def _mend_along_wall(s: Slice, span, n=WALL_GAP_POINTS):
+    """A point of a wall whose edge is known on both sides along the loop (within n points,
+    through wall points only) but that itself starts afresh, or was not seen raised at all,
+    is a glitch of this frame (a rim point a pixel off): it takes its neighbours' bracket.
+    Repeated while it mends more: a glitch a few points longer than n mends from its ends."""
+    while True:
+        known = np.isfinite(span[:, 0]) & (span[:, 0] > s.level)  # continues an edge from above
+        suspect = s.wall & ~known
+        if not suspect.any() or not known.any():
+            return span
+        sides = [_nearest_along(s, suspect, known, step, span, n) for step in (s.prv, s.nxt)]
+        fix = suspect & np.isfinite(sides[0][:, 0]) & np.isfinite(sides[1][:, 0])
+        if not fix.any():
+            return span
+        span = span.copy()
+        span[fix, 0] = np.minimum(sides[0][fix, 0], sides[1][fix, 0])
+        span[fix, 1] = np.maximum(sides[0][fix, 1], sides[1][fix, 1])
+
+
+def _nearest_along(s, start, known, step, span, n):
+    """For the `start` points: the span of the first `known` point within n steps along the
+    loop (prv or nxt), walking over wall points only (NaN where there is none)."""
+    found = np.full((len(s.P), 2), np.nan)
+    open_ = start.copy()
+    j = np.arange(len(s.P))
+    for _ in range(n):
+        j = step[j]
+        hit = open_ & known[j]
+        found[hit] = span[j[hit]]
+        open_ &= ~hit & s.wall[j]
+    return found
