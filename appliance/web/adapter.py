@@ -117,10 +117,6 @@ class WebService:
         with self._command():
             return dict(self.inner.update_settings(changes))
 
-    def offers(self, name: str) -> bool:
-        """Whether the service has this facade method (a BenchService has them all)."""
-        return callable(getattr(self.inner, name, None))
-
     @contextlib.contextmanager
     def _command(self):
         """Around a call that changes the bench: its effect (a move, a frame, a job gone) shows at once."""

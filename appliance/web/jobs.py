@@ -189,7 +189,7 @@ def job_zip(job_id):
 
 
 def _usb_offered() -> bool:
-    return bool(ext()["config"].get("usb")) and svc().offers("export_to_usb")
+    return bool(ext()["config"].get("usb"))
 
 
 @bp.get("/usb")

@@ -74,9 +74,7 @@ def logout():
 @bp.get("/")
 def dashboard():
     svc = _ext()["service"]
-    return render_template(
-        "dashboard.html", page="dashboard", defaults=svc.settings(), machine=svc.offers("preview")
-    )
+    return render_template("dashboard.html", page="dashboard", defaults=svc.settings())
 
 
 @bp.get("/jobs")
@@ -139,9 +137,8 @@ def job(job_id):
         gcode=gcode,
         images=images,
         names={n: download_name(info, n) for n in outputs},
-        manage=svc.offers("reprocess"),
         choices=_choices(),
-        repost=svc.offers("repost") and "heightmap.csv" in outputs and info.get("status") == "done",
+        repost="heightmap.csv" in outputs and info.get("status") == "done",
         materials=_materials(),
     )
 
@@ -181,22 +178,18 @@ def system():
 
 @bp.get("/calibration")
 def calibration():
-    svc = _ext()["service"]
     return render_template(
         "calibration.html",
         page="calibration",
-        offered=svc.offers("calibration"),
         board_text=describe(PRINTED),
     )
 
 
 @bp.get("/commission")
 def commission():
-    svc = _ext()["service"]
     return render_template(
         "commission.html",
         page="commission",
-        offered=svc.offers("commissioning"),
         chessboard=_chessboard_files(),
         board_text=describe(PRINTED),
     )

@@ -74,8 +74,7 @@ def system_info() -> dict:
         "web_started": _ext()["started"],
         "web_uptime_s": round(time.time() - _ext()["started"], 1),
     }
-    if _svc().offers("system"):
-        info.update(_svc().system())
+    info.update(_svc().system())
     return info
 
 
@@ -119,10 +118,8 @@ def support_bundle():
             z.writestr(f"logs/{name}.log", logfiles.tail(_bench_data(), name))
         z.writestr("settings.json", json.dumps(without_secrets(svc.settings()), indent=2))
         z.writestr("system.json", json.dumps(system_info(), indent=2, default=str))
-        if svc.offers("backup"):
-            z.writestr("calibration.json", json.dumps(svc.backup()["calibration"], indent=2))
-        if svc.offers("events"):
-            z.writestr("events.json", json.dumps(svc.events(None, 500), indent=2, default=str))
+        z.writestr("calibration.json", json.dumps(svc.backup()["calibration"], indent=2))
+        z.writestr("events.json", json.dumps(svc.events(None, 500), indent=2, default=str))
         z.writestr(
             "README.txt",
             "InkSlice support bundle: the daemon's and web's last log lines, the settings "

@@ -24,7 +24,6 @@ from pathlib import Path, PurePosixPath
 from flask import Blueprint, Request, current_app, jsonify, request
 
 from ..scanfile import check_frame_header, check_scan_json_size, read_image_header, scan_from_json
-from .adapter import NotOffered
 from .apicore import Refused, ext, json_errors, svc
 
 bp = json_errors(Blueprint("uploads", __name__))
@@ -80,8 +79,6 @@ def upload_scan():
     The service checks the folder again (the daemon: importing.py) and keeps its own
     copy, so the unpacked folder is removed whether the import succeeds or not.
     """
-    if not svc().offers("import_scan"):
-        raise NotOffered("bench", "this bench service cannot import scans")
     cfg = ext()["config"]
     uploads = incoming_dir(cfg["data_dir"])
     uploads.mkdir(parents=True, exist_ok=True)

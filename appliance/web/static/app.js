@@ -92,7 +92,6 @@
       if (mapBusy) return; mapBusy = true;
       try {
         const r = await fetch("/api/heightmap/live", { credentials: "same-origin" });
-        if (r.status === 501) { text("#livemap-note", "This bench does not report a partial height map."); return; }
         if (!r.ok || r.status === 204) return;
         const hm = await r.json();
         const c = $("#livemap"), ctx = c.getContext("2d");
