@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import statistics
 import threading
+import time
 from pathlib import Path
 
 from ..atomicio import write_text
@@ -90,3 +91,37 @@ class JobTimes:
 
 def _positive(v, zero=False) -> bool:
     return isinstance(v, (int, float)) and (v >= 0 if zero else v > 0)
+
+
+class JobClock:
+    """A scan's ETA, scanning plus processing (eta.py), and its times once it ends done."""
+
+    def __init__(self, times: JobTimes, fresh: bool, clock=time.monotonic):
+        self.times, self.fresh, self.clock = times, fresh, clock
+        self.t0 = clock()
+        self.t_proc = None
+        self.per_level = times.per_level_s()
+
+    def eta(self, state: dict, changes: dict) -> dict:
+        """`changes` with eta_s (and eta_processing_s) made to cover what is left of the whole job."""
+        out = dict(changes)
+        total, done = int(state.get("levels_total") or 0), int(state.get("levels_done") or 0)
+        proc = self.times.processing_s(total)
+        if state.get("state") == "processing":
+            if self.t_proc is None:
+                self.t_proc = self.clock()
+                out["eta_s"] = None if proc is None else round(proc, 1)
+                out["eta_processing_s"] = out["eta_s"]
+            return out
+        if "eta_s" in changes or "levels_done" in changes or "state" in changes:
+            scan = changes.get("eta_s")  # the runner's: levels left x its recent level time
+            if scan is None and self.per_level is not None:
+                scan = self.per_level * max(total - done, 0)
+            out["eta_s"] = None if scan is None else round(scan + (proc or 0.0), 1)
+            out["eta_processing_s"] = None if proc is None else round(proc, 1)
+        return out
+
+    def finished(self, job_id: str, levels: int):
+        if self.fresh and self.t_proc is not None:  # a resumed scan's times are only part of one
+            now = self.clock()
+            self.times.record(job_id, levels, self.t_proc - self.t0, now - self.t_proc)

@@ -88,6 +88,16 @@ class Webhook:
             self._thread.start()
         return True
 
+    def job_ended(self, job: dict | None, state: dict) -> None:
+        """A job just finished or failed (a cancel was someone's choice, and commissioning's own
+        reference scans are followed on its page): say so."""
+        if job is not None and job["params"].get("reference"):
+            return
+        if state["state"] == "done":
+            self.send("finished", job, f"{(job or {}).get('name') or 'the job'} is done")
+        else:
+            self.send("failed", job, (job or {}).get("reason") or state.get("message") or "the job failed")
+
     def test(self) -> dict:
         """Send a test message now, to the address set; {"ok", "problem"} (the settings page's button)."""
         s = self._settings()
