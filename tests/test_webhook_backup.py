@@ -11,7 +11,7 @@ from polling import wait_until
 
 from appliance.cli import main as cli_main
 from appliance.daemon import settings as S
-from appliance.daemon.commissioning import in_force
+from appliance.daemon.commissioned import in_force
 from appliance.errors import InkSliceError, SettingError
 
 

@@ -189,10 +189,15 @@ class GuidedCalibration:
         return {}
 
     def _preview(self, frame):
-        img = frame if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+        show_board(self.show_frame, frame, self.board, find_corners(frame, self.board))
+
+
+def show_board(show_frame, frame, board: Board, corners=None, what: str = "calibration") -> None:
+    """The frame on the dashboard's preview, the board's corners drawn in when given."""
+    img = frame if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    if corners is not None:
         img = img.copy()
-        corners = find_corners(frame, self.board).astype(np.float32).reshape(-1, 1, 2)
-        cv2.drawChessboardCorners(img, self.board.pattern, corners, True)
-        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 80])
-        if ok:
-            self.show_frame(buf.tobytes(), {"level_mm": None, "time": time.time(), "what": "calibration"})
+        cv2.drawChessboardCorners(img, board.pattern, corners.astype(np.float32).reshape(-1, 1, 2), True)
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 80])
+    if ok:
+        show_frame(buf.tobytes(), {"level_mm": None, "time": time.time(), "what": what})

@@ -19,8 +19,8 @@ import time
 from ..errors import Cancelled, InkSliceError
 from . import processing
 from . import settings as S
-from .commissioning import reference_processor
 from .eta import JobClock
+from .measurements import reference_processor
 from .runner import ScanRunner
 from .store import DiskFull
 

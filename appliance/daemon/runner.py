@@ -39,7 +39,7 @@ from ..vision.part import find_part
 from ..vision.refine import mask_pixel_mm, next_refinement, surfaced_faces
 from . import processing
 from . import settings as S
-from .commissioning import scan_extra, stored_camera
+from .commissioned import scan_extra, stored_camera
 from .levels import LevelPlan, waterline_change
 
 log = logging.getLogger("inkslice.runner")
