@@ -20,23 +20,18 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import cv2
 
 from .. import atomicio
+from ..datadir import data_dir
 from ..errors import SettingError
 from ..vision.calibration import Board, BoardPose, CalibrationError, calibrate
 
 NAME = "calibrate"
 ORDER = 30
 HELP = "calibrate the camera from chessboard images, or the meniscus from a reference scan"
-
-
-def data_dir() -> Path:
-    env = os.environ.get("INKSLICE_DATA")
-    return Path(env) if env else Path.home() / ".local" / "share" / "inkslice"
 
 
 def default_out(reference=False) -> Path:

@@ -2,6 +2,7 @@
 
 import json
 
+from .. import datadir
 from ..errors import SettingError
 
 NAME = "daemon"
@@ -10,7 +11,7 @@ HELP = "run the scan daemon (state machine, job store, recovery) on the real or 
 
 
 def add_arguments(p):
-    p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice)")
+    p.add_argument("--data", default=None, help=datadir.HELP)
     p.add_argument("--socket", default=None, help="control socket (default DATA/daemon.sock)")
     p.add_argument(
         "--wiring",
@@ -93,10 +94,9 @@ def run(args):
     from ..daemon.processing import child_process, in_process
 
     setup_logging(args.log_level)
-    from ..daemon.main import data_dir
     from ..logfiles import log_to_file
 
-    log_to_file(data_dir(args.data), "daemon")  # the system page shows the last lines
+    log_to_file(datadir.data_dir(args.data), "daemon")  # the system page shows the last lines
     factory = make_factory(args)
     processor = child_process if args.processor == "child" else in_process
     if args.sim is not None:

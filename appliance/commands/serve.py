@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import datadir
+
 NAME = "serve"
 ORDER = 60
 HELP = "serve the web UI (phone/desktop) with waitress"
@@ -22,8 +24,7 @@ def add_arguments(p):
     p.add_argument(
         "--data",
         default=None,
-        help="data folder (default $INKSLICE_DATA or /var/lib/inkslice); "
-        "the web keeps its password hash in DATA/web/",
+        help=datadir.HELP + "; the web keeps its password hash in DATA/web/",
     )
     p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
     p.add_argument(
@@ -47,10 +48,9 @@ def add_arguments(p):
 
 
 def run(args):
-    from ..daemon.main import data_dir
     from ..web.server import serve
 
-    data = data_dir(args.data)
+    data = datadir.data_dir(args.data)
     import logging
 
     from ..logfiles import log_to_file

@@ -12,6 +12,7 @@ import json
 import sys
 from pathlib import Path
 
+from .. import datadir
 from ..errors import SettingError
 
 NAME = "settings"
@@ -30,7 +31,7 @@ def add_arguments(p):
         "items", nargs="*", metavar="KEY=VALUE | FILE", help="for set: the changes; for restore: the file"
     )
     p.add_argument("-o", "--out", default=None, help="backup: the file to write (default: stdout)")
-    p.add_argument("--data", default=None, help="data folder (default $INKSLICE_DATA or /var/lib/inkslice)")
+    p.add_argument("--data", default=None, help=datadir.HELP)
     p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
 
 
@@ -69,9 +70,8 @@ class _Offline:
 
 
 def _service(args):
-    from ..daemon.main import data_dir
 
-    data = data_dir(args.data)
+    data = datadir.data_dir(args.data)
     sock = Path(args.socket or data / "daemon.sock")
     if sock.exists():
         from ..daemon.rpc import BenchClient

@@ -14,17 +14,13 @@ import sys
 import threading
 from pathlib import Path
 
+from ..datadir import data_dir
 from . import rpc
 from .notify import notify, watchdog_interval
 from .processing import child_process, in_process
 from .service import BenchService
 
 log = logging.getLogger("inkslice.daemon")
-DEFAULT_DATA = "/var/lib/inkslice"
-
-
-def data_dir(arg=None) -> Path:
-    return Path(arg or os.environ.get("INKSLICE_DATA") or DEFAULT_DATA)
 
 
 def setup_logging(level="INFO"):
