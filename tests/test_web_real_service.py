@@ -5,6 +5,7 @@ import json
 import zipfile
 
 import pytest
+from polling import wait_until
 from web_helpers import light_processor, login, wait_state
 
 from appliance.daemon import rpc
@@ -292,8 +293,9 @@ def test_cancel_stops_a_step_that_is_still_running(web):
 
     t = threading.Thread(target=home)
     t.start()
-    while not (svc.factory.last and "home" in svc.factory.last.stage.calls):
-        time.sleep(0.01)
+    wait_until(
+        lambda: svc.factory.last and "home" in svc.factory.last.stage.calls, what="the homing", every=0.01
+    )
     t0 = time.monotonic()
     cal = c.post("/api/calibration/cancel").get_json()
     took = time.monotonic() - t0
