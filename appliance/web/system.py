@@ -21,46 +21,18 @@ import time
 import zipfile
 from urllib.parse import urlsplit
 
-from flask import Blueprint, Response, current_app, jsonify, request
+from flask import Blueprint, Response, jsonify, request
 
 from .. import __version__, logfiles
 from ..daemon import settings as S
-from ..errors import DeviceError, InkSliceError, SettingError
-from .adapter import NotOffered
+from .apicore import ext, json_errors, svc
 
-bp = Blueprint("system", __name__)
+bp = json_errors(Blueprint("system", __name__))
 log = logging.getLogger("inkslice.web")
 
 
-def _ext():
-    return current_app.extensions["inkslice"]
-
-
-def _svc():
-    return _ext()["service"]
-
-
 def _bench_data():
-    return _ext()["config"].get("bench_data_dir") or _ext()["config"]["data_dir"]
-
-
-def _err(e: InkSliceError, code):
-    return jsonify(error=e.problem, where=e.where), code
-
-
-@bp.errorhandler(NotOffered)
-def _not_offered(e):
-    return _err(e, 501)
-
-
-@bp.errorhandler(SettingError)
-def _setting(e):
-    return _err(e, 400)
-
-
-@bp.errorhandler(DeviceError)
-def _device(e):
-    return _err(e, 409)
+    return ext()["config"].get("bench_data_dir") or ext()["config"]["data_dir"]
 
 
 @bp.get("/settings/schema")
@@ -71,10 +43,10 @@ def schema():
 def system_info() -> dict:
     info = {
         "version": __version__,
-        "web_started": _ext()["started"],
-        "web_uptime_s": round(time.time() - _ext()["started"], 1),
+        "web_started": ext()["started"],
+        "web_uptime_s": round(time.time() - ext()["started"], 1),
     }
-    info.update(_svc().system())
+    info.update(svc().system())
     return info
 
 
@@ -111,15 +83,15 @@ def without_secrets(settings: dict) -> dict:
 
 @bp.get("/support.zip")
 def support_bundle():
-    svc = _svc()
+    bench = svc()
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         for name in logfiles.NAMES:
             z.writestr(f"logs/{name}.log", logfiles.tail(_bench_data(), name))
-        z.writestr("settings.json", json.dumps(without_secrets(svc.settings()), indent=2))
+        z.writestr("settings.json", json.dumps(without_secrets(bench.settings()), indent=2))
         z.writestr("system.json", json.dumps(system_info(), indent=2, default=str))
-        z.writestr("calibration.json", json.dumps(svc.backup()["calibration"], indent=2))
-        z.writestr("events.json", json.dumps(svc.events(None, 500), indent=2, default=str))
+        z.writestr("calibration.json", json.dumps(bench.backup()["calibration"], indent=2))
+        z.writestr("events.json", json.dumps(bench.events(None, 500), indent=2, default=str))
         z.writestr(
             "README.txt",
             "InkSlice support bundle: the daemon's and web's last log lines, the settings "
@@ -135,7 +107,7 @@ def support_bundle():
 
 @bp.get("/backup")
 def backup():
-    doc = _svc().backup()
+    doc = svc().backup()
     log.info("backup of settings and calibration downloaded")
     return Response(
         json.dumps(doc, indent=2) + "\n",
@@ -149,14 +121,14 @@ def restore():
     doc = request.get_json(silent=True)
     if not isinstance(doc, dict):
         return jsonify(error="send the backup file's JSON as the body", where="restore"), 400
-    out = _svc().restore(doc)
+    out = svc().restore(doc)
     log.info("settings and calibration restored from a backup: %s", out)
     return jsonify(out)
 
 
 @bp.post("/webhook/test")
 def webhook_test():
-    return jsonify(_svc().test_webhook())
+    return jsonify(svc().test_webhook())
 
 
 def _stamp():
