@@ -3,7 +3,7 @@
 Two pipelines share this entry point (pipelines.py): "inkslice", ours (sub-pixel
 waterlines, a regularised fit, then a cutter-compensated finishing program from cam/),
 and "seed", the seed method of the 2013 dissertation with its own G-code format
-(cam/dissertation.py). report.py writes report.md.
+(cam/seed.py). report.py writes report.md.
 
 With `compare`, the other pipeline's methods are run on the same frames so
 the report can put them side by side. Statistics (eqs 3-27..3-30) are computed
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from . import atomicio, outputs, plots, progress
-from .cam.dissertation import dissertation_gcode
+from .cam.seed import seed_gcode
 from .errors import InkSliceError, SettingError
 from .pipelines import (  # noqa: F401 (callers import these from here)
     LABELS,
@@ -139,7 +139,7 @@ def is_output_name(name: str) -> bool:
 def toolpath_files(job: Job, cam_options=None) -> dict:
     """G-code for the chosen height map: ours, and the dissertation's format beside it."""
     hm = job.heightmap
-    files = {"toolpath-dissertation.gcode": dissertation_gcode(hm).encode()}
+    files = {"toolpath-dissertation.gcode": seed_gcode(hm).encode()}
     if job.pipeline == "seed":
         files["toolpath.gcode"] = files.pop("toolpath-dissertation.gcode")
         return files

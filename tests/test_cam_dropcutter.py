@@ -116,7 +116,7 @@ def test_flat_end_on_a_slope_touches_with_its_rim_exactly():
     # direction, tip = Z(p + R g/|g|). The lattice disc's outermost uphill offsets
     # stop short of the rim (0.007 mm low here); the finishing drop-cutter searches
     # the rim itself.
-    from appliance.cam.zigzag import drop_points as finishing_drop
+    from appliance.cam.contact import drop_points as finishing_drop
 
     g = np.array([0.24, 0.08])
     hm = grid_map(lambda X, Y: 10 + g[0] * X + g[1] * Y, 0, 30, 0, 30, 1.0)

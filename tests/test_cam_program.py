@@ -11,12 +11,12 @@ from cam_helpers import grid_map
 
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.dialects import check_fanuc, check_grbl
-from appliance.cam.dissertation import dissertation_gcode
 from appliance.cam.gcodeparse import parse_gcode
 from appliance.cam.jobs import finishing_gcode, roughing_gcode, verify_gcode
 from appliance.cam.limits import Machine
 from appliance.cam.roughing import RoughSettings
 from appliance.cam.sampling import Sampler
+from appliance.cam.seed import seed_gcode
 from appliance.cam.zigzag import FinishSettings
 from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
@@ -114,7 +114,7 @@ def test_grbl_and_fanuc_rules():
 def test_dissertation_dialect_and_its_gouge():
     hm = bowl()
     text = finish(hm, dialect="dissertation").text
-    assert text == dissertation_gcode(hm)
+    assert text == seed_gcode(hm)
     rep, _ = verify_gcode(text, hm, cutter="ball6", z_zero=float(np.nanmax(hm.z)), resolution=0.1)
     ours, _ = verify_gcode(finish(hm).text, hm, resolution=0.1)
     assert rep.gouge > 0.1  # surface points as tool tips: the ball digs in

@@ -130,14 +130,15 @@ def test_a_tiny_step_leaves_a_tiny_scallop_at_a_downhill_corner(cutter, h):
     # in reach the edge row; the first pass stands 0.4 above it whatever the step, and a
     # flat end or bull nose measured that as the next pass's scallop (0.40 / 0.25 at a
     # 0.01 mm step): the planner crawled at its minimum step (18 min for 0.87 mm)
+    from appliance.cam.cusps import PassProbe
     from appliance.cam.sampling import Sampler
-    from appliance.cam.zigzag import _frame, _PassProbe
+    from appliance.cam.zigzag import pass_frame
 
     hm = grid_map(lambda X, Y: 30 - 0.83 * Y - 0.15 * X, 0, 20, 0, 10, 0.5)
     st = FinishSettings(parse_cutter(cutter), scallop=h)
     s = Sampler(hm, edge_step=0.05)
-    e1, e2, (t0, t1), _ = _frame(s, 0.0, 0.0)
-    probe = _PassProbe(s, st, e1, e2, t0, int(np.ceil((t1 - t0) / st.resolution - 1e-9)) + 1)
+    e1, e2, (t0, t1), _ = pass_frame(s, 0.0, 0.0)
+    probe = PassProbe(s, st, e1, e2, t0, int(np.ceil((t1 - t0) / st.resolution - 1e-9)) + 1)
     first = [probe.pass_at(0.0)]
     assert probe.scallop(first, probe.pass_at(0.01)) < 0.5 * h
     assert 0.5 * h < probe.scallop(first, probe.pass_at(0.5 if cutter == "flat6" else 0.1)) < 3 * h

@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 from .cutters import Cutter
+from .dropcutter import DEFAULT_RESOLUTION
+from .dropcutter import drop_lines as lattice_lines
 from .sampling import Sampler
 
 STEEP = 0.8  # |grad Z| above which a tip is polished (~39 degrees)
@@ -150,3 +152,23 @@ def _ring_scan(sampler, cutter, px, py):
     f = _F(sampler, cutter, px[:, None], py[:, None], ux[None, :], uy[None, :])
     j = np.argmax(f, axis=1)
     return ux[j], uy[j]
+
+
+def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
+    """The lattice drop-cutter, polished on steep faces so a tip is never low by the
+    lattice's h'' d^2 / 8 there: a low tip is a gouge. Every finishing tip comes from here."""
+    origins = np.atleast_2d(np.asarray(origins, float))
+    e1 = np.asarray(direction, float)
+    e1 = e1 / np.hypot(*e1)
+    tip = lattice_lines(sampler, cutter, origins, e1, n, d)
+    t = d * np.arange(n)
+    x = origins[:, :1] + t[None, :] * e1[0]
+    y = origins[:, 1:2] + t[None, :] * e1[1]
+    return polish(sampler, cutter, x, y, tip, d)
+
+
+def drop_points(sampler, cutter, x, y, d=DEFAULT_RESOLUTION):
+    """drop_lines at scattered points (each a line of one position)."""
+    x = np.asarray(x, float).ravel()
+    y = np.asarray(y, float).ravel()
+    return drop_lines(sampler, cutter, np.column_stack([x, y]), (1.0, 0.0), 1, d)[:, 0]

@@ -114,28 +114,26 @@ def parse_cutter(text: str, flute_length: float | None = None, flutes: int = 2) 
     m = _NAME.match(str(text).strip().lower())
     if not m:
         raise SettingError(
-            "--cutter",
+            "cutter",
             f"{text!r} is not a cutter name; use e.g. ball6, flat3 or bull6r1 "
             "(diameter in mm, bull corner radius after r)",
         )
     kind, d, rc = m.group(1), float(m.group(2)), m.group(3)
     if kind == "ball":
         if rc is not None:
-            raise SettingError("--cutter", f"{text!r}: a ball cutter has no separate corner radius")
+            raise SettingError("cutter", f"{text!r}: a ball cutter has no separate corner radius")
         corner = d / 2
     elif kind == "flat":
         if rc is not None:
-            raise SettingError("--cutter", f"{text!r}: a flat cutter has no corner radius")
+            raise SettingError("cutter", f"{text!r}: a flat cutter has no corner radius")
         corner = 0.0
     else:
         if rc is None:
-            raise SettingError(
-                "--cutter", f"{text!r}: a bull-nose cutter needs a corner radius, e.g. bull6r1"
-            )
+            raise SettingError("cutter", f"{text!r}: a bull-nose cutter needs a corner radius, e.g. bull6r1")
         corner = float(rc)
         if corner <= 0 or corner >= d / 2:
             raise SettingError(
-                "--cutter",
+                "cutter",
                 f"{text!r}: bull-nose corner radius must be between 0 and {d / 2:g} mm (exclusive)",
             )
     fl = DEFAULT_FLUTE_FACTOR * d if flute_length is None else float(flute_length)

@@ -16,16 +16,16 @@ from ..errors import InkSliceError, SettingError
 from ..surface.heightmap import HeightMap
 from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM, header_notes
 from .cutters import Cutter, parse_cutter
-from .dissertation import dissertation_gcode
 from .feeds import DEFAULT_MATERIAL, conditions
 from .gcodeparse import parse_gcode
-from .limits import Machine, check_envelope, limit_feeds
+from .limits import DEFAULT_MACHINE, Machine, check_envelope, limit_feeds
 from .millsim import new_stock, report, simulate
 from .opening import REACH_TOL
 from .posts import DEFAULT_DIALECT, render
 from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
+from .seed import seed_gcode
 from .zigzag import FinishSettings, finishing
 
 # The lattice a plan or a simulation works on, at its resolution over the part's
@@ -78,7 +78,7 @@ def finishing_gcodes(
     rpm=None,
     clearance=DEFAULT_CLEARANCE,
     z_offset=0.0,
-    machine: Machine = Machine(),
+    machine: Machine = DEFAULT_MACHINE,
     stock_top=None,
     uncertain_mm=DEFAULT_UNCERTAIN_MM,
 ) -> dict:
@@ -87,7 +87,7 @@ def finishing_gcodes(
     check_heightmap(hm)
     jobs = {}
     if "dissertation" in dialects:
-        text = dissertation_gcode(hm)
+        text = seed_gcode(hm)
         jobs["dissertation"] = Job(text, float("nan"), {"dialect": "dissertation", "lines": text.count("\n")})
     ours = [d for d in dialects if d != "dissertation"]
     if not ours:
@@ -155,7 +155,7 @@ def roughing_gcode(
     dialect=DEFAULT_DIALECT,
     clearance=DEFAULT_CLEARANCE,
     z_offset=0.0,
-    machine: Machine = Machine(),
+    machine: Machine = DEFAULT_MACHINE,
 ) -> Job:
     check_heightmap(hm)
     if dialect == "dissertation":
@@ -210,7 +210,9 @@ def cutter_from_program(parsed, default=None) -> Cutter:
         except (ValueError, KeyError, IndexError):
             raise InkSliceError("G-code", f"cannot read the cutter header {meta!r}") from None
     if default is None:
-        raise SettingError("--cutter", "the program does not name its cutter; give --cutter (e.g. ball6)")
+        raise SettingError(
+            "cutter", "the program does not name its cutter; name the one it was made for (e.g. ball6)"
+        )
     return parse_cutter(default) if isinstance(default, str) else default
 
 
@@ -222,7 +224,7 @@ def verify_gcode(
     z_zero=None,
     resolution=0.1,
     reach_tol=REACH_TOL,
-    edge_band=0.5,
+    edge_band=0.0,
     uncut_tol=0.1,
     where="G-code",
 ):
@@ -252,8 +254,9 @@ def verify_gcode(
 
     tools = tool_cutters(parsed) if cutter is None else {}
     if tools:
-        missing = sorted(set(parsed.tool.tolist()) - set(tools) - {0})
-        if missing or (parsed.tool == 0).all():
+        spindle = parsed.tool if parsed.tool is not None else np.zeros(len(parsed.kind), int)
+        missing = sorted(set(spindle.tolist()) - set(tools) - {0})
+        if missing or bool((spindle == 0).all()):
             raise InkSliceError(
                 where,
                 f"changes to tool {missing[0] if missing else 0}, which its header "
@@ -268,7 +271,7 @@ def verify_gcode(
         z_zero = -float(m) if m else 0.0
     if not np.isfinite(z_zero):
         # a NaN Z0 made every Z unknown: a "program never sets Z" traceback
-        raise SettingError("--z-zero", f"must be a number of mm or 'top', got {z_zero}")
+        raise SettingError("z zero", f"must be a number of mm or 'top', got {z_zero}")
     # edges on: the opening (what the cutter can reach at all) must see the part's
     # edge as the toolpath did, or the band along uphill edges counts as scallop
     sampler = Sampler(hm, edge_step=resolution / 2)

@@ -42,6 +42,10 @@ class Machine:
             raise SettingError("machine rapid", f"must be > 0 mm/min, got {self.rapid:g}")
 
 
+# the machine every program is checked against unless one is given (frozen: shared safely)
+DEFAULT_MACHINE = Machine()
+
+
 def parse_travel(text) -> tuple:
     """'xmin,xmax,ymin,ymax,zmin,zmax' (mm)."""
     try:
@@ -49,7 +53,7 @@ def parse_travel(text) -> tuple:
     except ValueError:
         v = []
     if len(v) != 6:
-        raise SettingError("--travel", f"{text!r}: give six numbers xmin,xmax,ymin,ymax,zmin,zmax (mm)")
+        raise SettingError("machine travel", f"{text!r}: give six numbers xmin,xmax,ymin,ymax,zmin,zmax (mm)")
     return ((v[0], v[1]), (v[2], v[3]), (v[4], v[5]))
 
 
@@ -60,7 +64,7 @@ def parse_feeds(text) -> tuple:
     except ValueError:
         v = []
     if len(v) != 3:
-        raise SettingError("--max-feed", f"{text!r}: give three numbers fx,fy,fz (mm/min)")
+        raise SettingError("machine max feed", f"{text!r}: give three numbers fx,fy,fz (mm/min)")
     return tuple(v)
 
 

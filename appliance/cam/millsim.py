@@ -21,12 +21,15 @@ What is reported (all in mm, vertical):
 * scallop = stock - max(design, opening), max and mean, over the cells where
   the cutter can reach: cells where the cutter's opening of the design (the
   stock an infinitely fine stepover would leave) is within `reach_tol` of the
-  design, and at least `edge_band` inside the footprint's edge. Measured from
+  design (tool positions up to a radius past the outline count: a program
+  that runs off it onto the base reaches the rim from there), and at least
+  `edge_band` inside the footprint's edge (default 0: all of it). Measured from
   the opening, not the design: the opening's own residue (<= reach_tol) is
   set by the cutter's size, not the stepover. Concave regions
   tighter than the cutter, and the walls of steps, are excluded there and
   counted separately as unreachable area;
-* uncut area: part cells left more than `uncut_tol` above the design.
+* uncut area: part cells left more than `uncut_tol` above the design, also as
+  a fraction of the cells the cutter can reach.
 """
 
 from __future__ import annotations
@@ -175,6 +178,7 @@ class Report:
     deviation: np.ndarray
     part: np.ndarray
     measured: np.ndarray
+    uncut_reachable: float = 0.0  # fraction of the cells the cutter can reach left uncut
 
     def lines(self):
         out = [
@@ -182,7 +186,8 @@ class Report:
             f"scallop: max {self.scallop_max:.4f} mm at x={self.scallop_at[0]:.2f} y={self.scallop_at[1]:.2f}, "
             f"mean {self.scallop_mean:.4f} mm over {self.measured_area:.0f} mm^2 the cutter can reach",
             f"unreachable by the cutter (excluded): {self.unreachable_area:.1f} mm^2",
-            f"uncut area: {self.uncut_area:.1f} mm^2 ({100 * self.uncut_fraction:.2f} % of {self.part_area:.0f} mm^2)",
+            f"uncut area: {self.uncut_area:.1f} mm^2 ({100 * self.uncut_fraction:.2f} % of {self.part_area:.0f} mm^2, "
+            f"{100 * self.uncut_reachable:.2f} % of the area the cutter can reach)",
             f"rapids that cut stock: {self.crashes}"
             + (f" (first at line {self.first_crash_line})" if self.crashes else ""),
         ]
@@ -194,7 +199,7 @@ def report(
     cutter: Cutter,
     sim: SimResult,
     reach_tol=REACH_TOL,
-    edge_band=0.5,
+    edge_band=0.0,
     uncut_tol=0.1,
     reach_resolution=0.0,
 ) -> Report:
@@ -209,7 +214,8 @@ def report(
     inner = ndimage.distance_transform_edt(np.pad(part, 1), sampling=r)[1:-1, 1:-1]
     # reachability from the opening (opening.py), on a lattice at least as coarse as the stock's
     d = max(reach_resolution, r)
-    op = Opening.over(sampler, cutter, d, st.xs[0], st.ys[0], st.xs[-1], st.ys[-1])
+    # positions up to a radius past the outline, where a program finishing the rim runs
+    op = Opening.over(sampler, cutter, d, st.xs[0], st.ys[0], st.xs[-1], st.ys[-1], pad=cutter.radius)
     above, reach = op.above(st.z, design, X, Y, reach_tol)
     measured = part & reach & (inner >= edge_band)
     g = np.where(part, -dev, -np.inf)
@@ -237,6 +243,7 @@ def report(
         dev,
         part,
         measured,
+        float((uncut & reach).sum() / max((part & reach).sum(), 1)),
     )
 
 

@@ -195,15 +195,19 @@ class Opening:
     z: np.ndarray
 
     @classmethod
-    def over(cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None):
-        """The opening on a lattice of spacing d from (x0, y0) to (x1, y1) (default: the footprint's bounds)."""
+    def over(cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None, pad=0.0):
+        """The opening on a lattice of spacing d from (x0, y0) to (x1, y1) (default: the footprint's
+        bounds), with tool positions up to `pad` beyond them (whole steps of d): a program that
+        runs off the outline onto the base reaches the rim from there."""
         bx0, bx1, by0, by1 = sampler.bounds
         x0 = bx0 if x0 is None else x0
         y0 = by0 if y0 is None else y0
         x1 = bx1 if x1 is None else x1
         y1 = by1 if y1 is None else y1
-        # nodes up to the far bound, none past it (like the simulation's stock): a
-        # position past the part's edge is one no program with margin 0 has
+        # nodes up to the far bound and `pad` past it, no further (like the simulation's
+        # stock): a position further out is one no program has
+        k = int(np.ceil(pad / d - 1e-9)) if pad > 0 else 0
+        x0, y0, x1, y1 = x0 - k * d, y0 - k * d, x1 + k * d, y1 + k * d
         nx = np.arange(x0, x1 + d / 2, d).size
         ny = np.arange(y0, y1 + d / 2, d).size
         return cls(cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d))

@@ -39,13 +39,14 @@ from dataclasses import dataclass, field
 
 from ..errors import SettingError
 from ..surface.heightmap import HeightMap
-from .dissertation import dissertation_gcode
+from .cutters import Cutter
 from .feeds import DEFAULT_MATERIAL
-from .limits import Machine, check_envelope, limit_feeds
+from .limits import DEFAULT_MACHINE, Machine, check_envelope, limit_feeds
 from .posts import _num, comment_lines, finish_lines, get_dialect, header_lines, motion_lines
 from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
+from .seed import seed_gcode
 from .tools import Tool
 from .waterline import DEFAULT_STEEP_DEG, SteepSettings, plan_rest
 from .waterline import plan as steep_plan
@@ -73,7 +74,7 @@ _OP = re.compile(r"^(rough|finish|rest)\s+T(\d+)(?:\s+(zigzag|steep))?$", re.I)
 
 def parse_operations(text: str, tools: dict) -> list:
     """'rough T1, finish T2 steep, rest T3' -> [Operation]; tools: {number: Tool}."""
-    ops = []
+    ops: list[Operation] = []
     for part in [p.strip() for p in str(text).split(",") if p.strip()]:
         m = _OP.match(part)
         if not m:
@@ -129,7 +130,8 @@ def plan_operations(
     check_heightmap(hm)
     sampler = Sampler(hm, edge_step=resolution / 2)
     top = sampler.z_max + ROUGH_ABOVE_PART if stock_top is None else float(stock_top)
-    out, larger = [], None
+    out: list[Planned] = []
+    larger: Cutter | None = None
     for op in ops:
         c = op.tool.cutter
         res = min(resolution, c.radius / 3)
@@ -148,6 +150,8 @@ def plan_operations(
             p = steep_plan(sampler, SteepSettings(c, scallop, steep_deg, resolution=res))
             runs, notes = p.runs, [_tn(op.tool) + n for n in p.notes]
         else:
+            if larger is None:  # parse_operations puts a finish before every rest
+                raise SettingError("operations", "rest machining needs a finish before it")
             p = plan_rest(sampler, SteepSettings(c, scallop, steep_deg, resolution=res), larger)
             runs, notes = p.runs, [_tn(op.tool) + n for n in p.notes]
         if op.kind in ("finish", "rest"):
@@ -193,7 +197,7 @@ def post_operations(
     material: str = DEFAULT_MATERIAL,
     clearance: float = DEFAULT_CLEARANCE,
     z_offset: float = 0.0,
-    machine: Machine = Machine(),
+    machine: Machine = DEFAULT_MACHINE,
     chord: float = 0.002,
     hm: HeightMap | None = None,
 ) -> list:
@@ -201,7 +205,7 @@ def post_operations(
     if dialect == "dissertation":
         if hm is None:
             raise SettingError("dialect", "the dissertation format needs the height map")
-        text = dissertation_gcode(hm)
+        text = seed_gcode(hm)
         return [Posted(f"{_safe(job)}-finish-dissertation.nc", text, [], float("nan"))]
     d = get_dialect(dialect)
     check_frame(clearance, z_offset)

@@ -18,7 +18,7 @@ fanuc     `%` first and last, a program number O0001, N numbers, every
           3 decimals, G54 work offset named, comments in capitals.
 
 The dissertation's own format is not a dialect of a Program (it has no
-cutter compensation at all): see dissertation.py; the toolpath command
+cutter compensation at all): see seed.py; the toolpath command
 offers it as `--dialect dissertation` for comparison.
 """
 

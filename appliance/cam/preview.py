@@ -31,7 +31,9 @@ SCALE = 100.0  # units per mm
 
 def preview(programs) -> dict:
     """programs: [(Tool or None, Program)] in the order they run."""
-    paths, changes, tools = [], [], {}
+    paths: list[dict] = []
+    changes: list[dict] = []
+    tools: dict[str, dict] = {}
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     last_tool, prev = object(), None
     for tool, prog in programs:

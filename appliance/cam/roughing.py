@@ -31,8 +31,9 @@ import numpy as np
 
 from ..errors import SettingError
 from .cutters import Cutter
+from .polyline import reduce_polyline, true_runs
 from .sampling import Sampler
-from .zigzag import _true_runs, check_fits, reduce_polyline
+from .zigzag import check_fits
 
 DEFAULT_STEPDOWN = 1.0
 DEFAULT_LEAVE = 0.3
@@ -113,7 +114,7 @@ def roughing(sampler: Sampler, st: RoughSettings):
         if cut.any():
             for j in range(ys.size):
                 row = []
-                for a, b in _true_runs(cut[j]):
+                for a, b in true_runs(cut[j]):
                     pts = np.column_stack([xs[a:b], np.full(b - a, ys[j]), z[j, a:b]])
                     row.append(reduce_polyline(pts, st.chord))
                 if j % 2 == 1:

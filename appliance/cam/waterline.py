@@ -48,18 +48,12 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import SettingError
+from .contact import drop_lines, drop_points
+from .contours import contours
 from .cutters import Cutter
+from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .scallop import ball_stepover, flat_stepover
-from .zigzag import (
-    _frame,
-    _true_runs,
-    check_fits,
-    drop_lines,
-    drop_points,
-    reduce_polyline,
-    refine,
-    refine_tolerance,
-)
+from .zigzag import check_fits, pass_frame
 
 DEFAULT_STEEP_DEG = 50.0
 DEFAULT_OVERLAP_DEG = 5.0
@@ -207,103 +201,6 @@ def shallow_stepover(cutter: Cutter, scallop: float, slope_deg: float) -> float:
     )
 
 
-# -- marching squares ------------------------------------------------------------
-
-# corner bits: 1 (j, i), 2 (j, i+1), 4 (j+1, i+1), 8 (j+1, i); edges: 0 bottom, 1 right, 2 top, 3 left
-_SEGMENTS = {
-    1: [(3, 0)],
-    2: [(0, 1)],
-    3: [(3, 1)],
-    4: [(1, 2)],
-    6: [(0, 2)],
-    7: [(3, 2)],
-    8: [(2, 3)],
-    9: [(0, 2)],
-    11: [(1, 2)],
-    12: [(1, 3)],
-    13: [(0, 1)],
-    14: [(3, 0)],
-}
-_SADDLE = {
-    (5, True): [(0, 1), (2, 3)],
-    (5, False): [(3, 0), (1, 2)],
-    (10, True): [(3, 0), (1, 2)],
-    (10, False): [(0, 1), (2, 3)],
-}
-
-
-def contours(field: TipField, level: float) -> list:
-    """Polylines (k, 2) where the tip field crosses `level`; closed ones repeat their first point."""
-    F = field.tip
-    ny, nx = F.shape
-    v = F - level
-    a, b, c, d = v[:-1, :-1], v[:-1, 1:], v[1:, 1:], v[1:, :-1]
-    valid = np.isfinite(a) & np.isfinite(b) & np.isfinite(c) & np.isfinite(d)
-    case = ((a > 0) * 1 + (b > 0) * 2 + (c > 0) * 4 + (d > 0) * 8) * valid
-    centre_high = (a + b + c + d) > 0
-    jj, ii = np.nonzero((case > 0) & (case < 15))
-    if jj.size == 0:
-        return []
-    xs, ys, g = field.xs, field.ys, field.g
-
-    def edge(j, i, e):
-        """Global id and crossing point of edge e of cell (j, i)."""
-        if e == 0:
-            p, q, eid = (j, i), (j, i + 1), ("h", j, i)
-        elif e == 2:
-            p, q, eid = (j + 1, i), (j + 1, i + 1), ("h", j + 1, i)
-        elif e == 3:
-            p, q, eid = (j, i), (j + 1, i), ("v", j, i)
-        else:
-            p, q, eid = (j, i + 1), (j + 1, i + 1), ("v", j, i + 1)
-        vp, vq = v[p], v[q]
-        t = vp / (vp - vq)
-        x = xs[p[1]] + t * (xs[q[1]] - xs[p[1]])
-        y = ys[p[0]] + t * (ys[q[0]] - ys[p[0]])
-        return eid, (x, y)
-
-    point, ends = {}, {}
-    segs = []
-    for j, i in zip(jj.tolist(), ii.tolist()):
-        k = int(case[j, i])
-        pairs = _SADDLE[(k, bool(centre_high[j, i]))] if k in (5, 10) else _SEGMENTS[k]
-        for e1, e2 in pairs:
-            id1, p1 = edge(j, i, e1)
-            id2, p2 = edge(j, i, e2)
-            point[id1], point[id2] = p1, p2
-            s = len(segs)
-            segs.append((id1, id2))
-            ends.setdefault(id1, []).append(s)
-            ends.setdefault(id2, []).append(s)
-    used = np.zeros(len(segs), bool)
-    lines = []
-    for s0 in range(len(segs)):
-        if used[s0]:
-            continue
-        used[s0] = True
-        chain = list(segs[s0])
-        for forward in (True, False):  # grow from both ends
-            while True:
-                tail = chain[-1] if forward else chain[0]
-                nxt = [s for s in ends[tail] if not used[s]]
-                if not nxt:
-                    break
-                s = nxt[0]
-                used[s] = True
-                a_, b_ = segs[s]
-                new = b_ if a_ == tail else a_
-                if forward:
-                    chain.append(new)
-                else:
-                    chain.insert(0, new)
-                if chain[0] == chain[-1]:
-                    break
-            if chain[0] == chain[-1]:
-                break
-        lines.append(np.array([point[e] for e in chain], float))
-    return lines
-
-
 def _orient(field: TipField, line):
     """Higher tip field on the left of the direction of travel (one sense for every loop)."""
     if len(line) < 2:
@@ -329,7 +226,7 @@ def _split(line, inside):
         k = int(np.flatnonzero(~inside)[0])  # start the loop outside, so no piece is cut in two
         line = np.vstack([line[k:-1], line[: k + 1]])
         inside = np.concatenate([inside[k:-1], inside[: k + 1]])
-    return [line[a:b] for a, b in _true_runs(inside) if b - a >= 2]
+    return [line[a:b] for a, b in true_runs(inside) if b - a >= 2]
 
 
 def _resample(line, step):
@@ -352,6 +249,7 @@ def _drop_runs(sampler, st: SteepSettings, lines):
     for ln in lines:
         runs.append(np.column_stack([ln, z[k : k + len(ln)]]))
         k += len(ln)
+    assert st.chord is not None  # set by SteepSettings.__post_init__
     tol = refine_tolerance(st.chord)
     runs = refine(sampler, st.cutter, runs, tol, 0.0, st.resolution)
     out = []
@@ -377,7 +275,7 @@ def waterlines(sampler, st: SteepSettings, field: TipField, steep):
     out, at = [], None
     for z in levels:
         pieces = []
-        for ln in contours(field, float(z)):
+        for ln in contours(field.xs, field.ys, field.tip, float(z)):
             for piece in _split(ln, field.lookup(steep, ln[:, 0], ln[:, 1])):
                 if np.sum(np.hypot(*np.diff(piece, axis=0).T)) >= 2 * st.resolution:
                     pieces.append(_resample(_orient(field, piece), st.resolution))
@@ -399,7 +297,7 @@ def raster(sampler, st: SteepSettings, field: TipField, shallow, stepover):
     """Zig-zag XY polylines over the shallow region, passes `stepover` apart."""
     if not shallow.any():
         return []
-    e1, e2, (t0, t1), (s0, s1) = _frame(sampler, st.angle, 0.0)
+    e1, e2, (t0, t1), (s0, s1) = pass_frame(sampler, st.angle, 0.0)
     k = max(int(np.ceil((s1 - s0) / stepover - 1e-9)), 1)
     passes = np.linspace(s0, s1, k + 1)
     n = int(np.ceil((t1 - t0) / st.resolution - 1e-9)) + 1
@@ -410,7 +308,7 @@ def raster(sampler, st: SteepSettings, field: TipField, shallow, stepover):
         keep = field.lookup(shallow, pts[:, 0], pts[:, 1]) & (
             sampler.part_distance(pts[:, 0], pts[:, 1]) <= 1e-9
         )
-        pieces = [pts[a:b] for a, b in _true_runs(keep) if b - a >= 2]
+        pieces = [pts[a:b] for a, b in true_runs(keep) if b - a >= 2]
         if p % 2 == 1:
             pieces = [q[::-1] for q in pieces[::-1]]
         out.extend(pieces)

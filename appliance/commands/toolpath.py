@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from .. import atomicio, progress
 from ..outputs import read_heightmap_csv
+from ._flags import flags
 
 NAME = "toolpath"
 ORDER = 30
@@ -58,8 +59,9 @@ def add_arguments(p):
     g.add_argument(
         "--margin",
         type=float,
-        default=0.0,
-        help="how far the cutter axis may go past the part's edge, mm (0..radius)",
+        default=None,
+        help="how far the cutter axis may go past the part's edge, mm (0..radius; default: the "
+        "cutter's radius, so the passes run off the outline onto the base and finish the rim)",
     )
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
     g.add_argument(
@@ -126,10 +128,11 @@ def _machine(args):
     from ..cam.limits import Machine, parse_feeds, parse_travel
 
     kw = {}
-    if args.travel:
-        kw["travel"] = parse_travel(args.travel)
-    if args.max_feed:
-        kw["max_feed"] = parse_feeds(args.max_feed)
+    with flags({"machine travel": "--travel", "machine max feed": "--max-feed"}):
+        if args.travel:
+            kw["travel"] = parse_travel(args.travel)
+        if args.max_feed:
+            kw["max_feed"] = parse_feeds(args.max_feed)
     if args.rapid is not None:
         kw["rapid"] = args.rapid
     return Machine(**kw)
@@ -148,7 +151,7 @@ def run(args):
     from ..cam.jobs import finishing_gcode, roughing_gcode
     from ..cam.roughing import RoughSettings
     from ..cam.sampling import check_heightmap
-    from ..cam.zigzag import FinishSettings
+    from ..cam.zigzag import RIM, FinishSettings
 
     atomicio.check_output_file(args.out, "-o")  # before the work, not after it
     if args.rough_out:
@@ -170,7 +173,8 @@ def run(args):
         z_offset=args.z_offset,
         machine=machine,
     )
-    cutter = parse_cutter(args.cutter, args.flute_length, args.flutes)
+    with flags({"cutter": "--cutter"}):
+        cutter = parse_cutter(args.cutter, args.flute_length, args.flutes)
     st = FinishSettings(
         cutter,
         scallop=None if args.stepover is not None else args.scallop,
@@ -178,13 +182,14 @@ def run(args):
         angle=args.angle,
         resolution=args.resolution,
         chord=args.chord,
-        margin=args.margin,
+        margin=RIM if args.margin is None else args.margin,
         leave=args.leave,
     )
     if args.rough_out:
         import numpy as np
 
-        rc = parse_cutter(args.rough_cutter, args.flute_length, args.flutes)
+        with flags({"cutter": "--rough-cutter"}):
+            rc = parse_cutter(args.rough_cutter, args.flute_length, args.flutes)
         top = float(np.nanmax(hm.z)) + 2.0 if args.stock_top is None else args.stock_top
         rs = RoughSettings(rc, top, args.stepdown, args.rough_leave, args.rough_stepover)
         progress.stage("roughing program")
@@ -292,7 +297,9 @@ def run_job(args):
     if args.operations:
         ops = parse_operations(args.operations, tools)
     else:
-        ops = [_finish_op(args, parse_cutter(args.cutter, args.flute_length, args.flutes), tools)]
+        with flags({"cutter": "--cutter"}):
+            cutter = parse_cutter(args.cutter, args.flute_length, args.flutes)
+        ops = [_finish_op(args, cutter, tools)]
     return _post_named(args, hm, ops, out_dir, None, job=args.job or (src.name if src.is_dir() else src.stem))
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from .. import atomicio, progress
 from ..errors import InkSliceError, SettingError
 from ..outputs import read_heightmap_csv
+from ._flags import flags
 
 # our finishing programs keep within 0.005 mm (tests/test_cam_scallop.py); twice that
 # tolerates the simulation's lattice, and a program that digs into the part fails
@@ -41,8 +42,9 @@ def add_arguments(p):
     p.add_argument(
         "--edge-band",
         type=float,
-        default=0.5,
-        help="band inside the part's edge left out of the scallop figures, mm",
+        default=0.0,
+        help="band inside the part's edge left out of the scallop figures, mm (default 0: "
+        "the whole surface the cutter can reach, its rim included)",
     )
     p.add_argument(
         "--reach-tol",
@@ -92,17 +94,18 @@ def run(args):
             except ValueError:
                 raise SettingError("--z-zero", f"{args.z_zero!r} is not a number or 'top'") from None
     progress.stage("simulated milling")
-    rep, info = verify_gcode(
-        text,
-        hm,
-        cutter=args.cutter,
-        z_zero=z_zero,
-        resolution=args.resolution,
-        reach_tol=args.reach_tol,
-        edge_band=args.edge_band,
-        uncut_tol=args.uncut_tol,
-        where=str(path),
-    )
+    with flags({"cutter": "--cutter", "z zero": "--z-zero"}):
+        rep, info = verify_gcode(
+            text,
+            hm,
+            cutter=args.cutter,
+            z_zero=z_zero,
+            resolution=args.resolution,
+            reach_tol=args.reach_tol,
+            edge_band=args.edge_band,
+            uncut_tol=args.uncut_tol,
+            where=str(path),
+        )
     print(
         f"{path}: {info['moves']} moves, cutter {info['cutter']}, program Z0 at {info['z_zero']:.3f} mm "
         "above the base top"

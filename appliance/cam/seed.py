@@ -1,4 +1,8 @@
-"""The dissertation's G-code (appendix A), kept for comparison.
+"""The seed's G-code: the dissertation's own format (appendix A), kept for comparison.
+
+"Seed" is the project's word for the dissertation's baseline (its vision
+method is vision/seed.py, its surface surface/seed.py). Users choose this
+format as the `dissertation` dialect, the name they know it by.
 
 Every grid point becomes a G01 move in a zig-zag that holds X and sweeps Y,
 alternating direction; absolute millimetres, spindle 1500 rpm, feed 1500,
@@ -18,9 +22,7 @@ import numpy as np
 from ..surface.heightmap import HeightMap
 
 
-def dissertation_gcode(
-    hm: HeightMap, stock_top: float | None = None, spindle: int = 1500, feed: int = 1500
-) -> str:
+def seed_gcode(hm: HeightMap, stock_top: float | None = None, spindle: int = 1500, feed: int = 1500) -> str:
     top = float(np.nanmax(hm.z)) if stock_top is None else float(stock_top)
     lines = ["G90 G21", f"M03 S{spindle}"]
     first = True

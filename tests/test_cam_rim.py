@@ -1,0 +1,49 @@
+"""The rim is finished: the default program runs off the part's outline onto the base, and
+`verify` measures the whole surface the cutter can reach, its edge included (issue 20)."""
+
+import numpy as np
+import pytest
+from cam_helpers import grid_map
+
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.gcodeparse import parse_gcode
+from appliance.cam.jobs import finishing_gcode, verify_gcode
+from appliance.cam.zigzag import FinishSettings
+
+
+def _dome(X, Y):
+    # a dome falling towards every edge, about 1.4 mm above the base there (less than the radius: the base holds the tip): the strip along the
+    # edge can only be reached by a cutter whose axis is outside the outline
+    return 1 + 6 * np.exp(-((X - 10) ** 2 + (Y - 8) ** 2) / 60)
+
+
+@pytest.mark.parametrize("cutter,h", [("ball4", 0.05), ("flat4", 0.05)])
+def test_the_default_program_finishes_the_rim_and_verify_measures_all_of_it(cutter, h):
+    hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
+    job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=h))
+    rep, _ = verify_gcode(job.text, hm)  # no edge band by default
+    assert rep.measured_area == pytest.approx(rep.part_area - rep.unreachable_area)
+    assert rep.unreachable_area < 0.01 * rep.part_area  # the rim counts as reachable
+    assert rep.uncut_reachable <= 0.01
+    assert abs(rep.scallop_max - h) <= 0.1 * h, rep.lines()
+    assert rep.gouge <= 0.005
+
+
+def test_the_passes_run_off_the_outline_onto_the_base_and_never_below_it():
+    hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
+    ball = parse_cutter("ball4")
+    p = parse_gcode(finishing_gcode(hm, FinishSettings(ball, scallop=0.05)).text)
+    z0 = -float(p.meta("inkslice z_offset") or 0.0)
+    cut = (p.kind == 1) & np.isfinite(p.xyz).all(axis=1)
+    x, y, z = p.xyz[cut].T
+    outside = (x < 0) | (x > 20) | (y < 0) | (y > 16)
+    assert outside.any() and x.min() < -1.5 and y.max() > 17.5  # up to a radius (2 mm) less a step
+    assert x.min() >= -2 and x.max() <= 22 and y.min() >= -2 and y.max() <= 18
+    assert (z + z0).min() >= -1e-6  # the tip never goes below the base top
+
+
+def test_a_program_kept_inside_the_outline_leaves_the_rim_uncut():
+    hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=0.0))
+    rep, _ = verify_gcode(job.text, hm)
+    assert rep.uncut_reachable > 0.02 or rep.scallop_max > 0.2, rep.lines()
