@@ -144,7 +144,7 @@ def test_parser_round_trip_and_errors():
 def test_envelope_is_refused_not_clipped():
     m = Machine(travel=((-10, 15), (-10, 210), (-5, 150)))
     with pytest.raises(SettingError, match=r"X travel -10..15 mm by 5\.000 mm"):
-        finish(machine=m)
+        finish(machine=m, margin=0.0)  # the part alone: 5 mm past X 15
     with pytest.raises(SettingError, match="Z travel"):
         finish(machine=Machine(travel=((-10, 300), (-10, 300), (-5, 12))))
     # a work offset moves the program, and can push it out
