@@ -43,6 +43,7 @@ from .heightmap import HeightMap
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls
+from .registration import registered
 from .silhouettes import occluded_nodes
 from .slices import check_waterlines, outline_bounds
 from .uncertainty import OCCLUDED, CellEvidence, node_uncertainty
@@ -96,6 +97,7 @@ class ReconstructOptions:
     meniscus: MeniscusModel | None = None  # the correction, when wanted
     perspective: Perspective | None = None  # camera foot and height: walls seen by their raised edges
     pixel_mm: float = 0.0  # the camera's pixel on the liquid plane (waterline placement)
+    register_frames: bool = True  # frames moved back by their lateral stage play (registration.py)
     explain_uncertainty: bool = False  # diagnostics["uncertainty_terms"]: each term on the output grid
 
 
@@ -169,6 +171,10 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     slices, notes = check_waterlines(waterlines)
     diag: dict[str, Any] = {"notes": notes, "levels_in_mm": [s.level for s in slices]}
     camera = opt.perspective
+    if opt.register_frames:
+        foot, height = (camera.xy, camera.height_mm) if camera is not None else (None, None)
+        slices, offsets = registered(slices, foot, height)
+        diag["frame_offsets_mm"] = float(np.max(np.hypot(*offsets.T), initial=0.0))
     if camera is None:
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)
     seen = slices

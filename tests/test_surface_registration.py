@@ -1,0 +1,62 @@
+"""Frames registered on the walls they share (surface/registration.py).
+
+A 20 mm block whose top is a plane rising from 10 mm at x = 0 to 20 mm at x = 20: at a level
+between the two its waterline runs along three walls (x = 20, y = 0, y = 20), which stay put
+from frame to frame, and across the top at x = 2 (L - 10), which moves 2 mm a level. A stage
+that plays sideways shifts each frame's whole waterline; the walls tell by how much.
+"""
+
+import numpy as np
+
+from appliance.surface.registration import registered
+from appliance.surface.slices import make_slice
+
+LEVELS = np.arange(19.7, 10.0, -0.3)
+
+
+def _rectangle(x0, x1, y0, y1, step=0.1):
+    def edge(a, b):
+        n = max(int(np.hypot(*(b - a)) / step), 1)
+        return a + (b - a) * (np.arange(n) / n)[:, None]
+
+    c = [np.array(p, float) for p in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]
+    return np.vstack([edge(c[i], c[(i + 1) % 4]) for i in range(4)])  # counter-clockwise
+
+
+def _frames(play):
+    """The block's slices, each frame's waterline shifted by its row of `play` (mm)."""
+    return [
+        make_slice(L, [_rectangle(2.0 * (L - 10.0), 20.0, 0.0, 20.0) + off]) for L, off in zip(LEVELS, play)
+    ]
+
+
+def test_each_frames_stage_play_is_measured_on_the_walls_and_taken_out():
+    rng = np.random.default_rng(3)
+    r, a = 0.05 * np.sqrt(rng.uniform(size=LEVELS.size)), rng.uniform(0, 2 * np.pi, LEVELS.size)
+    play = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    frames = _frames(play)
+    out, offsets = registered(frames)
+
+    def walls(slices):
+        """Per frame: where its wall x = 20 and its wall y = 0 stand."""
+        at = []
+        for s in slices:
+            side = (s.P[:, 0] > 19.8) & (np.abs(s.P[:, 1] - 10.0) < 9.5)
+            foot = (s.P[:, 1] < 0.2) & (s.P[:, 0] < 19.8) & (s.P[:, 0] > s.P[:, 0].min() + 0.2)
+            at.append((s.P[side, 0].mean(), s.P[foot, 1].mean()))
+        return np.array(at)
+
+    before, after = walls(frames), walls(out)
+    assert np.ptp(before, axis=0).min() > 0.05  # the play moved the walls by up to 0.1 mm
+    # moved back, the frames' walls line up (what stays is the play's slow part, registration._trend),
+    # where the frames share long walls in both directions (the lower half: y walls over 10 mm)
+    low = LEVELS < 15.0
+    assert np.all(after[low].std(axis=0) < 0.4 * before[low].std(axis=0))
+    assert np.abs(offsets[:, 0] - (before[:, 0] - after[:, 0])).max() < 1e-9  # the offsets say by how much
+
+
+def test_frames_without_play_come_back_as_they_were():
+    frames = _frames(np.zeros((LEVELS.size, 2)))
+    out, offsets = registered(frames)
+    assert all(a is b for a, b in zip(out, frames))
+    assert np.abs(offsets).max() < 0.005
