@@ -91,8 +91,13 @@ def polish_rim(sampler: Sampler, cutter: Cutter, x, y, tip, chunk=20_000):
     return out.reshape(shape)
 
 
-def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
-    """Tips `tip` at (x, y) from the lattice drop-cutter, raised to nearer the exact contact where steep."""
+def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part=True):
+    """Tips `tip` at (x, y) from the lattice drop-cutter, raised to nearer the exact contact where steep.
+
+    off_part: polish positions off the part too (a program's: see below). The opening's
+    lattice leaves them: the band a radius wide around a 100 mm part's outline is a
+    tenth of its lattice, every node a ring scan, for a reach mask that errs only
+    towards measuring more."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     if cutter.kind == "flat":
@@ -110,7 +115,9 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=40_000):
     # an axis off the part (a pass run off the outline to finish the rim) stands on the flat
     # base, yet its contact is on the part's edge or a face beside it: 0.008 mm low on a
     # 79-degree face 0.4 mm in from the outline when it was not polished
-    steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP) | ~sampler.on_part(x, y)
+    steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP)
+    if off_part:
+        steep |= ~sampler.on_part(x, y) & sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
     sel = np.flatnonzero(steep)
     x, y, gx2, gy2, idx = x[sel], y[sel], gx2[sel], gy2[sel], near[sel]
     half = chunk // 2

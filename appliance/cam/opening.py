@@ -41,7 +41,13 @@ def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
     for j0, j1 in _bands(ny, nx):
         X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
         tip[j0:j1] = polish(
-            sampler, cutter, X, Y, drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d), d
+            sampler,
+            cutter,
+            X,
+            Y,
+            drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d),
+            d,
+            off_part=False,
         )
     out = _erode(tip, cutter, d)
     if cutter.kind == "flat":

@@ -213,7 +213,19 @@ class Sampler:
         u, v, i, j, inside = self._cell(x, y)
         return cache[key][j, i] | ~inside
 
-    def _steep_cells(self, cells, slope):
+    def may_have_steep_faces(self, x, y, reach, slope):
+        """Like may_be_steep, but only the part's own faces count, not the cliff where it meets
+        the floor (the drop-cutter meets that exactly, as edges): for a position off the part,
+        whose axis stands on the base, read at the nearest cell of the lattice."""
+        cells = int(np.ceil(reach / min(self.dx, self.dy))) + 2
+        key = ("faces", cells, float(slope))
+        cache = self.__dict__.setdefault("_steep_cache", {})
+        if key not in cache:
+            cache[key] = self._steep_cells(cells, slope, cliffs=False)
+        u, v, i, j, inside = self._cell(x, y)
+        return cache[key][j, i]
+
+    def _steep_cells(self, cells, slope, cliffs=True):
         g00, g10, g01, g11 = self._g00, self._g10, self._g01, self._g11
         bx = np.maximum(np.abs(g10 - g00), np.abs(g11 - g01)) / self.dx
         by = np.maximum(np.abs(g11 - g10), np.abs(g01 - g00)) / self.dy
@@ -223,10 +235,13 @@ class Sampler:
         cliff |= ndimage.binary_dilation(cliff, np.ones((3, 3), bool)) | (
             ~on & ndimage.binary_dilation(on, np.ones((3, 3), bool))
         )
-        bx = np.where(cliff, np.inf, bx)
+        if cliffs:
+            bx, by = np.where(cliff, np.inf, bx), np.where(cliff, np.inf, by)
+        else:
+            bx, by = np.where(on, bx, 0.0), np.where(on, by, 0.0)
         size = 2 * cells + 1
         bx = ndimage.maximum_filter(bx, size=size, mode="nearest")
-        by = ndimage.maximum_filter(np.where(cliff, np.inf, by), size=size, mode="nearest")
+        by = ndimage.maximum_filter(by, size=size, mode="nearest")
         return np.hypot(bx, by) > slope
 
     @property
