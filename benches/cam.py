@@ -16,10 +16,18 @@ Targets 5 s and 20 s not yet met: the planner's envelopes of each candidate pass
 (~2 s at 0.05) and the opening over the whole map (~1.9 s) are most of what is left.
 
 `--only rim` is issue 20's "the rim is finished": each sample and cutter of the
-acceptance table, the default program (passes run off the outline by the
-cutter's radius) verified with no edge band: uncut share of the reachable
-area (target <= 1 %) and the maximum scallop (within 10 % of the request);
-`--rim-compare` prints the margin-0 program (the old default) beside it.
+acceptance table, a program with margin RIM (passes run off the outline by the
+cutter's radius less a step; `toolpath --rim`) verified with no edge band: the
+uncut share of the reachable area (target <= 1 %) and the maximum scallop
+(within 10 % of the request); `--rim-compare` prints the margin-0 default
+beside it. Measured 2026-12-02 (RIM): sample1 ball6 0.05: 0.00 % uncut, max
+0.0491, gouge 0.0029 (margin 0 left 250 mm^2 of rim unmeasured); sample2 ball6
+0.01: 0.00 %, 0.0098, 0.0014; sample3 flat6 0.05: 0.00 %, 0.0715 at the corner
+(0, 100) MISS; sample4 bull1r0.25 0.01: 0.00 %, 0.0569 at its edge MISS. RIM is
+not the default yet: sample 1 at 0.01 took 58.6 s / 886 MB with it against
+14.9 s / 202 MB without (refining the moves that roll over the rim).
+Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
+0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
@@ -52,7 +60,7 @@ from appliance.cam.jobs import finishing_gcode, finishing_gcodes, verify_gcode
 from appliance.cam.posts import DIALECT_NAMES
 from appliance.cam.sampling import Sampler
 from appliance.cam.seed import seed_gcode
-from appliance.cam.zigzag import FinishSettings
+from appliance.cam.zigzag import RIM, FinishSettings
 from appliance.sim import surfaces
 from appliance.surface.heightmap import HeightMap
 
@@ -287,14 +295,14 @@ def bench_rim(quick, only_sample=None, only_cutter=None, compare=False):
             if only_cutter and cname != only_cutter:
                 continue
             cutter = parse_cutter(cname)
-            for margin in (None, 0.0) if compare else (None,):
-                kw = {} if margin is None else {"margin": margin}
+            for margin in (RIM, 0.0) if compare else (RIM,):
+                kw = {"margin": margin}
                 job = finishing_gcode(hm, FinishSettings(cutter, scallop=h, resolution=res, **kw))
                 rep, _ = verify_gcode(job.text, hm, resolution=res)
                 ok = (
                     rep.gouge <= 0.005 and rep.uncut_reachable <= 0.01 and abs(rep.scallop_max - h) <= 0.1 * h
                 )
-                m = "R" if margin is None else f"{margin:g}"
+                m = "R-d" if margin == RIM else f"{margin:g}"
                 print(
                     f"{name:8s} {cname:11s} {h:<12g} {m:6s}  {rep.gouge:.4f}   {rep.scallop_max:.4f} "
                     f"({rep.scallop_at[0]:5.1f}, {rep.scallop_at[1]:5.1f})   {100 * rep.uncut_reachable:8.2f}"

@@ -1,5 +1,5 @@
-"""The rim is finished: the default program runs off the part's outline onto the base, and
-`verify` measures the whole surface the cutter can reach, its edge included (issue 20)."""
+"""The rim is finished: a program with margin RIM runs off the part's outline onto the base,
+and `verify` measures the whole surface the cutter can reach, its edge included (issue 20)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from cam_helpers import grid_map
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.gcodeparse import parse_gcode
 from appliance.cam.jobs import finishing_gcode, verify_gcode
-from appliance.cam.zigzag import FinishSettings
+from appliance.cam.zigzag import RIM, FinishSettings
 
 
 def _dome(X, Y):
@@ -18,9 +18,9 @@ def _dome(X, Y):
 
 
 @pytest.mark.parametrize("cutter,h", [("ball4", 0.05), ("flat4", 0.05)])
-def test_the_default_program_finishes_the_rim_and_verify_measures_all_of_it(cutter, h):
+def test_a_rim_program_finishes_the_rim_and_verify_measures_all_of_it(cutter, h):
     hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
-    job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=h))
+    job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=h, margin=RIM))
     rep, _ = verify_gcode(job.text, hm)  # no edge band by default
     assert rep.measured_area == pytest.approx(rep.part_area - rep.unreachable_area)
     assert rep.unreachable_area < 0.01 * rep.part_area  # the rim counts as reachable
@@ -32,7 +32,7 @@ def test_the_default_program_finishes_the_rim_and_verify_measures_all_of_it(cutt
 def test_the_passes_run_off_the_outline_onto_the_base_and_never_below_it():
     hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
     ball = parse_cutter("ball4")
-    p = parse_gcode(finishing_gcode(hm, FinishSettings(ball, scallop=0.05)).text)
+    p = parse_gcode(finishing_gcode(hm, FinishSettings(ball, scallop=0.05, margin=RIM)).text)
     z0 = -float(p.meta("inkslice z_offset") or 0.0)
     cut = (p.kind == 1) & np.isfinite(p.xyz).all(axis=1)
     x, y, z = p.xyz[cut].T
@@ -42,8 +42,8 @@ def test_the_passes_run_off_the_outline_onto_the_base_and_never_below_it():
     assert (z + z0).min() >= -1e-6  # the tip never goes below the base top
 
 
-def test_a_program_kept_inside_the_outline_leaves_the_rim_uncut():
+def test_the_default_program_kept_inside_the_outline_leaves_the_rim_uncut():
     hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
-    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=0.0))
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05))  # margin 0
     rep, _ = verify_gcode(job.text, hm)
     assert rep.uncut_reachable > 0.02 or rep.scallop_max > 0.2, rep.lines()

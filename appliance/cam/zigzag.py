@@ -17,11 +17,12 @@ Boundary
 Tool positions are kept where the axis lies within `margin` of the footprint.
 Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
-the base). By default the margin is the cutter's radius less a step: the passes run
-off the outline until the cutter has all but left the part, so the rim is
-finished like the rest (with margin 0 the axis never leaves the part, and the strip the
-cutter could only reach from outside stays uncut: 10 % of a dome, with
-1.6 mm scallops at its edge). A pass broken by a hole or a bay of the
+the base). With margin RIM (the cutter's radius less a step) the passes run off the
+outline until the cutter has all but left the part, so the rim is finished
+like the rest; with margin 0 (the default, for now: RIM costs sample 1 at
+scallop 0.01 58.6 s and 886 MB against 14.9 s and 202 MB) the axis never
+leaves the part, and the strip the cutter could only reach from outside
+stays uncut. A pass broken by a hole or a bay of the
 footprint becomes several runs; the program builder retracts between them.
 
 Neighbouring runs that end and start within two stepovers are linked by a
@@ -59,7 +60,9 @@ class FinishSettings:
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
     chord: float | None = None
-    margin: float = RIM  # RIM: the cutter's radius less a step
+    # RIM (the cutter's radius less a step) finishes the rim, but costs 4x the CPU and
+    # memory at scallop 0.01 (refining the moves that roll over it): not yet the default
+    margin: float = 0.0
     leave: float = 0.0
 
     def __post_init__(self):
