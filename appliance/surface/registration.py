@@ -33,6 +33,7 @@ PAIR_SIGMA_MM = 0.006  # how well two frames' shift is known at best
 MIN_AGREEING = 30  # points that must agree before a pair's shift counts
 VOTERS = 400  # points (evenly along the waterline) that vote on the shift
 PAIRS = (1, 2)  # each frame is compared with the ones this many frames above it
+CLOSURE_CHI2 = 9.0  # three pairs' shifts around a triangle close to within 3 x their spread
 TREND_FRAMES = 9  # frames over which a drift of the offsets is their slow part, not play
 NOTHING_TO_DO_MM = 0.015  # offsets whose rms is below this are the waterlines' noise (a harsh
 # sample 4 without play: 0.008 mm; with 0.05 mm of play: 0.03): the frames stay as they were
@@ -122,25 +123,48 @@ def frame_offsets(slices: list[Slice], camera_xy=None, camera_height_mm=None) ->
     the shifts between neighbouring frames and a prior of PLAY_MM on each offset."""
     K = len(slices)
     seen = [k for k in range(K) if not slices[k].empty]
-    index = {k: j for j, k in enumerate(seen)}
     m = len(seen)
     A = np.eye(2 * m) / (0.5 * PLAY_MM) ** 2
     b = np.zeros(2 * m)
-    for j, k in enumerate(seen):
-        for gap in PAIRS:
-            if j - gap < 0:
-                continue
-            u = index[seen[j - gap]]
-            shift, W = pair_shift(slices[seen[j - gap]], slices[k], camera_xy, camera_height_mm)
-            # (t_k - t_u) = shift, weighted by W
-            for a, sa in ((j, 1.0), (u, -1.0)):
-                b[2 * a : 2 * a + 2] += sa * (W @ shift)
-                for c, sc in ((j, 1.0), (u, -1.0)):
-                    A[2 * a : 2 * a + 2, 2 * c : 2 * c + 2] += sa * sc * W
+    pairs = {
+        (j - gap, j): pair_shift(slices[seen[j - gap]], slices[seen[j]], camera_xy, camera_height_mm)
+        for j in range(m)
+        for gap in PAIRS
+        if j - gap >= 0
+    }
+    for (u, j), (shift, W) in _closed(pairs).items():
+        # (t_j - t_u) = shift, weighted by W
+        for a, sa in ((j, 1.0), (u, -1.0)):
+            b[2 * a : 2 * a + 2] += sa * (W @ shift)
+            for c, sc in ((j, 1.0), (u, -1.0)):
+                A[2 * a : 2 * a + 2, 2 * c : 2 * c + 2] += sa * sc * W
     t = np.linalg.solve(A, b).reshape(m, 2)
     out = np.zeros((K, 2))
     out[seen] = t - _trend(t)
     return out
+
+
+def _closed(pairs: dict) -> dict:
+    """The pairs whose shifts close a triangle: frames u, u+1, u+2 played by t_u, t_u+1,
+    t_u+2 give shift(u, u+2) = shift(u, u+1) + shift(u+1, u+2) to within the pairs' noise.
+    A face steep but not vertical (a sphere's cap above its wall) moves its waterline
+    outwards by a few hundredths a level, and an arc of it then agrees on a shift that no
+    stage made (0.1-0.17 mm on the demo's sphere, frames without any play); two levels apart
+    the same face moves twice as far, and its arc and shift are others, so the triangle does
+    not close. Only pairs confirmed by a closed triangle count."""
+    known = {key: pair for key, pair in pairs.items() if pair[1].any()}
+    confirmed = set()
+    for u, w in known:
+        sides = [(u, w), (u, u + 1), (u + 1, w)]
+        if w - u != 2 or not all(side in known for side in sides):
+            continue
+        gap = known[(u, w)][0] - known[(u, u + 1)][0] - known[(u + 1, w)][0]
+        # each side is known across the walls it saw, to the play along them (one straight
+        # wall tells nothing along it): the gap is weighed by the three sides' spreads
+        spread = sum(np.linalg.inv(known[side][1] + np.eye(2) / PLAY_MM**2) for side in sides)
+        if gap @ np.linalg.solve(spread, gap) <= CLOSURE_CHI2:
+            confirmed |= set(sides)
+    return {key: pairs[key] for key in confirmed}
 
 
 def _trend(t: np.ndarray) -> np.ndarray:
