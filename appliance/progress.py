@@ -9,11 +9,13 @@ A command shows them inside `with progress.shown():`. On a terminal that is one 
 redrawn in place: a bar with the count for a counted stage, the seconds so far for the others
 (a ticker keeps it moving while a single step takes long). Anywhere else (a pipe, a log, a test)
 it is plain lines: the stage's start, every quarter of a counted stage, and how long it took.
-The daemon's processing child has no display: the calls do nothing there.
+The daemon's processing child has no display: it only clocks the stages (`timed`), so a job's
+log says where its processing time went.
 """
 
 from __future__ import annotations
 
+import resource
 import sys
 import threading
 import time
@@ -52,6 +54,39 @@ def shown(stream=None, tty: bool | None = None):
             sys.stdout = stream
         _display.close()
         _display = previous
+
+
+@contextmanager
+def timed():
+    """Clock the stages reported inside the block: yields a _StageClock whose `seconds`
+    ({stage: seconds}) and `peak_mb` ({stage: the process's peak memory when it ended}) fill as they end."""
+    global _display
+    previous, _display = _display, _StageClock()
+    try:
+        yield _display
+    finally:
+        _display.close()
+        _display = previous
+
+
+class _StageClock:
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self.peak_mb: dict[str, float] = {}
+        self.name, self.t0 = None, 0.0
+
+    def stage(self, name, total=None):
+        self.close()
+        self.name, self.t0 = name, time.monotonic()
+
+    def step(self, done, total=None):
+        pass
+
+    def close(self):
+        if self.name is not None:
+            self.seconds[self.name] = self.seconds.get(self.name, 0.0) + time.monotonic() - self.t0
+            self.peak_mb[self.name] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB
+            self.name = None
 
 
 class _AroundTheBar:

@@ -71,3 +71,18 @@ def test_render_and_process_say_frames_waterlines_surface_and_toolpath(tmp_path,
     stages = [l.split(" ...")[0] for l in said.splitlines() if " ..." in l]
     assert stages[:2] == ["waterlines", "surface (fit)"] and stages[-2:] == ["toolpath", "writing outputs"]
     assert f"{tmp_path / 'out'}/heightmap.csv" in said
+
+
+def test_timed_clocks_each_stage_and_the_peak_memory_when_it_ended():
+    with progress.timed() as clock:
+        progress.stage("waterlines", total=2)
+        progress.step(1)
+        progress.stage("toolpath")
+        block = bytearray(20_000_000)  # the peak rises during the toolpath
+        progress.stage("writing outputs")
+        del block
+    assert list(clock.seconds) == ["waterlines", "toolpath", "writing outputs"]
+    assert all(s >= 0 for s in clock.seconds.values())
+    assert clock.peak_mb["toolpath"] >= clock.peak_mb["waterlines"]
+    progress.stage("after the block")  # nobody listens again: nothing recorded
+    assert "after the block" not in clock.seconds

@@ -82,7 +82,13 @@ def run(processor: Callable, store, job_id: str, settings: dict, stop) -> list[s
     if stop is not None and stop.is_set():
         raise Cancelled()
     if "peak_rss_mb" in result:
-        store.event(job_id, "processed", f"processing peak memory {result['peak_rss_mb']} MB")
+        # [seconds, the child's peak MB when the phase ended]: where the time and the memory went
+        phases = ", ".join(f"{k} {s:g} s (to {mb} MB)" for k, (s, mb) in result.get("phases", {}).items())
+        store.event(
+            job_id,
+            "processed",
+            f"processing peak memory {result['peak_rss_mb']} MB" + (f"; {phases}" if phases else ""),
+        )
     return checked_outputs(result, job_dir)
 
 

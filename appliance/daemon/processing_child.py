@@ -10,10 +10,12 @@ from ..errors import InkSliceError
 def main(argv, truth_for=lambda scan_folder: None):
     """`truth_for(scan_folder)`: the part's ground truth for the statistics, or None (a real scan)."""
     scan, out, options = argv[0], argv[1], json.loads(argv[2])
+    from .. import progress
     from ..process import process_scan
 
     try:
-        result = process_scan(scan, out, truth=truth_for(scan), **options)
+        with progress.timed() as clock:
+            result = process_scan(scan, out, truth=truth_for(scan), **options)
     except InkSliceError as e:
         print(f"{e.where}: {e.problem}", file=sys.stderr)
         return 2
@@ -28,7 +30,12 @@ def main(argv, truth_for=lambda scan_folder: None):
         return 2
     print(
         json.dumps(
-            {"outputs": result["outputs"], "method": result.get("method"), "truth": result.get("truth")}
+            {
+                "outputs": result["outputs"],
+                "method": result.get("method"),
+                "truth": result.get("truth"),
+                "phases": {k: [round(v, 2), round(clock.peak_mb[k])] for k, v in clock.seconds.items()},
+            }
         )
     )
     return 0

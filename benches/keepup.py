@@ -1,0 +1,168 @@
+"""Does the daemon keep up? The demo's scan through the real daemon, and how long its result
+takes after the last frame (issue 20: within 10 s, and the whole processing under 300 MB).
+
+The appliance as `inkslice demo --serve` runs it: `inkslice daemon --sim simavr` (the firmware
+under simavr behind the real SerialStage, the virtual camera at 640 x 480 looking at the
+demo's part, the sphere), every setting at its default, processing in its child process. The
+bench starts one scan over the daemon's socket and prints:
+
+- after the last frame: from the last frame on disk (scan.json is rewritten with each frame) to
+  the job's end (its `finished` time, when the result is written and the job is done);
+- the processing child's phases (its job log: seconds each, and its peak memory as each ended);
+- peak memory: the daemon's largest VmRSS while it processes plus the processing child's peak
+  (ru_maxrss from wait4), against the limit; and the daemon's VmHWM over the whole job (it
+  includes the virtual camera's renderer, which a real bench does not run).
+
+    .venv/bin/python benches/keepup.py                  # the demo's scan (about 2 min)
+    .venv/bin/python benches/keepup.py --settle 0       # the same scan, captured without settling
+    .venv/bin/python benches/keepup.py --part cone      # another part
+
+A Pi 4 is 4-5x slower than the build machine: a figure here is a fifth of what it will be there.
+
+Measured 2026-12-03 (shared 2-core box, load 8-9 from other work), before any change: 84
+frames, capture 75 s; the result 45.9 s after the last frame (waterlines 0.4 s, surface fit
+7.4 s, toolpath 35.4 s, writing 0.2 s): MISS. Memory while processing: daemon 185 MB (idle
+with the simulated bench: see the run) + child 286 MB (135 MB after the waterlines, 181 after
+the fit, 286 in the toolpath) = 471 MB: MISS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from appliance.daemon.rpc import BenchClient  # noqa: E402
+from appliance.errors import DeviceError  # noqa: E402
+
+AFTER_LAST_FRAME_S = 10.0
+PEAK_MB = 300.0
+
+
+def proc_status_mb(pid, key):
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) / 1024  # kB -> MB
+    return None
+
+
+def start_daemon(tmp: Path, part: str, frame: str):
+    sock = tmp / "d.sock"
+    log = open(tmp / "daemon.log", "wb")
+    cmd = [sys.executable, "-m", "appliance.cli", "daemon", "--sim", "simavr", "--frame", frame]
+    cmd += ["--surface", part, "--data", str(tmp / "data"), "--socket", str(sock)]
+    proc = subprocess.Popen(cmd, stdout=log, stderr=log, cwd=REPO)
+    client = BenchClient(sock)
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            client.state()
+            return proc, client
+        except DeviceError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                sys.exit(f"daemon did not start: {(tmp / 'daemon.log').read_text()[-2000:]}")
+            time.sleep(0.2)
+
+
+def run_scan(client, params, pid):
+    """Start the scan, wait for its end; (job, seconds from start to the first 'processing'
+    state, the daemon's largest resident MB while it processed)."""
+    t0 = time.monotonic()
+    job_id = client.start_scan(params)
+    t_processing, processing_mb = None, 0.0
+    while True:
+        st = client.state()
+        if st["state"] == "processing":
+            if t_processing is None:
+                t_processing = time.monotonic() - t0
+            processing_mb = max(processing_mb, proc_status_mb(pid, "VmRSS"))
+        if st["state"] in ("done", "failed", "cancelled") and client.job(job_id)["status"] == st["state"]:
+            return client.job(job_id), t_processing, processing_mb
+        time.sleep(0.1)
+
+
+def phases_of(message: str) -> tuple[float | None, list[tuple[str, float, float]]]:
+    """The child's peak MB and [(phase, seconds, peak MB when it ended)] from its 'processed' event."""
+    peak = re.match(r"processing peak memory ([\d.]+) MB", message)
+    rows = re.findall(r"([\w ()]+?) ([\d.]+) s \(to (\d+) MB\)", message.partition("; ")[2])
+    return (float(peak.group(1)) if peak else None), [(n.strip(" ,"), float(s), float(m)) for n, s, m in rows]
+
+
+def verdict(ok: bool) -> str:
+    return "PASS" if ok else "MISS"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", default="sphere", help="the part on the simulated bench (default: the demo's)")
+    ap.add_argument("--frame", default="640x480", help="frame size (default: the demo's 640x480)")
+    ap.add_argument(
+        "--settle", type=float, default=None, help="settle_s for the scan (default: the setting's)"
+    )
+    ap.add_argument("--keep", action="store_true", help="keep the data folder and print where it is")
+    args = ap.parse_args(argv)
+    params = {"name": "keep-up bench", "surface": args.part}
+    if args.settle is not None:
+        params["settle_s"] = args.settle
+    tmp = Path(tempfile.mkdtemp(prefix="inkslice-bench-keepup-"))
+    try:
+        proc, client = start_daemon(tmp, args.part, args.frame)
+        try:
+            idle_mb = proc_status_mb(proc.pid, "VmRSS")
+            job, t_capture, daemon_processing_mb = run_scan(client, params, proc.pid)
+            daemon_mb = proc_status_mb(proc.pid, "VmHWM")
+            events = [e["message"] for e in client.events(job["id"]) if e["kind"] == "processed"]
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+        if job["status"] != "done":
+            sys.exit(f"the scan ended {job['status']}: {job['reason']}")
+        scan_json = tmp / "data" / "jobs" / job["id"] / "scan" / "scan.json"
+        frames = len(json.loads(scan_json.read_text())["frames"])
+        after = job["finished"] - scan_json.stat().st_mtime
+        child_mb, phases = phases_of(events[0] if events else "")
+        print(f"the demo's scan: {args.part}, {frames} frames of {args.frame}, capture {t_capture:.1f} s")
+        print(f"processing child's phases ({len(phases)}):")
+        for name, s, mb in phases:
+            print(f"  {name:<22} {s:6.2f} s   peak {mb:5.0f} MB when it ended")
+        # while the child runs, the daemon holds what it is then (its peak came with the
+        # renderer during the capture): that plus the child's peak is the processing's
+        total_mb = daemon_processing_mb + (child_mb or 0.0)
+        ok_time, ok_mem = after <= AFTER_LAST_FRAME_S, total_mb <= PEAK_MB
+        print(
+            f"result ready {after:.1f} s after the last frame (limit {AFTER_LAST_FRAME_S:g} s; "
+            f"a Pi 4: ~{4.5 * after:.0f} s): {verdict(ok_time)}"
+        )
+        print(
+            f"daemon: idle {idle_mb:.0f} MB, peak (VmHWM, the virtual camera's renderer included) {daemon_mb:.0f} MB"
+        )
+        print(
+            f"while processing: daemon {daemon_processing_mb:.0f} MB + processing child {child_mb} MB "
+            f"= {total_mb:.0f} MB (limit {PEAK_MB:g} MB): {verdict(ok_mem)}"
+        )
+        summary = {"after_last_frame_s": round(after, 2), "daemon_mb": round(daemon_mb, 1)}
+        summary |= {
+            "daemon_processing_mb": round(daemon_processing_mb, 1),
+            "daemon_idle_mb": round(idle_mb, 1),
+        }
+        summary |= {"child_mb": child_mb, "frames": frames, "phases": {n: s for n, s, _ in phases}}
+        print(json.dumps(summary))
+        return 0 if ok_time and ok_mem else 1
+    finally:
+        if args.keep:
+            print(f"kept {tmp}")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
