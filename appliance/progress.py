@@ -99,7 +99,7 @@ class _AroundTheBar:
         with self._display.lock:
             self._stream.write("\r\x1b[K" + text)
             if text.endswith("\n") and self._display.name is not None:
-                self._stream.write(self._display._line())
+                self._stream.write(self._display.line())
         return len(text)
 
     def __getattr__(self, name):
@@ -157,7 +157,7 @@ class Display:
         s = time.monotonic() - self.t0
         return f"{s:.1f} s" if s < 60 else f"{int(s) // 60} min {int(s) % 60:02d} s"
 
-    def _line(self):
+    def line(self):
         if self.total:
             frac = min(1.0, self.done / self.total)
             fill = int(round(BAR * frac))
@@ -168,7 +168,7 @@ class Display:
         return f"{self.name} ... {self._elapsed()}"
 
     def _draw(self):
-        self.stream.write("\r\x1b[K" + self._line())
+        self.stream.write("\r\x1b[K" + self.line())
         self.stream.flush()
 
     def _say(self, text):
@@ -181,7 +181,7 @@ class Display:
         if self.total:
             self.done = self.total if self.done >= self.total else self.done
         if self.tty:
-            self.stream.write("\r\x1b[K" + self._line() + " done\n")
+            self.stream.write("\r\x1b[K" + self.line() + " done\n")
             self.stream.flush()
         else:
             self._say(f"{self.name}: done in {self._elapsed()}")

@@ -132,7 +132,7 @@ def test_the_store_turns_sqlite_disk_full_into_a_disk_fault_and_keeps_a_jobs_end
 
 def fill_after_frames(svc, disk, n):
     """The disk fills up right after frame n is on disk, before the job row catches up with it."""
-    keep = svc._keep_frame
+    keep = svc.keep_frame
 
     def on_frame(image, info):
         keep(image, info)
@@ -142,7 +142,7 @@ def fill_after_frames(svc, disk, n):
         ):
             disk.fill()
 
-    svc._keep_frame = on_frame
+    svc.keep_frame = on_frame
 
 
 def filling_processor(disk, processor):

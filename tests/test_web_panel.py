@@ -56,7 +56,7 @@ def finished_scan(c, h, svc, params=SCAN):
 
 def test_the_panel_previews_homes_jogs_and_goes_to_a_level_and_the_light_goes_off_after(web):
     c, h, svc, bench = web
-    svc._manual.idle_s = 0.6
+    svc.manual.idle_s = 0.6
     st = c.post("/api/machine/preview", headers=h).get_json()
     assert st["open"] and st["light"] and not st["homed"]
     light = bench.last.light
@@ -151,7 +151,7 @@ def test_the_eta_learns_scanning_and_processing_from_past_jobs(web):
     c, h, svc, _ = web
     assert svc.state()["eta_processing_s"] is None  # a new box knows no processing time
     finished_scan(c, h, svc)
-    learned = svc._times
+    learned = svc.job_times
     assert learned.count() == 1 and learned.per_level_s() > 0
     c.post("/api/scan", json={**SCAN, "settle_s": 0.2}, headers=h)
     seen = []

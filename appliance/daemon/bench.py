@@ -8,8 +8,8 @@ it starts and says in the same words who is in the way. The machine panel gives 
 at once when another asks (its session only keeps the light on for someone watching).
 
 BenchSessions(service) uses of the service: store, factory, settings(), update_settings(), job(),
-cancel(), scan_running(), _lock, _state, _set(), _show_frame(), _note_fault(),
-_start_reference_scan().
+cancel(), scan_running(), lock, current, publish(), show_frame(), note_fault(),
+start_reference_scan().
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class BenchSessions:
         self.calibration: GuidedCalibration | None = None
         self.commissioning = Commissioning(service.store, _CommissioningHooks(self))
         self.manual = ManualSession(
-            self._open_for_panel, service.settings, service._show_frame, self._manual_report
+            self._open_for_panel, service.settings, service.show_frame, self._manual_report
         )
 
     # -- who holds the bench -----------------------------------------------------------------
@@ -42,7 +42,7 @@ class BenchSessions:
         The machine panel never counts: it gives the devices back to whoever asks."""
         svc = self.service
         if scan and svc.scan_running():
-            return f"a scan is running ({svc._state['job_id']})"
+            return f"a scan is running ({svc.current['job_id']})"
         if calibration and self.calibration is not None and self.calibration.active:
             return "a guided calibration holds the bench"
         if self.commissioning.holds_bench:
@@ -73,7 +73,7 @@ class BenchSessions:
         if self.commissioning.holds_bench:
             self.commissioning.cancel(wait_s=wait_s)
 
-    def _open_devices(self, params: dict | None = None):
+    def open_devices(self, params: dict | None = None):
         self.manual.close()  # the panel's session gives the devices back
         svc = self.service
         return svc.factory.open(svc.settings(), self.calibration_params() if params is None else params)
@@ -87,13 +87,13 @@ class BenchSessions:
     # -- the guided calibration (calibration.py) ---------------------------------------------
     def guided(self) -> GuidedCalibration:
         svc = self.service
-        with svc._lock:
+        with svc.lock:
             if self.calibration is None:
                 self.calibration = GuidedCalibration(
-                    self._open_devices,
+                    self.open_devices,
                     svc.store,
                     svc.settings(),
-                    show_frame=svc._show_frame,
+                    show_frame=svc.show_frame,
                     operator=self.operator,
                     **svc.factory.calibration_target,
                 )
@@ -104,7 +104,7 @@ class BenchSessions:
             return self.cancel_calibration()
         svc = self.service
         cal = self.guided()
-        with svc._lock:
+        with svc.lock:
             if svc.scan_running():
                 raise SettingError(
                     "calibration", f"{self.holder()}; calibrate when it has finished, or cancel it"
@@ -115,14 +115,14 @@ class BenchSessions:
             raise SettingError("calibration", "a calibration step is already running")
         try:
             cal.settings = svc.settings()
-            svc._set(message=f"calibration: {step}")
+            svc.publish(message=f"calibration: {step}")
             try:
                 out = cal.do(step)
             except InkSliceError as e:
-                svc._set(message=f"calibration: {step} failed: {e.problem}")
+                svc.publish(message=f"calibration: {step} failed: {e.problem}")
                 raise
             done = not cal.active
-            svc._set(
+            svc.publish(
                 message="calibration stored" if done and step == "accept" else f"calibration: {step} done"
             )
             if step == "accept":
@@ -144,19 +144,19 @@ class BenchSessions:
         finally:
             cal.lock.release()
         if was_active:
-            self.service._set(message="calibration cancelled")
+            self.service.publish(message="calibration cancelled")
             self.service.store.event(None, "calibration", "guided calibration cancelled; the bench is free")
         return cal.describe()
 
     # -- the machine panel (manual.py) -------------------------------------------------------
     def machine(self, action, *args) -> dict:
         """Run a machine-panel action unless a scan, calibration or commissioning holds the bench."""
-        with self.service._lock:
+        with self.service.lock:
             self.refuse_if_held("stage", error=DeviceError)
         try:
             return action(*args)
         except DeviceError as e:
-            self.service._note_fault(f"{e.where}: {e.problem}")
+            self.service.note_fault(f"{e.where}: {e.problem}")
             raise
 
     def preview(self) -> dict:
@@ -171,19 +171,19 @@ class BenchSessions:
 
     def _manual_report(self, status, hardware) -> None:
         svc = self.service
-        with svc._lock:
+        with svc.lock:
             changes = {}
             if status is not None:
                 changes["manual"] = status
             if hardware:
-                changes["hardware"] = {**svc._state["hardware"], **hardware}
+                changes["hardware"] = {**svc.current["hardware"], **hardware}
             if changes:
-                svc._set(**changes)
+                svc.publish(**changes)
 
     # -- commissioning (commissioning.py) ----------------------------------------------------
     def commission(self, step: str, action: str, values: dict | None) -> dict:
         if action == "start" and step in ("level_zero", "camera"):  # the steps that move the stage
-            with self.service._lock:
+            with self.service.lock:
                 if self.service.scan_running():
                     raise SettingError(
                         "commissioning",
@@ -202,14 +202,14 @@ class _CommissioningHooks:
         self._sessions, self._service = sessions, svc
         self.operator = sessions.operator or HumanOperator()
         self.settings, self.update_settings, self.job = svc.settings, svc.update_settings, svc.job
-        self.show_frame = svc._show_frame
-        self.start_reference_scan = svc._start_reference_scan
+        self.show_frame = svc.show_frame
+        self.start_reference_scan = svc.start_reference_scan
 
     def open_devices(self):
-        return self._sessions._open_devices({})
+        return self._sessions.open_devices({})
 
     def say(self, message: str) -> None:
-        self._service._set(message=message)
+        self._service.publish(message=message)
 
     def cancel_scan(self) -> None:
         self._service.cancel(reason="cancelled: the commissioning step was cancelled")

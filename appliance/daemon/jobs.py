@@ -4,8 +4,8 @@ Rename, delete, process a kept scan again with other settings, post a finished h
 for another machine (repost.py), and the bytes each job takes on the data disk. None of these
 captures anything; they are refused for a job while its scan or processing runs.
 
-JobManager(service) uses of the service: store, scan_running(), _lock, _state, _set(),
-_refuse_if_busy() and _run (jobthread.py: the thread that processes a kept scan).
+JobManager(service) uses of the service: store, scan_running(), lock, current, publish(),
+refuse_if_busy() and job_thread (jobthread.py: the thread that processes a kept scan).
 """
 
 from __future__ import annotations
@@ -56,18 +56,18 @@ class JobManager:
 
     def delete(self, job_id: str) -> None:
         svc = self.service
-        with svc._lock:
+        with svc.lock:
             job = self.store.get_job(job_id)
-            current = svc._state["job_id"] == job_id
+            current = svc.current["job_id"] == job_id
             if current:
-                svc._run.join_if_over(job_id)  # the job is over; its thread is closing up
+                svc.job_thread.join_if_over(job_id)  # the job is over; its thread is closing up
             if current and (svc.scan_running() or job["status"] in ACTIVE):
                 raise DeviceError("job", f"job {job_id} is {job['status']}; stop it first")
             self.store.delete_job(job_id)
             shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
             self._sizes.pop(job_id, None)
             if current:
-                svc._set(
+                svc.publish(
                     job_id=None, state="idle", message="ready", levels_done=0, levels_total=0, eta_s=None
                 )
         log.info("job %s deleted", job_id)
@@ -78,8 +78,8 @@ class JobManager:
             if key not in S.DEFAULTS:
                 raise SettingError(key, "unknown setting")
         svc = self.service
-        with svc._lock:
-            svc._refuse_if_busy()
+        with svc.lock:
+            svc.refuse_if_busy()
             job = self.store.get_job(job_id)
             refuse_while_active(job)
             if not (self.store.job_dir(job_id) / "scan" / "scan.json").is_file():
@@ -90,15 +90,15 @@ class JobManager:
             )
             self.store.event(job_id, "reprocess", "processed again" + (f" with {changes}" if changes else ""))
             self._sizes.pop(job_id, None)
-            svc._run.start_processing(job_id)
+            svc.job_thread.start_processing(job_id)
             return job_id
 
     def repost(self, job_id: str, options: dict | None) -> list[str]:
-        with self.service._lock:
+        with self.service.lock:
             job = self.store.get_job(job_id)
             refuse_while_active(job, "wait for it to finish")
         names = R.repost(self.store.job_dir(job_id), job_id, S.full(job["settings"]), options or {})
-        with self.service._lock:
+        with self.service.lock:
             job = self.store.get_job(job_id)
             self.store.update_job(job_id, outputs=sorted(set(job.get("outputs") or []) | set(names)))
             self.store.event(

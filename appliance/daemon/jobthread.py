@@ -4,10 +4,10 @@ the processing of a kept scan (an imported folder, a reprocess, a resumed import
 Why apart from the service: the service answers requests and publishes state; this module owns
 what runs meanwhile: the thread, its stop event (a cancel sets it and stops the stage at once),
 the devices a scan holds open, and the ETA clock (eta.py). Every change of state goes back
-through the service's _set(), so subscribers, the webhook and the panel see it.
+through the service's publish(), so subscribers, the webhook and the panel see it.
 
-JobThread(service) uses of the service: store, factory, processor, disk_free_mb, _lock, _state,
-_set(), _times, _manual, _keep_frame(), _note_fault(), _preview.
+JobThread(service) uses of the service: store, factory, processor, disk_free_mb, lock, current,
+publish(), job_times, manual, keep_frame(), note_fault(), live_view.
 """
 
 from __future__ import annotations
@@ -47,13 +47,13 @@ class JobThread:
 
     def cancel(self, reason: str, wait_s: float) -> None:
         svc = self.service
-        with svc._lock:
+        with svc.lock:
             thread = self.thread
             if thread is None or not thread.is_alive():
                 return
             self.stop.reason = reason
             self.stop.set()
-            svc._set(message="cancelling")
+            svc.publish(message="cancelling")
             devices = self.devices
         if devices is not None and devices.stage is not None:
             try:
@@ -65,8 +65,8 @@ class JobThread:
     def start_scan(self, job_id, total, done):
         svc = self.service
         self.stop.clear()
-        svc._preview.clear()
-        svc._set(
+        svc.live_view.clear()
+        svc.publish(
             state="homing",
             job_id=job_id,
             level_mm=None,
@@ -82,25 +82,25 @@ class JobThread:
 
     def _run_scan(self, job_id):
         svc = self.service
-        svc._manual.close()  # a panel session gives the stage and camera back
+        svc.manual.close()  # a panel session gives the stage and camera back
         job = self.store.get_job(job_id)
         self.job_settings = job["settings"]
         try:
             devices = svc.factory.open(job["settings"], job["params"])
         except Exception as e:  # missing stage or camera, a bad wiring file ...
             reason = f"cannot start: {e}"
-            svc._note_fault(str(e))
+            svc.note_fault(str(e))
             try:
                 self.store.update_job(job_id, status="failed", reason=reason, finished=time.time())
                 self.store.event(job_id, "failed", reason)
             except DiskFull as full:  # held in memory, written when there is room
                 log.warning("job %s: %s", job_id, full)
-            svc._set(state="failed", message=reason)
+            svc.publish(state="failed", message=reason)
             return
-        svc._set(hardware={**svc._state["hardware"], **devices.hardware})
+        svc.publish(hardware={**svc.current["hardware"], **devices.hardware})
         self.devices = devices
         final = {}
-        clock = JobClock(svc._times, fresh=job["levels_done"] == 0)
+        clock = JobClock(svc.job_times, fresh=job["levels_done"] == 0)
 
         def report(**changes):
             # the final state is published once the devices are closed, so a client that
@@ -108,10 +108,10 @@ class JobThread:
             if changes.get("state") in ("done", "failed", "cancelled"):
                 final.update(changes)
                 if changes["state"] == "done":
-                    clock.finished(job_id, svc._state["levels_done"])
+                    clock.finished(job_id, svc.current["levels_done"])
             else:
-                with svc._lock:
-                    svc._set(**clock.eta({**svc._state, **changes}, changes))
+                with svc.lock:
+                    svc.publish(**clock.eta({**svc.current, **changes}, changes))
 
         processor = svc.processor
         if job["params"].get("reference"):  # the meniscus step's scan of the reference ball
@@ -124,24 +124,24 @@ class JobThread:
                 processor,
                 report,
                 self.stop,
-                on_frame=svc._keep_frame,
+                on_frame=svc.keep_frame,
                 disk_free_mb=svc.disk_free_mb,
             )
             status = runner.run()
             if status == "failed":
-                svc._note_fault(self.store.get_job(job_id)["reason"])
+                svc.note_fault(self.store.get_job(job_id)["reason"])
         finally:
-            with svc._lock:
+            with svc.lock:
                 self.devices = None
             devices.close()
-            svc._set(**final)
+            svc.publish(**final)
 
     def start_processing(self, job_id):
         svc = self.service
         job = self.store.get_job(job_id)
         self.stop.clear()
-        expected = svc._times.processing_s(job["levels_total"])
-        svc._set(
+        expected = svc.job_times.processing_s(job["levels_total"])
+        svc.publish(
             state="processing",
             job_id=job_id,
             level_mm=None,
@@ -160,7 +160,7 @@ class JobThread:
 
     def _run_processing(self, job_id):
         svc = self.service
-        svc._manual.close()  # a panel session gives the devices back
+        svc.manual.close()  # a panel session gives the devices back
         job = self.store.get_job(job_id)
         try:
             self.store.update_job(job_id, status="processing")
@@ -185,6 +185,6 @@ class JobThread:
             self.store.event(job_id, status, reason or "imported scan processed")
         except DiskFull as e:  # held in memory, written when there is room
             log.warning("job %s: %s", job_id, e)
-        svc._set(
+        svc.publish(
             state=status, message=reason or "imported scan processed", eta_s=0 if status == "done" else None
         )

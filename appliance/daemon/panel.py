@@ -15,8 +15,8 @@ slowly after a failure. The display shows, first found wins:
 and always the box's address on its last line.
 
 FrontPanel(service) uses of the service: state(), start_scan(), cancel(), export_latest_gcode(),
-scan_running(), store.event(), _set(notice=...), and the commissioning session and first-run
-password it holds.
+scan_running(), store.event(), publish(notice=...), and the commissioning session (commissioner) and first-run
+password (first_run) it holds.
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ class FrontPanel:
         lines = notice.pop("lines")
         with self._lock:
             self._shown_notice = (time.monotonic() + NOTICE_S, lines)
-        self.service._set(notice=notice)
+        self.service.publish(notice=notice)
         if log_it:
             (log.info if notice.get("ok", True) else log.warning)("button: %s", notice["text"])
             self.service.store.event(None, notice["kind"], notice["text"])
@@ -176,7 +176,7 @@ class FrontPanel:
     def _commissioning_lines(self, st: dict) -> list[str] | None:
         """What a commissioning step asks of the person at the bench; a scan's progress (the
         reference ball's) takes the screen while it runs."""
-        session = self.service._commissioning.session
+        session = self.service.commissioner.session
         if session is None or st["state"] in ACTIVE:
             return None
         return [*session.display_lines(), lan_address()]
@@ -185,7 +185,7 @@ class FrontPanel:
         """The first-run password while nobody has logged in; a scan's progress takes the screen."""
         if st["state"] in ACTIVE:
             return None
-        password = self.service._first_run.pending()
+        password = self.service.first_run.pending()
         if not password:
             return None
         return ["FIRST LOGIN", "admin password:", password, lan_address()]

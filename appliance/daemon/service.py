@@ -7,13 +7,14 @@ tests use only those methods, in-process or over the socket (rpc.BenchClient).
     for state in service.subscribe(timeout=30): ...
     service.job(job_id)["outputs"]; service.job_file(job_id, "toolpath.gcode")
 
-This module holds the state (one lock guards it; _set() publishes every change to subscribers
-and tells the webhook of a job that ended) and the facade's own methods. The rest is done by
-small collaborators the service holds, each in a module of its own:
-    _run       jobthread.py   the one thread that runs a job (a scan, or processing a kept scan)
+This module holds the state (`current`, guarded by `lock`; publish() sends every change to
+subscribers and tells the webhook of a job that ended) and the facade's own methods. The rest is
+done by small collaborators the service holds, each in a module of its own; the members they use
+(lock, current, publish(), refuse_if_busy(), ...) are public, the rest of the web sees the facade:
+    job_thread jobthread.py   the one thread that runs a job (a scan, or processing a kept scan)
     _bench     bench.py       who holds the bench; guided calibration, commissioning, machine panel
     _panel     panel.py       the front panel's thread: button, status light, display
-    _preview   preview.py     the newest frame and the live height map, for the dashboard
+    live_view  preview.py     the newest frame and the live height map, for the dashboard
     _usb       usbexport.py   which job file goes to a USB stick (hw/usb.py copies it)
     _jobs      jobs.py        the job manager: rename, delete, reprocess, repost, sizes
 
@@ -79,10 +80,10 @@ class BenchService:
         self.factory = factory
         self.processor = processor
         self.disk_free_mb = disk_free_mb
-        self._first_run = Pending(self.data_dir)  # the web's first-run password, until the first login
-        self._preview = Preview()
-        self._lock = threading.RLock()
-        self._state = {
+        self.first_run = Pending(self.data_dir)  # the web's first-run password, until the first login
+        self.live_view = Preview()
+        self.lock = threading.RLock()
+        self.current = {
             "state": "idle",
             "job_id": None,
             "level_mm": None,
@@ -103,21 +104,21 @@ class BenchService:
         if self.interrupted:
             self._report_interrupted(self.store.get_job(self.interrupted[0]))
         devices = open_panel(factory)
-        self._state["hardware"].update(devices.hardware)
+        self.current["hardware"].update(devices.hardware)
         self._panel = FrontPanel(self, devices, panel_interval_s)
         self._bench = BenchSessions(self, devices.operator)
-        self._commissioning = self._bench.commissioning
-        self._manual = self._bench.manual
+        self.commissioner = self._bench.commissioning
+        self.manual = self._bench.manual
         self._usb = UsbExport(usb, self.store, self.job_file, self._panel.notify)
         self._jobs = JobManager(self)
-        self._run = JobThread(self)
-        self._times = JobTimes(self.data_dir)
+        self.job_thread = JobThread(self)
+        self.job_times = JobTimes(self.data_dir)
         self._panel.start()
         if self.interrupted and self.settings()["auto_resume"]:
             self.resume(self.interrupted[0])
 
     def _report_interrupted(self, last: dict) -> None:
-        self._state.update(
+        self.current.update(
             state="failed",
             job_id=last["id"],
             message=last["reason"],
@@ -138,8 +139,8 @@ class BenchService:
 
     # == the facade ===============================================================
     def state(self) -> dict:
-        with self._lock:
-            return copy.deepcopy(self._state)
+        with self.lock:
+            return copy.deepcopy(self.current)
 
     def start_scan(self, params: dict) -> str:
         params = dict(params or {})
@@ -147,8 +148,8 @@ class BenchService:
         for key in params:
             if key not in S.DEFAULTS and key not in extra:
                 raise SettingError(key, "unknown scan parameter")
-        with self._lock:
-            self._refuse_if_busy()
+        with self.lock:
+            self.refuse_if_busy()
             settings = S.validate(self.settings(), {k: v for k, v in params.items() if k in S.DEFAULTS})
             extras = {k: v for k, v in params.items() if k not in S.DEFAULTS}
             extras = self.factory.check(extras) or extras  # may fill in defaults (the surface)
@@ -157,11 +158,11 @@ class BenchService:
 
     def cancel(self, wait_s: float = 30.0, reason: str = "cancelled by the operator") -> None:
         self._bench.cancel(wait_s)  # a calibration or commissioning step gives the bench back
-        self._run.cancel(reason, wait_s)
+        self.job_thread.cancel(reason, wait_s)
 
     def resume(self, job_id: str) -> str:
-        with self._lock:
-            self._refuse_if_busy()
+        with self.lock:
+            self.refuse_if_busy()
             job = self.store.get_job(job_id)
             if job["status"] not in ("failed", "cancelled"):
                 raise SettingError(
@@ -174,9 +175,9 @@ class BenchService:
             )
             self.store.event(job_id, "resumed", f"resumed (attempt {job['attempts'] + 1})")
             if job["params"].get("imported"):
-                self._run.start_processing(job_id)  # nothing to capture: process it again
+                self.job_thread.start_processing(job_id)  # nothing to capture: process it again
             else:
-                self._run.start_scan(job_id, job["levels_total"], job["levels_done"])
+                self.job_thread.start_scan(job_id, job["levels_total"], job["levels_done"])
             return job_id
 
     def jobs(self) -> list[dict]:
@@ -198,13 +199,13 @@ class BenchService:
         return path
 
     def latest_frame(self):
-        return self._preview.latest()
+        return self.live_view.latest()
 
     def settings(self) -> dict:
         return S.full(self.store.load_settings())
 
     def update_settings(self, changes: dict) -> dict:
-        with self._lock:
+        with self.lock:
             new = S.validate(self.settings(), changes)
             self.store.save_settings({k: new[k] for k in changes})
             return new
@@ -212,9 +213,9 @@ class BenchService:
     def subscribe(self, timeout: float = 30.0):
         """Yields the state dict now and on every change, for at most `timeout` seconds."""
         q: queue.Queue = queue.Queue(maxsize=200)
-        with self._lock:
+        with self.lock:
             self._subscribers.append(q)
-            first = copy.deepcopy(self._state)
+            first = copy.deepcopy(self.current)
         end = time.monotonic() + timeout
         try:
             yield first
@@ -227,7 +228,7 @@ class BenchService:
                 except queue.Empty:
                     continue
         finally:
-            with self._lock:
+            with self.lock:
                 self._subscribers.remove(q)
 
     def events(self, job_id=None, limit=200) -> list[dict]:
@@ -235,7 +236,7 @@ class BenchService:
 
     # == the extras the web UI offers ===============================================
     def live_heightmap(self) -> dict | None:
-        return self._preview.heightmap()
+        return self.live_view.heightmap()
 
     def calibration(self) -> dict:
         return self._bench.guided().describe()
@@ -251,13 +252,13 @@ class BenchService:
         return self._bench.preview()
 
     def home_stage(self) -> dict:
-        return self._bench.machine(self._manual.home)
+        return self._bench.machine(self.manual.home)
 
     def jog(self, mm: float) -> dict:
-        return self._bench.machine(self._manual.jog, mm)
+        return self._bench.machine(self.manual.jog, mm)
 
     def goto_level(self, level_mm: float) -> dict:
-        return self._bench.machine(self._manual.goto, level_mm)
+        return self._bench.machine(self.manual.goto, level_mm)
 
     # -- the job manager (jobs.py) -----------------------------------------------------------
     def rename_job(self, job_id: str, name: str) -> dict:
@@ -277,29 +278,29 @@ class BenchService:
 
     # -- commissioning (commissioning.py) ----------------------------------------------------
     def commissioning(self) -> dict:
-        return self._commissioning.describe()
+        return self.commissioner.describe()
 
     def commission(self, step: str, action: str, values: dict | None = None) -> dict:
         return self._bench.commission(step, action, values)
 
     def export_commissioning(self) -> dict:
-        return self._commissioning.export()
+        return self.commissioner.export()
 
     def import_commissioning(self, doc: dict) -> dict:
-        return self._commissioning.import_(doc)
+        return self.commissioner.import_(doc)
 
     def ink_changed(self) -> dict:
-        return self._commissioning.ink_changed()
+        return self.commissioner.ink_changed()
 
-    def _start_reference_scan(self, changes: dict, params: dict) -> str:
+    def start_reference_scan(self, changes: dict, params: dict) -> str:
         """A scan of a reference part, processed by reference_processor; params are not the
         factory's (the part on the base is whatever the operator was asked to put there)."""
-        with self._lock:
-            self._refuse_if_busy()
+        with self.lock:
+            self.refuse_if_busy()
             return self._create_scan_job(params["name"], S.validate(self.settings(), changes), params)
 
-    def _show_frame(self, jpeg: bytes, info: dict):
-        self._preview.show(jpeg, info)
+    def show_frame(self, jpeg: bytes, info: dict):
+        self.live_view.show(jpeg, info)
 
     def import_scan(self, folder) -> str:
         """A scan folder from elsewhere (the web's upload) becomes a job and is processed.
@@ -308,22 +309,22 @@ class BenchService:
         Returns the job id at once; processing runs like a scan's (state processing -> done).
         """
         scan = importing.check(folder)
-        with self._lock:
-            self._refuse_if_busy()  # say so before copying a big folder
+        with self.lock:
+            self.refuse_if_busy()  # say so before copying a big folder
         job_id = new_job_id()
         importing.copy_into(scan, self.store.job_dir(job_id))  # outside the lock: it may take seconds
         n = len(scan.frames)
         name = str(scan.extra.get("name") or "imported scan")[:80]
-        with self._lock:
+        with self.lock:
             try:
-                self._refuse_if_busy()
+                self.refuse_if_busy()
                 self.store.create_job(job_id, name, self.settings(), {"name": name, "imported": True}, n)
                 self.store.update_job(job_id, status="processing", levels_done=n)
                 self.store.event(job_id, "imported", f"scan folder imported ({n} frames)")
             except BaseException:
                 shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
                 raise
-            self._run.start_processing(job_id)
+            self.job_thread.start_processing(job_id)
             return job_id
 
     # -- USB sticks: the daemon picks the job's file (usbexport.py), hw/usb.py copies it -------
@@ -348,14 +349,14 @@ class BenchService:
 
     def restore(self, doc: dict) -> dict:
         """Replace the settings and calibration history by a backup's; refused while the bench works."""
-        with self._lock:
-            self._refuse_if_busy()
-            if self._commissioning.session is not None:
+        with self.lock:
+            self.refuse_if_busy()
+            if self.commissioner.session is not None:
                 raise SettingError(
                     "restore", "a commissioning step is in progress; finish or cancel it first"
                 )
             out = backups.restore(self.store, doc)
-        self._set(message="settings and calibration restored from a backup")
+        self.publish(message="settings and calibration restored from a backup")
         return out
 
     def test_webhook(self) -> dict:
@@ -382,10 +383,10 @@ class BenchService:
 
     def scan_running(self) -> bool:
         """A scan's (or a kept scan's processing) thread is alive."""
-        return self._run.running()
+        return self.job_thread.running()
 
     # == internals ================================================================
-    def _refuse_if_busy(self):
+    def refuse_if_busy(self):
         try:
             self.store.flush_unwritten()  # what a full disk held back is written first
         except DiskFull:
@@ -396,17 +397,17 @@ class BenchService:
                 "space (delete old jobs), then start or resume",
             ) from None
         self._bench.refuse_if_held("scan", scan=False)
-        self._run.join_if_over(self._state["job_id"])
-        if self._run.running():
+        self.job_thread.join_if_over(self.current["job_id"])
+        if self.job_thread.running():
             raise SettingError(
-                "scan", f"a scan is already running ({self._state['job_id']}); cancel it first"
+                "scan", f"a scan is already running ({self.current['job_id']}); cancel it first"
             )
 
-    def _set(self, **changes):
-        with self._lock:
-            before = self._state["state"]
-            self._state.update(changes)
-            snap = copy.deepcopy(self._state)
+    def publish(self, **changes):
+        with self.lock:
+            before = self.current["state"]
+            self.current.update(changes)
+            snap = copy.deepcopy(self.current)
             subs = list(self._subscribers)
         if before in ACTIVE and snap["state"] in ("done", "failed"):
             self._job_ended(snap)
@@ -420,7 +421,7 @@ class BenchService:
         job_id = new_job_id()
         total = LevelPlan(settings).estimate_total([])
         self.store.create_job(job_id, name, settings, params, total)
-        self._run.start_scan(job_id, total, 0)
+        self.job_thread.start_scan(job_id, total, 0)
         return job_id
 
     def _job_ended(self, st):
@@ -430,16 +431,16 @@ class BenchService:
             job = None
         self.webhook.job_ended(job, st)
 
-    def _note_fault(self, reason):
+    def note_fault(self, reason):
         """A device's fault on its chip: "stage fake: no reply" -> stage: "fault: no reply"."""
         reason = reason.removeprefix("cannot start: ")
         for name in ("stage", "camera", "disk", "light", "bench"):
             if reason.startswith(name):
                 problem = reason.partition(": ")[2] or reason
-                self._set(hardware={**self._state["hardware"], name: f"fault: {problem}"})
+                self.publish(hardware={**self.current["hardware"], name: f"fault: {problem}"})
 
-    def _keep_frame(self, image: np.ndarray, info: dict):
+    def keep_frame(self, image: np.ndarray, info: dict):
         """The runner's frame: the preview for latest_frame() and the live height map."""
-        width = self._run.job_settings.get("preview_width", S.DEFAULTS["preview_width"])
-        job_id = self._state["job_id"]
-        self._preview.keep(image, info, job_id, self.store.job_dir(job_id), width)
+        width = self.job_thread.job_settings.get("preview_width", S.DEFAULTS["preview_width"])
+        job_id = self.current["job_id"]
+        self.live_view.keep(image, info, job_id, self.store.job_dir(job_id), width)
