@@ -26,8 +26,38 @@ def test_the_socket_serves_exactly_the_facade_calls():
     assert "subscribe" not in rpc.METHODS and "close" not in rpc.METHODS  # streamed / local only
 
 
-def test_the_clients_replayable_reads_are_facade_calls():
-    assert set(rpc.BenchClient.READ_ONLY) <= set(rpc.METHODS)
+def test_the_client_replays_exactly_the_methods_the_facade_marks_as_reads():
+    assert rpc.BenchClient.READ_ONLY == facade.read_only()
+    assert facade.read_only() <= set(rpc.METHODS)
+    assert {"state", "jobs", "job", "job_file", "settings", "latest_frame"} <= facade.read_only()
+
+
+def test_no_method_that_changes_the_bench_is_marked_as_a_read():
+    # sent twice after a daemon restart, any of these would act twice
+    changes = {
+        "start_scan",
+        "cancel",
+        "resume",
+        "update_settings",
+        "delete_job",
+        "rename_job",
+        "reprocess",
+        "repost",
+        "import_scan",
+        "calibrate",
+        "commission",
+        "import_commissioning",
+        "ink_changed",
+        "preview",
+        "home_stage",
+        "jog",
+        "goto_level",
+        "export_to_usb",
+        "restore",
+        "test_webhook",
+    }
+    assert changes <= set(facade.methods())
+    assert changes & facade.read_only() == set()
 
 
 def test_the_web_wraps_every_facade_call():

@@ -10,6 +10,10 @@ so they cross the socket unchanged; the two exceptions, latest_frame's JPEG byte
 job_file's Path, are encoded by rpc.py. Errors are the appliance's own (errors.py):
 SettingError for bad input, DeviceError when the bench cannot, InkSliceError otherwise.
 
+A method marked @reads only reads: the socket's client may send it again on a fresh
+connection when the daemon restarted under it, since doing it twice changes nothing
+(rpc.BenchClient.READ_ONLY is read_only()).
+
 `differences(cls)` compares a class with the protocol by name and parameters; the
 tests run it on BenchService and BenchClient (tests/test_facade.py). An implementation
 may take extra trailing parameters with defaults (BenchService.cancel's wait) that only
@@ -19,17 +23,26 @@ in-process callers use.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol, TypeVar
 
 # Facade methods that are not plain request/reply calls over the socket: subscribe streams
 # (rpc.py serves it on its own), close lets go of the caller's own handle.
 NOT_CALLS = ("subscribe", "close")
 
+_Method = TypeVar("_Method", bound=Callable[..., Any])
+
+
+def reads(method: _Method) -> _Method:
+    """Marks a facade method that changes nothing: safe to send twice."""
+    method.reads_only = True  # type: ignore[attr-defined]
+    return method
+
 
 class Bench(Protocol):
     # -- the bench's state and the scan ---------------------------------------------------
+    @reads
     def state(self) -> dict:
         """The bench now: state, job_id, level, progress, ETA, message, hardware, notice, manual."""
         ...
@@ -50,31 +63,38 @@ class Bench(Protocol):
         """Continue a failed, cancelled or interrupted scan where it stopped."""
         ...
 
+    @reads
     def latest_frame(self) -> tuple[bytes, dict] | None:
         """The newest camera frame as JPEG with its info (level, time); None before any."""
         ...
 
+    @reads
     def live_heightmap(self) -> dict | None:
         """The current (or last) scan's height map so far; None before the first frame."""
         ...
 
     # -- jobs -----------------------------------------------------------------------------
+    @reads
     def jobs(self) -> list[dict]:
         """Every job, newest first."""
         ...
 
+    @reads
     def job(self, job_id: str) -> dict:
         """One job's record: status, params, outputs, levels, times."""
         ...
 
+    @reads
     def job_file(self, job_id: str, name: str) -> Path:
         """A file inside that job's folder (outputs, scan/scan.json, scan/frames/...); nothing else."""
         ...
 
+    @reads
     def job_sizes(self) -> dict[str, int]:
         """Bytes on disk per job."""
         ...
 
+    @reads
     def events(self, job_id: str | None = None, limit: int = 200) -> list[dict]:
         """The event log, newest first (one job's, or the whole box's)."""
         ...
@@ -100,6 +120,7 @@ class Bench(Protocol):
         ...
 
     # -- settings, calibration, commissioning ---------------------------------------------
+    @reads
     def settings(self) -> dict:
         """Every setting in force (docs/settings.md)."""
         ...
@@ -108,6 +129,7 @@ class Bench(Protocol):
         """Validate and save these changes; every setting in force after them."""
         ...
 
+    @reads
     def calibration(self) -> dict:
         """The guided plane calibration: its step and what it found."""
         ...
@@ -116,6 +138,7 @@ class Bench(Protocol):
         """Do one guided calibration step (home, target, detect, accept); calibration()."""
         ...
 
+    @reads
     def commissioning(self) -> dict:
         """Every commissioning step's result in force with its date, the step in progress."""
         ...
@@ -124,6 +147,7 @@ class Bench(Protocol):
         """One action of one commissioning step (docs/api/README.md); commissioning()."""
         ...
 
+    @reads
     def export_commissioning(self) -> dict:
         """The commissioning results as one document."""
         ...
@@ -154,6 +178,7 @@ class Bench(Protocol):
         ...
 
     # -- the box: USB, backup, system, webhook --------------------------------------------
+    @reads
     def usb_sticks(self) -> list[dict]:
         """The USB sticks plugged in; none when USB export is off."""
         ...
@@ -164,6 +189,7 @@ class Bench(Protocol):
         """Copy a job's file onto a stick (None: the first), verified, then unmounted."""
         ...
 
+    @reads
     def backup(self) -> dict:
         """The settings and the calibration history as one document."""
         ...
@@ -172,6 +198,7 @@ class Bench(Protocol):
         """Replace the settings and calibration history by a backup's."""
         ...
 
+    @reads
     def system(self) -> dict:
         """Version, uptimes, the data disk, the number of jobs, the last webhook delivery."""
         ...
@@ -188,6 +215,11 @@ class Bench(Protocol):
 def methods() -> tuple[str, ...]:
     """The facade's method names, in the order written above."""
     return tuple(name for name in vars(Bench) if not name.startswith("_") and callable(vars(Bench)[name]))
+
+
+def read_only() -> frozenset[str]:
+    """The facade methods marked @reads."""
+    return frozenset(name for name in methods() if getattr(vars(Bench)[name], "reads_only", False))
 
 
 def calls() -> tuple[str, ...]:

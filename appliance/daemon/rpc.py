@@ -170,22 +170,7 @@ class BenchClient:
     method only reads.
     """
 
-    READ_ONLY = frozenset(
-        {
-            "state",
-            "jobs",
-            "job",
-            "job_file",
-            "latest_frame",
-            "settings",
-            "events",
-            "live_heightmap",
-            "calibration",
-            "commissioning",
-            "export_commissioning",
-            "usb_sticks",
-        }
-    )
+    READ_ONLY = facade.read_only()  # replayed on a fresh connection (facade.reads)
 
     def __init__(self, path, timeout: float = 30.0, max_connections: int = MAX_CONNECTIONS):
         self.path, self.timeout = str(path), timeout
