@@ -4,6 +4,7 @@ import json
 
 from .. import datadir
 from ..errors import SettingError
+from ._flags import add_daemon_paths
 
 NAME = "daemon"
 ORDER = 60
@@ -11,8 +12,7 @@ HELP = "run the scan daemon (state machine, job store, recovery) on the real or 
 
 
 def add_arguments(p):
-    p.add_argument("--data", default=None, help=datadir.HELP)
-    p.add_argument("--socket", default=None, help="control socket (default DATA/daemon.sock)")
+    add_daemon_paths(p)
     p.add_argument(
         "--wiring",
         default="/etc/inkslice/bench.json",

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from ..errors import SettingError
+from ._flags import add_web_address
 
 NAME = "demo"
 ORDER = 10
@@ -28,12 +29,12 @@ def add_arguments(p):
         "virtual camera, daemon, web UI) until Ctrl-C",
     )
     p.add_argument("--serve-only", action="store_true", help="skip the table; only run the appliance")
-    p.add_argument("--port", type=int, default=8080, help="web UI port for --serve (default 8080)")
-    p.add_argument(
-        "--host",
-        default="127.0.0.1",
-        help="address the web UI listens on for --serve (default 127.0.0.1, this machine only; "
+    add_web_address(
+        p,
+        "127.0.0.1",
+        "address the web UI listens on for --serve (default 127.0.0.1, this machine only; "
         "0.0.0.0 lets a phone on the same network open it: `make demo HOST=0.0.0.0`)",
+        "web UI port for --serve (default 8080)",
     )
     p.add_argument("--part", default="sphere", help="the part on the simulated bench for --serve")
 

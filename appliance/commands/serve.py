@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import datadir
+from ._flags import add_daemon_paths, add_web_address
 
 NAME = "serve"
 ORDER = 60
@@ -19,14 +20,8 @@ HELP = "serve the web UI (phone/desktop) with waitress"
 
 
 def add_arguments(p):
-    p.add_argument("--host", default="0.0.0.0", help="address to listen on (default: all, for the LAN)")
-    p.add_argument("--port", type=int, default=8080)
-    p.add_argument(
-        "--data",
-        default=None,
-        help=datadir.HELP + "; the web keeps its password hash in DATA/web/",
-    )
-    p.add_argument("--socket", default=None, help="the daemon's control socket (default DATA/daemon.sock)")
+    add_web_address(p, "0.0.0.0", "address to listen on (default: all, for the LAN)")
+    add_daemon_paths(p, datadir.HELP + "; the web keeps its password hash in DATA/web/")
     p.add_argument(
         "--https",
         action="store_true",

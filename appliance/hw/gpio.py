@@ -22,6 +22,16 @@ from ..errors import DeviceError
 from .base import OutputLine
 
 
+def request_line(chip: str, offset: int, name: str, settings):
+    """One line of `chip`, held by us as inkslice-NAME until released."""
+    import gpiod
+
+    try:
+        return gpiod.request_lines(chip, consumer=f"inkslice-{name}", config={offset: settings})
+    except (OSError, ValueError) as e:
+        raise DeviceError(f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}") from None
+
+
 class GpioOutput(OutputLine):
     def __init__(self, chip: str, offset: int, name: str, active_low: bool = False):
         import gpiod
@@ -29,20 +39,10 @@ class GpioOutput(OutputLine):
 
         self._Value = Value
         self.name, self.offset = name, offset
-        try:
-            self._req = gpiod.request_lines(
-                chip,
-                consumer=f"inkslice-{name}",
-                config={
-                    offset: gpiod.LineSettings(
-                        direction=Direction.OUTPUT, active_low=active_low, output_value=Value.INACTIVE
-                    )
-                },
-            )
-        except (OSError, ValueError) as e:
-            raise DeviceError(
-                f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}"
-            ) from None
+        out = gpiod.LineSettings(
+            direction=Direction.OUTPUT, active_low=active_low, output_value=Value.INACTIVE
+        )
+        self._req = request_line(chip, offset, name, out)
 
     def set(self, on: bool) -> None:
         try:
@@ -103,24 +103,14 @@ class GpioButton:
         from gpiod.line import Bias, Direction, Edge
 
         self.name, self.offset = name, offset
-        try:
-            self._req = gpiod.request_lines(
-                chip,
-                consumer=f"inkslice-{name}",
-                config={
-                    offset: gpiod.LineSettings(
-                        direction=Direction.INPUT,
-                        bias=Bias.PULL_UP,
-                        active_low=True,
-                        edge_detection=Edge.BOTH,
-                        debounce_period=datetime.timedelta(milliseconds=30),
-                    )
-                },
-            )
-        except (OSError, ValueError) as e:
-            raise DeviceError(
-                f"gpio {name} ({chip} line {offset})", f"cannot request the line: {e}"
-            ) from None
+        pulled_up = gpiod.LineSettings(
+            direction=Direction.INPUT,
+            bias=Bias.PULL_UP,
+            active_low=True,
+            edge_detection=Edge.BOTH,
+            debounce_period=datetime.timedelta(milliseconds=30),
+        )
+        self._req = request_line(chip, offset, name, pulled_up)
         from gpiod.edge_event import EdgeEvent
 
         self._rising = EdgeEvent.Type.RISING_EDGE  # active-low: rising = pressed
