@@ -6,6 +6,8 @@ a device) and *what* is wrong. The CLI prints it as one line and exits 2; the
 web UI and the daemon store the same text with the job.
 """
 
+import math
+
 
 class InkSliceError(Exception):
     def __init__(self, where, problem):
@@ -32,3 +34,11 @@ class Cancelled(Exception):
     Not an InkSliceError: nothing is wrong, and whoever stopped it already knows why.
     It lives here, beside the errors, because the runner, the processing and the
     commissioning all raise or catch it and none of them should import another for it."""
+
+
+def check_mm(where: str, value, *, zero_ok: bool = False, what: str = "") -> None:
+    """A length that must be a number of mm above zero (at or above, with zero_ok), else a
+    SettingError: `check_mm("cutter", d, what="diameter")` -> "cutter: diameter must be > 0 mm, got 0"."""
+    if value is None or not math.isfinite(value) or (value < 0 if zero_ok else value <= 0):
+        bound = ">= 0" if zero_ok else "> 0"
+        raise SettingError(where, f"{what + ' ' if what else ''}must be {bound} mm, got {value}")

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SettingError
+from ..errors import SettingError, check_mm
 
 # Usable length below the holder. A 6 mm tool reaching 40 mm is a long-reach
 # (necked) tool; the dissertation's samples stand up to ~37 mm above the base.
@@ -46,16 +46,14 @@ class Cutter:
     flutes: int = 2
 
     def __post_init__(self):
-        if not np.isfinite(self.diameter) or self.diameter <= 0:
-            raise SettingError("cutter", f"diameter must be > 0 mm, got {self.diameter}")
+        check_mm("cutter", self.diameter, what="diameter")
         if not (0 <= self.corner_radius <= self.radius + 1e-12):
             raise SettingError(
                 "cutter",
                 f"corner radius must be between 0 and the radius "
                 f"{self.radius:g} mm, got {self.corner_radius}",
             )
-        if not np.isfinite(self.flute_length) or self.flute_length <= 0:
-            raise SettingError("cutter", f"flute length must be > 0 mm, got {self.flute_length}")
+        check_mm("cutter", self.flute_length, what="flute length")
         if int(self.flutes) < 1:
             raise SettingError("cutter", f"flutes must be >= 1, got {self.flutes}")
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InkSliceError, SettingError
+from ..errors import InkSliceError, SettingError, check_mm
 from ..surface.heightmap import HeightMap
 from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM, header_notes
 from .cutters import Cutter, parse_cutter
@@ -35,8 +35,7 @@ MAX_WORK_CELLS = 40_000_000
 
 
 def check_work(hm: HeightMap, resolution: float, setting: str):
-    if not np.isfinite(resolution) or resolution <= 0:
-        raise SettingError(setting, f"must be > 0 mm, got {resolution}")
+    check_mm(setting, resolution)
     wx, wy = float(hm.x[-1] - hm.x[0]), float(hm.y[-1] - hm.y[0])
     cells = (wx / resolution + 1) * (wy / resolution + 1)
     if cells > MAX_WORK_CELLS:
@@ -52,6 +51,28 @@ class Job:
     text: str
     runtime_s: float
     summary: dict = field(default_factory=dict)
+
+
+def _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset):
+    """Every check a plan's inputs get before planning (which takes seconds to minutes), then
+    the cutting conditions and the sampler the plan reads the surface through."""
+    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    settings.check()
+    check_work(hm, settings.resolution, "resolution")
+    check_frame(clearance, z_offset)
+    return cond, Sampler(hm, edge_step=settings.resolution / 2)
+
+
+def _summary(cond, slowed, text, **plan) -> dict:
+    """A job's summary: what the plan made, then the conditions it cuts with."""
+    return {
+        **plan,
+        "feed": cond.feed,
+        "plunge": cond.plunge,
+        "rpm": cond.rpm,
+        "slowed_moves": slowed,
+        "lines": text.count("\n"),
+    }
 
 
 def _post(hm, runs, cutter, cond, stock_top, title, dialect, clearance, z_offset, machine, chord, notes):
@@ -92,11 +113,7 @@ def finishing_gcodes(
     ours = [d for d in dialects if d != "dissertation"]
     if not ours:
         return jobs
-    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
-    settings.check()
-    check_work(hm, settings.resolution, "resolution")
-    check_frame(clearance, z_offset)
-    sampler = Sampler(hm, edge_step=settings.resolution / 2)
+    cond, sampler = _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset)
     fin = finishing(sampler, settings)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
     target = (
@@ -125,22 +142,17 @@ def finishing_gcodes(
             settings.chord,
             notes,
         )
-        jobs[d] = Job(
+        summary = _summary(
+            cond,
+            slowed,
             text,
-            rt,
-            {
-                "passes": int(len(fin.passes)),
-                "runs": len(fin.runs),
-                "points": int(sum(len(r) for r in fin.runs)),
-                "stepover_min": float(so.min()) if so.size else 0.0,
-                "stepover_max": float(so.max()) if so.size else 0.0,
-                "feed": cond.feed,
-                "plunge": cond.plunge,
-                "rpm": cond.rpm,
-                "slowed_moves": slowed,
-                "lines": text.count("\n"),
-            },
+            passes=int(len(fin.passes)),
+            runs=len(fin.runs),
+            points=int(sum(len(r) for r in fin.runs)),
+            stepover_min=float(so.min()) if so.size else 0.0,
+            stepover_max=float(so.max()) if so.size else 0.0,
         )
+        jobs[d] = Job(text, rt, summary)
     return jobs
 
 
@@ -160,11 +172,7 @@ def roughing_gcode(
     check_heightmap(hm)
     if dialect == "dissertation":
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
-    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
-    settings.check()
-    check_work(hm, settings.resolution, "resolution")
-    check_frame(clearance, z_offset)
-    sampler = Sampler(hm, edge_step=settings.resolution / 2)
+    cond, sampler = _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset)
     runs = roughing(sampler, settings)
     notes = [
         f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
@@ -184,18 +192,7 @@ def roughing_gcode(
         settings.chord,
         notes,
     )
-    return Job(
-        text,
-        rt,
-        {
-            "runs": len(runs),
-            "feed": cond.feed,
-            "plunge": cond.plunge,
-            "rpm": cond.rpm,
-            "slowed_moves": slowed,
-            "lines": text.count("\n"),
-        },
-    )
+    return Job(text, rt, _summary(cond, slowed, text, runs=len(runs)))
 
 
 def cutter_from_program(parsed, default=None) -> Cutter:
@@ -234,14 +231,10 @@ def verify_gcode(
     block's top is the part's top + 1 mm, or the program's safe height if lower.
     """
     check_heightmap(hm)
-    for name, v, least in (
-        ("resolution", resolution, None),
-        ("reach tolerance", reach_tol, None),
-        ("edge band", edge_band, 0.0),
-        ("uncut tolerance", uncut_tol, 0.0),
-    ):
-        if not np.isfinite(v) or (v <= 0 if least is None else v < least):
-            raise SettingError(name, f"must be {'> 0' if least is None else '>= 0'} mm, got {v}")
+    check_mm("resolution", resolution)
+    check_mm("reach tolerance", reach_tol)
+    check_mm("edge band", edge_band, zero_ok=True)
+    check_mm("uncut tolerance", uncut_tol, zero_ok=True)
     check_work(hm, resolution, "resolution")
     parsed = parse_gcode(text, where)
     for ax, name in enumerate("XYZ"):

@@ -46,26 +46,26 @@ class Machine:
 DEFAULT_MACHINE = Machine()
 
 
-def parse_travel(text) -> tuple:
-    """'xmin,xmax,ymin,ymax,zmin,zmax' (mm)."""
+def _numbers(text, count: int, setting: str, form: str) -> list[float]:
+    """`count` comma-separated numbers, else a SettingError that shows the form wanted."""
     try:
         v = [float(s) for s in str(text).split(",")]
     except ValueError:
         v = []
-    if len(v) != 6:
-        raise SettingError("machine travel", f"{text!r}: give six numbers xmin,xmax,ymin,ymax,zmin,zmax (mm)")
+    if len(v) != count:
+        raise SettingError(setting, f"{text!r}: give {form}")
+    return v
+
+
+def parse_travel(text) -> tuple:
+    """'xmin,xmax,ymin,ymax,zmin,zmax' (mm)."""
+    v = _numbers(text, 6, "machine travel", "six numbers xmin,xmax,ymin,ymax,zmin,zmax (mm)")
     return ((v[0], v[1]), (v[2], v[3]), (v[4], v[5]))
 
 
 def parse_feeds(text) -> tuple:
     """'fx,fy,fz' (mm/min)."""
-    try:
-        v = [float(s) for s in str(text).split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 3:
-        raise SettingError("machine max feed", f"{text!r}: give three numbers fx,fy,fz (mm/min)")
-    return tuple(v)
+    return tuple(_numbers(text, 3, "machine max feed", "three numbers fx,fy,fz (mm/min)"))
 
 
 def check_envelope(prog: Program, machine: Machine):

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SettingError
+from ..errors import SettingError, check_mm
 from .cutters import Cutter
 from .feeds import Conditions
 
@@ -59,8 +59,7 @@ def check_frame(clearance, z_offset):
     minutes, and then failed on its last step); a NaN work offset was written
     out as `G0 Znan` and the command reported success.
     """
-    if not np.isfinite(clearance) or clearance <= 0:
-        raise SettingError("clearance", f"must be > 0 mm, got {clearance}")
+    check_mm("clearance", clearance)
     if not np.isfinite(z_offset):
         raise SettingError("z offset", f"must be a number of mm, got {z_offset}")
 

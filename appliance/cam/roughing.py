@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SettingError
+from ..errors import SettingError, check_mm
 from .cutters import Cutter
 from .polyline import reduce_polyline, true_runs
 from .sampling import Sampler
@@ -51,26 +51,22 @@ class RoughSettings:
     chord: float = 0.01
 
     def check(self):
-        if not np.isfinite(self.stepdown) or self.stepdown <= 0:
-            raise SettingError("step-down", f"must be > 0 mm, got {self.stepdown}")
+        check_mm("step-down", self.stepdown)
         if self.stepdown > self.cutter.flute_length:
             raise SettingError(
                 "step-down",
                 f"{self.stepdown:g} mm is deeper than the flute length {self.cutter.flute_length:g} mm",
             )
         so = self.stepover_mm
-        if not np.isfinite(so) or so <= 0:
-            raise SettingError("stepover", f"must be > 0 mm, got {so}")
+        check_mm("stepover", so)
         if so >= self.cutter.diameter:
             raise SettingError(
                 "stepover",
                 f"{so:g} mm is not less than the cutter diameter "
                 f"{self.cutter.diameter:g} mm: ridges would be left standing",
             )
-        if not np.isfinite(self.leave) or self.leave < 0:
-            raise SettingError("stock to leave", f"must be >= 0 mm, got {self.leave}")
-        if not np.isfinite(self.resolution) or self.resolution <= 0:
-            raise SettingError("resolution", f"must be > 0 mm, got {self.resolution}")
+        check_mm("stock to leave", self.leave, zero_ok=True)
+        check_mm("resolution", self.resolution)
 
     @property
     def stepover_mm(self):

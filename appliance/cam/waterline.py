@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from ..errors import SettingError
+from ..errors import SettingError, check_mm
 from .contact import drop_lines, drop_points
 from .contours import contours
 from .cutters import Cutter
@@ -98,13 +98,9 @@ class SteepSettings:
             raise SettingError(
                 "steep overlap", f"must be >= 0 and leave both regions, got {self.overlap_deg}"
             )
-        for name, v in (
-            ("resolution", self.resolution),
-            ("grid", self.grid),
-            ("chord tolerance", self.chord),
-        ):
-            if not (np.isfinite(v) and v > 0):
-                raise SettingError(name, f"must be > 0 mm, got {v}")
+        check_mm("resolution", self.resolution)
+        check_mm("grid", self.grid)
+        check_mm("chord tolerance", self.chord)
         if self.resolution > R / 3:
             raise SettingError(
                 "resolution", f"{self.resolution:g} mm is too coarse for a cutter of radius {R:g} mm"

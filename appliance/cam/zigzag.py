@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SettingError
+from ..errors import SettingError, check_mm
 from .contact import drop_lines
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
@@ -80,8 +80,7 @@ class FinishSettings:
     def check(self):
         R = self.cutter.radius
         if self.stepover is not None:
-            if not np.isfinite(self.stepover) or self.stepover <= 0:
-                raise SettingError("stepover", f"must be > 0 mm, got {self.stepover}")
+            check_mm("stepover", self.stepover)
             if self.stepover >= self.cutter.diameter:
                 raise SettingError(
                     "stepover",
@@ -89,14 +88,12 @@ class FinishSettings:
                     f"diameter {self.cutter.diameter:g} mm: strips would be left uncut",
                 )
         else:
-            if self.scallop is None or not np.isfinite(self.scallop) or self.scallop <= 0:
-                raise SettingError("scallop", f"must be > 0 mm, got {self.scallop}")
+            check_mm("scallop", self.scallop)
             if self.scallop >= R:
                 raise SettingError(
                     "scallop", f"{self.scallop:g} mm is not less than the cutter radius {R:g} mm"
                 )
-        if not np.isfinite(self.resolution) or self.resolution <= 0:
-            raise SettingError("resolution", f"must be > 0 mm, got {self.resolution}")
+        check_mm("resolution", self.resolution)
         if not np.isfinite(self.angle):
             raise SettingError("angle", f"must be a number of degrees, got {self.angle}")
         if self.resolution > R / 3:
@@ -105,18 +102,15 @@ class FinishSettings:
                 f"{self.resolution:g} mm is too coarse for a cutter of radius "
                 f"{R:g} mm (at most {R / 3:.3g} mm)",
             )
-        if not np.isfinite(self.chord) or self.chord <= 0:
-            raise SettingError("chord tolerance", f"must be > 0 mm, got {self.chord}")
-        if not np.isfinite(self.margin) or self.margin < 0:
-            raise SettingError("margin", f"must be >= 0 mm, got {self.margin}")
+        check_mm("chord tolerance", self.chord)
+        check_mm("margin", self.margin, zero_ok=True)
         if self.margin > R:
             raise SettingError(
                 "margin",
                 f"{self.margin:g} mm is more than the cutter radius {R:g} mm: "
                 "the cutter would drop off the part's edge to the base",
             )
-        if not np.isfinite(self.leave) or self.leave < 0:
-            raise SettingError("stock to leave", f"must be >= 0 mm, got {self.leave}")
+        check_mm("stock to leave", self.leave, zero_ok=True)
 
 
 @dataclass
