@@ -10,13 +10,12 @@ or an API token), except /api/health and /api/openapi.json.
 from __future__ import annotations
 
 import json
-import re
 import time
 
 from flask import Blueprint, Response, current_app, jsonify, request
 
 from .adapter import ACTIVE
-from .apicore import Refused, check_job_id, err, ext, json_body, json_errors, svc
+from .apicore import check_job_id, check_steps, err, ext, json_body, json_download, json_errors, svc
 
 bp = json_errors(Blueprint("api", __name__))
 
@@ -212,8 +211,7 @@ def calibration():
 
 @bp.post("/calibration/<step>")
 def calibrate(step):
-    if not re.match(r"^[a-z_]{1,30}$", step):
-        raise Refused("bad step name", 400)
+    check_steps(step)
     return jsonify(svc().calibrate(step))
 
 
@@ -227,14 +225,7 @@ def commissioning():
 
 @bp.get("/commissioning/export")
 def commissioning_export():
-    doc = svc().export_commissioning()
-    body = json.dumps(doc, indent=2) + "\n"
-    stamp = time.strftime("%Y%m%d", time.gmtime())
-    return Response(
-        body,
-        mimetype="application/json",
-        headers={"Content-Disposition": f'attachment; filename="inkslice-commissioning-{stamp}.json"'},
-    )
+    return json_download(svc().export_commissioning(), "commissioning")
 
 
 @bp.post("/commissioning/import")
@@ -249,6 +240,5 @@ def commissioning_ink_changed():
 
 @bp.post("/commissioning/<step>/<action>")
 def commission(step, action):
-    if not re.match(r"^[a-z_]{1,30}$", step) or not re.match(r"^[a-z_]{1,30}$", action):
-        raise Refused("bad step or action name", 400)
+    check_steps(step, action)
     return jsonify(svc().commission(step, action, json_body()))

@@ -10,9 +10,11 @@ or file), 409 (the bench is busy), 501 (the bench service lacks the feature).
 
 from __future__ import annotations
 
+import json
 import re
+import time
 
-from flask import current_app, jsonify, request
+from flask import Response, current_app, jsonify, request
 
 from ..errors import DeviceError, InkSliceError, ScanError, SettingError
 from .adapter import NotOffered
@@ -22,6 +24,7 @@ from .adapter import NotOffered
 # returns files inside the job's folder); this is the first of two locks.
 JOB_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,79}$")
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
+STEP = re.compile(r"^[a-z_]{1,30}$")  # a calibration or commissioning step, or a step's action
 
 
 def ext():
@@ -55,6 +58,22 @@ def check_job_id(job_id):
 def check_name(name):
     if not FILE_NAME.match(name or "") or ".." in name:
         raise Refused("bad file name", 400)
+
+
+def check_steps(*names):
+    if not all(STEP.match(name or "") for name in names):
+        raise Refused(f"bad {' or '.join(('step', 'action')[: len(names)])} name", 400)
+
+
+def download(body, mimetype: str, what: str, suffix: str) -> Response:
+    """A file the browser saves as inkslice-WHAT-<local date and time>.SUFFIX."""
+    stamp = time.strftime("%Y%m%d-%H%M", time.localtime())
+    disposition = f'attachment; filename="inkslice-{what}-{stamp}.{suffix}"'
+    return Response(body, mimetype=mimetype, headers={"Content-Disposition": disposition})
+
+
+def json_download(doc: dict, what: str) -> Response:
+    return download(json.dumps(doc, indent=2) + "\n", "application/json", what, "json")
 
 
 def json_body() -> dict:

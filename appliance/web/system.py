@@ -25,7 +25,7 @@ from flask import Blueprint, Response, jsonify, request
 
 from .. import __version__, logfiles
 from ..daemon import settings as S
-from .apicore import ext, json_errors, svc
+from .apicore import download, ext, json_download, json_errors, svc
 
 bp = json_errors(Blueprint("system", __name__))
 log = logging.getLogger("inkslice.web")
@@ -60,10 +60,9 @@ def logs(name):
     if name not in logfiles.NAMES:
         return jsonify(error=f"no log named {name!r}; there are {', '.join(logfiles.NAMES)}"), 404
     text = logfiles.tail(_bench_data(), name)
-    resp = Response(text, mimetype="text/plain; charset=utf-8")
     if request.args.get("download") == "1":
-        resp.headers["Content-Disposition"] = f'attachment; filename="inkslice-{name}-{_stamp()}.log"'
-    return resp
+        return download(text, "text/plain; charset=utf-8", name, "log")
+    return Response(text, mimetype="text/plain; charset=utf-8")
 
 
 def without_secrets(settings: dict) -> dict:
@@ -98,22 +97,14 @@ def support_bundle():
             "(secrets left out), the calibration history, the box's figures and its recent "
             "events. No passwords, tokens, scans or jobs.\n",
         )
-    return Response(
-        buf.getvalue(),
-        mimetype="application/zip",
-        headers={"Content-Disposition": f'attachment; filename="inkslice-support-{_stamp()}.zip"'},
-    )
+    return download(buf.getvalue(), "application/zip", "support", "zip")
 
 
 @bp.get("/backup")
 def backup():
     doc = svc().backup()
     log.info("backup of settings and calibration downloaded")
-    return Response(
-        json.dumps(doc, indent=2) + "\n",
-        mimetype="application/json",
-        headers={"Content-Disposition": f'attachment; filename="inkslice-backup-{_stamp()}.json"'},
-    )
+    return json_download(doc, "backup")
 
 
 @bp.post("/restore")
@@ -129,7 +120,3 @@ def restore():
 @bp.post("/webhook/test")
 def webhook_test():
     return jsonify(svc().test_webhook())
-
-
-def _stamp():
-    return time.strftime("%Y%m%d-%H%M", time.localtime())
