@@ -90,11 +90,15 @@ def run_scan(client, params, pid):
         time.sleep(0.1)
 
 
-def phases_of(message: str) -> tuple[float | None, list[tuple[str, float, float]]]:
-    """The child's peak MB and [(phase, seconds, peak MB when it ended)] from its 'processed' event."""
-    peak = re.match(r"processing peak memory ([\d.]+) MB", message)
+def phases_of(message: str) -> tuple[float | None, float | None, list[tuple[str, float, float]]]:
+    """The child's peak MB, its CPU seconds and [(phase, seconds, peak MB when it ended)]
+    from its 'processed' event."""
+    peak = re.match(r"processing peak memory ([\d.]+) MB(?:, ([\d.]+) s CPU)?", message)
     rows = re.findall(r"([\w ()]+?) ([\d.]+) s \(to (\d+) MB\)", message.partition("; ")[2])
-    return (float(peak.group(1)) if peak else None), [(n.strip(" ,"), float(s), float(m)) for n, s, m in rows]
+    phases = [(n.strip(" ,"), float(s), float(m)) for n, s, m in rows]
+    if not peak:
+        return None, None, phases
+    return float(peak.group(1)), (float(peak.group(2)) if peak.group(2) else None), phases
 
 
 def verdict(ok: bool) -> str:
@@ -129,9 +133,9 @@ def main(argv=None):
         scan_json = tmp / "data" / "jobs" / job["id"] / "scan" / "scan.json"
         frames = len(json.loads(scan_json.read_text())["frames"])
         after = job["finished"] - scan_json.stat().st_mtime
-        child_mb, phases = phases_of(events[0] if events else "")
+        child_mb, child_cpu, phases = phases_of(events[0] if events else "")
         print(f"the demo's scan: {args.part}, {frames} frames of {args.frame}, capture {t_capture:.1f} s")
-        print(f"processing child's phases ({len(phases)}):")
+        print(f"processing child: {child_cpu} s CPU; its phases (wall):")
         for name, s, mb in phases:
             print(f"  {name:<22} {s:6.2f} s   peak {mb:5.0f} MB when it ended")
         # while the child runs, the daemon holds what it is then (its peak came with the
@@ -154,7 +158,12 @@ def main(argv=None):
             "daemon_processing_mb": round(daemon_processing_mb, 1),
             "daemon_idle_mb": round(idle_mb, 1),
         }
-        summary |= {"child_mb": child_mb, "frames": frames, "phases": {n: s for n, s, _ in phases}}
+        summary |= {
+            "child_mb": child_mb,
+            "child_cpu_s": child_cpu,
+            "frames": frames,
+            "phases": {n: s for n, s, _ in phases},
+        }
         print(json.dumps(summary))
         return 0 if ok_time and ok_mem else 1
     finally:

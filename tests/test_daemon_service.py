@@ -255,7 +255,7 @@ def test_processing_in_a_child_process_gives_the_same_files(tmp_path):
         # the job log says where the child's time and memory went, phase by phase
         (logged,) = [e["message"] for e in svc.store.events(job["id"]) if e["kind"] == "processed"]
         assert logged.startswith("processing peak memory ")
-        assert "; the seed method " in logged and " MB), writing outputs " in logged
+        assert " s CPU; the seed method " in logged and " MB), writing outputs " in logged
     finally:
         svc.close()
 

@@ -87,7 +87,9 @@ def run(processor: Callable, store, job_id: str, settings: dict, stop) -> list[s
         store.event(
             job_id,
             "processed",
-            f"processing peak memory {result['peak_rss_mb']} MB" + (f"; {phases}" if phases else ""),
+            f"processing peak memory {result['peak_rss_mb']} MB"
+            + (f", {result['cpu_s']:g} s CPU" if "cpu_s" in result else "")
+            + (f"; {phases}" if phases else ""),
         )
     return checked_outputs(result, job_dir)
 
@@ -143,7 +145,12 @@ def child_process(
         stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
     peak_mb = usage.ru_maxrss / 1024  # Linux reports kB
     if rc == 0:
-        return {**json.loads(stdout.strip().splitlines()[-1]), "peak_rss_mb": round(peak_mb, 1)}
+        cpu_s = usage.ru_utime + usage.ru_stime  # on a busy box a far surer figure than the wall time
+        return {
+            **json.loads(stdout.strip().splitlines()[-1]),
+            "peak_rss_mb": round(peak_mb, 1),
+            "cpu_s": round(cpu_s, 1),
+        }
     if rc == 2 and stderr.strip():
         where, _, problem = stderr.strip().splitlines()[-1].partition(": ")
         raise InkSliceError(where or "processing", problem or stderr.strip())
