@@ -19,11 +19,15 @@ bench starts one scan over the daemon's socket and prints:
 
 A Pi 4 is 4-5x slower than the build machine: a figure here is a fifth of what it will be there.
 
-Measured 2026-12-03 (shared 2-core box, load 8-9 from other work), before any change: 84
-frames, capture 75 s; the result 45.9 s after the last frame (waterlines 0.4 s, surface fit
-7.4 s, toolpath 35.4 s, writing 0.2 s): MISS. Memory while processing: daemon 185 MB (idle
-with the simulated bench: see the run) + child 286 MB (135 MB after the waterlines, 181 after
-the fit, 286 in the toolpath) = 471 MB: MISS.
+Measured 2026-12-03 on the shared 2-core box at a load of 8-13 from other work (the wall
+times are the load's as much as the processing's; the child's CPU seconds are surer). 84 frames,
+capture 74 s. Before (11bc55f): result 45.9 s after the last frame (waterlines 0.4 s, fit 7.4 s,
+toolpath 35.4 s, writing 0.2 s); daemon 185 MB + child 286 MB = 471 MB while processing. After
+fbb410a (Sampler.z and the registration's vote, the same numbers for less CPU): 47.2 s at a
+higher load, the child 21.2 s CPU (fit 13.5 s and toolpath 30.7 s wall); daemon 185 MB (100 MB
+idle: the rest is the simulated camera's renderer) + child 263 MB (95 MB after its imports, 135
+after the waterlines, 175 after the fit, 263 in the toolpath) = 448 MB. Both MISS: the
+finishing planner's CPU (some 15 s of the 21) and memory are what is left (issue 20, item 1).
 """
 
 from __future__ import annotations
