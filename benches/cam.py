@@ -26,6 +26,11 @@ beside it. Measured 2026-12-02 (RIM): sample1 ball6 0.05: 0.00 % uncut, max
 (0, 100) MISS; sample4 bull1r0.25 0.01: 0.00 %, 0.0569 at its edge MISS. RIM is
 not the default yet: sample 1 at 0.01 took 58.6 s / 886 MB with it against
 14.9 s / 202 MB without (refining the moves that roll over the rim).
+2026-12-03, one loaded box, main | now, RIM, sample 1 from 0.5 mm, ball6: 0.05:
+9.7 s / 205 MB | 9.5 s / 203 MB; 0.01: 66.7 s / 886 MB | 46.4 s / 471 MB (the off-part
+moves from a fine line, rimline.py; the planner's envelopes in blocks). Still 3x
+margin 0 at 0.01: the planner crawls over the outline (stepovers of 0.01-0.06 mm
+for the first passes off the part, which only pivot on its edge).
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 

@@ -39,6 +39,18 @@ class PassProbe(PassEnvelope):
         level = max(0, int(np.ceil(np.log2(self.row * 8 / max(gap, 1e-3)) - 1e-9)))
         return self.row / 2**level
 
+    def keep_only(self, s):
+        """Keep the envelope of the candidate at s (the planner's best so far) and no other: the
+        pass it places is that one, whose envelope is then merged, not swept again (when only
+        the last candidate's was kept, sweeping the others again was a third of the planner's
+        time with the rim). At most two are held: this one and the latest."""
+        self._kept = s
+        self._forget_others()
+
+    def _forget_others(self):
+        for key in [k for k in self._measured if k[0] != self._kept]:
+            del self._measured[key]
+
     def _placed(self, step, done):
         """The placed passes merged on the row grid of spacing `step`, up to date with `done`."""
         sa = done[-1][0]
@@ -77,6 +89,7 @@ class PassProbe(PassEnvelope):
         Z, on, op, placed, owner, env_a = grid.rows(k0, k1)
         env_b = self.envelope(b, (ys - b[0])[:, None], cols_all)
         # the pass placed next is one of these candidates: its rows are merged from here
+        self._forget_others()
         self._measured[(b[0], step)] = (k0, env_b)
         stock = np.minimum(placed, env_b)
         who = np.where(env_b < placed, len(done), owner)  # which pass leaves the stock there
@@ -255,6 +268,7 @@ class PlacedRows:
         first = int(np.floor((done[-1][0] - R) / self.step))
         while self.merged < len(done) and done[self.merged][0] + R < first * self.step:
             self.merged += 1
+        placed = False
         while self.merged < len(done):
             p = done[self.merged]
             j0 = max(int(np.ceil((p[0] - R) / self.step)), first)
@@ -272,7 +286,11 @@ class PlacedRows:
             self.owner[sl] = np.where(lower, self.merged, self.owner[sl])
             self.last = (j0, env)
             self.merged += 1
-        self.probe._measured.clear()
+            placed = True
+        if placed:
+            # the candidates measured for the pass placed are of no use to the next one
+            self.probe._measured.clear()
+            self.probe._kept = None
 
     def rows(self, k0, k1):
         """(design, on part, opening, placed stock, owner, last pass's envelope) on rows k0..k1-1."""

@@ -20,6 +20,7 @@ from .segments import min_over_segment
 
 PLAN_SPACING = 0.3  # mm between the points the planner measures along a pass
 _ROW = 0.05  # mm between the rows of the planner's cross-sections
+_ENV_BLOCK = 150_000  # elements of one envelope call (see envelope_many)
 _BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which the
 # quadratic through three rows 0.1 apart gives within 1e-5 mm
 
@@ -38,6 +39,7 @@ class PassEnvelope:
         self.stride = max(1, int(round(spacing / st.resolution)))
         self._grids = {}
         self._measured = {}  # (across, row step) -> (first row, envelope) of candidates measured
+        self._kept = None  # across position of the candidate whose envelope is kept (cusps.py)
         # rows of the cross-sections: eight per flat-surface stepover, at most 0.05 mm
         self.row = min(
             _BALL_ROW if st.cutter.kind == "ball" else _ROW, flat_stepover(st.cutter, st.scallop) / 8
@@ -91,9 +93,30 @@ class PassEnvelope:
 
     def envelope_many(self, passes, pid, dy, cols):
         """envelope() with column j's pass passes[pid[j]]: the cusp's fine search asks
-        for many passes, each at a few columns, and one call costs what one pass's does."""
+        for many passes, each at a few columns, and one call costs what one pass's does.
+
+        Every element is its own minimum, so a large call is made in blocks of rows (or of
+        columns) of _ENV_BLOCK elements: the exact sweep's temporaries are ~30 arrays of
+        the call's size, and the 6300 rows x 414 columns a candidate a hundredth of a
+        millimetre over the rim asks for were 600 MB of a finishing plan's 886 MB peak."""
+        cols, pid = np.asarray(cols), np.asarray(pid)
+        dy = np.asarray(dy, float)
+        rows, ncol = np.broadcast_shapes(dy.shape, (1, cols.size))
+        if rows * ncol <= _ENV_BLOCK:
+            return self._envelope_block(passes, pid, dy, cols)
+        if dy.shape[1] == 1:
+            step = max(1, _ENV_BLOCK // max(ncol, 1))
+            blocks = [self._envelope_block(passes, pid, dy[r : r + step], cols) for r in range(0, rows, step)]
+            return np.concatenate(blocks, axis=0)
+        step = max(1, _ENV_BLOCK // max(rows, 1))
+        blocks = [
+            self._envelope_block(passes, pid[c : c + step], dy[:, c : c + step], cols[c : c + step])
+            for c in range(0, ncol, step)
+        ]
+        return np.concatenate(blocks, axis=1)
+
+    def _envelope_block(self, passes, pid, dy, cols):
         cut, d, R = self.st.cutter, self.st.resolution, self.st.cutter.radius
-        cols = np.asarray(cols)
         full = np.stack([q[1] for q in passes])
         a_flat = R - cut.corner_radius
         dy = np.abs(np.asarray(dy, float))

@@ -43,6 +43,7 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
             if sc <= hi_ok:
                 if best_ok is None or s > best_ok:
                     best_ok, best_p = s, cand
+                    probe.keep_only(cand[0])
                 if sc >= lo_ok or sa + s >= s1 - 1e-9 or s >= s_cap - 1e-9:
                     break
             else:
