@@ -42,6 +42,23 @@ uncertainty changes of 2 December (inradius of the top, no lattice guess, the in
 (surface/registration.py, 2 December, same renders): sample4 0.5007 0.448 4.835 -> 0.2455 0.363
 1.937; sample1 0.0195 0.064 1.169 -> 0.0191 0.069 0.921. The seed table's figures are unchanged
 (without play the offsets stay under registration.NOTHING_TO_DO_MM and nothing moves).
+(e) the whole bench on today's main (3 December, 0b07181: registration counts only the frame
+pairs whose shifts close a triangle), fresh renders from above with the runner's refinement
+frames, meniscus 2.507 mm / 0.26 deg / 0.95, Ea / interior p99 / max mm, honest share of (cells):
+    sample1    0.0158 0.042 0.558  94% of 31    17.6% marked
+    sample2    0.0961 0.211 0.494  37% of 619   15.0%  (16 refinement frames at 21.6-24.4; the
+               fit stands 0.1-0.2 mm low over the lower saddle, unmarked; the older render with
+               4 of them, same code: 0.0208)
+    sample3    0.0618 0.155 0.553  65% of 289   18.7%  (7 refinement frames on the older render:
+               0.0377)
+    sample4    0.2456 0.363 1.937 100% (all)
+    twin-peaks 0.0519 0.270 1.104  62% of 173   19.0%  ((c) 0.0235 0.115 0.389 before registration)
+    plateau    0.1322 0.949 1.705  40% of 805   18.4%
+    ring       0.1435 0.967 1.334  49% of 524   55.5%
+  held out: crater 0.0965 1.100 1.385  42% of 291  15.6%; steep-front 0.0141 0.061 0.193  11% of 9
+  5.8%. All tuned: 68.5 % of 4166 marked (34.9 % of the cells, mean); held out: 41.0 % of 300.
+  Within targets: sample1 (but max 0.558), steep-front. Over: sample2/3 Ea (their refinement
+  frames), sample4, twin-peaks, plateau, ring; the honesty target on neither set.
 What is left, from per-cell error maps: sample 4 (10 mm across, slopes 4-10) is the stage
 wobble and the meniscus, not glare: rendered without the wobble its Ea is 0.249, without
 wobble, glare, dust and the image's noise 0.142 (the curved contact line on a part that is
