@@ -47,11 +47,11 @@ from .segments import min_over_segment
 DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath points
 _SLAB_BUDGET = 750_000  # slab elements per chunk: reading the map there takes ~15 arrays
 # of its size (3 M elements were 370 MB of a finishing plan)
-_CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
+CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 
 @functools.lru_cache(maxsize=16)
-def _offsets(cutter: Cutter, d: float):
+def disc_offsets(cutter: Cutter, d: float):
     """Disc offsets grouped by |b|: [(b, a_values, h_values)], m (cached: read-only)."""
     M = cutter.radius / d
     m = int(np.floor(M + 1e-9))
@@ -83,7 +83,7 @@ def drop_lines(
     e1 = np.asarray(direction, float)
     e1 = e1 / np.hypot(*e1)
     e2 = np.array([-e1[1], e1[0]])
-    groups, m = _offsets(cutter, d)
+    groups, m = disc_offsets(cutter, d)
     L = origins.shape[0]
     out = np.empty((L, len(range(0, n, stride))))
     per_line = (2 * m + 1) * (n + 2 * m)
@@ -92,7 +92,7 @@ def drop_lines(
     if axis is not None and L > 1 and np.median(np.diff(np.sort(origins[:, 1 - axis]))) <= d * (1 + 1e-9):
         # lines a lattice step apart (a grid) read one new row each: a chunk may hold
         # as many as keep the ~1450 slice operations' arrays in cache
-        chunk = max(chunk, _CACHE_ELEMENTS // max(n, 1))
+        chunk = max(chunk, CACHE_ELEMENTS // max(n, 1))
     c = np.arange(-m, n + m) * d
     b = np.arange(-m, m + 1) * d
     # lattice offsets relative to the line origin, shape (2m+1, n+2m)

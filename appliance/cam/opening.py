@@ -22,7 +22,7 @@ from scipy import ndimage
 
 from .contact import STEEP, plane_contact, polish, surface_gradient
 from .cutters import Cutter
-from .dropcutter import _CACHE_ELEMENTS, _offsets, drop_grid
+from .dropcutter import CACHE_ELEMENTS, disc_offsets, drop_grid
 from .sampling import Sampler
 
 REACH_TOL = 0.005  # mm: a cell is reachable when the opening is within this of the design
@@ -77,7 +77,7 @@ def _erode(tip, cutter, d):
     operations (the whole map at once streamed 4 MB arrays from memory each
     time: 1.1 -> 0.5 s).
     """
-    groups, m = _offsets(cutter, d)
+    groups, m = disc_offsets(cutter, d)
     quarter = [
         (b, [(a, np.float32(h)) for a, h in zip(av.tolist(), hv.tolist()) if a >= 0]) for b, av, hv in groups
     ]
@@ -87,7 +87,7 @@ def _erode(tip, cutter, d):
     pad = np.full((ny + 2 * m, nx + 2 * m), np.inf, np.float32)
     pad[m : m + ny, m : m + nx] = tip - ref
     out = np.full(tip.shape, np.inf, np.float32)
-    band = max(1, _CACHE_ELEMENTS // max(nx, 1))
+    band = max(1, CACHE_ELEMENTS // max(nx, 1))
     tmp = np.empty((band, nx), np.float32)
     rows = np.empty((band, nx + 2 * m), np.float32)
     for j0 in range(0, ny, band):

@@ -42,7 +42,7 @@ from ..surface.heightmap import HeightMap
 from .cutters import Cutter
 from .feeds import DEFAULT_MATERIAL
 from .limits import DEFAULT_MACHINE, Machine, check_envelope, limit_feeds
-from .posts import _num, comment_lines, finish_lines, get_dialect, header_lines, motion_lines
+from .posts import comment_lines, finish_lines, gcode_number, get_dialect, header_lines, motion_lines
 from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
@@ -253,7 +253,7 @@ def _post_section(d, ops, progs, notes, chord, job, pause):
     out += comment_lines(d, f"InkSlice {' + '.join(o.kind for o in ops)} with {_tn(tool)}{tool.name}")
     for h in header_lines(first, runtime, notes)[1:]:
         out += comment_lines(d, h)
-    out += [s.format(chord=_num(chord, d.decimals)) for s in d.start]
+    out += [s.format(chord=gcode_number(chord, d.decimals)) for s in d.start]
     out.append(f"M3 S{first.rpm:.0f}")
     for _, prog, _ in progs:
         out += motion_lines(prog, d)
@@ -287,7 +287,7 @@ def _post_changer(d, sections, chord, job):
     for _, _, notes in sections:
         for n in notes:
             out += comment_lines(d, n)
-    out += [s.format(chord=_num(chord, d.decimals)) for s in d.start]
+    out += [s.format(chord=gcode_number(chord, d.decimals)) for s in d.start]
     for ops, ps, _ in sections:
         tool = ps[0][0]
         out += comment_lines(d, f"{' + '.join(o.kind for o in ops)}: {_tn(tool)}{tool.cutter.describe()}")

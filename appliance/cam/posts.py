@@ -63,7 +63,8 @@ def get_dialect(name) -> Dialect:
         ) from None
 
 
-def _num(v, dec):
+def gcode_number(v, dec):
+    """A word's value with `dec` decimals, never "-0.000"."""
     s = f"{v:.{dec}f}"
     if s.startswith("-") and float(s) == 0:
         s = s[1:]
@@ -101,7 +102,7 @@ def render(prog: Program, dialect: str, runtime_s: float, chord: float = 0.002, 
     for h in header_lines(prog, runtime_s, extra_notes):
         out.extend(comment_lines(d, h))
     for s in d.start:
-        out.append(s.format(chord=_num(chord, d.decimals)))
+        out.append(s.format(chord=gcode_number(chord, d.decimals)))
     out.append(f"M3 S{prog.rpm:.0f}")
     out.extend(motion_lines(prog, d))
     out.append("M5")
@@ -131,12 +132,12 @@ def motion_lines(prog: Program, d: Dialect) -> list:
             v = prog.xyz[k, ax]
             if k == 0 and ax < 2:
                 continue  # the opening retract moves Z only
-            s = _num(v, dec)
+            s = gcode_number(v, dec)
             if s != last[ax]:
                 words.append(name + s)
                 last[ax] = s
         if prog.kind[k] == FEED:
-            f = _num(prog.feed[k], 0 if d.name != "fanuc" else 1)
+            f = gcode_number(prog.feed[k], 0 if d.name != "fanuc" else 1)
             if f != last_f:
                 words.append("F" + f)
                 last_f = f
