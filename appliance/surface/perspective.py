@@ -87,7 +87,7 @@ def mark_walls(
             if camera is not None
             else np.zeros(len(s.P), bool)
         )
-        s._curve = None
+        s.walls_changed()
         total += int(s.wall.sum())
     return total
 

@@ -154,7 +154,7 @@ def mark_silhouettes(slices: list[Slice], camera: Perspective, tol_mm: float = S
         s.rim = rim
         s.wall = hidden if s.wall is None else s.wall | hidden
         s.edge = hidden if s.edge is None else s.edge | hidden
-        s._curve = None
+        s.walls_changed()
         total += int(hidden.sum())
     return total
 

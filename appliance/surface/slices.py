@@ -63,6 +63,10 @@ class Slice:
             )
         return self._curve
 
+    def walls_changed(self) -> None:
+        """Its wall marks were changed: the level curve is derived again when next asked."""
+        self._curve = None
+
     def moved(self, P, z):
         """The same slice with corrected point positions and heights (its loops follow
         the points: the exposed area is where the points say)."""
