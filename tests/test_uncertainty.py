@@ -212,3 +212,43 @@ def test_cells_under_an_occluding_face_are_labelled_occluded_and_a_step_unsure()
     assert [SOURCES[k] for k in src2[:2, :2].ravel() if k >= 0] == ["occluded"] * 3 and src2[0, 0] == -1
     assert sig2[1, 1] == pytest.approx(1 / np.sqrt(12)) and sig2[3, 4] == 0.01
     assert _occluded_cells(src, sig, 7, slices)[0] is src  # a count, not a mask: nothing to mark
+
+
+def _ridge_evidence(rise):
+    """A long ridge along y, its crest 10 mm high at x = 50 and 45 deg flanks, scanned at
+    levels 9.5, 8.5, ... with the given meniscus correction per node (capillary 2.5 mm)."""
+    from appliance.surface.lattice import Lattice
+    from appliance.surface.uncertainty import CellEvidence
+
+    lat = Lattice(np.arange(30.0, 70.01, 0.5), np.arange(0.0, 20.01, 0.5))
+    X, _ = np.meshgrid(lat.x, lat.y)
+    z = 10.0 - np.abs(X - 50.0)
+    lv = np.arange(9.5, -10.0, -1.0)
+    exposed = np.stack([z > L for L in lv])
+    first = np.argmax(exposed, axis=0)
+    ev = CellEvidence(lat, z, z, first, z > lv[-1], [], exposed, 0.05, None, rise(X), 2.5)
+    return ev, lv, X
+
+
+def test_a_rise_is_unsure_just_below_the_top_it_came_out_with():
+    # the model lifts the flanks' contact lines 1.5 mm, as on an open face; next to the
+    # crest the face ends above the contact line before the ink could climb that high
+    from appliance.surface.uncertainty import _shared_meniscus
+
+    ev, lv, X = _ridge_evidence(lambda X: np.full(X.shape, 1.5))
+    u = _shared_meniscus(ev, lv)
+    crest, far_down = np.abs(X - 50) < 1, (np.abs(X - 50) > 8) & ev.footprint
+    assert u[crest].min() > 0.1  # a tenth of the rise or more: low confidence
+    assert u[far_down].max() < 0.1 * 1.5 * np.exp(-7 / 2.5) + 1e-9  # the face went on: fades
+
+
+def test_a_shelf_beside_a_wall_shares_its_meniscus():
+    # the flanks rise 2 mm but a flat shelf (no rise of its own) starts 5 mm out: within a
+    # capillary length of the flank the shelf's contact line is the flank's meniscus too
+    from appliance.surface.uncertainty import _shared_meniscus
+
+    ev, lv, X = _ridge_evidence(lambda X: np.where(np.abs(X - 50) < 5, 2.0, 0.0))
+    u = _shared_meniscus(ev, lv)
+    near, far = (np.abs(np.abs(X - 50) - 6) < 0.3), np.abs(X - 50) > 9
+    assert u[near].min() == pytest.approx(0.2, abs=0.01)  # a tenth of what the wall rises
+    assert u[far & ev.footprint].max() == pytest.approx(0.0)

@@ -33,6 +33,11 @@ from what limits each:
 - the meniscus: its correction models a contact line on an open face; near the
   outline the ink also meets the part's edge, within about a capillary length,
   so the correction there is unsure by its size times exp(-distance / length).
+  The same holds where the face does not stay open: within a capillary length of a
+  face whose rise differs (a wall beside a shelf, the two flanks of a crest) the
+  meniscus is shared between them, unsure by a share of the difference; and within
+  a capillary length below the top of the piece it came out with, the face ends
+  before the ink can climb the rise the model gives it (a crest, a plateau's rim).
 
 `DEFAULT_UNCERTAIN_MM` is the threshold above which a cell counts as low
 confidence: the G-code header lists such regions (`low_confidence_regions`),
@@ -60,6 +65,7 @@ DEFAULT_UNCERTAIN_MM = 0.1  # cells above this are low confidence (G-code header
 LATERAL_PX = 0.5  # a waterline is placed to about half a pixel
 FAR_GAPS = 4.0  # this many times the part's typical distance to a waterline: unpinned
 STEEP_SLOPE = 3.0  # |grad z| above this (72 deg) the cell is on a wall
+RISE_SHARE = 0.1  # where its face is cut short or shared, a meniscus rise is unsure by this share
 
 
 def source_code(name: str) -> int:
@@ -132,6 +138,38 @@ def _above_the_ink(ev: CellEvidence, lv):
     lift = np.abs(np.nan_to_num(ev.rise)) if ev.rise is not None else 0.0
     above = np.where((ev.first > 0) & (ev.first < K) & np.isfinite(ev.z), ev.z - under - lift, 0.0)
     return np.maximum(above, 0.0)
+
+
+def _piece_tops(ev: CellEvidence, K):
+    """Per node, the first frame of the piece it came out with (the connected region of
+    its first frame's exposure that holds it): where that piece's top came out."""
+    first = np.where(ev.footprint, ev.first, K)
+    tops = np.full(first.shape, K)
+    for k in np.unique(first[first < K]):
+        at = first == k
+        lab, n = ndimage.label(ev.exposed[k] | at, structure=np.ones((3, 3)))
+        least = np.concatenate([[K], np.asarray(ndimage.minimum(first, lab, np.arange(1, n + 1)))])
+        tops[at] = least[lab[at]].astype(int)
+    return tops
+
+
+def _shared_meniscus(ev: CellEvidence, lv):
+    """Per node, how unsure the meniscus rise is where the face does not stay open (mm):
+    a share of how much more a face within a capillary length rises (the ink between them
+    is one surface), and of the rise itself below the top of the node's piece, fading over
+    a capillary length (the face ends above the contact line before the rise is climbed)."""
+    if ev.rise is None or ev.capillary_mm <= 0:
+        return np.zeros(ev.lat.shape)
+    rise = np.where(ev.footprint, np.abs(np.nan_to_num(ev.rise)), 0.0)
+    n = max(1, int(round(ev.capillary_mm / min(ev.lat.hx, ev.lat.hy))))
+    yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
+    u_shared = ndimage.maximum_filter(rise, footprint=xx**2 + yy**2 <= n * n) - rise
+    K = len(lv)
+    tops = _piece_tops(ev, K)
+    came_out = ev.footprint & (ev.first < K) & (tops < K)
+    below_top = np.where(came_out, lv[np.minimum(tops, K - 1)] - lv[np.minimum(ev.first, K - 1)], np.inf)
+    u_cut = rise * np.exp(-below_top / ev.capillary_mm)
+    return RISE_SHARE * np.where(ev.footprint, np.hypot(u_shared, u_cut), 0.0)
 
 
 def _nearest_distance(points, lat):
@@ -256,7 +294,8 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
         # the lattice's border is the outline too (a part that fills its bounds)
         d_out = ndimage.distance_transform_edt(np.pad(ev.footprint, 1), sampling=(lat.hy, lat.hx))[1:-1, 1:-1]
         u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
-    u = np.sqrt(u_lat**2 + u_gap**2 + u_fit**2 + u_frames**2 + u_bound**2 + u_rim**2 + u_men**2)
+    u_shared = _shared_meniscus(ev, lv)
+    u = np.sqrt(u_lat**2 + u_gap**2 + u_fit**2 + u_frames**2 + u_bound**2 + u_rim**2 + u_men**2 + u_shared**2)
     if explain is not None:
         explain.update(
             lateral=u_lat,
@@ -269,6 +308,7 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
             bound=u_bound,
             rim=u_rim,
             meniscus=u_men,
+            meniscus_shared=u_shared,
         )
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
