@@ -178,14 +178,14 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     out = sampler.part_distance(
         along[None, :] * e1[0] + passes[:, None] * e2[0], along[None, :] * e1[1] + passes[:, None] * e2[1]
     )
-    keeps = out <= st.margin + 1e-9
-    fine = FineEnds(sampler, drop_cutter, origins, e1, d, tips, mids, keeps, out > 0, tol, st.leave)
+    within = out <= st.margin + 1e-9
+    fine = FineEnds(sampler, drop_cutter, origins, e1, d, tips, mids, within, out > 0, tol, st.leave)
     ordered = []
     for k, s in enumerate(passes):
         pts = along[:, None] * e1[None, :] + s * e2[None, :]
         xyz = np.column_stack([pts, tips[k]])
         mid = np.column_stack([(along[:-1] + 0.5 * d)[:, None] * e1[None, :] + s * e2[None, :], mids[k]])
-        pass_runs = [fine.insert(k, xyz[a:b], mid[a : b - 1], a) for a, b in true_runs(keeps[k])]
+        pass_runs = [fine.insert(k, xyz[a:b], mid[a : b - 1], a) for a, b in true_runs(within[k])]
         if k % 2 == 1:
             pass_runs = [(r[::-1], len(r) - 2 - c) for r, c in pass_runs[::-1]]
         ordered.extend(pass_runs)
