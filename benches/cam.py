@@ -26,11 +26,17 @@ beside it. Measured 2026-12-02 (RIM): sample1 ball6 0.05: 0.00 % uncut, max
 (0, 100) MISS; sample4 bull1r0.25 0.01: 0.00 %, 0.0569 at its edge MISS. RIM is
 not the default yet: sample 1 at 0.01 took 58.6 s / 886 MB with it against
 14.9 s / 202 MB without (refining the moves that roll over the rim).
-2026-12-03, one loaded box, main | now, RIM, sample 1 from 0.5 mm, ball6: 0.05:
-9.7 s / 205 MB | 9.5 s / 203 MB; 0.01: 66.7 s / 886 MB | 46.4 s / 471 MB (the off-part
-moves from a fine line, rimline.py; the planner's envelopes in blocks). Still 3x
-margin 0 at 0.01: the planner crawls over the outline (stepovers of 0.01-0.06 mm
-for the first passes off the part, which only pivot on its edge).
+2026-12-03, one run, c2565ef | 7ffa848, RIM, sample 1 from 0.5 mm, ball6: 0.05:
+8.3 s / 197 MB | 6.5 s / 188 MB; 0.01: 49.4 s / 892 MB | 34.6 s / 494 MB; margin 0
+unchanged (the same programs): 4.3 s / 174 MB and 12.3 s / 192 MB. 7ffa848 took the
+off-part moves from a fine line of tips instead of refining them point by point
+(refinement 17 s -> ~0 at 0.01), but sample4 bull1r0.25 then gouged 0.0051 (0.0047
+without): withdrawn; with the planner's envelopes in blocks alone 0.01 is 43.9 s /
+494 MB. Still 3x margin 0: the planner crawls over the outline (stepovers of
+0.01-0.06 mm for the first passes off the part, which only pivot on its edge), and
+its rows for those tiny gaps are the 494 MB. Rim rows: sample1 ball6 0.01 0.0100 OK,
+sample2 ball6 0.01 0.0098 OK, sample3 flat6 0.0715 and sample4 bull1r0.25 0.0569
+still MISS (the planner's).
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 

@@ -53,7 +53,7 @@ def test_the_default_program_kept_inside_the_outline_leaves_the_rim_uncut():
 
 def test_where_a_pass_rolls_over_the_outline_no_move_runs_below_the_cutters_tip():
     # off the part the tip follows the cutter rolling about the edge, sharply concave: the
-    # moves there come from a fine line of tips (rimline.py), then refinement and thinning
+    # moves there are refined where they would cut in, then thinned
     hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
     st = FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=RIM)
     sampler = Sampler(hm, edge_step=st.resolution / 2)
@@ -67,5 +67,5 @@ def test_where_a_pass_rolls_over_the_outline_no_move_runs_below_the_cutters_tip(
     p = (a[:, None, :] + u[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3)
     tip = drop_points(sampler, st.cutter, p[:, 0], p[:, 1], st.resolution)
     # thinning holds the dropped points within the chord tolerance; between them a move may
-    # pass a little lower (0.00212 with refinement alone, 0.00215 with the fine line)
+    # pass a little lower (0.00212 measured)
     assert np.max(tip - p[:, 2]) <= 1.1 * st.chord
