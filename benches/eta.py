@@ -15,6 +15,10 @@ Measured (--quick, 6 levels of 0.3 s settle, then about a minute of real process
 miss is a job whose processing ran far from the learned median (the same job's processing took
 50 to 105 s as the other work came and went); the estimate cannot know the CPU it will get. On a
 quiet box the processing time repeats and the error is that of the first figure in each run.
+
+Measured 2026-12-03 on the same machine alone (load average under 1; 3 jobs, not --quick, each
+about 13 s: 7.5 s of scanning, 5.6-6.4 s of processing): shown ETA at 25 % within 2.7, 1.7 and
+8.1 % of the time really left (target 20 %).
 """
 
 from __future__ import annotations
