@@ -53,13 +53,27 @@ class Job:
     summary: dict = field(default_factory=dict)
 
 
-def _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset):
+@dataclass(frozen=True)
+class Setup:
+    """What every job takes besides its plan: the cutting conditions (None: from the material)
+    and where the program sits on the machine. The jobs below take these as keywords."""
+
+    material: str = DEFAULT_MATERIAL
+    feed: float | None = None
+    plunge: float | None = None
+    rpm: float | None = None
+    clearance: float = DEFAULT_CLEARANCE
+    z_offset: float = 0.0
+    machine: Machine = DEFAULT_MACHINE
+
+
+def _prepare(hm, settings, setup: Setup):
     """Every check a plan's inputs get before planning (which takes seconds to minutes), then
     the cutting conditions and the sampler the plan reads the surface through."""
-    cond = conditions(settings.cutter, material, feed=feed, plunge=plunge, rpm=rpm)
+    cond = conditions(settings.cutter, setup.material, feed=setup.feed, plunge=setup.plunge, rpm=setup.rpm)
     settings.check()
     check_work(hm, settings.resolution, "resolution")
-    check_frame(clearance, z_offset)
+    check_frame(setup.clearance, setup.z_offset)
     return cond, Sampler(hm, edge_step=settings.resolution / 2)
 
 
@@ -75,11 +89,11 @@ def _summary(cond, slowed, text, **plan) -> dict:
     }
 
 
-def _post(hm, runs, cutter, cond, stock_top, title, dialect, clearance, z_offset, machine, chord, notes):
-    prog = build_program(runs, cutter, cond, stock_top, title, clearance, z_offset)
-    check_envelope(prog, machine)
-    slowed = limit_feeds(prog, machine)
-    rt = prog.runtime(machine.rapid)
+def _post(hm, runs, cutter, cond, stock_top, title, dialect, setup: Setup, chord, notes):
+    prog = build_program(runs, cutter, cond, stock_top, title, setup.clearance, setup.z_offset)
+    check_envelope(prog, setup.machine)
+    slowed = limit_feeds(prog, setup.machine)
+    rt = prog.runtime(setup.machine.rapid)
     text = render(prog, dialect, rt, chord, notes)
     return prog, text, rt, slowed
 
@@ -93,19 +107,15 @@ def finishing_gcodes(
     settings: FinishSettings,
     dialects,
     *,
-    material=DEFAULT_MATERIAL,
-    feed=None,
-    plunge=None,
-    rpm=None,
-    clearance=DEFAULT_CLEARANCE,
-    z_offset=0.0,
-    machine: Machine = DEFAULT_MACHINE,
     stock_top=None,
     uncertain_mm=DEFAULT_UNCERTAIN_MM,
+    **setup,
 ) -> dict:
     """One finishing plan written in several dialects: {dialect: Job}. A map that carries
-    its uncertainty has its low-confidence regions (over `uncertain_mm`) named in the header."""
+    its uncertainty has its low-confidence regions (over `uncertain_mm`) named in the header.
+    `setup`: the keywords of Setup."""
     check_heightmap(hm)
+    su = Setup(**setup)
     jobs = {}
     if "dissertation" in dialects:
         text = seed_gcode(hm)
@@ -113,7 +123,7 @@ def finishing_gcodes(
     ours = [d for d in dialects if d != "dissertation"]
     if not ours:
         return jobs
-    cond, sampler = _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset)
+    cond, sampler = _prepare(hm, settings, su)
     fin = finishing(sampler, settings)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
     target = (
@@ -136,9 +146,7 @@ def finishing_gcodes(
             top,
             "InkSlice finishing program",
             d,
-            clearance,
-            z_offset,
-            machine,
+            su,
             settings.chord,
             notes,
         )
@@ -156,23 +164,13 @@ def finishing_gcodes(
     return jobs
 
 
-def roughing_gcode(
-    hm: HeightMap,
-    settings: RoughSettings,
-    *,
-    material=DEFAULT_MATERIAL,
-    feed=None,
-    plunge=None,
-    rpm=None,
-    dialect=DEFAULT_DIALECT,
-    clearance=DEFAULT_CLEARANCE,
-    z_offset=0.0,
-    machine: Machine = DEFAULT_MACHINE,
-) -> Job:
+def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, dialect=DEFAULT_DIALECT, **setup) -> Job:
+    """`setup`: the keywords of Setup."""
     check_heightmap(hm)
+    su = Setup(**setup)
     if dialect == "dissertation":
         raise SettingError("dialect", "the dissertation format has no roughing; choose another dialect")
-    cond, sampler = _prepare(hm, settings, material, feed, plunge, rpm, clearance, z_offset)
+    cond, sampler = _prepare(hm, settings, su)
     runs = roughing(sampler, settings)
     notes = [
         f"z-level roughing from Z {settings.stock_top:g}, step-down {settings.stepdown:g} mm, "
@@ -186,9 +184,7 @@ def roughing_gcode(
         settings.stock_top,
         "InkSlice roughing program",
         dialect,
-        clearance,
-        z_offset,
-        machine,
+        su,
         settings.chord,
         notes,
     )
