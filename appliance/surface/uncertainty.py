@@ -295,21 +295,20 @@ def node_uncertainty(ev: CellEvidence, explain: dict | None = None):
         d_out = ndimage.distance_transform_edt(np.pad(ev.footprint, 1), sampling=(lat.hy, lat.hx))[1:-1, 1:-1]
         u_men = np.abs(np.nan_to_num(ev.rise)) * np.exp(-d_out / ev.capillary_mm)
     u_shared = _shared_meniscus(ev, lv)
-    u = np.sqrt(u_lat**2 + u_gap**2 + u_fit**2 + u_frames**2 + u_bound**2 + u_rim**2 + u_men**2 + u_shared**2)
+    # the independent parts, added in quadrature; `explain` gets them by name
+    parts = {
+        "lateral": u_lat,
+        "gap": u_gap,
+        "fit": u_fit,
+        "frames": u_frames,
+        "bound": u_bound,
+        "rim": u_rim,
+        "meniscus": u_men,
+        "meniscus_shared": u_shared,
+    }
+    u = np.sqrt(sum(p**2 for p in parts.values()))
     if explain is not None:
-        explain.update(
-            lateral=u_lat,
-            gap=u_gap,
-            gap_bend=u_bend,
-            gap_far=u_far,
-            gap_cap=u_cap,
-            fit=u_fit,
-            frames=u_frames,
-            bound=u_bound,
-            rim=u_rim,
-            meniscus=u_men,
-            meniscus_shared=u_shared,
-        )
+        explain.update(parts, gap_bend=u_bend, gap_far=u_far, gap_cap=u_cap)
 
     src = np.full(lat.shape, INTERPOLATED, np.int8)
     near = max(0.5 * h, 2 * ev.pixel_mm)
