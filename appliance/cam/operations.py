@@ -47,7 +47,7 @@ from .program import DEFAULT_CLEARANCE, build_program, check_frame
 from .roughing import RoughSettings, roughing
 from .sampling import Sampler, check_heightmap
 from .seed import seed_gcode
-from .tools import Tool
+from .tools import Tool, one_line_items
 from .waterline import DEFAULT_STEEP_DEG, SteepSettings, plan_rest
 from .waterline import plan as steep_plan
 from .zigzag import FinishSettings, finishing
@@ -69,20 +69,18 @@ class Operation:
         return f"{self.kind}-{self.tool.name}"
 
 
-_OP = re.compile(r"^(rough|finish|rest)\s+T(\d+)(?:\s+(zigzag|steep))?$", re.I)
+_OP = re.compile(r"(rough|finish|rest)\s+T(\d+)(?:\s+(zigzag|steep))?", re.I)
 
 
 def parse_operations(text: str, tools: dict) -> list:
     """'rough T1, finish T2 steep, rest T3' -> [Operation]; tools: {number: Tool}."""
     ops: list[Operation] = []
-    for part in [p.strip() for p in str(text).split(",") if p.strip()]:
-        m = _OP.match(part)
-        if not m:
-            raise SettingError(
-                "operations",
-                f"{part!r}: write each as KIND Tn [zigzag|steep], KIND one of "
-                f"{', '.join(OPERATION_KINDS)}, e.g. 'rough T1, finish T2, rest T3'",
-            )
+    form = (
+        f"write each as KIND Tn [zigzag|steep], KIND one of {', '.join(OPERATION_KINDS)}, "
+        "e.g. 'rough T1, finish T2, rest T3'"
+    )
+    for m in one_line_items(text, ",", _OP, "operations", form):
+        part = m.group(0)
         kind, n, strategy = m.group(1).lower(), int(m.group(2)), (m.group(3) or "zigzag").lower()
         if n not in tools:
             raise SettingError(

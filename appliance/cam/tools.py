@@ -24,6 +24,7 @@ and P plunge in mm/min, S spindle rpm), read by `parse_tool_text`.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -154,18 +155,27 @@ _TEXT_TOOL = re.compile(
 _TEXT_FEED = re.compile(r"([a-z]+):((?:[FPS]\d+(?:\.\d*)?/?)+)", re.I)
 
 
+def one_line_items(text: str, sep: str, pattern: re.Pattern, setting: str, form: str) -> Iterator[re.Match]:
+    """The items of a one-line list (`text` cut at `sep`, blank items skipped) as matches of
+    `pattern`. An item that does not match is refused, quoted, with `form`: how to write one."""
+    for part in str(text).split(sep):
+        part = part.strip()
+        if not part:
+            continue
+        m = pattern.fullmatch(part)
+        if not m:
+            raise SettingError(setting, f"{part!r}: {form}")
+        yield m
+
+
 def parse_tool_text(text: str) -> dict:
     """The settings' one-line table ('T1 flat D6 FL48; T2 ball D6 ...') -> {number: Tool}."""
+    form = (
+        "write a tool as 'T2 ball D6 FL48' (T number, type flat, ball or bull, D diameter, CR corner "
+        "radius for a bull nose, FL flute length, mm), then material:F900/P300/S12000 if it has its own feeds"
+    )
     entries = []
-    for part in [p.strip() for p in str(text).split(";") if p.strip()]:
-        m = _TEXT_TOOL.fullmatch(part)
-        if not m:
-            raise SettingError(
-                "tool_table",
-                f"{part!r}: write a tool as 'T2 ball D6 FL48' (T number, type flat, "
-                "ball or bull, D diameter, CR corner radius for a bull nose, FL flute "
-                "length, mm), then material:F900/P300/S12000 if it has its own feeds",
-            )
+    for m in one_line_items(text, ";", _TEXT_TOOL, "tool_table", form):
         e = {"number": int(m.group(1)), "type": m.group(2).lower(), "diameter_mm": float(m.group(3))}
         if m.group(4):
             e["corner_radius_mm"] = float(m.group(4))
