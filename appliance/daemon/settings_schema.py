@@ -69,6 +69,8 @@ def dialects() -> tuple:
 
 
 URL = r"https?://[^\s]{1,500}"
+# what a step between two levels may be, fixed or adaptive: more than nothing, at most 100 mm
+LEVEL_STEP: dict = {"unit": "mm", "lo": 0.0, "hi": 100.0, "lo_ok": False}
 SCHEMA = (
     # -- scanning: levels from the top (part submerged) down to the bottom (fully exposed)
     Setting(
@@ -114,10 +116,7 @@ SCHEMA = (
         "number",
         "scanning",
         "Level step",
-        unit="mm",
-        lo=0.0,
-        hi=100.0,
-        lo_ok=False,
+        **LEVEL_STEP,
         step=0.1,
         help="The step between levels (fixed mode), and the first step of an adaptive scan. Smaller "
         "steps follow steep and detailed parts better and take longer.",
@@ -128,10 +127,7 @@ SCHEMA = (
         "number",
         "scanning",
         "Smallest adaptive step",
-        unit="mm",
-        lo=0.0,
-        hi=100.0,
-        lo_ok=False,
+        **LEVEL_STEP,
         step=0.05,
         help="The smallest step an adaptive scan takes.",
     ),
@@ -141,10 +137,7 @@ SCHEMA = (
         "number",
         "scanning",
         "Largest adaptive step",
-        unit="mm",
-        lo=0.0,
-        hi=100.0,
-        lo_ok=False,
+        **LEVEL_STEP,
         step=0.1,
         help="The largest step an adaptive scan takes.",
     ),
