@@ -34,20 +34,15 @@ def read_above(extractor, above, below=()) -> list[Waterline]:
     for level_mm, frame in above:
         where = f"frame at level {level_mm:g} mm"
         check_image(frame, extractor.width, extractor.height, where)
-        probe.outline = []
-        probe._decimated = None
         probe.lower.frames = below[: max(1, len(extractor.lower.frames))]  # as many as it used
-        read = probe._band.copy()
+        read = probe.next_tiles()
         g = probe.grid
         for island in probe.islands.islands:  # the tiles of the part below, not just its edge
             x, y, w, h = cv2.boundingRect(island)
             t = ((np.array([[x, y], [x + w, y + h]]) - (g.ox, g.oy)) // g.tile).astype(int)
             read[max(0, t[0, 1]) : t[1, 1] + 1, max(0, t[0, 0]) : t[1, 0] + 1] = True
         try:
-            loops = probe._read_band(
-                frame, level_mm, where, band=read, lattice=False, mode="above", learn=False
-            )
-            wl = probe._finish(loops or [], level_mm, where)
+            wl = probe.read_tiles(frame, level_mm, read, where)
         except NoPartError:
             break
         out.append(wl)

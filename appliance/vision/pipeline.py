@@ -136,6 +136,20 @@ class WaterlineExtractor:
             loops = self._read_full(frame, level_mm, where)
         return self._finish(loops, level_mm, where)
 
+    def next_tiles(self) -> np.ndarray | None:
+        """A copy of the tiles the next frame is read over (the band around the last
+        waterline; None before a frame showed the part)."""
+        return None if self._band is None else self._band.copy()
+
+    def read_tiles(self, frame: np.ndarray, level_mm: float, tiles: np.ndarray, where: str) -> Waterline:
+        """The waterline of `frame` read over `tiles` only, with what the frames before taught
+        (channel, threshold, colour test) however little part the tiles show: how above.py
+        reads the frames above the first that showed the part. NoPartError when none shows."""
+        self.outline = []
+        self._decimated = None
+        loops = self._read_band(frame, level_mm, where, band=tiles, lattice=False, mode="above", learn=False)
+        return self._finish(loops or [], level_mm, where)
+
     @property
     def _ch(self):
         return 2 if self.channel is None else self.channel  # red until a frame shows two classes
