@@ -51,6 +51,20 @@ class PassProbe(PassEnvelope):
         for key in [k for k in self._measured if k[0] != self._kept]:
             del self._measured[key]
 
+    def placed_envelope(self, p, step, j0, j1):
+        """Pass p's envelope on rows j0..j1-1 of the grid of spacing `step`: the one measured
+        when p was a candidate, where it covers those rows, else swept now."""
+        known = self._measured.get((p[0], step))
+        if known is not None and known[0] <= j0 and known[0] + known[1].shape[0] >= j1:
+            return known[1][j0 - known[0] : j1 - known[0]]
+        ys = step * np.arange(j0, j1)
+        return self.envelope(p, (ys - p[0])[:, None], np.arange(self.along.size))
+
+    def forget_candidates(self):
+        """A pass was placed: the candidates measured for it are of no use to the next one."""
+        self._measured.clear()
+        self._kept = None
+
     def _placed(self, step, done):
         """The placed passes merged on the row grid of spacing `step`, up to date with `done`."""
         sa = done[-1][0]
@@ -274,12 +288,7 @@ class PlacedRows:
             j0 = max(int(np.ceil((p[0] - R) / self.step)), first)
             j1 = int(np.floor((p[0] + R) / self.step)) + 1
             self._hold(first, j1)
-            ys = self.step * np.arange(j0, j1)
-            known = self.probe._measured.get((p[0], self.step))
-            if known is not None and known[0] <= j0 and known[0] + known[1].shape[0] >= j1:
-                env = known[1][j0 - known[0] : j1 - known[0]]
-            else:
-                env = self.probe.envelope(p, (ys - p[0])[:, None], np.arange(self.probe.along.size))
+            env = self.probe.placed_envelope(p, self.step, j0, j1)
             sl = slice(j0 - self.k0, j1 - self.k0)
             lower = env < self.stock[sl]
             self.stock[sl] = np.where(lower, env, self.stock[sl])
@@ -288,9 +297,7 @@ class PlacedRows:
             self.merged += 1
             placed = True
         if placed:
-            # the candidates measured for the pass placed are of no use to the next one
-            self.probe._measured.clear()
-            self.probe._kept = None
+            self.probe.forget_candidates()
 
     def rows(self, k0, k1):
         """(design, on part, opening, placed stock, owner, last pass's envelope) on rows k0..k1-1."""
