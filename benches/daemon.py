@@ -18,10 +18,8 @@ processing child 481 MB with the default pipeline (440 MB with --pipeline seed).
 
 import argparse
 import json
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -29,6 +27,8 @@ import cv2
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from benchtmp import bench_tmp  # noqa: E402
 
 from appliance.daemon.levels import LevelPlan  # noqa: E402
 from appliance.daemon.rpc import BenchClient  # noqa: E402
@@ -95,8 +95,7 @@ def main():
         params["pipeline"] = pipeline
     levels = levels_of({k: v for k, v in params.items() if k in DEFAULTS})
     assert len(levels) == n, len(levels)
-    tmp = Path(tempfile.mkdtemp(prefix="inkslice-bench-daemon-"))
-    try:
+    with bench_tmp(args.keep, "inkslice-bench-daemon-") as tmp:
         t0 = time.monotonic()
         render(tmp / "replay", levels, small_rig(w, h), surface)
         print(f"rendered {n} frames of {w} x {h} in {time.monotonic() - t0:.1f} s")
@@ -175,11 +174,6 @@ def main():
             )
         )
         return 0 if hwm < LIMIT_MB else 1
-    finally:
-        if args.keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -35,15 +35,15 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from benchtmp import bench_tmp  # noqa: E402
 
 from appliance.daemon.rpc import BenchClient  # noqa: E402
 from appliance.errors import DeviceError  # noqa: E402
@@ -121,8 +121,7 @@ def main(argv=None):
     params = {"name": "keep-up bench", "surface": args.part}
     if args.settle is not None:
         params["settle_s"] = args.settle
-    tmp = Path(tempfile.mkdtemp(prefix="inkslice-bench-keepup-"))
-    try:
+    with bench_tmp(args.keep, "inkslice-bench-keepup-") as tmp:
         proc, client = start_daemon(tmp, args.part, args.frame)
         try:
             idle_mb = proc_status_mb(proc.pid, "VmRSS")
@@ -170,11 +169,6 @@ def main(argv=None):
         }
         print(json.dumps(summary))
         return 0 if ok_time and ok_mem else 1
-    finally:
-        if args.keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":
