@@ -22,6 +22,7 @@ in-process callers use.
 
 from __future__ import annotations
 
+import functools
 import inspect
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -225,6 +226,32 @@ def read_only() -> frozenset[str]:
 def calls() -> tuple[str, ...]:
     """The facade methods served as request/reply over the socket (rpc.METHODS)."""
     return tuple(name for name in methods() if name not in NOT_CALLS)
+
+
+_Class = TypeVar("_Class", bound=type)
+
+
+def forwards(via: str) -> Callable[[_Class], _Class]:
+    """A class decorator for a stand-in of the facade (the socket's client, the web's wrapper):
+    every request/reply call the class does not write out itself becomes one that hands its
+    name and arguments to the class's method `via`, `via(name, *args, **kwargs)`. The method
+    carries the facade's signature, docstring and @reads mark (inspect.signature follows its
+    __wrapped__), so differences() and help() see the facade's method."""
+
+    def fill(cls: _Class) -> _Class:
+        for name in calls():
+            if name not in vars(cls):
+                setattr(cls, name, _forwarder(name, via))
+        return cls
+
+    return fill
+
+
+def _forwarder(name: str, via: str) -> Callable[..., Any]:
+    def method(self, *args, **kwargs):
+        return getattr(self, via)(name, *args, **kwargs)
+
+    return functools.wraps(getattr(Bench, name))(method)
 
 
 def _parameters(fn) -> list[inspect.Parameter]:

@@ -81,12 +81,7 @@ class _Handler(socketserver.StreamRequestHandler):
                 req = json.loads(raw)
                 method, args, kwargs = req["method"], req.get("args", []), req.get("kwargs", {})
             except (ValueError, KeyError, TypeError):
-                self._send(
-                    {
-                        "ok": False,
-                        "error": {"type": "InkSliceError", "where": "rpc", "problem": "malformed request"},
-                    }
-                )
+                self._refuse("InkSliceError", "rpc", "malformed request")
                 continue
             if method == "subscribe":
                 for state in service.subscribe(*args, **kwargs):
@@ -94,16 +89,7 @@ class _Handler(socketserver.StreamRequestHandler):
                 self._send({"end": True})
                 continue
             if method not in METHODS:
-                self._send(
-                    {
-                        "ok": False,
-                        "error": {
-                            "type": "InkSliceError",
-                            "where": "rpc",
-                            "problem": f"no method {method!r}",
-                        },
-                    }
-                )
+                self._refuse("InkSliceError", "rpc", f"no method {method!r}")
                 continue
             try:
                 result = getattr(service, method)(*args, **kwargs)
@@ -112,19 +98,14 @@ class _Handler(socketserver.StreamRequestHandler):
                 kind = next(
                     c.__name__ for c in type(e).__mro__ if c.__name__ in _ERRORS
                 )  # NoStick: DeviceError
-                self._send({"ok": False, "error": {"type": kind, "where": e.where, "problem": e.problem}})
+                self._refuse(kind, e.where, e.problem)
             except Exception as e:
                 log.exception("rpc %s", method)
-                self._send(
-                    {
-                        "ok": False,
-                        "error": {
-                            "type": "InkSliceError",
-                            "where": "daemon",
-                            "problem": f"internal error: {type(e).__name__}: {e}",
-                        },
-                    }
-                )
+                self._refuse("InkSliceError", "daemon", f"internal error: {type(e).__name__}: {e}")
+
+    def _refuse(self, kind, where, problem):
+        """The reply of a call that failed: the error's type name (one of _ERRORS), where, what."""
+        self._send({"ok": False, "error": {"type": kind, "where": where, "problem": problem}})
 
     def _send(self, obj):
         self.wfile.write((json.dumps(obj) + "\n").encode())
@@ -160,6 +141,7 @@ class _Conn:
                 pass
 
 
+@facade.forwards("_call")
 class BenchClient:
     """The facade (facade.Bench), spoken over the daemon's socket. Thread-safe.
 
@@ -246,109 +228,12 @@ class BenchClient:
             raise _ERRORS.get(e["type"], errors.InkSliceError)(e["where"], e["problem"])
         return reply["result"]
 
-    def state(self) -> dict:
-        return self._call("state")
-
-    def start_scan(self, params: dict) -> str:
-        return self._call("start_scan", params)
-
-    def cancel(self) -> None:
-        return self._call("cancel")
-
-    def resume(self, job_id: str) -> str:
-        return self._call("resume", job_id)
-
-    def jobs(self) -> list[dict]:
-        return self._call("jobs")
-
-    def job(self, job_id: str) -> dict:
-        return self._call("job", job_id)
-
+    # Every other facade call is sent as it is (facade.forwards); these encode what JSON cannot carry.
     def job_file(self, job_id: str, name: str) -> Path:
         return Path(self._call("job_file", job_id, name))
 
-    def settings(self) -> dict:
-        return self._call("settings")
-
-    def update_settings(self, changes: dict) -> dict:
-        return self._call("update_settings", changes)
-
-    def events(self, job_id: str | None = None, limit: int = 200) -> list[dict]:
-        return self._call("events", job_id, limit)
-
-    def live_heightmap(self) -> dict | None:
-        return self._call("live_heightmap")
-
-    def calibration(self) -> dict:
-        return self._call("calibration")
-
-    def calibrate(self, step: str) -> dict:
-        return self._call("calibrate", step)
-
     def import_scan(self, folder: str | Path) -> str:
         return self._call("import_scan", str(folder))
-
-    def commissioning(self) -> dict:
-        return self._call("commissioning")
-
-    def commission(self, step: str, action: str, values: dict | None = None) -> dict:
-        return self._call("commission", step, action, values)
-
-    def export_commissioning(self) -> dict:
-        return self._call("export_commissioning")
-
-    def import_commissioning(self, doc: dict) -> dict:
-        return self._call("import_commissioning", doc)
-
-    def ink_changed(self) -> dict:
-        return self._call("ink_changed")
-
-    def usb_sticks(self) -> list[dict]:
-        return self._call("usb_sticks")
-
-    def backup(self) -> dict:
-        return self._call("backup")
-
-    def restore(self, doc: dict) -> dict:
-        return self._call("restore", doc)
-
-    def system(self) -> dict:
-        return self._call("system")
-
-    def test_webhook(self) -> dict:
-        return self._call("test_webhook")
-
-    def preview(self) -> dict:
-        return self._call("preview")
-
-    def home_stage(self) -> dict:
-        return self._call("home_stage")
-
-    def jog(self, mm: float) -> dict:
-        return self._call("jog", mm)
-
-    def goto_level(self, level_mm: float) -> dict:
-        return self._call("goto_level", level_mm)
-
-    def rename_job(self, job_id: str, name: str) -> dict:
-        return self._call("rename_job", job_id, name)
-
-    def delete_job(self, job_id: str) -> None:
-        return self._call("delete_job", job_id)
-
-    def reprocess(self, job_id: str, changes: dict | None = None) -> str:
-        return self._call("reprocess", job_id, changes)
-
-    def repost(self, job_id: str, options: dict | None = None) -> list[str]:
-        return self._call("repost", job_id, options)
-
-    def job_sizes(self) -> dict[str, int]:
-        return self._call("job_sizes")
-
-    def export_to_usb(
-        self, job_id: str, name: str = "toolpath.gcode", stick: str | None = None, release: bool = True
-    ) -> dict:
-        return self._call("export_to_usb", job_id, name, stick, release)
 
     def latest_frame(self) -> tuple[bytes, dict] | None:
         r = self._call("latest_frame")
