@@ -4,7 +4,8 @@ the socket, with the caching and the small shape fixes the routes want.
 The routes call only this wrapper. What the daemon offers, and what each method means,
 is written once in daemon/facade.py; here are only the web's own concerns: state and
 frames cached for a moment, the cache dropped after a command, job records with the
-keys the templates read.
+keys the templates read. A call with none of these is not written out here: it goes
+through as the daemon answers it (facade.forwards, WebService._forward).
 """
 
 from __future__ import annotations
@@ -15,16 +16,18 @@ import threading
 import time
 from pathlib import Path
 
-from ..daemon.facade import Bench
+from ..daemon.facade import Bench, forwards, read_only
 from ..errors import InkSliceError
 
 ACTIVE = ("homing", "scanning", "processing")
+READS = read_only()
 
 
 class NotOffered(InkSliceError):
     """This box has the feature switched off (the route answers 501), e.g. USB export."""
 
 
+@forwards("_forward")
 class WebService:
     """`state()` and `latest_frame()` are cached for a moment (STATE_TTL_S, FRAME_TTL_S).
 
@@ -79,18 +82,6 @@ class WebService:
         st.setdefault("levels_total", 0)
         return st
 
-    def start_scan(self, params: dict) -> str:
-        with self._command():
-            return self.inner.start_scan(params)
-
-    def cancel(self) -> None:
-        with self._command():
-            return self.inner.cancel()
-
-    def resume(self, job_id: str) -> str:
-        with self._command():
-            return self.inner.resume(job_id)
-
     def jobs(self) -> list[dict]:
         return [self._job(j) for j in self.inner.jobs()]
 
@@ -117,6 +108,15 @@ class WebService:
         with self._command():
             return dict(self.inner.update_settings(changes))
 
+    def _forward(self, method: str, *args, **kwargs):
+        """A facade call the routes take as the daemon answers it (facade.forwards): one that
+        only reads goes straight through; any other changes the bench, so the cache drops after it."""
+        call = getattr(self.inner, method)
+        if method in READS:
+            return call(*args, **kwargs)
+        with self._command():
+            return call(*args, **kwargs)
+
     @contextlib.contextmanager
     def _command(self):
         """Around a call that changes the bench: its effect (a move, a frame, a job gone) shows at once."""
@@ -125,93 +125,15 @@ class WebService:
         finally:
             self._drop_cache()
 
-    def live_heightmap(self) -> dict | None:
-        return self.inner.live_heightmap()
-
-    def calibration(self) -> dict:
-        return self.inner.calibration()
-
-    def calibrate(self, step: str) -> dict:
-        with self._command():
-            return self.inner.calibrate(step)
-
-    def commissioning(self) -> dict:
-        return self.inner.commissioning()
-
-    def commission(self, step: str, action: str, values: dict | None = None) -> dict:
-        with self._command():  # a step changes the state message (and may start a scan)
-            return self.inner.commission(step, action, values)
-
-    def export_commissioning(self) -> dict:
-        return self.inner.export_commissioning()
-
-    def import_commissioning(self, doc: dict) -> dict:
-        with self._command():
-            return self.inner.import_commissioning(doc)
-
-    def ink_changed(self) -> dict:
-        return self.inner.ink_changed()
-
-    def import_scan(self, folder: Path) -> str:
-        with self._command():  # the import starts processing: show it at once
-            return self.inner.import_scan(folder)
-
     def usb_sticks(self) -> list[dict]:
         return list(self.inner.usb_sticks())
-
-    def export_to_usb(self, job_id: str, name: str, stick: str | None) -> dict:
-        return self.inner.export_to_usb(job_id, name, stick)
-
-    def backup(self) -> dict:
-        return self.inner.backup()
-
-    def restore(self, doc: dict) -> dict:
-        with self._command():
-            return self.inner.restore(doc)
-
-    def system(self) -> dict:
-        return self.inner.system()
-
-    def test_webhook(self) -> dict:
-        return self.inner.test_webhook()
-
-    def preview(self) -> dict:
-        with self._command():
-            return self.inner.preview()
-
-    def home_stage(self) -> dict:
-        with self._command():
-            return self.inner.home_stage()
-
-    def jog(self, mm: float) -> dict:
-        with self._command():
-            return self.inner.jog(mm)
-
-    def goto_level(self, level_mm: float) -> dict:
-        with self._command():
-            return self.inner.goto_level(level_mm)
 
     def rename_job(self, job_id: str, name: str) -> dict:
         with self._command():
             return self._job(self.inner.rename_job(job_id, name))
 
-    def delete_job(self, job_id: str) -> None:
-        with self._command():
-            self.inner.delete_job(job_id)
-
-    def reprocess(self, job_id: str, changes: dict) -> str:
-        with self._command():
-            return self.inner.reprocess(job_id, changes)
-
-    def repost(self, job_id: str, options: dict) -> list[str]:
-        with self._command():
-            return self.inner.repost(job_id, options)
-
     def job_sizes(self) -> dict[str, int]:
         return dict(self.inner.job_sizes())
-
-    def events(self, job_id: str | None = None, limit: int = 200) -> list[dict]:
-        return self.inner.events(job_id, limit)
 
     @staticmethod
     def _job(j: dict) -> dict:
