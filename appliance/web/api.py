@@ -165,48 +165,35 @@ def resume(job_id):
     return jsonify(job_id=svc().resume(job_id)), 201
 
 
-# -- the machine panel: refused (409) while a scan, calibration or commissioning holds the bench --
+# -- routes that are one facade call, answered with what it returns ------------------------
+# (endpoint, HTTP methods, rule, the call on the service). The machine panel's moves are refused
+# (409) by the daemon while a scan, calibration or commissioning holds the bench; the
+# commissioning's shapes are in docs/api/README.md (daemon/commissioning.py).
+ONE_CALL = (
+    ("machine_preview", ["POST"], "/machine/preview", lambda s: s.preview()),
+    ("machine_home", ["POST"], "/machine/home", lambda s: s.home_stage()),
+    ("machine_jog", ["POST"], "/machine/jog", lambda s: s.jog(json_body().get("mm"))),
+    ("machine_goto", ["POST"], "/machine/goto", lambda s: s.goto_level(json_body().get("level_mm"))),
+    ("get_settings", ["GET"], "/settings", lambda s: s.settings()),
+    ("patch_settings", ["PATCH", "POST"], "/settings", lambda s: s.update_settings(json_body())),
+    ("calibration", ["GET"], "/calibration", lambda s: s.calibration()),
+    ("commissioning", ["GET"], "/commissioning", lambda s: s.commissioning()),
+    (
+        "commissioning_import",
+        ["POST"],
+        "/commissioning/import",
+        lambda s: s.import_commissioning(json_body()),
+    ),
+    ("commissioning_ink_changed", ["POST"], "/commissioning/ink-changed", lambda s: s.ink_changed()),
+)
 
 
-@bp.post("/machine/preview")
-def machine_preview():
-    return jsonify(svc().preview())
+def _answer(call):
+    return lambda: jsonify(call(svc()))
 
 
-@bp.post("/machine/home")
-def machine_home():
-    return jsonify(svc().home_stage())
-
-
-@bp.post("/machine/jog")
-def machine_jog():
-    return jsonify(svc().jog(json_body().get("mm")))
-
-
-@bp.post("/machine/goto")
-def machine_goto():
-    return jsonify(svc().goto_level(json_body().get("level_mm")))
-
-
-# -- settings -------------------------------------------------------------------------------
-
-
-@bp.get("/settings")
-def get_settings():
-    return jsonify(svc().settings())
-
-
-@bp.route("/settings", methods=["PATCH", "POST"])
-def patch_settings():
-    return jsonify(svc().update_settings(json_body()))
-
-
-# -- calibration -------------------------------------------------------------------------------
-
-
-@bp.get("/calibration")
-def calibration():
-    return jsonify(svc().calibration())
+for _endpoint, _methods, _rule, _call in ONE_CALL:
+    bp.add_url_rule(_rule, _endpoint, _answer(_call), methods=_methods)
 
 
 @bp.post("/calibration/<step>")
@@ -215,27 +202,9 @@ def calibrate(step):
     return jsonify(svc().calibrate(step))
 
 
-# -- commissioning (daemon/commissioning.py; shapes in docs/api/README.md) ---------------------------
-
-
-@bp.get("/commissioning")
-def commissioning():
-    return jsonify(svc().commissioning())
-
-
 @bp.get("/commissioning/export")
 def commissioning_export():
     return json_download(svc().export_commissioning(), "commissioning")
-
-
-@bp.post("/commissioning/import")
-def commissioning_import():
-    return jsonify(svc().import_commissioning(json_body()))
-
-
-@bp.post("/commissioning/ink-changed")
-def commissioning_ink_changed():
-    return jsonify(svc().ink_changed())
 
 
 @bp.post("/commissioning/<step>/<action>")
