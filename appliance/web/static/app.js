@@ -21,6 +21,16 @@
   }
   function show(el, on) { if (el) el.classList.toggle("hidden", !on); }
   function text(sel, t) { const e = $(sel); if (e) e.textContent = t; }
+  // a form's named fields as the API takes them: by data-kind int, number or bool, else the text
+  function formValues(form) {
+    const values = {};
+    form.querySelectorAll("[name]").forEach((el) => {
+      const kind = el.dataset.kind;
+      values[el.name] = kind === "int" ? parseInt(el.value, 10) : kind === "number" ? Number(el.value)
+        : kind === "bool" ? el.checked : el.value;
+    });
+    return values;
+  }
   function fmtEta(s) {
     if (s === null || s === undefined) return "";
     s = Math.max(0, Math.round(s));
@@ -257,20 +267,13 @@
     const rep = $("#reprocess-form");
     if (rep) rep.addEventListener("submit", async (ev) => {
       ev.preventDefault();
-      const settings = {};
-      rep.querySelectorAll("[name]").forEach((el) => {
-        settings[el.name] = el.dataset.kind === "int" ? parseInt(el.value, 10) : (el.dataset.kind === "number" ? Number(el.value) : el.value);
-      });
-      try { await api("POST", jobUrl + "/reprocess", { settings }); location.reload(); }
+      try { await api("POST", jobUrl + "/reprocess", { settings: formValues(rep) }); location.reload(); }
       catch (e) { say("Not started: " + e.message); }
     });
     const post = $("#repost-form");
     if (post) post.addEventListener("submit", async (ev) => {
       ev.preventDefault();
-      const options = {};
-      post.querySelectorAll("[name]").forEach((el) => {
-        options[el.name] = el.dataset.kind === "bool" ? el.checked : (el.dataset.kind === "number" ? Number(el.value) : el.value);
-      });
+      const options = formValues(post);
       const go = $("#repost-go"); go.disabled = true; text("#repost-result", "Making the program…");
       try { const r = await api("POST", jobUrl + "/post", options); text("#repost-result", "Written: " + r.files.filter((f) => f.endsWith(".nc")).join(", ")); location.reload(); }
       catch (e) { text("#repost-result", "Not made: " + e.message); go.disabled = false; }
