@@ -18,7 +18,6 @@ processing child 481 MB with the default pipeline (440 MB with --pipeline seed).
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -28,23 +27,14 @@ import cv2
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from benchtmp import bench_tmp  # noqa: E402
+from benchkit import bench_tmp, proc_status_mb, start_daemon  # noqa: E402
 
 from appliance.daemon.levels import LevelPlan  # noqa: E402
-from appliance.daemon.rpc import BenchClient  # noqa: E402
 from appliance.daemon.settings import DEFAULTS, validate  # noqa: E402
-from appliance.errors import DeviceError  # noqa: E402
 from appliance.sim.fakes import LevelSeededCamera, replay_name, small_rig  # noqa: E402
 from appliance.sim.surfaces import get  # noqa: E402
 
 LIMIT_MB = 250.0
-
-
-def proc_status(pid, key):
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(key + ":"):
-            return int(line.split()[1]) / 1024  # kB -> MB
-    return None
 
 
 def levels_of(params):
@@ -99,59 +89,35 @@ def main():
         t0 = time.monotonic()
         render(tmp / "replay", levels, small_rig(w, h), surface)
         print(f"rendered {n} frames of {w} x {h} in {time.monotonic() - t0:.1f} s")
-        sock = tmp / "d.sock"
-        log = open(tmp / "daemon.log", "wb")
-        proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "appliance.cli",
-                "daemon",
-                "--sim",
-                "fake",
-                "--replay",
-                str(tmp / "replay"),
-                "--frame",
-                f"{w}x{h}",
-                "--surface",
-                surface.name,
-                "--data",
-                str(tmp / "data"),
-                "--socket",
-                str(sock),
-            ],
-            stdout=log,
-            stderr=log,
-            cwd=REPO,
+        proc, client = start_daemon(
+            tmp,
+            "--sim",
+            "fake",
+            "--replay",
+            str(tmp / "replay"),
+            "--frame",
+            f"{w}x{h}",
+            "--surface",
+            surface.name,
         )
-        client = BenchClient(sock)
-        while True:
-            try:
-                client.state()
-                break
-            except DeviceError:
-                if proc.poll() is not None:
-                    sys.exit(f"daemon exited: {(tmp / 'daemon.log').read_text()}")
-                time.sleep(0.1)
-        idle_mb = proc_status(proc.pid, "VmRSS")
+        idle_mb = proc_status_mb(proc.pid, "VmRSS")
         t0 = time.monotonic()
         job_id = client.start_scan(params)
         rss_max, t_scan = 0.0, None
         while True:
             st = client.state()
-            rss_max = max(rss_max, proc_status(proc.pid, "VmRSS"))
+            rss_max = max(rss_max, proc_status_mb(proc.pid, "VmRSS"))
             if st["state"] == "processing" and t_scan is None:
                 t_scan = time.monotonic() - t0
             if st["state"] in ("done", "failed", "cancelled") and client.job(job_id)["status"] == st["state"]:
                 break
             time.sleep(0.1)
         total = time.monotonic() - t0
-        hwm = proc_status(proc.pid, "VmHWM")
+        hwm = proc_status_mb(proc.pid, "VmHWM")
         job = client.job(job_id)
         events = [e["message"] for e in client.events(job_id) if e["kind"] == "processed"]
         proc.terminate()
         proc.wait(timeout=30)
-        log.close()
         if job["status"] != "done":
             sys.exit(f"scan {job['status']}: {job['reason']}")
         print(f"scan: {job['levels_done']} levels of {w} x {h}, capture {t_scan:.1f} s, total {total:.1f} s")

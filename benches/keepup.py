@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -43,38 +42,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from benchtmp import bench_tmp  # noqa: E402
-
-from appliance.daemon.rpc import BenchClient  # noqa: E402
-from appliance.errors import DeviceError  # noqa: E402
+from benchkit import bench_tmp, proc_status_mb, start_daemon  # noqa: E402
 
 AFTER_LAST_FRAME_S = 10.0
 PEAK_MB = 300.0
-
-
-def proc_status_mb(pid, key):
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(key + ":"):
-            return int(line.split()[1]) / 1024  # kB -> MB
-    return None
-
-
-def start_daemon(tmp: Path, part: str, frame: str):
-    sock = tmp / "d.sock"
-    log = open(tmp / "daemon.log", "wb")
-    cmd = [sys.executable, "-m", "appliance.cli", "daemon", "--sim", "simavr", "--frame", frame]
-    cmd += ["--surface", part, "--data", str(tmp / "data"), "--socket", str(sock)]
-    proc = subprocess.Popen(cmd, stdout=log, stderr=log, cwd=REPO)
-    client = BenchClient(sock)
-    deadline = time.monotonic() + 120
-    while True:
-        try:
-            client.state()
-            return proc, client
-        except DeviceError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                sys.exit(f"daemon did not start: {(tmp / 'daemon.log').read_text()[-2000:]}")
-            time.sleep(0.2)
 
 
 def run_scan(client, params, pid):
@@ -122,7 +93,7 @@ def main(argv=None):
     if args.settle is not None:
         params["settle_s"] = args.settle
     with bench_tmp(args.keep, "inkslice-bench-keepup-") as tmp:
-        proc, client = start_daemon(tmp, args.part, args.frame)
+        proc, client = start_daemon(tmp, "--sim", "simavr", "--frame", args.frame, "--surface", args.part)
         try:
             idle_mb = proc_status_mb(proc.pid, "VmRSS")
             job, t_capture, daemon_processing_mb = run_scan(client, params, proc.pid)

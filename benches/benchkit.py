@@ -1,0 +1,65 @@
+"""What the benches that run the daemon as a subprocess (daemon.py, keepup.py) share:
+a scratch folder, the daemon started in it, and its memory as the kernel counts it.
+
+The folder is a real one (not a TemporaryDirectory) because the daemon's data, socket
+and log must outlive a crash of the daemon, and --keep leaves it to look into when a
+figure looks wrong.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from appliance.daemon.rpc import BenchClient  # noqa: E402
+from appliance.errors import DeviceError  # noqa: E402
+
+
+@contextlib.contextmanager
+def bench_tmp(keep: bool, prefix: str) -> Iterator[Path]:
+    """A fresh folder named `prefix`...; at the end removed, or, with `keep`, its path printed."""
+    tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    try:
+        yield tmp
+    finally:
+        if keep:
+            print(f"kept {tmp}")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def start_daemon(tmp: Path, *flags: str, wait_s: float = 120.0) -> tuple[subprocess.Popen, BenchClient]:
+    """`inkslice daemon FLAGS` with its data, socket and log in `tmp`, once it answers on the
+    socket: (the process, a client). The bench exits with the log's end when it does not."""
+    sock = tmp / "d.sock"
+    cmd = [sys.executable, "-m", "appliance.cli", "daemon", *flags]
+    cmd += ["--data", str(tmp / "data"), "--socket", str(sock)]
+    with open(tmp / "daemon.log", "wb") as log:  # the daemon writes to its own copy
+        proc = subprocess.Popen(cmd, stdout=log, stderr=log, cwd=REPO)
+    client = BenchClient(sock)
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            client.state()
+            return proc, client
+        except DeviceError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                sys.exit(f"daemon did not start: {(tmp / 'daemon.log').read_text()[-2000:]}")
+            time.sleep(0.1)
+
+
+def proc_status_mb(pid: int, key: str) -> float | None:
+    """A memory figure of /proc/PID/status (VmRSS now, VmHWM the peak) in MB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) / 1024  # kB -> MB
+    return None
