@@ -55,6 +55,40 @@ walls and rims), the crater, the steep front and (by 0.002) twin-peaks. A rule t
 measured worse (sample1 0.0241, sample2 0.0546, sample3 0.0577) and was reverted. The
 reference ball is commissioned from its plain levels (the runner would also refine its cap).
 
+Where the error sits (3 December 2026, main at 3ab8bb7: the same renders, refinement frames and
+meniscus file; per-node maps against the truth by slope, height, distance from the outline and
+on the solve's lattice, with the apparent surface captured; parts looked at: sample4, crater,
+twin-peaks, steep-front; samples 1-3 not re-run). Ea / interior p99 / max, mm:
+    sample4 0.0947 / 0.052 / 0.837    crater 0.0584 / 0.619 / 1.315
+    twin-peaks 0.0523 / 0.459 / 0.665    steep-front 0.1047 / 1.289 / 1.316
+ - Frame registration (0b07181), on renders without any stage play, Ea without -> with it:
+   steep-front 0.0590 -> 0.1047 (frames 5 and 4, where the apron's pinned rim is the waterline,
+   get 0.08 mm, beyond the play prior; 13..17 get +-0.03 along the front; the apron, 60 % of
+   the part, comes out +0.15 high instead of +0.08), crater 0.0636 -> 0.0584, twin-peaks
+   0.0520 -> 0.0523, sample4 0.0947 either way (its offsets are under NOTHING_TO_DO_MM).
+ - Sample 4 (not its walls): 0.034 of its 0.095 is one near-flat strip (truth 22.3, slope under
+   20 deg) along the y = 45 edge, +0.5..+0.8 mm over x 46-50. It comes out at once (frame 22.99)
+   but is not found as a face (on a 10 mm part no node is l_c from that frame's contact line),
+   so its apparent height sits at its bracket's bottom (0.3-0.78 under the truth's), and the
+   solve takes the contact lines' bend from its own top: +0.28/mm where the truth's level
+   curves bend -0.3/mm, so the depression comes out -0.45 for -1.3. The two cancel on the
+   strip's left half and add on its right.
+ - Crater: its crest (r 17-23 mm: 0.21 mean on the lattice, +0.29 signed) and its floor (r < 5:
+   0.38). Fed the exact apparent surface the solve still leaves the crest 0.24 out: h(|grad|)
+   has a V at zero slope (dh/dg = l_c cos(theta/2), 2.2 mm for this ink), so at a crest or a
+   floor phi = top - A is kinked, and the third-order smoothness on phi rounds the kink off.
+ Tried on the captured apparent surfaces (lattice Ea sample4 / crater / twin-peaks / steep-front,
+ as landed 0.096 / 0.049 / 0.048 / 0.062), none kept: the fine steps smoothing the top instead
+ of phi 0.109 / 0.033 / 0.047 / 0.063, at 1.5-2.5 spacings the crater swings 0.02-0.11 (three
+ Levenberg-Marquardt steps: the answer depends on the path); the bend from the apparent
+ surface 0.110 / 0.060 (sample4 / crater); eight fine steps 0.102 / 0.045 / 0.104 / 0.089;
+ smoothing phi - h'(0) sin(beta) (the V taken out) in the fine steps 0.091 / 0.075 / 0.042 /
+ 0.047 (crests better, outlines worse; at half of it 0.095 / 0.041 / 0.043 / 0.053, a factor
+ with no reason behind it); zero slope on the dewetted faces' nodes 0.096 / 0.056 / 0.048 /
+ 0.062. What would close it: a registration that finds no play where there is none on a
+ physics2 scan, face detection for faces smaller than 2 l_c, and a solve whose regulariser
+ knows the V (on every step, with the branch kept) - each to be checked on the first ink too.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
