@@ -31,35 +31,6 @@
 
 #define FW_VERSION "0.1.0"
 
-/* ---- names from codes.def, for status reports and ID ---- */
-#define CODE(kind, num, name, text) CODE_##kind(num, name)
-#define CODE_ERR(num, name)
-#define CODE_FLAG(num, name)
-#define CODE_ALARM(num, name)
-#define CODE_STATE(num, name) static const char state_##name[] PROGMEM = #name;
-#define CODE_RESET(num, name) static const char reset_##name[] PROGMEM = #name;
-#include "../codes.def"
-#undef CODE_STATE
-#undef CODE_RESET
-#define CODE_STATE(num, name) [num] = state_##name,
-#define CODE_RESET(num, name)
-static const char *const state_names[] PROGMEM = {
-#include "../codes.def"
-};
-#undef CODE_STATE
-#undef CODE_RESET
-#define CODE_STATE(num, name)
-#define CODE_RESET(num, name) [num] = reset_##name,
-static const char *const reset_names[] PROGMEM = {
-#include "../codes.def"
-};
-#undef CODE
-#undef CODE_ERR
-#undef CODE_FLAG
-#undef CODE_ALARM
-#undef CODE_STATE
-#undef CODE_RESET
-
 /* ---- reset reason: MCUSR must be read and cleared before anything else,
  * and the watchdog disabled, or a watchdog reset loops forever ---- */
 static uint8_t reset_flags __attribute__((section(".noinit")));
@@ -242,7 +213,7 @@ static uint8_t flags(void)
 /* "<state> <position> <flags hex> <alarm>", shared by STATUS and '?' */
 static uint8_t put_status(char *b, uint8_t n)
 {
-  n = proto_put_P(b, n, REPLY_MAX, PGM_PTR(&state_names[state]));
+  n = proto_put_P(b, n, REPLY_MAX, PGM_PTR(&proto_state_names[state]));
   b[n++] = ' ';
   n = proto_put_i32(b, n, REPLY_MAX, stepper_position());
   b[n++] = ' ';
@@ -313,7 +284,7 @@ static uint8_t execute(command_t *c, uint8_t *reboot)
     n = proto_put_P(reply, n, REPLY_MAX, PSTR(" inkslice-stepper proto="));
     n = proto_put_i32(reply, n, REPLY_MAX, PROTO_VERSION);
     n = proto_put_P(reply, n, REPLY_MAX, PSTR(" fw=" FW_VERSION " reset="));
-    n = proto_put_P(reply, n, REPLY_MAX, PGM_PTR(&reset_names[reset_reason()]));
+    n = proto_put_P(reply, n, REPLY_MAX, PGM_PTR(&proto_reset_names[reset_reason()]));
     n = proto_put_P(reply, n, REPLY_MAX, settings_defaulted ? PSTR(" settings=defaults") : PSTR(" settings=ok"));
     return n;
   case V_STATUS:
@@ -405,7 +376,7 @@ static void banner(void)
   uint8_t n = proto_put_P(b, 0, sizeof b, PSTR("# inkslice-stepper proto="));
   n = proto_put_i32(b, n, sizeof b, PROTO_VERSION);
   n = proto_put_P(b, n, sizeof b, PSTR(" reset="));
-  n = proto_put_P(b, n, sizeof b, PGM_PTR(&reset_names[reset_reason()]));
+  n = proto_put_P(b, n, sizeof b, PGM_PTR(&proto_reset_names[reset_reason()]));
   n = proto_seal(b, n, sizeof b);
   serial_write(b, n);
 }

@@ -73,6 +73,35 @@ const uint8_t proto_verb_args[V_COUNT] PROGMEM = {
 };
 #undef VERB
 
+/* The state and reset-reason words of status reports and ID, from codes.def. */
+#define CODE(kind, num, name, text) CODE_##kind(num, name)
+#define CODE_ERR(num, name)
+#define CODE_FLAG(num, name)
+#define CODE_ALARM(num, name)
+#define CODE_STATE(num, name) static const char state_##name[] PROGMEM = #name;
+#define CODE_RESET(num, name) static const char reset_##name[] PROGMEM = #name;
+#include "../codes.def"
+#undef CODE_STATE
+#undef CODE_RESET
+#define CODE_STATE(num, name) [num] = state_##name,
+#define CODE_RESET(num, name)
+const char *const proto_state_names[] PROGMEM = {
+#include "../codes.def"
+};
+#undef CODE_STATE
+#undef CODE_RESET
+#define CODE_STATE(num, name)
+#define CODE_RESET(num, name) [num] = reset_##name,
+const char *const proto_reset_names[] PROGMEM = {
+#include "../codes.def"
+};
+#undef CODE
+#undef CODE_ERR
+#undef CODE_FLAG
+#undef CODE_ALARM
+#undef CODE_STATE
+#undef CODE_RESET
+
 /* "<seq> <VERB> [arg [arg]]*XXXX": the checksum is checked first and
  * nothing else is trusted before it passes; only then is the seq believed. */
 uint8_t proto_parse(char *line, uint8_t len, command_t *cmd)

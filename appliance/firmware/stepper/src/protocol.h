@@ -39,4 +39,7 @@ uint8_t proto_put_P(char *buf, uint8_t len, uint8_t cap, const char *flash_str);
 /* The verbs' names (in flash) and argument counts, indexed by enum verb. */
 extern const char *const proto_verb_names[V_COUNT];
 extern const uint8_t proto_verb_args[V_COUNT];
+/* The state words (indexed by enum state_code) and reset reasons (enum reset_code), in flash. */
+extern const char *const proto_state_names[];
+extern const char *const proto_reset_names[];
 #endif
