@@ -66,6 +66,11 @@ twin-peaks, steep-front; samples 1-3 not re-run). Ea / interior p99 / max, mm:
    get 0.08 mm, beyond the play prior; 13..17 get +-0.03 along the front; the apron, 60 % of
    the part, comes out +0.15 high instead of +0.08), crater 0.0636 -> 0.0584, twin-peaks
    0.0520 -> 0.0523, sample4 0.0947 either way (its offsets are under NOTHING_TO_DO_MM).
+   The steep front's frames 21..16 share no pair with a closed triangle, yet move +-0.02 (minus
+   their neighbours' trend): leaving them put, 0.1057; leaving frames 6, 5, 4 put, 0.0819. The
+   rest is the +-0.015..0.034 given to 15..13 and to the refinement frames 6.38..6.25 round the
+   apron's bracket. Pairs 6->5, 5->4, 6->4 (x 0.032 / 0.003 / 0.100) close their triangle only
+   because each is known across one wall and not along it.
  - Sample 4 (not its walls): 0.034 of its 0.095 is one near-flat strip (truth 22.3, slope under
    20 deg) along the y = 45 edge, +0.5..+0.8 mm over x 46-50. It comes out at once (frame 22.99)
    but is not found as a face (on a 10 mm part no node is l_c from that frame's contact line),
