@@ -220,6 +220,27 @@ def test_an_edge_continues_the_one_that_showed_first():
     assert max(below) == pytest.approx(40.0, abs=0.2), below
 
 
+def test_refinement_frames_do_not_cut_an_edge_off_from_the_step_above():
+    """The runner bisects a step where a face came out at once (11.5, 11.25, 11.125 between
+    12 and 11 mm). Two of those frames, 0.125 mm apart, see the far wall 0.05 mm out (stage
+    play): counted as level steps they would be the whole history of the frames below, which
+    would carry their fresh bracket, a fraction of a step high, and stand off the wall. The
+    history is two level steps, whatever frames lie between, so the edge seen at 12 mm holds."""
+    from appliance.surface.perspective import unproject_rims
+
+    camera = Perspective((-20.0, 45.0), 300.0)
+    levels = [15.0, 14.0, 13.0, 12.0, 11.5, 11.25, 11.125, 11.0, 10.0, 9.0, 8.0, 7.0, 6.0, 5.0]
+    seen = _seen_from(camera, WEDGE, ideal_waterlines(WEDGE, levels, 0.1))
+    for k in (5, 6):  # the 11.25 and 11.125 mm frames
+        for lp in seen[k].loops:
+            lp[lp[:, 0] > 40.0, 0] += 0.05
+    slices, _ = check_waterlines(seen)
+    mark_walls(slices, 0.03, camera)
+    below = [s.P[:, 0].max() for s in unproject_rims(slices, camera, 0.03)[7:]]
+    # measured: 40.10 mm (the bracket's middle); 40.61 with the last two frames for history
+    assert max(below) == pytest.approx(40.0, abs=0.2), below
+
+
 def test_the_outline_where_the_lowest_frame_lost_part_of_the_part():
     """The lowest frames can see less of the part than the ones above: sample 2's far
     wall leaves the camera's view and that stretch of their loop is a chord. The outline
