@@ -96,6 +96,10 @@ scans keep the same two frames. Ea / interior p99 / max mm, honest share of (cel
   Within targets now: sample1 (but max 0.558), sample2, sample3 (Ea 0.038, p99 0.10, max
   0.21), steep-front. Over: sample4, twin-peaks, plateau, ring (their errors sit where (f)
   and the note below say); the honesty target holds on both sets.
+  Twin-peaks is registration's (same render, (g)'s code, register_frames off): 0.0236 0.115
+  0.389 against 0.0519 0.270 1.104 with it. Its 14 moved frames' offsets against the play
+  the renderer drew (default_rng([seed, frame]), centred): rms 0.037 mm of play, 0.054 left
+  after the offsets (sample 2: 0.034, 0.035 left): the offsets do not follow the play there.
 What is left, from per-cell error maps: sample 4 (10 mm across, slopes 4-10) is the stage
 wobble and the meniscus, not glare: rendered without the wobble its Ea is 0.249, without
 wobble, glare, dust and the image's noise 0.142 (the curved contact line on a part that is
