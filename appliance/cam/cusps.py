@@ -175,7 +175,23 @@ class PassProbe(PassEnvelope):
         if exact.size:
             self._cusp_exact(fine, done, b, owners, S, cols_ok, exact)
         above, reach = self.opening.above(fine, Zf, Xf, Yf)
-        fine = np.where(onf & reach, above, -np.inf)
+        # where both axes stand off the part (a pass run off the outline, margin RIM) the
+        # fine rows stay between the two contacts, as the coarse ones do: there a ball
+        # pivots on the outline at the same row from every pass, and the rows just inside
+        # (cut by the later passes) read as a cusp of slope x row step (sample 1 with the
+        # rim at 0.01: 20 passes 0.01-0.06 mm apart before the first that reaches the
+        # top). On the part the rows around the top are kept (sample 3's downhill corner),
+        # and so are margin-0 programs' (their candidates' columns beyond sample 4's outline)
+        ax, ay = self.along[cols_ok] * self.e1[0], self.along[cols_ok] * self.e1[1]
+        off = (
+            (self.st.margin > 0)
+            & (self.sampler.part_distance(ax + sa * self.e2[0], ay + sa * self.e2[1]) > 1e-9)
+            & (self.sampler.part_distance(ax + sb * self.e2[0], ay + sb * self.e2[1]) > 1e-9)
+        )
+        between = ~off[None, :] | (
+            (S >= ys[lo[cols_ok]][None, :] - 1e-9) & (S <= ys[hi[cols_ok]][None, :] + 1e-9)
+        )
+        fine = np.where(onf & reach & between, above, -np.inf)
         return max(coarse, float(np.max(fine)))
 
     def _cusp_of_two(self, fine, owners, nb, r, nrows, env_a, env_b, cols_ok):

@@ -29,19 +29,6 @@ def refine_tolerance(chord):
     return min(chord / 4, 0.0005)
 
 
-def insert_mids(pts, mid, tol):
-    """Insert the midpoints whose tip is above the straight move by more than tol; returns the
-    points and the segments (halves of the split ones) to check further."""
-    if len(pts) < 2:
-        return pts, np.zeros(0, int)
-    chord = 0.5 * (pts[:-1, 2] + pts[1:, 2])
-    up = np.flatnonzero(mid[:, 2] - chord > tol)
-    if up.size == 0:
-        return pts, np.zeros(0, int)
-    first = up + np.arange(up.size)
-    return np.insert(pts, up + 1, mid[up], axis=0), np.concatenate([first, first + 1])
-
-
 def refine(sampler, cutter, runs, tol, leave, d, max_levels=12, cand=None):
     """Split every move whose middle the cutter must pass above the straight line.
 

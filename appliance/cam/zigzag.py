@@ -19,10 +19,11 @@ Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
 the base). With margin RIM (the cutter's radius less a step) the passes run off the
 outline until the cutter has all but left the part, so the rim is finished
-like the rest; with margin 0 (the default, for now: RIM still costs sample 1
-at scallop 0.01 about 3x the CPU and 2.5x the memory, see benches/cam.py) the axis never
-leaves the part, and the strip the cutter could only reach from outside
-stays uncut. A pass broken by a hole or a bay of the
+like the rest; where a pass rolls over the outline its tips come from fine
+lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
+1.2-1.5x the CPU, see benches/cam.py, and the default must meet the speed row)
+the axis never leaves the part, and the strip the cutter could only reach
+from outside stays uncut. A pass broken by a hole or a bay of the
 footprint becomes several runs; the program builder retracts between them.
 
 Neighbouring runs that end and start within two stepovers are linked by a
@@ -44,7 +45,8 @@ from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
 from .linking import links
 from .passplan import plan_passes
-from .polyline import insert_mids, reduce_polyline, refine, refine_tolerance, true_runs
+from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
+from .rimline import FineEnds
 from .sampling import Sampler
 
 DEFAULT_SCALLOP = 0.01  # mm
@@ -60,10 +62,8 @@ class FinishSettings:
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
     chord: float | None = None
-    # RIM (the cutter's radius less a step) finishes the rim, but at scallop 0.01 the
-    # planner crawls over the outline (stepovers of 0.01-0.06 mm for the first passes
-    # off the part, which only pivot on its edge) and the moves that roll over it are
-    # refined point by point: not yet the default
+    # RIM (the cutter's radius less a step) finishes the rim, at 1.2-1.5x the CPU of
+    # margin 0 on sample 1 (benches/cam.py): not yet the default
     margin: float = 0.0
     leave: float = 0.0
 
@@ -174,13 +174,17 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     mids = drop_lines(sampler, drop_cutter, origins + 0.5 * d * e1[None, :], e1, n - 1, d) + st.leave
     along = t0 + d * np.arange(n)
     tol = refine_tolerance(st.chord)
+    out = sampler.part_distance(
+        along[None, :] * e1[0] + passes[:, None] * e2[0], along[None, :] * e1[1] + passes[:, None] * e2[1]
+    )
+    within = out <= st.margin + 1e-9
+    fine = FineEnds(sampler, drop_cutter, origins, e1, d, tips, mids, within, out > 0, tol, st.leave)
     ordered = []
     for k, s in enumerate(passes):
         pts = along[:, None] * e1[None, :] + s * e2[None, :]
-        keep = sampler.part_distance(pts[:, 0], pts[:, 1]) <= st.margin + 1e-9
         xyz = np.column_stack([pts, tips[k]])
         mid = np.column_stack([(along[:-1] + 0.5 * d)[:, None] * e1[None, :] + s * e2[None, :], mids[k]])
-        pass_runs = [insert_mids(xyz[a:b], mid[a : b - 1], tol) for a, b in true_runs(keep)]
+        pass_runs = [fine.insert(k, xyz[a:b], mid[a : b - 1], a) for a, b in true_runs(within[k])]
         if k % 2 == 1:
             pass_runs = [(r[::-1], len(r) - 2 - c) for r, c in pass_runs[::-1]]
         ordered.extend(pass_runs)
