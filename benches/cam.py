@@ -52,7 +52,8 @@ would miss the 5 s row that margin 0 only just meets, and at 0.01 the 250 MB one
 `--only rim` with the planner's fix alone (before the fine lines): sample1 ball6 0.0100 /
 bull6r1 0.0098 / flat6 0.0495, sample2 ball6 0.0099, all 0.00 % uncut, gouge <= 0.0029
 (OK); with the fine lines too: sample4 bull1r0.25 0.0560 MISS as before, gouge 0.0050
-(0.0047 without the fine lines: at the 0.005 limit). The other rows not yet re-run.
+(0.0047 without the fine lines: at the 0.005 limit); sample1 ball6 0.0100, 0.00 %, gouge
+0.0019 OK (the same as before). The other rows not yet re-run.
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 
