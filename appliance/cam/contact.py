@@ -31,7 +31,9 @@ from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
 from .dropcutter import drop_lines as lattice_lines
 from .sampling import Sampler
+from .segments import min_over_segment
 
+WINDOW = 2  # cells either side of the found contact whose triangles are met exactly
 STEEP = 0.8  # |grad Z| above which a tip is polished (~39 degrees)
 _K = np.arange(-2, 3)
 _PU, _PV = [a.ravel() for a in np.meshgrid(_K, _K)]
@@ -112,12 +114,13 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
     gx, gy = surface_gradient(sampler, x, y, e)
     ux, uy = plane_contact(cutter, gx, gy)
     gx2, gy2 = surface_gradient(sampler, x + ux, y + uy, e)
-    # an axis off the part (a pass run off the outline to finish the rim) stands on the flat
-    # base, yet its contact is on the part's edge or a face beside it: 0.008 mm low on a
-    # 79-degree face 0.4 mm in from the outline when it was not polished
+    # an axis on a flat beside a wall (a floor at a wall's foot, or the base off the part
+    # where a pass runs off the outline to finish the rim) reads no slope at the axis nor at
+    # the plane's contact, yet the cutter meets the wall with its side: 0.085 mm low beside
+    # an 84-degree wall (benches/steep.py), 0.008 mm on a 79-degree face beside the outline
     steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP)
-    if off_part:
-        steep |= ~sampler.on_part(x, y) & sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
+    faces = sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
+    steep |= faces & (sampler.on_part(x, y) | off_part)
     sel = np.flatnonzero(steep)
     x, y, gx2, gy2, idx = x[sel], y[sel], gx2[sel], gy2[sel], near[sel]
     half = chunk // 2
@@ -132,7 +135,7 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
         k = np.concatenate([k0, k0])
         px, py = x[k], y[k]
         cx, cy = np.concatenate([gcx, rcx]), np.concatenate([gcy, rcy])
-        best = out[idx[k]]
+        best = np.full(k.size, -np.inf)
         f0 = _F(sampler, cutter, px, py, cx, cy)
         best = np.maximum(best, f0)
         sp = d
@@ -146,8 +149,57 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
             cx, cy = ox[r, j], oy[r, j]
             best = np.maximum(best, fb)
             sp /= 4
-        out[idx[k0]] = np.maximum(best[: k0.size], best[k0.size :])
+        n = k0.size
+        second = best[n:] > best[:n]
+        cx, cy = np.where(second, cx[n:], cx[:n]), np.where(second, cy[n:], cy[:n])
+        near_best = facet_contacts(sampler, cutter, x[k0], y[k0], x[k0] + cx, y[k0] + cy)
+        out[idx[k0]] = np.maximum(np.maximum(out[idx[k0]], np.maximum(best[:n], best[n:])), near_best)
     return out.reshape(shape)
+
+
+def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int = WINDOW):
+    """Exact tip heights at (px, py) against the triangles of the cells within `cells` of the
+    cell holding (gx, gy), the contact found so far.
+
+    The surface is those triangles, so a cutter touches one of them inside (a plane's
+    contact, plane_contact), or one of their sides or corners (segments.py, exact). The
+    lattice and the pattern search only sample offsets: on an 85-degree face h'' is
+    1 / (R cos^3) ~ 500 /mm for a 6 mm ball, and an offset 0.015 mm from the contact reads
+    0.06 mm low (benches/steep.py's gouge). -inf where nothing of the window is under the cutter.
+    """
+    best = np.full(np.shape(px), -np.inf)
+    ic = np.floor((gx - sampler.x0) / sampler.dx).astype(np.intp)
+    jc = np.floor((gy - sampler.y0) / sampler.dy).astype(np.intp)
+    dx, dy = sampler.dx, sampler.dy
+    for dj in range(-cells, cells + 1):
+        for di in range(-cells, cells + 1):
+            i = np.clip(ic + di, 0, sampler.nx - 2)
+            j = np.clip(jc + dj, 0, sampler.ny - 2)
+            z00, z10, z01, z11 = (g[j, i] for g in sampler.corner_grids)
+            x0, y0 = sampler.x0 + dx * i, sampler.y0 + dy * j
+            for upper, sx, sy in (
+                (True, (z10 - z00) / dx, (z11 - z10) / dy),
+                (False, (z11 - z01) / dx, (z01 - z00) / dy),
+            ):
+                ux, uy = plane_contact(cutter, sx, sy)
+                u, v = (px + ux - x0) / dx, (py + uy - y0) / dy
+                inside = (np.minimum(u, v) >= 0) & (np.maximum(u, v) <= 1) & ((u >= v) if upper else (u <= v))
+                val = z00 + sx * dx * u + sy * dy * v - cutter.profile(np.hypot(ux, uy))
+                np.maximum(best, np.where(inside, val, -np.inf), out=best)
+            # the cell's sides and diagonal, each a drop onto a segment
+            for (a, za), (b, zb) in (
+                (((0, 0), z00), ((1, 0), z10)),
+                (((0, 0), z00), ((0, 1), z01)),
+                (((0, 0), z00), ((1, 1), z11)),
+                (((1, 0), z10), ((1, 1), z11)),
+                (((0, 1), z01), ((1, 1), z11)),
+            ):
+                ax, ay = x0 + a[0] * dx, y0 + a[1] * dy
+                m = min_over_segment(
+                    cutter, px - ax, py - ay, (b[0] - a[0]) * dx, (b[1] - a[1]) * dy, za - zb, -za
+                )
+                np.maximum(best, -m, out=best)
+    return best
 
 
 _RING_R = np.array([0.6, 0.75, 0.85, 0.92, 0.97, 0.995])

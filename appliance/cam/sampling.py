@@ -89,6 +89,11 @@ class Sampler:
         self._dist = ndimage.distance_transform_edt(~cell_on, sampling=(self.dy, self.dx))
         self._dist = np.where(cell_on, 0.0, np.maximum(self._dist - 0.5 * step, 0.0))
 
+    @property
+    def corner_grids(self):
+        """Each cell's corner heights (z00, z10, z01, z11), floor on cells off the part."""
+        return self._g00, self._g10, self._g01, self._g11
+
     def _cell(self, x, y):
         fx = (np.asarray(x, float) - self.x0) / self.dx
         fy = (np.asarray(y, float) - self.y0) / self.dy

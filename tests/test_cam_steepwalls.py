@@ -1,0 +1,71 @@
+"""Walls of 84-85 degrees on a 0.2 mm map: the drop-cutter meets them exactly, so neither
+finishing nor rest machining cuts into them (issue 20, benches/steep.py).
+
+On a face that steep the cutter touches within a few hundredths of a millimetre of its
+rim, where h'' = 1 / (R cos^3) is ~500 /mm for a 6 mm ball: a contact found 0.015 mm
+off reads 0.06 mm low, and `verify` measures that as a gouge (vertically, as it
+measures everything)."""
+
+import numpy as np
+import pytest
+from cam_helpers import grid_map
+
+from appliance.cam.contact import drop_points
+from appliance.cam.cutters import parse_cutter
+from appliance.cam.jobs import verify_gcode
+from appliance.cam.operations import Operation, plan_operations, post_operations
+from appliance.cam.sampling import Sampler
+from appliance.cam.tools import Tool
+
+WALL_DEG = 85.0
+# verify's gouge tolerance (jobs: --max-gouge's lattice); the acceptance is "gouges nothing"
+GOUGE_TOL = 0.005
+
+
+def mesa(X, Y, c=8.0, radius=4.0, height=4.0):
+    """A round mesa whose wall is WALL_DEG at its steepest, rounded at the top and the foot."""
+    s = height / (4 * np.tan(np.radians(WALL_DEG)))  # the logistic's steepest slope is height / 4s
+    return 1 + height / (1 + np.exp((np.hypot(X - c, Y - c) - radius) / s))
+
+
+@pytest.fixture(scope="module")
+def part():
+    return grid_map(mesa, 0, 16, 0, 16, 0.2)
+
+
+@pytest.fixture(scope="module")
+def narrow():
+    """8 mm high on a 3 mm radius: the wall of benches/steep.py's 85-degree side, 12 x 12 mm."""
+    return grid_map(lambda X, Y: mesa(X, Y, c=6.0, radius=3.0, height=8.0), 0, 12, 0, 12, 0.2)
+
+
+def brute_tip(sampler, cutter, x, y, rings=400, angles=7200):
+    """The drop-cutter by brute force: the highest Z(p + u) - h(|u|) over a fine polar grid."""
+    r = np.linspace(0, cutter.radius, rings)[:, None]
+    a = np.linspace(0, 2 * np.pi, angles, endpoint=False)[None, :]
+    return float(np.max(sampler.z(x + r * np.cos(a), y + r * np.sin(a)) - cutter.profile(r + 0 * a)))
+
+
+@pytest.mark.parametrize("name", ["ball6", "ball2"])
+def test_a_cutter_on_the_floor_beside_the_wall_touches_it_with_its_side(part, name):
+    # the axis stands on the flat floor, where no slope is read at the axis, and the
+    # contact is on the wall a radius away
+    s = Sampler(part, edge_step=0.05)
+    c = parse_cutter(name)
+    ang = np.radians([10.0, 37.0, 61.0, 100.0, 200.0])
+    x = 8 + (4.05 + 0.97 * c.radius) * np.cos(ang)
+    y = 8 + (4.05 + 0.97 * c.radius) * np.sin(ang)
+    tips = drop_points(s, c, x, y, min(0.1, c.radius / 3))
+    exact = np.array([brute_tip(s, c, a, b) for a, b in zip(x, y)])
+    # the brute force's own grid is a lower bound; the tip is never lower than it by more
+    # than a micron, and never above the brute force by more than its grid's error
+    assert np.all(tips >= exact - 0.001), tips - exact
+    assert np.all(tips <= exact + 0.01), tips - exact
+
+
+def test_a_small_ball_finishing_an_85_degree_wall_does_not_gouge_it(narrow):
+    # before the drop-cutter met the wall's triangles exactly: 0.21 mm
+    tool = Tool(3, parse_cutter("ball2"))
+    planned, top = plan_operations(narrow, [Operation("finish", tool, "steep")], scallop=0.05)
+    rep, _ = verify_gcode(post_operations(planned, top, "linuxcnc")[0].text, narrow)
+    assert rep.gouge <= GOUGE_TOL, (rep.gouge, rep.gouge_at)
