@@ -35,6 +35,10 @@ from .segments import min_over_segment
 
 WINDOW = 2  # cells either side of the found contact whose triangles are met exactly
 STEEP = 0.8  # |grad Z| above which a tip is polished (~39 degrees)
+# |grad Z| of a wall (55 degrees): an axis with one within reach is polished wherever it
+# stands, and its contact met exactly (may_have_steep_faces is a bound from the larger x and
+# y slopes, so a gentler one would take in a whole dome whose tips the lattice has right)
+WALL = 1.43
 _K = np.arange(-2, 3)
 _PU, _PV = [a.ravel() for a in np.meshgrid(_K, _K)]
 
@@ -119,10 +123,13 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
     # the plane's contact, yet the cutter meets the wall with its side: 0.085 mm low beside
     # an 84-degree wall (benches/steep.py), 0.008 mm on a 79-degree face beside the outline
     steep = (np.hypot(gx, gy) > STEEP) | (np.hypot(gx2, gy2) > STEEP)
-    faces = sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
-    steep |= faces & (sampler.on_part(x, y) | off_part)
+    faces = sampler.may_have_steep_faces(x, y, cutter.radius + e, WALL)
+    on = sampler.on_part(x, y)
+    steep |= faces & on
+    if off_part:
+        steep |= ~on & sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
     sel = np.flatnonzero(steep)
-    x, y, gx2, gy2, idx = x[sel], y[sel], gx2[sel], gy2[sel], near[sel]
+    x, y, gx2, gy2, idx, faces = x[sel], y[sel], gx2[sel], gy2[sel], near[sel], faces[sel]
     half = chunk // 2
     for s in range(0, idx.size, half):
         k0 = np.arange(s, min(s + half, idx.size))
@@ -152,8 +159,14 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
         n = k0.size
         second = best[n:] > best[:n]
         cx, cy = np.where(second, cx[n:], cx[:n]), np.where(second, cy[n:], cy[:n])
-        near_best = facet_contacts(sampler, cutter, x[k0], y[k0], x[k0] + cx, y[k0] + cy)
-        out[idx[k0]] = np.maximum(np.maximum(out[idx[k0]], np.maximum(best[:n], best[n:])), near_best)
+        out[idx[k0]] = np.maximum(out[idx[k0]], np.maximum(best[:n], best[n:]))
+        # steep faces within reach: meet their triangles exactly (the part's outline is met
+        # exactly already, as edges, by the lattice drop)
+        w = np.flatnonzero(faces[k0])
+        if w.size:
+            k1 = k0[w]
+            exact = facet_contacts(sampler, cutter, x[k1], y[k1], x[k1] + cx[w], y[k1] + cy[w])
+            out[idx[k1]] = np.maximum(out[idx[k1]], exact)
     return out.reshape(shape)
 
 

@@ -51,6 +51,7 @@ DIALECTS = {
     "fanuc": Dialect("fanuc", 3, True, True, True, ("G21 G90 G17 G94 G40 G49 G80", "G54"), True, 60),
 }
 DEFAULT_DIALECT = "linuxcnc"
+COARSEST = min(d.decimals for d in DIALECTS.values())
 DIALECT_NAMES = tuple(DIALECTS) + ("dissertation",)
 
 
@@ -125,7 +126,14 @@ def motion_lines(prog: Program, d: Dialect) -> list:
     dec = d.decimals
     last = [None, None, None]
     last_g, last_f = None, None
+    at = None  # where the last move went, at the coarsest dialect's resolution
     for k in range(len(prog.kind)):
+        # a move to within a rounding of where we are is left out in every dialect alike
+        # (one written with 3 decimals and kept with 4 made the dialects' moves differ)
+        here = tuple(gcode_number(v, COARSEST) for v in prog.xyz[k])
+        if here == at:
+            continue
+        at = here if k > 0 else None  # the opening retract writes Z alone: X and Y are not there yet
         g = "G0" if prog.kind[k] == RAPID else "G1"
         words = [g] if g != last_g else []
         for ax, name in enumerate("XYZ"):
