@@ -71,7 +71,9 @@ def main():
     args = ap.parse_args()
     w, h, n = (640, 480, 10) if args.quick else (2048, 1536, 80)
     surface = get("sphere")
-    step = 0.4 if not args.quick else 3.0
+    # the range must reach over the sphere (30 mm): a top frame that still shows the part sends
+    # the scan higher than the replayed frames go
+    step = 0.4 if not args.quick else 3.5
     params = {
         "name": "memory bench",
         "surface": surface.name,
@@ -79,6 +81,7 @@ def main():
         "levels_to_mm": round(step * (n - 1), 3),
         "level_step_mm": step,
         "settle_s": 0.0,
+        "refine_mm": 0.0,  # no bisected steps: the replay holds the planned levels only
     }
     pipeline = args.pipeline or ("seed" if args.quick else "")
     if pipeline:
