@@ -45,11 +45,10 @@ class FineEnds:
     def __init__(self, sampler, cutter, origins, e1, d, tips, mids, keep, off, tol, leave=0.0):
         self.tol = tol
         both = keep[:, 1:] & keep[:, :-1]
+        rise = mids - 0.5 * (tips[:, 1:] + tips[:, :-1])  # each move's dropped middle above it
         with np.errstate(invalid="ignore"):
-            bent = mids - 0.5 * (tips[:, 1:] + tips[:, :-1]) > tol
-        self.flag = both & bent & (off[:, 1:] | off[:, :-1])
-        with np.errstate(invalid="ignore"):
-            sag = np.where(self.flag, mids - 0.5 * (tips[:, 1:] + tips[:, :-1]), 0.0)
+            self.flag = both & (rise > tol) & (off[:, 1:] | off[:, :-1])
+        sag = np.where(self.flag, rise, 0.0)
         self.windows = []  # (first move, passes, sub-positions, tips (passes, moves, sub - 1))
         m = int(np.ceil(cutter.radius / d))
         for a, b in _windows(np.flatnonzero(self.flag.any(axis=0)), 2 * m):
