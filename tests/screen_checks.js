@@ -43,6 +43,11 @@ return (function () {
     }
   });
   const sw = document.documentElement.scrollWidth, iw = window.innerWidth;
-  return { overflow: sw > iw ? ["page is " + sw + " px wide in a " + iw + " px window"] : [],
-           small: small, unlabelled: unlabelled };
+  const overflow = sw > iw ? ["page is " + sw + " px wide in a " + iw + " px window"] : [];
+  // the nav scrolls sideways rather than widen the page: what it hides is as lost as a wide page
+  document.querySelectorAll("nav").forEach((nav) => {
+    if (nav.scrollWidth > nav.clientWidth + 0.5)
+      overflow.push("the nav hides " + (nav.scrollWidth - nav.clientWidth) + " px of its links");
+  });
+  return { overflow: overflow, small: small, unlabelled: unlabelled };
 })();
