@@ -332,3 +332,17 @@ def test_a_flat_face_out_at_once_keeps_its_depression_where_the_contact_lines_be
     err = (z - part.height(X, Y))[face]
     print(f"face: mean {err.mean():+.4f} mm, worst {np.abs(err - 0.017).max():.4f} mm off the middle")
     assert abs(err.mean() - 0.017) < 0.03
+
+
+def test_the_ink_climbs_a_face_that_came_out_at_once_no_more_than_a_face_that_flat():
+    """A face between frames 0.09 mm apart, 2 mm or more from the frame above's waterline, has
+    an apparent height no steeper than 0.09 / 2: the ink climbs it 0.11 mm at most (l_c 2.5),
+    not a wall's 3.5 mm (which let the plateau's 10 mm base stand 0.3-0.65 mm high next to
+    its shoulder's foot on the harsh bench)."""
+    from appliance.surface.fitpass import flat_face_rise
+
+    lo, hi = np.array([9.90, np.nan]), np.array([9.99, np.nan])
+    climb = flat_face_rise(MeniscusModel(2.5, 0.0), (lo, hi), 2.0)
+    assert abs(climb[0] - 2 * 2.5 * np.sin(np.arctan(0.09 / 2.0) / 2)) < 1e-12
+    assert 0.11 < climb[0] < 0.12 and climb[1] == 0.0
+    assert np.all(flat_face_rise(None, (lo, hi), 2.0) == 0.0)  # no meniscus: the bracket itself

@@ -37,7 +37,7 @@ from ..errors import SettingError
 from . import seed as seed_methods
 from .corrections import corrected_levels
 from .dewetted import depression_depth
-from .fitpass import bracket, fit_pass
+from .fitpass import bracket, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
@@ -224,7 +224,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     # face is that much below its levels, dewetted.place_dewetted_faces)
     sure = np.isfinite(flat[0])
     sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
-    z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + rise_max)
+    climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
+    z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
