@@ -48,13 +48,16 @@ FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
 RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve ignores
 
 
-def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None):
+def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
     """-> the top (NaN where `apparent` is) whose contact lines are the level curves of
     `apparent` (the fit of the contact lines as they were seen, on lattice `lat`).
     `faces`: nodes of faces that came out at once (dewetted_nodes). No contact line crossed
     them, so no line's bend changes their depression: there the curvature term is left out
     (else the fit's ripples on a flat face, divided by CURVATURE_FLAT, read as bends: the
-    steep front's apron came out 0.18 mm high)."""
+    steep front's apron came out 0.18 mm high).
+    `ceiling`: the highest the top can stand (summit.summit_ceiling), held at every step, so
+    that the rise on the flanks follows a crest held under it (the harsh ring: interior p99
+    0.326 mm with the top clamped after the solve, 0.207 held during it)."""
     k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
     sub = Lattice(lat.x[::k], lat.y[::k])
     A = fill_nearest(apparent)[::k, ::k]
@@ -79,6 +82,7 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
             iterations=5,
             kappa=kc,
             straight=None if straight is None else straight[::2, ::2],
+            ceiling=ceiling,
         )
         start = A + _resample_rise(tc - Ac, coarse, sub)
         top = _solve_top(
@@ -92,10 +96,21 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
             iterations=FINE_ITERATIONS,
             kappa=kappa,
             straight=straight,
+            ceiling=ceiling,
         )
     else:
         top = _solve_top(
-            sub, A, fp, model, 3 * h, A, steps=(0.5, 1.0), iterations=5, kappa=kappa, straight=straight
+            sub,
+            A,
+            fp,
+            model,
+            3 * h,
+            A,
+            steps=(0.5, 1.0),
+            iterations=5,
+            kappa=kappa,
+            straight=straight,
+            ceiling=ceiling,
         )
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
@@ -123,7 +138,18 @@ def _resample_rise(phi, src, dst):
 
 
 def _solve_top(
-    lat, A, footprint, model, length_mm, start, steps, iterations, tol=1e-7, kappa=None, straight=None
+    lat,
+    A,
+    footprint,
+    model,
+    length_mm,
+    start,
+    steps,
+    iterations,
+    tol=1e-7,
+    kappa=None,
+    straight=None,
+    ceiling=np.inf,
 ):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
@@ -140,7 +166,7 @@ def _solve_top(
         trusted = footprint
     a, on = A[act], trusted[act].astype(float)
     I = sp.identity(problem.n, format="csc")
-    t = start[act].astype(float)
+    t = np.minimum(start[act].astype(float), ceiling)
     curved = kappa is not None
 
     keep = 1.0 if straight is None else (~straight[act]).astype(float)
@@ -175,7 +201,7 @@ def _solve_top(
             for _ in range(8):
                 step = splu((M + mu * I).tocsc(), permc_spec="COLAMD").solve(rhs)
                 if objective(t + step, m) < f0:
-                    t, mu = t + step, max(mu / 3.0, 1e-8)
+                    t, mu = np.minimum(t + step, ceiling), max(mu / 3.0, 1e-8)
                     break
                 mu *= 4.0
             else:

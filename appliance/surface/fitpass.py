@@ -20,6 +20,7 @@ from .dewetted import bracket_dewetted_faces, dewetted_nodes, pinned_rims_as_wal
 from .exposure import first_exposure
 from .flatfaces import flat_faces, flat_prior, tilt_crossed_faces
 from .gridfit import FitProblem, point_data
+from .summit import summit_ceiling
 
 BRACKET_SLACK_LEVELS = 2  # one held sample 4's rim nodes 1.4 mm low (clean Ea 0.0220 -> 0.0174 with two)
 
@@ -156,10 +157,13 @@ def fit_pass(lat, slices, opt, ftol, length, rise):
     prior = flat_prior(z, z_mid, mid & ~np.isfinite(placed), flat, tilted)
     if prior is not None:
         z = _fit_nodes(problem, placed, pts, zp, length, opt.point_weight, prior)
-    if opt.meniscus is not None:
+    ceiling = summit_ceiling(observed, opt.meniscus)
+    if opt.meniscus is None:
+        z = np.minimum(z, ceiling)
+    else:
         z = bracket_dewetted_faces(lat, z, z_fe, first, footprint, slices, opt.meniscus)
         faces = dewetted_nodes(lat, z_fe, first, footprint, slices, opt.meniscus)
-        top = top_from_apparent(lat, z, footprint, opt.meniscus, faces)
+        top = np.minimum(top_from_apparent(lat, z, footprint, opt.meniscus, faces, ceiling), ceiling)
         rise = top - z
         z = top
         _, slices = contact_points(observed, lat, rise, opt.meniscus)
