@@ -40,16 +40,36 @@ an axis on the floor beside the wall was never polished (no slope at the axis,
 while the cutter meets the wall with its side: 0.085 mm low), and its pattern
 search only samples offsets, where h'' ~ 500 /mm near the rim on an 85-degree
 face; now the triangles round the contact are met exactly (facet_contacts).
-The scallop on the walls is not held: 99 % of the band is within 0.033 mm
-(zig-zag 0.044) against 0.05 asked, but cells at the foot of the 85-degree side
-reach 0.150. Cause, found: the waterline contours are traced on the tip field's
-0.2 mm lattice, which bends from the floor onto the wall within a fraction of a
-node, so the lowest levels' points drop onto the floor (level 1.05 mm at 1.00)
-or 0.2-0.4 mm above their level, and the wall between them keeps the scallop.
-Moving each point across its contour to its level (regula falsi on exact drops)
-brought the maximum to 0.131 in a trial (not landed: the deadline); the rest
-is the level step, taken from the 99th percentile of the tip field's slope
-(82 deg, 0.40 mm) where the wall is 85 degrees (0.32 mm would hold it).
+The scallop on the walls was not held: 99 % of the band within 0.033 mm but cells
+at the foot of the 85-degree side at 0.150. Three causes, found and fixed in
+waterlines() (levels.py), measured one at a time with this bench's walls row
+(steep+shallow; the box at a load of 5-20, so CPU is not comparable across rows):
+
+    change                                    levels  dz    gouge   wall max  wall p99  CPU s
+    before (main 13e7e57, 07:31)                 22  0.401  0.0014   0.1502    0.0334    29.4
+    + points moved onto their level (on_level)   22  0.401  0.0014   0.1320    0.0341    54.7
+    + lowest level on the crease (lo + 0.01)     22  0.401  0.0232   0.0640    0.0298    70.7
+    + lowest level lo + 0.04 (FOOT)              22  0.401  0.0014   0.0658    0.0291    66.6
+    + dz from the steepest slope read (84.1)     24  0.350  0.0014   0.0577    0.0260    79.1
+    + a degree for the lattice's reading (85.1)  27  0.320  0.0014   0.0449    0.0205    90.2
+
+The foot: the lowest level lay below the floor (no contour), so the band of wall
+between the crease (a cutter on the floor touching the wall with its side,
+~2.7 mm up the 85-degree side) and the next level up kept that gap as scallop.
+On the crease itself the drop-cutter's polish misses the wall behind the
+floor's contact (0.026 mm low at x=22.7 y=31.8 against a brute-force drop:
+the ring scan's start loses to the floor's, so the exact facets are met
+around the wrong contact), hence the 0.0232 gouge: the lowest loop stands
+0.04 mm above the floor instead. That drop-cutter defect is contact.polish's
+and still there for any position exactly on such a crease. The level step:
+the 99th percentile of the tip field's slope (82 degrees) held 0.066 mm on the
+85-degree side; the steepest slope read, plus the degree the 0.2 mm lattice's
+differences take off an 85-degree wall, holds it at 27 levels instead of 22.
+Now (this bench's own walls row, 08:40, load ~18): steep+shallow 80.7 s CPU,
+33574 lines, gouge 0.0014, max 0.0473, uncut 4.39 %, wall band 94 mm^2, wall
+max 0.0449 for 0.05 asked (no tolerance needed), p99 0.0205, none > 1.1h. The CPU rows were taken at loads of 5 (first) to 20
+(last): the plan's added cost is the 5 extra levels (+23 %) and ~11 exact drops
+per loop point for on_level, not yet measured A/B.
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ from appliance.cam.jobs import verify_gcode
 from appliance.cam.operations import Operation, plan_operations, post_operations
 from appliance.cam.sampling import Sampler
 from appliance.cam.tools import Tool
+from appliance.cam.waterline import FOOT, SteepSettings, regions, tip_field, waterlines
 
 WALL_DEG = 85.0
 # verify's gouge tolerance (jobs: --max-gouge's lattice); the acceptance is "gouges nothing"
@@ -69,3 +70,27 @@ def test_a_small_ball_finishing_an_85_degree_wall_does_not_gouge_it(narrow):
     planned, top = plan_operations(narrow, [Operation("finish", tool, "steep")], scallop=0.05)
     rep, _ = verify_gcode(post_operations(planned, top, "linuxcnc")[0].text, narrow)
     assert rep.gouge <= GOUGE_TOL, (rep.gouge, rep.gouge_at)
+
+
+def test_waterline_loops_stand_on_their_levels_down_to_the_crease_at_the_foot(narrow):
+    # the tip field's lattice is 0.2 mm and bends from the floor onto the wall within a
+    # fraction of a node: its straight contours put the lowest loops on the floor or
+    # tenths of a millimetre above their level; each point is moved across its loop
+    s = Sampler(narrow, edge_step=0.05)
+    st = SteepSettings(parse_cutter("ball6"), 0.05)
+    field = tip_field(s, st.cutter, st.grid)
+    steep, _ = regions(field, st)
+    loops, levels, dz = waterlines(s, st, field, steep)
+    assert levels >= 2 and dz > 0
+    pts = np.vstack(loops)
+    z = drop_points(s, st.cutter, pts[:, 0], pts[:, 1], st.resolution)
+    own = np.repeat(
+        [np.median(z[k : k + len(p)]) for k, p in zip(np.cumsum([0] + [len(p) for p in loops]), loops)],
+        [len(p) for p in loops],
+    )
+    # on the level to well under the scallop asked (0.03 mm at the crease, where the tip
+    # rises ~10 mm per mm: 0.003 mm across the loop)
+    assert np.max(np.abs(z - own)) <= 0.04, np.max(np.abs(z - own))
+    # the lowest loop runs just above the floor (the crease where a cutter resting on the
+    # floor meets the wall with its side), not up to a level step above it
+    assert own.min() - 1.0 <= FOOT + 0.005, own.min()

@@ -21,14 +21,11 @@ drop-cutter height (the cutter touches the design and cannot cut into it).
 
 Waterlines: contours of T at levels dz apart (marching squares on the
 lattice), kept where they lie in the steep region, resampled every
-`resolution` and dropped exactly (the contour only says where; the height is
-the drop-cutter's), then refined where the straight moves between points
-would cut in (zigzag.refine) and thinned to the chord tolerance. dz holds the
-vertical scallop (verify measures vertically) at the steepest slope present
-(capped at 87 degrees): for a corner radius rc a step dz along a wall of slope
-theta leaves h = (dz / sin theta)^2 / (8 rc cos theta) vertically, largest at
-the steepest wall, so dz = sin(theta) sqrt(8 rc h cos(theta)); a flat end's
-staircase leaves dz itself.
+`resolution`, each point moved across its contour onto its level by exact
+drops, the lowest level just above the floor so a wall is cut to its foot
+(levels.py: how far apart, and why on the level), then refined where the
+straight moves between points would cut in (zigzag.refine) and thinned to
+the chord tolerance.
 
 Zig-zag on the shallow region: passes a fixed stepover apart, the stepover
 that holds the scallop on a slope of threshold + overlap across the passes
@@ -51,14 +48,14 @@ from ..errors import SettingError, check_mm
 from .contact import drop_lines, drop_points
 from .contours import contours
 from .cutters import Cutter
+from .levels import FOOT, level_step, on_level, steepest
 from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .scallop import ball_stepover, flat_stepover
 from .zigzag import check_fits, pass_frame
 
 DEFAULT_STEEP_DEG = 50.0
 DEFAULT_OVERLAP_DEG = 5.0
-MAX_WALL_DEG = 87.0
-SEAM_DEG = 15.0  # how far past its limit the zig-zag's overlap band may climb          # walls steeper than this are held as if they were this steep
+SEAM_DEG = 15.0  # how far past its limit the zig-zag's overlap band may climb
 
 
 @dataclass
@@ -176,14 +173,6 @@ def _disc(r):
     return I * I + J * J <= r * r
 
 
-def level_step(cutter: Cutter, scallop: float, wall_deg: float) -> float:
-    th = np.radians(min(max(wall_deg, 1.0), MAX_WALL_DEG))
-    rc = cutter.corner_radius
-    if rc <= 0:
-        return float(scallop)
-    return float(np.sin(th) * np.sqrt(8 * rc * scallop * np.cos(th)))
-
-
 def shallow_stepover(cutter: Cutter, scallop: float, slope_deg: float) -> float:
     if cutter.kind == "flat":
         # a flat bottom's riser on a slope m is m x stepover
@@ -263,18 +252,28 @@ def waterlines(sampler, st: SteepSettings, field: TipField, steep):
     """(XY polylines in cutting order, levels, dz): top level first, each level's pieces nearest-first."""
     if not steep.any():
         return [], 0, 0.0
-    wall = float(np.percentile(field.slope_deg[steep], 99))
-    dz = level_step(st.cutter, st.scallop, wall)
+    dz = level_step(st.cutter, st.scallop, steepest(field, steep))
     lo, hi = float(np.nanmin(field.tip[steep])), float(np.nanmax(field.tip[steep]))
-    n = int(np.ceil((hi - lo) / dz - 1e-9))
-    levels = hi - dz * np.arange(n + 1) - 1e-6
-    out, at = [], None
+    # the levels span the steep region evenly, the lowest FOOT above its lowest tip: a wall
+    # standing on a floor is cut to its foot by a loop beside the crease where the cutter,
+    # resting on the floor, touches the wall with its side. A lowest level below the floor
+    # has no contour, and the band of wall between the crease and the level above it kept
+    # up to a level step of scallop (benches/steep.py: 0.119 mm at an 85-degree wall's foot).
+    # Not on the crease itself: there the drop-cutter's search can miss the wall behind
+    # the floor's contact (0.026 mm low, a gouge), a hair above it cannot.
+    n = max(int(np.ceil((hi - lo) / dz - 1e-9)), 1)
+    levels = np.linspace(hi - 1e-6, lo + min(FOOT, dz / 4), n + 1)
+    by_level = []
     for z in levels:
         pieces = []
         for ln in contours(field.xs, field.ys, field.tip, float(z)):
             for piece in _split(ln, field.lookup(steep, ln[:, 0], ln[:, 1])):
                 if np.sum(np.hypot(*np.diff(piece, axis=0).T)) >= 2 * st.resolution:
                     pieces.append(_resample(_orient(field, piece), st.resolution))
+        by_level.append(pieces)
+    on_level(sampler, st, field.g, [(p, z) for z, ps in zip(levels, by_level) for p in ps])
+    out, at = [], None
+    for pieces in by_level:
         while pieces:  # nearest piece next; a closed loop starts where it is nearest
             if at is None:
                 k = 0
