@@ -100,6 +100,8 @@ flatter than a slope of 0.15 smooth the top instead of phi. Ea mm before -> afte
     sample1 0.0117 -> 0.0112   sample2 0.0607 -> 0.0524   sample3 0.0537 -> 0.0382
     sample4 0.0947 -> 0.0581   crater  0.0553 -> 0.0255   twin-peaks 0.0524 -> 0.0336
     steep-front 0.0865 -> 0.0814
+(faces that came out at once and nodes held by a summit's ceiling keep smoothing phi, as
+landed: crater re-measured 0.0255; on the solve's lattice the others moved by <= 0.001.)
 The crater's crest (r 17-23 mm) on the solve's lattice 0.206 -> 0.047 mm, its floor (r < 5)
 0.383 -> 0.032. The first ink (scans rendered as benches/seed_table.py --effects physics
 renders them, commissioned from its own ball): sample1 0.0065 -> 0.0065, sample2 0.0263 ->
