@@ -18,6 +18,11 @@ on a 0.25 slope with a 6 mm flat end at d = 0.1). So for a flat end every
 point's rim is searched: Z at 64 points around the circle of radius R, then
 three shrinking fans of 9 angles around the best.
 
+On a coarse map (the daemon's 50-cell grid: 1.2 mm cells under a 6 mm ball) a whole
+cutter's disc is a few dozen cells, and a tip beside a wall is met exactly against every
+triangle under the cutter, with no search first (DISC_CELLS): the ring scans were most
+of the daemon's toolpath.
+
 Every value tried is Z(p + u) - h(|u|) for a real offset |u| <= R, so it is a
 lower bound of the true tip: taking the max with the lattice answer can only
 move the tip towards the true one, never above it (no scallop added).
@@ -39,6 +44,9 @@ STEEP = 0.8  # |grad Z| above which a tip is polished (~39 degrees)
 # stands, and its contact met exactly (may_have_steep_faces is a bound from the larger x and
 # y slopes, so a gentler one would take in a whole dome whose tips the lattice has right)
 WALL = 1.43
+# cells in the window of a whole cutter's disc up to which polish meets every cell under the
+# cutter exactly instead of searching for the contact first (7 x 7 for the daemon's map)
+DISC_CELLS = 81
 _K = np.arange(-2, 3)
 _PU, _PV = [a.ravel() for a in np.meshgrid(_K, _K)]
 
@@ -97,7 +105,7 @@ def polish_rim(sampler: Sampler, cutter: Cutter, x, y, tip, chunk=20_000):
     return out.reshape(shape)
 
 
-def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part=True):
+def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=2_000, off_part=True):
     """Tips `tip` at (x, y) from the lattice drop-cutter, raised to nearer the exact contact where steep.
 
     off_part: polish positions off the part too (a program's: see below). The opening's
@@ -128,6 +136,16 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
     steep |= faces & on
     if off_part:
         steep |= ~on & sampler.may_have_steep_faces(x, y, cutter.radius + e, STEEP)
+    span = int(np.ceil(cutter.radius / min(sampler.dx, sampler.dy)))
+    if (2 * span + 1) ** 2 <= DISC_CELLS:
+        # a coarse map (the daemon's: 1.2 mm cells under a 6 mm ball): every cell under the
+        # cutter is met exactly, which is the tip itself, with no search to centre a window
+        w = np.flatnonzero(steep & faces)
+        for s in range(0, w.size, chunk):
+            k = w[s : s + chunk]
+            exact = facet_contacts(sampler, cutter, x[k], y[k], x[k], y[k], span, floor=out[near[k]])
+            out[near[k]] = np.maximum(out[near[k]], exact)
+        steep &= ~faces
     sel = np.flatnonzero(steep)
     x, y, gx2, gy2, idx, faces = x[sel], y[sel], gx2[sel], gy2[sel], near[sel], faces[sel]
     half = chunk // 2
@@ -165,12 +183,14 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=8_000, off_part
         w = np.flatnonzero(faces[k0])
         if w.size:
             k1 = k0[w]
-            exact = facet_contacts(sampler, cutter, x[k1], y[k1], x[k1] + cx[w], y[k1] + cy[w])
+            exact = facet_contacts(
+                sampler, cutter, x[k1], y[k1], x[k1] + cx[w], y[k1] + cy[w], floor=out[idx[k1]]
+            )
             out[idx[k1]] = np.maximum(out[idx[k1]], exact)
     return out.reshape(shape)
 
 
-def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int = WINDOW):
+def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int = WINDOW, floor=None):
     """Exact tip heights at (px, py) against the triangles of the cells within `cells` of the
     cell holding (gx, gy), the contact found so far.
 
@@ -179,40 +199,58 @@ def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int 
     lattice and the pattern search only sample offsets: on an 85-degree face h'' is
     1 / (R cos^3) ~ 500 /mm for a 6 mm ball, and an offset 0.015 mm from the contact reads
     0.06 mm low (benches/steep.py's gouge). -inf where nothing of the window is under the cutter.
+
+    `floor` (per point, optional): the tip already known; a cell whose highest corner less
+    h at its nearest point to the axis cannot rise above it is not met (it could not change
+    max(floor, result)). Of a window's 25 cells one to four pass on a sphere's wall; every
+    (cell, point) pair left is met in one call per side, not one per cell.
     """
-    best = np.full(np.shape(px), -np.inf)
-    ic = np.floor((gx - sampler.x0) / sampler.dx).astype(np.intp)
-    jc = np.floor((gy - sampler.y0) / sampler.dy).astype(np.intp)
-    dx, dy = sampler.dx, sampler.dy
-    for dj in range(-cells, cells + 1):
-        for di in range(-cells, cells + 1):
-            i = np.clip(ic + di, 0, sampler.nx - 2)
-            j = np.clip(jc + dj, 0, sampler.ny - 2)
-            z00, z10, z01, z11 = (g[j, i] for g in sampler.corner_grids)
-            x0, y0 = sampler.x0 + dx * i, sampler.y0 + dy * j
-            for upper, sx, sy in (
-                (True, (z10 - z00) / dx, (z11 - z10) / dy),
-                (False, (z11 - z01) / dx, (z01 - z00) / dy),
-            ):
-                ux, uy = plane_contact(cutter, sx, sy)
-                u, v = (px + ux - x0) / dx, (py + uy - y0) / dy
-                inside = (np.minimum(u, v) >= 0) & (np.maximum(u, v) <= 1) & ((u >= v) if upper else (u <= v))
-                val = z00 + sx * dx * u + sy * dy * v - cutter.profile(np.hypot(ux, uy))
-                np.maximum(best, np.where(inside, val, -np.inf), out=best)
-            # the cell's sides and diagonal, each a drop onto a segment
-            for (a, za), (b, zb) in (
-                (((0, 0), z00), ((1, 0), z10)),
-                (((0, 0), z00), ((0, 1), z01)),
-                (((0, 0), z00), ((1, 1), z11)),
-                (((1, 0), z10), ((1, 1), z11)),
-                (((0, 1), z01), ((1, 1), z11)),
-            ):
-                ax, ay = x0 + a[0] * dx, y0 + a[1] * dy
-                m = min_over_segment(
-                    cutter, px - ax, py - ay, (b[0] - a[0]) * dx, (b[1] - a[1]) * dy, za - zb, -za
-                )
-                np.maximum(best, -m, out=best)
-    return best
+    px, py = np.ravel(np.asarray(px, float)), np.ravel(np.asarray(py, float))
+    best = np.full(px.shape, -np.inf)
+    dx, dy, R = sampler.dx, sampler.dy, cutter.radius
+    off = np.arange(-cells, cells + 1)
+    di, dj = (a.ravel()[:, None] for a in np.meshgrid(off, off))
+    ic = np.floor((np.ravel(gx) - sampler.x0) / dx).astype(np.intp)
+    jc = np.floor((np.ravel(gy) - sampler.y0) / dy).astype(np.intp)
+    i = np.clip(ic[None, :] + di, 0, sampler.nx - 2)  # (cells, points)
+    j = np.clip(jc[None, :] + dj, 0, sampler.ny - 2)
+    x0, y0 = sampler.x0 + dx * i, sampler.y0 + dy * j
+    # the nearest point of each cell to the axis; beyond the radius nothing touches
+    ex = np.maximum(np.maximum(x0 - px, px - x0 - dx), 0.0)
+    ey = np.maximum(np.maximum(y0 - py, py - y0 - dy), 0.0)
+    near = np.hypot(ex, ey)
+    live = near <= R * (1 + 1e-9) + 1e-12
+    if floor is not None:
+        top = sampler.cell_top[j, i] - cutter.profile(np.minimum(near, R))
+        live &= top > np.ravel(floor)[None, :]
+    c, p = np.nonzero(live)
+    if p.size == 0:
+        return best.reshape(np.shape(gx))
+    i, j, x0, y0, px, py = i[c, p], j[c, p], x0[c, p], y0[c, p], px[p], py[p]
+    z00, z10, z01, z11 = (g[j, i] for g in sampler.corner_grids)
+    val = np.full(p.size, -np.inf)
+    for upper, sx, sy in (
+        (True, (z10 - z00) / dx, (z11 - z10) / dy),
+        (False, (z11 - z01) / dx, (z01 - z00) / dy),
+    ):
+        ux, uy = plane_contact(cutter, sx, sy)
+        u, v = (px + ux - x0) / dx, (py + uy - y0) / dy
+        inside = (np.minimum(u, v) >= 0) & (np.maximum(u, v) <= 1) & ((u >= v) if upper else (u <= v))
+        at = z00 + sx * dx * u + sy * dy * v - cutter.profile(np.hypot(ux, uy))
+        np.maximum(val, np.where(inside, at, -np.inf), out=val)
+    # the cell's sides and diagonal, each a drop onto a segment
+    for (a, za), (b, zb) in (
+        (((0, 0), z00), ((1, 0), z10)),
+        (((0, 0), z00), ((0, 1), z01)),
+        (((0, 0), z00), ((1, 1), z11)),
+        (((1, 0), z10), ((1, 1), z11)),
+        (((0, 1), z01), ((1, 1), z11)),
+    ):
+        ax, ay = x0 + a[0] * dx, y0 + a[1] * dy
+        m = min_over_segment(cutter, px - ax, py - ay, (b[0] - a[0]) * dx, (b[1] - a[1]) * dy, za - zb, -za)
+        np.maximum(val, -m, out=val)
+    np.maximum.at(best, p, val)
+    return best.reshape(np.shape(gx))
 
 
 _RING_R = np.array([0.6, 0.75, 0.85, 0.92, 0.97, 0.995])

@@ -45,8 +45,8 @@ from .sampling import Sampler
 from .segments import min_over_segment
 
 DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath points
-_SLAB_BUDGET = 750_000  # slab elements per chunk: reading the map there takes ~15 arrays
-# of its size (3 M elements were 370 MB of a finishing plan)
+_SLAB_BUDGET = 250_000  # slab elements per chunk: reading the map there takes ~15 arrays
+# of its size (3 M elements were 370 MB of a finishing plan; 750 k, 20 MB of the daemon's)
 CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 

@@ -60,7 +60,9 @@ def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
     return out
 
 
-def _bands(ny, nx, cells=150_000):
+def _bands(ny, nx, cells=40_000):
+    # 150 k nodes a band held the drop's edge pairs and the polish's temporaries: 70 MB of
+    # the daemon's toolpath peak on a sphere's coarse map
     rows = max(1, cells // max(nx, 1))
     return [(j0, min(j0 + rows, ny)) for j0 in range(0, ny, rows)]
 
@@ -111,7 +113,7 @@ def _erode(tip, cutter, d):
 _PATTERN = np.stack([a.ravel() for a in np.meshgrid(np.arange(-2, 3), np.arange(-2, 3))])
 
 
-def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=50_000, rows=None):
+def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=10_000, rows=None):
     """Lower `out` (in place) on steep faces to nearer the continuous minimum.
 
     The erosion takes the min of tip(p + u) + h(|u|) over lattice offsets u;

@@ -94,6 +94,13 @@ class Sampler:
         """Each cell's corner heights (z00, z10, z01, z11), floor on cells off the part."""
         return self._g00, self._g10, self._g01, self._g11
 
+    @property
+    def cell_top(self):
+        """Each cell's highest corner (floor off the part): no point of its triangles is higher."""
+        if getattr(self, "_top", None) is None:
+            self._top = np.maximum(np.maximum(self._g00, self._g10), np.maximum(self._g01, self._g11))
+        return self._top
+
     def _cell(self, x, y):
         fx = (np.asarray(x, float) - self.x0) / self.dx
         fy = (np.asarray(y, float) - self.y0) / self.dy
