@@ -47,6 +47,7 @@ from .segments import min_over_segment
 DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath points
 _SLAB_BUDGET = 250_000  # slab elements per chunk: reading the map there takes ~15 arrays
 # of its size (3 M elements were 370 MB of a finishing plan; 750 k, 20 MB of the daemon's)
+_EDGE_POINTS = 20_000  # tool positions whose edge contacts are found at once
 CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 
@@ -109,10 +110,17 @@ def drop_lines(
         out[s : s + chunk] = _dilate_slab(table, index, groups, m, n, stride)
     if sampler.edges is not None:
         along = d * np.arange(0, n, stride)
-        px = origins[:, 0, None] + along[None, :] * e1[0]
-        py = origins[:, 1, None] + along[None, :] * e1[1]
-        lines = (origins, e1, d, n, stride) if n > 1 else None
-        _edge_contacts(sampler.edges, cutter, px.ravel(), py.ravel(), out.reshape(-1), lines)
+        # in blocks of lines: the (patch, point) pairs of a whole plan's lines at once were
+        # 50 MB of the daemon's toolpath peak (a sphere's coarse map has walls for edges)
+        step = max(1, _EDGE_POINTS // max(along.size, 1))
+        for s in range(0, L, step):
+            o = origins[s : s + step]
+            px = o[:, 0, None] + along[None, :] * e1[0]
+            py = o[:, 1, None] + along[None, :] * e1[1]
+            lines = (o, e1, d, n, stride) if n > 1 else None
+            _edge_contacts(
+                sampler.edges, cutter, px.ravel(), py.ravel(), out[s : s + step].reshape(-1), lines
+            )
     return out
 
 
