@@ -28,6 +28,7 @@ is processing_child.py).
 from __future__ import annotations
 
 import ctypes
+import gc
 import json
 import os
 import signal
@@ -102,6 +103,20 @@ def in_process(scan_folder, out_folder, options, stop=None) -> dict:
     return process_scan(scan_folder, out_folder, **options)
 
 
+def release_freed_memory():
+    """Hand the heap the capture freed back to the kernel before the child starts.
+
+    Frames and their temporaries are freed after each one is saved, but glibc keeps the
+    freed heap for reuse: the daemon stayed at its capture's peak (185 MB against 100
+    idle on the demo's scan) all through the processing, while the child needed the room.
+    """
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc: nothing to trim
+        pass
+
+
 def _die_with_parent():
     """In the child, before exec: ask the kernel to SIGKILL it when the daemon dies,
     so a kill -9 of the daemon cannot leave an orphan writing into the job folder."""
@@ -121,6 +136,7 @@ def child_process(
 ) -> dict:
     """`module`: the child's main (processing_child.py, or one that adds to it with the same protocol)."""
     cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
+    release_freed_memory()
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(
             cmd,

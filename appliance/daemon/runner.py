@@ -390,6 +390,7 @@ class ScanRunner:
     # -- processing -------------------------------------------------------------
     def _process(self) -> list[str]:
         self._check_stop()
+        processing.release_freed_memory()  # before the state says so: the capture's heap is gone
         self.store.update_job(self.job_id, status="processing")
         self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
         return processing.run(self.processor, self.store, self.job_id, S.full(self.settings), self.stop)
