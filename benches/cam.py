@@ -54,6 +54,12 @@ bull6r1 0.0098 / flat6 0.0495, sample2 ball6 0.0099, all 0.00 % uncut, gouge <= 
 (OK); with the fine lines too: sample4 bull1r0.25 0.0560 MISS as before, gouge 0.0050
 (0.0047 without the fine lines: at the 0.005 limit); sample1 ball6 0.0100, 0.00 %, gouge
 0.0019 OK (the same as before). The other rows not yet re-run.
+Session 11 (keepup), `--only finishing --old-ref 13e7e57`, one run, load ~19: 0.05: 6.3 s /
+142 MB | 7.0 s / 174 MB (the same program: the peak from smaller blocks in the drop's edge
+contacts and the opening); RIM 8.2 s / 161 MB (1.30x); 0.01: 20.8 s / 201 MB | 20.1 s / 197
+MB (1.0x); RIM 27.6 s / 290 MB (1.33x, over the 250 MB row). This dome has no wall, so the
+polish's exact facets (the daemon's sphere: 19.3 -> 12.0 s) do not run here; the planner's
+envelopes and the opening are still what is left.
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 

@@ -28,6 +28,18 @@ higher load, the child 21.2 s CPU (fit 13.5 s and toolpath 30.7 s wall); daemon 
 idle: the rest is the simulated camera's renderer) + child 263 MB (95 MB after its imports, 135
 after the waterlines, 175 after the fit, 263 in the toolpath) = 448 MB. Both MISS: the
 finishing planner's CPU (some 15 s of the 21) and memory are what is left (issue 20, item 1).
+
+Session 11, same box, one run each (load 4-8 before, 15 after: the CPU figures are the
+surer ones). Before (13e7e57): 54.0 s after the last frame, child 31.0 s CPU (fit 9.3 s,
+toolpath 41.7 s wall), daemon 185 MB + child 244 MB = 429 MB. After (cccdfa4: the polish
+meets only the triangles that can raise a tip, exactly over the whole disc on this coarse
+map; smaller blocks in the drop and the opening; the daemon trims its heap before
+processing): 30.9 s, child 15.9 s CPU (fit 10.9 s, toolpath 15.0 s wall), daemon 145 MB +
+child 177 MB = 322 MB. Both still MISS. The toolpath alone on this job's map: 19.3 -> 12.0 s
+CPU, 236 -> 156 MB (the scallop's envelopes are ~40 % of what is left, the opening ~25 %).
+The child's peak is now the fit's: the registration's pair shifts (+54 MB traced over
+what the fit holds). The daemon holds 45 MB over idle while processing, 17 MB of it the
+virtual camera's part grids (a real bench has none).
 """
 
 from __future__ import annotations
