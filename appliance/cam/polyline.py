@@ -96,6 +96,31 @@ def reduce_polyline(p, tol, keep=None):
         return p
     keep = np.zeros(n, bool) if keep is None else np.array(keep, bool, copy=True)
     keep[0] = keep[-1] = True
+    cuts = _pieces(np.flatnonzero(keep), _PIECE)
+    if len(cuts) > 2:
+        # no segment spans a kept point, so pieces between kept points reduce alone: a
+        # rim-finished plan's linked run of 10^6 points held ~15 arrays of its size at once
+        parts = [_reduce(p[a : b + 1], tol, keep[a : b + 1]) for a, b in zip(cuts[:-1], cuts[1:])]
+        return np.vstack([parts[0]] + [q[1:] for q in parts[1:]])
+    return _reduce(p, tol, keep)
+
+
+_PIECE = 50_000  # points reduced at once, at most (unless no kept point falls between)
+
+
+def _pieces(kept, size):
+    """Indices of kept points that cut a run into pieces of about `size` points (first and last included)."""
+    cuts = [int(kept[0])]
+    for k in kept[1:].tolist():
+        if k - cuts[-1] >= size:
+            cuts.append(k)
+    if cuts[-1] != kept[-1]:
+        cuts.append(int(kept[-1]))
+    return cuts
+
+
+def _reduce(p, tol, keep):
+    n = len(p)
     live = np.arange(n)  # the points whose segment may still be split
     while live.size:
         kept = np.flatnonzero(keep)
