@@ -59,7 +59,9 @@ Session 11 (keepup), `--only finishing --old-ref 13e7e57`, one run, load ~19: 0.
 contacts and the opening); RIM 8.2 s / 161 MB (1.30x); 0.01: 20.8 s / 201 MB | 20.1 s / 197
 MB (1.0x); RIM 27.6 s / 290 MB (1.33x, over the 250 MB row). This dome has no wall, so the
 polish's exact facets (the daemon's sphere: 19.3 -> 12.0 s) do not run here; the planner's
-envelopes and the opening are still what is left.
+envelopes and the opening are still what is left. Then reduce_polyline by pieces between
+kept points (the same programs, md5), one run each: 0.01 margin 0 21.8 s / 151 MB (was 201),
+RIM 0.01 27.9 s / 151 MB (was 290: the linked runs' whole-run arrays were its peak).
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 
