@@ -67,7 +67,17 @@ the 99th percentile of the tip field's slope (82 degrees) held 0.066 mm on the
 differences take off an 85-degree wall, holds it at 27 levels instead of 22.
 Now (this bench's own walls row, 08:40, load ~18): steep+shallow 80.7 s CPU,
 33574 lines, gouge 0.0014, max 0.0473, uncut 4.39 %, wall band 94 mm^2, wall
-max 0.0449 for 0.05 asked (no tolerance needed), p99 0.0205, none > 1.1h. The CPU rows were taken at loads of 5 (first) to 20
+max 0.0449 for 0.05 asked (no tolerance needed), p99 0.0205, none > 1.1h.
+Zig-zag alone beside it (same run): 25.4 s, 6842 lines, gouge 0.0039, max
+0.0568, wall max 0.0609, p99 0.0440 (unchanged code, as before). Three-tool
+job (same run): planned in 102.6 s CPU (33.7 before, load ~5 then); linuxcnc,
+mach3, fanuc pass rs274 (fanuc our rules too), the three GRBL files our rules;
+whole job gouge 0.0016 mm (0.0024 before), 9.59 mm^3 left, 2.5 mm^2 uncut;
+finishing alone gouge 0.0014, 38.87 mm^3, 70.6 mm^2; no crashes.
+Not a waterline defect: tests' narrow 12 x 12 mesa (85 degrees all round, 3 mm
+top radius) with ball6 keeps 0.36 mm at (6.0, 2.9) before and after (0.3659 ->
+0.3602): the axis that would meet that wall's lower half stands off the map's
+edge, and finishing does not run off the outline (the rim, issue 20 item 2). The CPU rows were taken at loads of 5 (first) to 20
 (last): the plan's added cost is the 5 extra levels (+23 %) and ~11 exact drops
 per loop point for on_level, not yet measured A/B.
 """
