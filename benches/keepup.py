@@ -39,7 +39,9 @@ child 177 MB = 322 MB. Both still MISS. The toolpath alone on this job's map: 19
 CPU, 236 -> 156 MB (the scallop's envelopes are ~40 % of what is left, the opening ~25 %).
 The child's peak is now the fit's: the registration's pair shifts (+54 MB traced over
 what the fit holds). The daemon holds 45 MB over idle while processing, 17 MB of it the
-virtual camera's part grids (a real bench has none).
+virtual camera's part grids (a real bench has none). Main at f54862a (with the fit's
+changes of the same morning), load ~7: 24.4 s after the last frame, child 17.9 s CPU (fit
+9.0 s, toolpath 13.1 s wall), daemon 139 MB + child 175 MB = 314 MB: MISS, MISS.
 """
 
 from __future__ import annotations
