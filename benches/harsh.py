@@ -131,6 +131,12 @@ share of (cells) over 0.1 mm:
   Within targets now: sample1, sample2, sample3, twin-peaks (Ea, p99 and max), crater, steep-
   front. Over: sample4 (untouched), plateau (Ea, p99: the shoulder's foot, below), ring (p99
   by 0.007, max: two wall-foot edge cells at the hole and the outer rim).
+(i) = (g)'s code (main 13e7e57) with registration's gate (3 December, _plays: frames move only
+where consecutive shifts are anti-correlated as play makes them), same renders, before (h)
+landed beside it (the two together not measured yet): twin-peaks (ratio +0.04) is no longer
+moved, 0.0519 0.270 1.104 -> 0.0235 0.115 0.389; plateau (+0.04) no longer moved, 0.1323 ->
+0.1315 0.944 1.712; sample1-4 (-0.27, -0.10, -0.05, -0.44) and steep-front (-0.07) move the
+same frames as before (0.0157, 0.0208, 0.0366, 0.2455); crater and ring moved nothing either way.
 What is left, from per-cell error maps: sample 4 (10 mm across, slopes 4-10) is the stage
 wobble and the meniscus, not glare: rendered without the wobble its Ea is 0.249, without
 wobble, glare, dust and the image's noise 0.142 (the curved contact line on a part that is
