@@ -149,6 +149,12 @@ walls' common outward move solved for beside it): physics2 moved nothing either,
 against its posterior spread (scaled by the pairs' reduced chi-square) left more of harsh
 sample4's play (rms 0.024 -> 0.032 mm at 99 %).
 
+The two together (main at 7d373c6: the V rows, the harsh fit's bounds and the play gate), same
+renders, Ea mm, old registration -> the gate: twin-peaks 0.0336 -> 0.0443 (its 15 frames the old
+rule moved helped it here; still <= 0.05), steep-front 0.0824 -> 0.0544; with the gate: crater
+0.0241, sample3 0.0369, sample4 0.0581 (sample1, sample2 not re-run). Over 0.05: sample2 (0.0524
+before the gate, which moves none of its frames now), sample4, steep-front (by 0.0044).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
