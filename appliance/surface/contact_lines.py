@@ -7,9 +7,8 @@ which the ordinary fit reconstructs from them as if they were waterlines (first 
 thin plate, cross-validated smoothing: nothing about the meniscus). The top then solves
     top - h(atan |grad top|) = A
 node by node: a first-order equation, solved as least squares with a little smoothness
-on the rise phi = top - A (third-order, so it bends phi only where its curvature changes;
-where the top is level, on the top itself: LevelRows) by damped Gauss-Newton
-(Levenberg-Marquardt; h(|grad|) linearised along the slope).
+on the rise phi = top - A (third-order, so it bends phi only where its curvature changes)
+by damped Gauss-Newton (Levenberg-Marquardt; h(|grad|) linearised along the slope).
 
 Why not the obvious iteration (rise from the current fit's slope, refit, repeat)? Where
 the top is flat it runs away: raising a contact line steepens the fit's drop beside it,
@@ -47,7 +46,6 @@ from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
 SOLVE_MAX_SIDE = 101  # the rise is smooth: solved on at most this many nodes a side
 FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
 RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve ignores
-LEVEL_SLOPE = 0.15  # slopes (rise over run) round which the rise's V is the top's, not phi's
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
@@ -158,8 +156,7 @@ def _solve_top(
     problem = FitProblem(lat, footprint)
     act = problem.active
     Dx, Dy = problem.gradient()
-    rows = problem.third_order_rows()
-    R = (rows.T @ rows).tocsc()
+    R = problem.third_order()
     lam = length_mm**6 / (lat.hx * lat.hy)
     # the apparent surface's outline nodes are the fit's least sure (their first exposure
     # comes from the wall's waterline, a level step wide): where the top rises to a rim the
@@ -168,9 +165,6 @@ def _solve_top(
     if trusted.sum() < 9:
         trusted = footprint
     a, on = A[act], trusted[act].astype(float)
-    level = LevelRows(rows, on, straight if straight is None else straight[act])
-    of_a = rows @ a
-    target = of_a  # smoothing phi = top - A: the top's third differences are to follow A's
     I = sp.identity(problem.n, format="csc")
     t = np.minimum(start[act].astype(float), ceiling)
     curved = kappa is not None
@@ -187,8 +181,8 @@ def _solve_top(
 
     def objective(t, m):
         r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
-        p = rows @ t - target
-        return float(r @ r + lam * (p @ p))
+        p = t - a
+        return float(r @ r + lam * (p @ (R @ p)))
 
     mu = 1.0
     for f in steps:
@@ -198,12 +192,11 @@ def _solve_top(
                 kap = curvature_of(t)
             gx, gy = Dx @ t, Dy @ t
             g = np.hypot(gx, gy)
-            target = level.target(of_a, g, t < ceiling)
             r = on * (t - m.rise_on_slope(g, kap) - a)
             c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
             M = (J.T @ J + lam * R).tocsc()
-            rhs = -(J.T @ r) - lam * (rows.T @ (rows @ t - target))
+            rhs = -(J.T @ r) - lam * (R @ (t - a))
             f0 = objective(t, m)
             for _ in range(8):
                 step = splu((M + mu * I).tocsc(), permc_spec="COLAMD").solve(rhs)
@@ -218,35 +211,6 @@ def _solve_top(
     out = np.full(lat.shape, np.nan)
     out[act] = t
     return out
-
-
-class LevelRows:
-    """Which smoothness rows smooth the top itself rather than the rise phi = top - A.
-
-    The rise h(|grad top|) has a V where the top is level (a crest, a floor, a saddle's
-    centre): dh/d|grad| = l_c cos(theta / 2) there, 2.2 mm for the second ink, so phi is
-    kinked while the top is smooth, and smoothing phi rounds the V off (the crater's crest
-    came out 0.21 mm high, its floor 0.38). A row with a node flatter than about
-    LEVEL_SLOPE smooths the top instead; one that reaches the untrusted outline nodes (their
-    heights are the smoothness' alone) keeps smoothing phi, which continues the rise there.
-    So do faces that came out at once (`faces`): no contact line crossed them, their rise is
-    the flat depression, with no V (a 6 mm face under the second ink came out 0.10 mm high
-    with the top smoothed there), and nodes a summit's ceiling holds (summit.py): level
-    because they are held, not a crest the contact lines went round (a mesa's shoulder
-    came out 1.3 mm off with the top smoothed there)."""
-
-    def __init__(self, rows, trusted, faces=None):
-        self.crossed = 1.0 if faces is None else (~faces).astype(float)
-        self.reach = abs(rows).tocsr()
-        self.reach.data[:] = 1.0  # the nodes each row touches
-        self.inside = (self.reach @ (1.0 - trusted)) == 0
-
-    def target(self, of_a, g, free=True):
-        """-> what the rows applied to the top should be: those applied to A (`of_a`) where
-        the top slopes (phi smooth), 0 where it is level (the top smooth); g: |grad top|."""
-        w = self.crossed * free / (1.0 + (g / LEVEL_SLOPE) ** 2)
-        level = np.asarray(self.reach.multiply(w[None, :]).max(axis=1).todense()).ravel()
-        return of_a * (1.0 - level * self.inside)
 
 
 def contact_points(slices, lat, rise, model: MeniscusModel):
