@@ -149,6 +149,19 @@ out at 9.3 mm, those at 37.5-41 at 9.9), the shoulder above stands 0.2-0.4 low (
 once) +0.35..0.45 high. Ring, after (h): the crest held flat at the cap, +0.15 over r 26-34
 mm where the truth falls to 19.75, and the wall-foot edge cells at r 15 and 45.
 
+(j) the whole bench on main d72c918 (3 December, session 11: the fit's two bounds, the
+registration's play gate, the level-top smoothing reverted), the same /tmp/harsh-hx renders,
+one part at a time on an idle core. Ea / interior p99 / max mm, honest share of (cells):
+    sample1    0.0157 0.042 0.558 100% of 28      sample2    0.0323 0.101 0.440  98% of 111
+    sample3    0.0221 0.054 0.447  97% of 33      sample4    0.2455 0.363 1.937 100% of 1725
+    twin-peaks 0.0235 0.115 0.389  32% of 31      plateau    0.0781 0.560 0.644  88% of 339
+    ring       0.0600 0.207 1.142 100% of 281
+  held out: crater 0.0393 0.202 0.291 92% of 121, steep-front 0.0153 0.093 0.256 54% of 13.
+  Honest share: tuned 97.4 % of 2548, held out 88.1 % of 134 (target 80 %). Within all three
+  targets: samples 1-3, twin-peaks, crater, steep-front. Over: sample4, plateau, ring.
+  With the level-top smoothing (fb7364e, since reverted) the plateau was 0.4105 / 0.221 /
+  4.828 and twin-peaks' max 1.199.
+
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
 """

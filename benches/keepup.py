@@ -42,6 +42,11 @@ what the fit holds). The daemon holds 45 MB over idle while processing, 17 MB of
 virtual camera's part grids (a real bench has none). Main at f54862a (with the fit's
 changes of the same morning), load ~7: 24.4 s after the last frame, child 17.9 s CPU (fit
 9.0 s, toolpath 13.1 s wall), daemon 139 MB + child 175 MB = 314 MB: MISS, MISS.
+
+Session 11, main d72c918 (the planner's work above, the waterline loops held on their levels),
+on an idle box: 84 frames, capture 59.2 s; result 15.6 s after the last frame (fit 4.75 s,
+toolpath 8.90 s, waterlines 0.49 s), child 16.9 s CPU; daemon 139 MB + child 178 MB = 317 MB.
+Both still MISS (10 s, 300 MB).
 """
 
 from __future__ import annotations

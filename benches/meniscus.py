@@ -155,6 +155,15 @@ rule moved helped it here; still <= 0.05), steep-front 0.0824 -> 0.0544; with th
 0.0241, sample3 0.0369, sample4 0.0581 (sample1, sample2 not re-run). Over 0.05: sample2 (0.0524
 before the gate, which moves none of its frames now), sample4, steep-front (by 0.0044).
 
+Reverted (d72c918): the level-top smoothing (the V rows) put the harsh bench's plateau 4.8 mm
+off (Ea 0.0782 -> 0.3998 on the same render) and twin-peaks' max over 1 mm. Any solve that
+keeps the rise's V at a level top has to pass the harsh plateau as well as the crater. Main at
+d72c918, the /tmp/men10/m2 renders, physics2, Ea / interior p99 / max mm:
+    sample1 0.0105 0.135 0.658   sample2 0.0600 0.429 1.415   sample3 0.0528 0.499 0.823
+    sample4 0.0947 0.052 0.837   crater  0.0540 0.594 1.142   twin-peaks 0.0525 0.466 1.202
+    steep-front 0.0735 0.622 0.699
+Within 0.05: sample1 only; the rest are 0.0025-0.045 over.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
