@@ -73,6 +73,7 @@ triangle mesh of two triangles per cell (split along the same diagonal our
 sampler uses, so both see the same surface), a 6 mm ball, zig-zag lines 1 mm
 apart with points 0.1 mm apart. Times are medians of repeated runs in this
 one process (the machine is shared and noisy); the ratio is what counts.
+
 Session 11, main d72c918, `--only finishing --old-ref 13e7e57` on an idle box, new | old:
 0.05: 4.9 s / 133 MB | 5.7 s / 174 MB (OK); RIM 7.4 s / 133 MB (1.50x margin 0's CPU);
 0.01: 17.1 s / 151 MB | 18.3 s / 200 MB (OK); RIM 24.9 s / 163 MB (1.46x).
