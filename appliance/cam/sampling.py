@@ -26,6 +26,8 @@ lattice: on very steep surfaces use a finer resolution (sample 4 gets 0.02 mm).
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from scipy import ndimage
 
@@ -94,12 +96,10 @@ class Sampler:
         """Each cell's corner heights (z00, z10, z01, z11), floor on cells off the part."""
         return self._g00, self._g10, self._g01, self._g11
 
-    @property
+    @cached_property
     def cell_top(self):
         """Each cell's highest corner (floor off the part): no point of its triangles is higher."""
-        if getattr(self, "_top", None) is None:
-            self._top = np.maximum(np.maximum(self._g00, self._g10), np.maximum(self._g01, self._g11))
-        return self._top
+        return np.maximum(np.maximum(self._g00, self._g10), np.maximum(self._g01, self._g11))
 
     def _cell(self, x, y):
         fx = (np.asarray(x, float) - self.x0) / self.dx

@@ -99,6 +99,10 @@ class Slice:
             a += 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
         return a
 
+    def length(self):
+        """Length of the waterline, all its loops closed."""
+        return sum(float(np.sum(np.hypot(*(np.roll(lp, -1, axis=0) - lp).T))) for lp in self.loops)
+
 
 def make_slice(level, loops) -> Slice:
     loops = [np.asarray(lp, float).reshape(-1, 2) for lp in loops]

@@ -35,7 +35,7 @@ SUMMIT_SLOPE = 2.0  # steeper (63 deg) at its first waterline, a summit is taken
 def band_half_width(sl) -> float:
     """Half the width of the band a slice encloses: its area over its perimeter (a disc of
     radius R: R / 2; a thin band: half its width)."""
-    perimeter = sum(float(np.sum(np.hypot(*(np.roll(lp, -1, axis=0) - lp).T))) for lp in sl.loops)
+    perimeter = sl.length()
     return abs(sl.area()) / perimeter if perimeter > 0 else 0.0
 
 
