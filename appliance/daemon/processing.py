@@ -136,7 +136,6 @@ def child_process(
 ) -> dict:
     """`module`: the child's main (processing_child.py, or one that adds to it with the same protocol)."""
     cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
-    release_freed_memory()
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(
             cmd,
