@@ -19,6 +19,7 @@ import pkgutil
 import sys
 
 from . import __version__, commands, progress
+from .cam.forks import workers_allowed
 from .errors import InkSliceError
 
 WRITE_REFUSED = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
@@ -53,7 +54,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         # a long command (PROGRESS = True) shows its stages: progress.py
-        with progress.shown() if args._progress else contextlib.nullcontext():
+        with progress.shown() if args._progress else contextlib.nullcontext(), workers_allowed():
             return int(args._run(args) or 0)
     except InkSliceError as e:
         print(f"inkslice: error: {e}", file=sys.stderr)

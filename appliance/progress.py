@@ -22,6 +22,7 @@ import time
 from contextlib import contextmanager
 
 BAR = 24
+TICKER = "progress"  # the bar's redrawing thread (cam/forks.py knows it is harmless)
 TICK_S = 0.25
 _display = None
 
@@ -118,7 +119,7 @@ class Display:
         self.stop = threading.Event()
         self.ticker = None
         if tty:
-            self.ticker = threading.Thread(target=self._tick, name="progress", daemon=True)
+            self.ticker = threading.Thread(target=self._tick, name=TICKER, daemon=True)
             self.ticker.start()
 
     def stage(self, name, total=None):

@@ -28,7 +28,9 @@ _BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which t
 class PassEnvelope:
     """Tip heights and envelopes of a candidate pass, on the planner's sparse points."""
 
-    def __init__(self, sampler, st, e1, e2, t0, n):
+    def __init__(self, sampler, st, e1, e2, t0, n, across=None):
+        """`across`: (s0, s1), the only passes this probe will measure (a band, bands.py):
+        the opening is then built over them and a cutter's reach beyond, not the whole part."""
         self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
         # A flat end's cusp beside its rim is the riser m s less |grad_x| x the half
         # chord sqrt(2 R s) its bottom spans there: where the gradient along the pass
@@ -55,7 +57,7 @@ class PassEnvelope:
         self.idx = idx
         self.along = t0 + st.resolution * idx
         # what an infinitely fine stepover would leave, on the verification's lattice
-        self.opening = Opening.over(sampler, st.cutter, st.resolution, pad=st.margin)
+        self.opening = _opening_for(sampler, st, e2, across)
 
     def pass_at(self, s):
         """(across position, tips at every point of the pass; inf where not in the program).
@@ -234,3 +236,17 @@ class PassEnvelope:
             self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
             self.along[None, :] * self.e1[1] + np.asarray(s)[:, None] * self.e2[1],
         )
+
+
+def _opening_for(sampler, st, e2, across):
+    """The opening the planner reads: over the whole part, or, for passes along X planned
+    over `across` only, over the rows they and their cusps reach (two cutter radii and the
+    margin beyond, the lattice the whole part's would have: the same values there)."""
+    if across is None or abs(e2[1] - 1.0) > 1e-12:
+        return Opening.over(sampler, st.cutter, st.resolution, pad=st.margin)
+    d = st.resolution
+    reach = 2 * st.cutter.radius + st.margin + 4 * d
+    _, _, by0, by1 = sampler.bounds
+    y0 = by0 + d * max(0, int(np.floor((across[0] - reach - by0) / d)))
+    y1 = min(by1, across[1] + reach)
+    return Opening.over(sampler, st.cutter, d, y0=y0, y1=y1, pad=st.margin)

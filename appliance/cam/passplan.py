@@ -17,9 +17,10 @@ from .scallop import ball_stepover, flat_stepover
 
 
 def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
+    """(across positions from s0 to s1, both included; the tips of each pass)."""
     h = st.scallop
     lo_ok, hi_ok, aim = 0.90 * h, 0.98 * h, 0.95 * h
-    probe = PassProbe(sampler, st, e1, e2, t0, n)
+    probe = PassProbe(sampler, st, e1, e2, t0, n, (s0, s1))
     # never more than 1.5 x the flat-surface stepover: convex surfaces allow a
     # little more, but a cross-section where nothing could be measured (the
     # pass along an uphill edge touching only the edge) must not open a gap

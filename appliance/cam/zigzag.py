@@ -40,11 +40,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SettingError, check_mm
+from .bands import plan_in_bands
 from .contact import drop_lines
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
 from .linking import links
-from .passplan import plan_passes
 from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .rimline import FineEnds
 from .sampling import Sampler
@@ -161,7 +161,7 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
         k = int(np.ceil((s1 - s0) / st.stepover - 1e-9))
         passes = np.linspace(s0, s1, k + 1) if k > 0 else np.array([s0])
     else:
-        passes, planned = plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
+        passes, planned = plan_in_bands(sampler, st, e1, e2, t0, n, s0, s1)
     origins = np.array([origin(s) for s in passes])
     if planned is not None and st.leave == 0:
         # the planner dropped the cutter along every pass it placed (inf off the part,

@@ -1,0 +1,104 @@
+"""Work forked onto the other cores, where that is safe.
+
+A fork copies only the thread that calls it: in a process with another thread alive (the
+daemon's web server and job runner) a lock that thread held stays held in the copy forever.
+So forking is allowed only by a process that knows it has no other thread (the processing
+child's main, `allow_workers`; a command, `workers_allowed`), and even then only while no
+other Python thread is alive (the command line's progress ticker excepted: a worker never
+draws). Everywhere else the work runs here, in one piece.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import pickle
+import signal
+import threading
+from contextlib import contextmanager
+
+from ..errors import InkSliceError
+from ..progress import TICKER
+
+MAX_WORKERS = 2  # each worker holds its own envelopes (~30 MB on the demo's part): 1 GB boxes
+
+_allowed = 1
+
+
+def allow_workers(n: int | None = None) -> int:
+    """Let finishing plan in up to `n` bands at once (default: the cores this process may use,
+    at most MAX_WORKERS), for the rest of this process: the processing child's main."""
+    global _allowed
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    _allowed = max(1, min(MAX_WORKERS, cores) if n is None else int(n))
+    return _allowed
+
+
+@contextmanager
+def workers_allowed(n: int | None = None):
+    """allow_workers for the block only (a command run in-process by a caller leaves the
+    caller as it was)."""
+    before = _allowed
+    allow_workers(n)
+    try:
+        yield
+    finally:
+        allow_workers(before)
+
+
+def workers() -> int:
+    """Bands to plan at once now: a fork copies only the calling thread, so with another
+    Python thread alive (a web server, a job runner) the planner stays in one."""
+    alone = all(t is threading.main_thread() or t.name == TICKER for t in threading.enumerate())
+    return _allowed if alone else 1
+
+
+def in_workers(tasks: list) -> list:
+    """Each task's result, the first run here and the others in forked children."""
+    children, parent = [], os.getpid()
+    for task in tasks[1:]:
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the worker: run, send, leave without running the parent's exit code
+            os.close(r)
+            _die_with(parent)
+            code = 0
+            try:
+                data = pickle.dumps(("ok", task()))
+            except BaseException as e:  # sent to the parent, raised there
+                data, code = pickle.dumps(("error", f"{type(e).__name__}: {e}")), 1
+            with os.fdopen(w, "wb") as out:
+                out.write(data)
+            os._exit(code)
+        os.close(w)
+        children.append((pid, r))
+    try:
+        results = [tasks[0]()]
+    finally:
+        received = [_receive(pid, r) for pid, r in children]
+    for kind, value in received:
+        if kind != "ok":
+            raise InkSliceError("worker", f"a forked worker failed: {value}")
+        results.append(value)
+    return results
+
+
+def _die_with(parent: int):
+    """A worker is killed with its parent (a cancelled job's child is SIGKILLed: its workers
+    must not run on, writing into a pipe nobody reads)."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+    if os.getppid() != parent:  # it died before the line above
+        os._exit(1)
+
+
+def _receive(pid: int, fd: int):
+    with os.fdopen(fd, "rb") as inp:
+        data = inp.read()  # read before waiting: a full pipe would block the worker
+    _, status = os.waitpid(pid, 0)
+    if not data:
+        code = os.waitstatus_to_exitcode(status)
+        return "error", f"it ended with {'signal ' + str(-code) if code < 0 else 'exit code ' + str(code)}"
+    return pickle.loads(data)
