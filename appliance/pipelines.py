@@ -15,7 +15,6 @@ process.py runs these for `inkslice process` and writes the outputs.
 from __future__ import annotations
 
 import json
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from .scanfile import read_frame
 from .surface import seed as seed_methods
 from .surface.heightmap import HeightMap
 from .vision import seed as seed_vision
+from .waterlines import extract_waterlines, frames_top_down
 
 PIPELINES = ("inkslice", "seed")
 OUR_METHODS = ("fit",)
@@ -66,10 +66,6 @@ def label(key: str) -> str:
     return LABELS[method] if method == "fit" else f"{LABELS[method]} (our waterlines)"
 
 
-def _frames_top_down(scan):
-    return sorted(scan.frames, key=lambda f: -f.level_mm)
-
-
 # -- the seed method ----------------------------------------------------------------
 
 
@@ -95,7 +91,7 @@ def run_seed(scan, grid_n=50):
     progress.stage("the seed method")
     slices = [
         seed_vision.seed_slice(read_frame(scan, ref), ref.level_mm, scan.camera)
-        for ref in _frames_top_down(scan)
+        for ref in frames_top_down(scan)
     ]
     pts = np.vstack([np.column_stack([s.edges_mm, np.full(len(s.edges_mm), s.level_mm)]) for s in slices])
     if len(pts) < 3:
@@ -109,42 +105,6 @@ def run_seed(scan, grid_n=50):
 
 
 # -- ours ---------------------------------------------------------------------------
-
-
-CONFIRMING_FRAMES = 2  # lower frames that must agree a pixel is part (vision/pipeline.py)
-REREAD_ABOVE = 3  # frames above the first showing the part read again for its top
-
-
-def extract_waterlines(scan):
-    """Every frame's waterline, top level first. Each frame is read with the next lower
-    ones beside it (exposure is monotone: what is part here is part below, so what they
-    do not show is glare or flotsam); only those few frames are held at a time."""
-    from .surface.slices import shows_waterline
-    from .vision.pipeline import WaterlineExtractor
-
-    extractor = WaterlineExtractor(scan.camera, no_part="empty")  # a scan starts above the part
-    frames = [ref for ref in _frames_top_down(scan) if shows_waterline(ref.level_mm)]
-    ahead = deque()
-    out = []
-    above = deque(maxlen=REREAD_ABOVE)  # the last frames, while none has shown the part
-    progress.stage("waterlines", total=len(frames))
-    for i in range(len(frames)):
-        progress.step(i)
-        while len(ahead) < CONFIRMING_FRAMES + 1 and i + len(ahead) < len(frames):
-            nxt = frames[i + len(ahead)]
-            ahead.append((nxt.level_mm, read_frame(scan, nxt)))
-        level, frame = ahead.popleft()
-        out.append(extractor.extract(frame, level, below=list(ahead)))
-        if above and out[-1].loops:
-            # the first frame showing the part: the ones above may show its top as a sliver
-            found = extractor.read_above(list(reversed(above)), below=[(level, frame)] + list(ahead))
-            for k, wl in enumerate(found):
-                out[-2 - k] = wl
-        if any(wl.loops for wl in out):
-            above.clear()
-        else:
-            above.append((level, frame))
-    return out
 
 
 def _waterline_bounds(waterlines):
@@ -173,13 +133,22 @@ def meniscus_model(scan, meniscus):
     return outputs.meniscus_model(doc, scan.camera, path)
 
 
-def run_inkslice(scan, methods, grid_n=50, spacing_mm=None, displacement=True, meniscus=None):
-    """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines)."""
+def run_inkslice(
+    scan,
+    methods,
+    grid_n=50,
+    spacing_mm=None,
+    displacement=True,
+    meniscus=None,
+    waterlines_of=extract_waterlines,
+):
+    """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines). `waterlines_of`:
+    scan -> its waterlines (a reader that followed the scan has most of them already)."""
     from .surface.base import stand_on_base
     from .surface.perspective import Perspective
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 
-    waterlines = extract_waterlines(scan)
+    waterlines = waterlines_of(scan)
     bounds = _waterline_bounds(waterlines)
     # the grid spans the part's outline once the walls' raised edges are put back
     grid = GridSpec(None, spacing_mm=spacing_mm) if spacing_mm else GridSpec(None, n=grid_n)

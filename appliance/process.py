@@ -71,6 +71,7 @@ def process(
     compare=False,
     displacement=True,
     meniscus=None,
+    waterlines_of=extract_waterlines,
 ) -> Job:
     scan_folder = Path(scan_folder)
     if pipeline not in PIPELINES:
@@ -100,7 +101,9 @@ def process(
     if pipeline == "inkslice" or compare:
         t0 = time.perf_counter()
         methods = (method,) if not compare else tuple(dict.fromkeys((method, "fit")))
-        hms, job.diagnostics, _ = run_inkslice(scan, methods, grid_n, spacing_mm, displacement, meniscus)
+        hms, job.diagnostics, _ = run_inkslice(
+            scan, methods, grid_n, spacing_mm, displacement, meniscus, waterlines_of
+        )
         job.heightmaps.update(hms)
         job.notes += [
             f"{label('inkslice:' + m)}: {n}" for m in methods for n in job.diagnostics[m]["base_notes"]

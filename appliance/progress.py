@@ -57,6 +57,20 @@ def shown(stream=None, tty: bool | None = None):
         _display = previous
 
 
+def peak_mb() -> float:
+    """This process's own peak resident memory in MB. Not ru_maxrss: a process started by
+    fork and exec keeps in it what its parent held when it forked (a daemon's 180 MB made a
+    processing child of 100 look like 220); the kernel's VmHWM is this program's alone."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB (not Linux)
+
+
 @contextmanager
 def timed():
     """Clock the stages reported inside the block: yields a _StageClock whose `seconds`
@@ -86,7 +100,7 @@ class _StageClock:
     def close(self):
         if self.name is not None:
             self.seconds[self.name] = self.seconds.get(self.name, 0.0) + time.monotonic() - self.t0
-            self.peak_mb[self.name] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB
+            self.peak_mb[self.name] = peak_mb()
             self.name = None
 
 

@@ -57,6 +57,34 @@ def start_daemon(tmp: Path, *flags: str, wait_s: float = 120.0) -> tuple[subproc
             time.sleep(0.1)
 
 
+def tree_pids(pid: int) -> list[int]:
+    """pid and every process below it (the daemon, its processing child, that child's workers)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        try:
+            for task in Path(f"/proc/{p}/task").iterdir():
+                todo += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:  # it ended meanwhile
+            pass
+    return out
+
+
+def tree_pss_mb(pid: int) -> float:
+    """The proportional set size of pid's whole tree in MB: each shared page (the libraries, a
+    forked worker's copy of its parent) counted once, shared out between the processes."""
+    total = 0
+    for p in tree_pids(pid):
+        try:
+            for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines():
+                if line.startswith("Pss:"):
+                    total += int(line.split()[1])
+        except OSError:
+            pass
+    return total / 1024
+
+
 def proc_status_mb(pid: int, key: str) -> float | None:
     """A memory figure of /proc/PID/status (VmRSS now, VmHWM the peak) in MB."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():

@@ -8,7 +8,10 @@ stops at once on cancel. Its result comes back as JSON on stdout; an
 InkSliceError in it comes back as its one-line text on stderr, exit code 2.
 
 A processor is any callable (scan_folder, out_folder, options, stop_event)
--> {"outputs": [file names], ...}; tests pass `in_process` or a fake. `run` is
+-> {"outputs": [file names], ...}; tests pass `in_process` or a fake. One that
+can also start before the capture ends has `follow` (`Follows`): the runner then
+starts it with the capture, and it reads each frame's waterline as the frame
+lands (`EarlyChild`), so the result is ready sooner after the last frame. `run` is
 the one way a job's scan is processed, for a captured scan (runner.py) and an
 imported one (service.py) alike: the job's settings become the processor's
 options (`options_for`), the outputs are checked, the peak memory noted.
@@ -30,6 +33,7 @@ from __future__ import annotations
 import ctypes
 import gc
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -38,8 +42,11 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 from ..errors import Cancelled, InkSliceError
+
+log = logging.getLogger("inkslice.processing")
 
 JOB_OWN = ("scan",)  # what a job folder holds besides the outputs
 PROGRAM = "toolpath.gcode"
@@ -75,11 +82,15 @@ def options_for(settings: dict) -> dict:
     return options
 
 
-def run(processor: Callable, store, job_id: str, settings: dict, stop) -> list[str]:
-    """Process job `job_id`'s scan (its folder's scan/) into the job folder with `settings`;
-    returns the checked outputs. Raises Cancelled when `stop` was set meanwhile."""
+def run(processor: Callable, store, job_id: str, settings: dict, stop, early=None) -> list[str]:
+    """Process job `job_id`'s scan (its folder's scan/) into the job folder with `settings`
+    (by `early`, the child that followed the capture, if there is one); returns the checked
+    outputs. Raises Cancelled when `stop` was set meanwhile."""
     job_dir = Path(store.job_dir(job_id))
-    result = processor(job_dir / "scan", job_dir, options_for(settings), stop)
+    if early is not None:
+        result = early.result(stop)
+    else:
+        result = processor(job_dir / "scan", job_dir, options_for(settings), stop)
     if stop is not None and stop.is_set():
         raise Cancelled()
     if "peak_rss_mb" in result:
@@ -126,46 +137,126 @@ def _die_with_parent():
         pass
 
 
+CHILD = "appliance.daemon.processing_child"
+
+
 def child_process(
-    scan_folder,
-    out_folder,
-    options,
-    stop=None,
-    poll_s: float = 0.2,
-    module: str = "appliance.daemon.processing_child",
+    scan_folder, out_folder, options, stop=None, poll_s: float = 0.2, module: str = CHILD
 ) -> dict:
     """`module`: the child's main (processing_child.py, or one that adds to it with the same protocol)."""
-    cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen(
-            cmd,
-            stdout=out,
-            stderr=err,
+    with _Child(module, scan_folder, out_folder, options) as child:
+        return child.result(stop, poll_s)
+
+
+class _Child:
+    """A processing child: its process and the files its stdout and stderr go to."""
+
+    def __init__(self, module, scan_folder, out_folder, options, follow=False):
+        cmd = [sys.executable, "-m", module, str(scan_folder), str(out_folder), json.dumps(options)]
+        self.out, self.err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(
+            cmd + (["--follow"] if follow else []),
+            stdin=subprocess.PIPE if follow else subprocess.DEVNULL,
+            stdout=self.out,
+            stderr=self.err,
             preexec_fn=_die_with_parent,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Kill it if it still runs (a cancel, a failed scan), and drop its files."""
+        if self.proc.returncode is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.out.close()
+        self.err.close()
+
+    def result(self, stop, poll_s) -> dict:
         while True:
             # wait4, not wait: it also gives the child's peak memory, which the job records
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
             if pid:
-                proc.returncode = rc = os.waitstatus_to_exitcode(status)
+                self.proc.returncode = rc = os.waitstatus_to_exitcode(status)
                 break
             if stop is not None and stop.is_set():
-                proc.kill()
-                proc.wait()
+                self.close()
                 raise Cancelled()
             time.sleep(poll_s)
-        out.seek(0)
-        err.seek(0)
-        stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
+        self.out.seek(0)
+        self.err.seek(0)
+        stdout, stderr = self.out.read().decode(errors="replace"), self.err.read().decode(errors="replace")
+        return _outcome(rc, usage, stdout, stderr)
+
+
+class EarlyChild(_Child):
+    """The processing child started when the capture starts (runner.py): it imports the
+    processing code and reads each frame's waterline as the frame lands, so the result is
+    ready sooner after the last frame (processing_child.py --follow). `result` tells it the
+    capture is over; `close` (any other end of the scan) ends it."""
+
+    def __init__(self, scan_folder, out_folder, options, module: str = CHILD):
+        super().__init__(module, scan_folder, out_folder, options, follow=True)
+        self.args = (scan_folder, out_folder, options)
+        self.module = module
+
+    def result(self, stop, poll_s=0.2) -> dict:
+        if self.proc.poll() is not None:
+            # it ended while following (killed for memory, say): a child as before does it all
+            log.warning(
+                "the processing child that followed the scan ended (%s): starting another",
+                self.proc.returncode,
+            )
+            return child_process(*self.args, stop, poll_s, self.module)
+        try:
+            self.proc.stdin.write(b"go\n")
+            self.proc.stdin.close()
+        except BrokenPipeError:  # it has ended already: its exit code says why
+            pass
+        return super().result(stop, poll_s)
+
+    def close(self):
+        if self.proc.stdin and not self.proc.stdin.closed:
+            try:
+                self.proc.stdin.close()
+            except BrokenPipeError:
+                pass
+        super().close()
+
+
+@runtime_checkable
+class Follows(Protocol):
+    """A processor that can start before the capture ends (`child_process` can; `in_process`
+    and a test's fakes cannot, and run when the capture is over)."""
+
+    def follow(self, scan_folder, out_folder, options) -> EarlyChild: ...
+
+
+child_process.follow = lambda scan_folder, out_folder, options: EarlyChild(  # type: ignore[attr-defined]
+    scan_folder, out_folder, options
+)
+
+
+def start_early(processor, scan_folder, out_folder, settings) -> EarlyChild | None:
+    """The child that follows the capture, for a processor that can."""
+    if not isinstance(processor, Follows):
+        return None
+    return processor.follow(scan_folder, out_folder, options_for(settings))
+
+
+def _outcome(rc, usage, stdout, stderr) -> dict:
+    # (ru_maxrss counts what the daemon held when it forked the child: the child's own peak
+    # is the one it reports, progress.peak_mb)
     peak_mb = usage.ru_maxrss / 1024  # Linux reports kB
     if rc == 0:
         cpu_s = usage.ru_utime + usage.ru_stime  # on a busy box a far surer figure than the wall time
-        return {
-            **json.loads(stdout.strip().splitlines()[-1]),
-            "peak_rss_mb": round(peak_mb, 1),
-            "cpu_s": round(cpu_s, 1),
-        }
+        result = json.loads(stdout.strip().splitlines()[-1])
+        return {**result, "peak_rss_mb": result.pop("peak_mb", round(peak_mb, 1)), "cpu_s": round(cpu_s, 1)}
     if rc == 2 and stderr.strip():
         where, _, problem = stderr.strip().splitlines()[-1].partition(": ")
         raise InkSliceError(where or "processing", problem or stderr.strip())

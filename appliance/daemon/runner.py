@@ -85,6 +85,7 @@ class ScanRunner:
         self._mask = None  # the part in the last frame of the descent
         self._scan: Scan | None = None
         self._level_times: list[float] = []
+        self._early: processing.EarlyChild | None = None  # the processing child following the capture
 
     # -- the whole job ----------------------------------------------------------
     def run(self) -> str:
@@ -94,6 +95,9 @@ class ScanRunner:
             self.plan = LevelPlan(self.settings, self._ceiling())
             pending = self._pending_refinement(scan)
             if pending or self.plan.next_target(scan.frames) is not None:
+                self._early = processing.start_early(
+                    self.processor, self.scan_dir, self.job_dir, S.full(self.settings)
+                )
                 self._home()
                 if pending:
                     self._refine(scan, *pending)
@@ -123,6 +127,9 @@ class ScanRunner:
             self._make_safe()
             self._finish("failed", f"internal error: {type(e).__name__}: {e}")
             return "failed"
+        finally:
+            if self._early is not None:  # done with, or the scan ended before its capture did
+                self._early.close()
 
     def _cancelled(self) -> str:
         reason = getattr(self.stop, "reason", "cancelled by the operator")
@@ -393,4 +400,6 @@ class ScanRunner:
         processing.release_freed_memory()  # before the state says so: the capture's heap is gone
         self.store.update_job(self.job_id, status="processing")
         self.report(state="processing", message="building the height map and the toolpath", eta_s=None)
-        return processing.run(self.processor, self.store, self.job_id, S.full(self.settings), self.stop)
+        return processing.run(
+            self.processor, self.store, self.job_id, S.full(self.settings), self.stop, self._early
+        )

@@ -252,22 +252,30 @@ class _KnownPart:
         return devices
 
     def processor(self, inner):
-        from ..daemon.processing import child_process
+        from ..daemon.processing import EarlyChild, child_process
         from .truth import find_truth, truth_path, write_truth
 
-        def process(scan_folder, out_folder, options, stop=None):
+        CHILD = "appliance.sim.processing_child"
+
+        def with_truth(scan_folder, options):
             if self.part_in_view is not None:
                 write_truth(scan_folder, self.part_in_view)
             # the job folder is replaced by the outputs: the truth file stays beside the scan
-            options = {**options, "keep": [*options.get("keep", ()), truth_path(scan_folder).name]}
+            return {**options, "keep": [*options.get("keep", ()), truth_path(scan_folder).name]}
+
+        def process(scan_folder, out_folder, options, stop=None):
+            options = with_truth(scan_folder, options)
             if inner is child_process:
-                return child_process(
-                    scan_folder, out_folder, options, stop, module="appliance.sim.processing_child"
-                )
+                return child_process(scan_folder, out_folder, options, stop, module=CHILD)
             from ..process import process_scan
 
             return process_scan(scan_folder, out_folder, truth=find_truth(scan_folder), **options)
 
+        if inner is child_process:
+            # the child that follows the capture (daemon/processing.py), with the truth too
+            process.follow = lambda scan_folder, out_folder, options: EarlyChild(  # type: ignore[attr-defined]
+                scan_folder, out_folder, with_truth(scan_folder, options), module=CHILD
+            )
         return process
 
 
