@@ -115,6 +115,17 @@ def _waterline_bounds(waterlines):
     return (float(p[:, 0].min()), float(p[:, 0].max()), float(p[:, 1].min()), float(p[:, 1].max()))
 
 
+def camera_view(camera):
+    """The camera's pose for the fit (surface/perspective.py), if the calibration has one."""
+    from .surface.perspective import Perspective
+
+    return (
+        Perspective(camera.centre_xy(), camera.height_mm)
+        if camera.height_mm and camera.K is not None
+        else None
+    )
+
+
 def meniscus_model(scan, meniscus):
     """The meniscus correction: a meniscus.json from `calibrate --reference`, scan.json's, or none."""
     if meniscus is False or (meniscus is None and not scan.extra.get("meniscus")):
@@ -141,11 +152,12 @@ def run_inkslice(
     displacement=True,
     meniscus=None,
     waterlines_of=extract_waterlines,
+    pair_memo=None,
 ):
     """Our pipeline -> ({"inkslice:method": HeightMap}, diagnostics, waterlines). `waterlines_of`:
-    scan -> its waterlines (a reader that followed the scan has most of them already)."""
+    scan -> its waterlines, and `pair_memo` the frame pairs' shifts (registration.pair_shifts):
+    a processing child that followed the scan has most of both already."""
     from .surface.base import stand_on_base
-    from .surface.perspective import Perspective
     from .surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 
     waterlines = waterlines_of(scan)
@@ -154,11 +166,7 @@ def run_inkslice(
     grid = GridSpec(None, spacing_mm=spacing_mm) if spacing_mm else GridSpec(None, n=grid_n)
     tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
     model = meniscus_model(scan, meniscus)
-    view = (
-        Perspective(scan.camera.centre_xy(), scan.camera.height_mm)
-        if scan.camera.height_mm and scan.camera.K is not None
-        else None
-    )
+    view = camera_view(scan.camera)
     out, diag = {}, {}
     for m in methods:
         progress.stage(f"surface ({m})")
@@ -171,6 +179,7 @@ def run_inkslice(
                 meniscus=model,
                 perspective=view,
                 pixel_mm=scan.camera.pixel_mm(),
+                pair_memo=pair_memo,
             ),
         )
         bounds = rec.diagnostics.get("bounds", bounds)

@@ -72,6 +72,7 @@ def process(
     displacement=True,
     meniscus=None,
     waterlines_of=extract_waterlines,
+    pair_memo=None,
 ) -> Job:
     scan_folder = Path(scan_folder)
     if pipeline not in PIPELINES:
@@ -102,7 +103,7 @@ def process(
         t0 = time.perf_counter()
         methods = (method,) if not compare else tuple(dict.fromkeys((method, "fit")))
         hms, job.diagnostics, _ = run_inkslice(
-            scan, methods, grid_n, spacing_mm, displacement, meniscus, waterlines_of
+            scan, methods, grid_n, spacing_mm, displacement, meniscus, waterlines_of, pair_memo
         )
         job.heightmaps.update(hms)
         job.notes += [

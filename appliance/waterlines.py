@@ -48,6 +48,9 @@ class TopDownReader:
 
     def __init__(self, scan):
         self.scan = scan
+        # the frame pairs' shifts measured as the frames were read, for the fit's registration
+        # (daemon/processing_child.py measure_pairs; keyed by the slices' content)
+        self.pair_memo: dict = {}
         self._start()
 
     def _start(self):

@@ -8,7 +8,7 @@ that plays sideways shifts each frame's whole waterline; the walls tell by how m
 
 import numpy as np
 
-from appliance.surface.registration import registered
+from appliance.surface.registration import pair_shifts, registered, slice_key
 from appliance.surface.slices import make_slice
 
 LEVELS = np.arange(19.7, 10.0, -0.3)
@@ -118,3 +118,22 @@ def test_frames_shifted_by_the_stages_play_are_moved_back_across_walls_facing_ea
     assert np.ptp(post_x(out)[3:-3]) < 0.01  # in line, to a fifth of the play
     assert np.ptp(post_x(out)) < 0.025  # the ends too, less well (one-sided pairs and trend)
     assert np.abs(offsets[:, 1]).max() < 0.005  # and nothing made up across y
+
+
+def test_pairs_measured_while_the_scan_ran_are_used_and_the_rest_measured():
+    rng = np.random.default_rng(5)
+    frames = _frames(rng.uniform(-0.04, 0.04, (LEVELS.size, 2)))
+    whole = pair_shifts(frames)
+    memo = {}
+    early = pair_shifts(frames[:10], memo=memo)  # the frames read before the scan ended
+    assert len(memo) == len(early)
+    at_end = pair_shifts(frames, memo=memo)
+    assert at_end.keys() == whole.keys() and len(memo) == len(whole)
+    assert all(np.array_equal(at_end[k][0], whole[k][0]) for k in whole)
+    # a pair in the memo is taken from it, not measured again
+    key = (slice_key(frames[0]), slice_key(frames[1]))
+    memo[key] = (np.array([9.0, 9.0]), np.eye(2))
+    assert np.array_equal(pair_shifts(frames, memo=memo)[(0, 1)][0], [9.0, 9.0])
+    # a frame with other points is another slice: its pairs are measured
+    moved = [frames[0].moved(frames[0].P + 0.01, frames[0].z), *frames[1:]]
+    assert not np.array_equal(pair_shifts(moved, memo=memo)[(0, 1)][0], [9.0, 9.0])

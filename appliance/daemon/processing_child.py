@@ -31,6 +31,7 @@ def main(argv, truth_for=lambda scan_folder: None):
             return ABANDONED
         if reader is not None:
             options["waterlines_of"] = reader.finish
+            options["pair_memo"] = reader.pair_memo
     try:
         with progress.timed() as clock:
             result = process_scan(scan, out, truth=truth_for(scan), **options)
@@ -100,8 +101,22 @@ def catch_up(scan_folder, reader, seen):
         return reader, seen
     scan = load_scan(scan_folder)
     reader = reader or TopDownReader(scan)
-    reader.read(settled(scan))
+    measure_pairs(reader.read(settled(scan)), reader.pair_memo, scan.camera)
     return reader, mtime
+
+
+def measure_pairs(waterlines, memo, camera):
+    """The shifts between the frames read so far (registration.py), into `memo`: the fit
+    then has only the last few pairs left to measure."""
+    from ..pipelines import camera_view
+    from ..surface.registration import pair_shifts
+    from ..surface.slices import check_waterlines
+
+    if not any(wl.loops for wl in waterlines):
+        return
+    view = camera_view(camera)
+    slices, _ = check_waterlines(waterlines)
+    pair_shifts(slices, *((view.xy, view.height_mm) if view is not None else (None, None)), memo=memo)
 
 
 def settled(scan) -> list:

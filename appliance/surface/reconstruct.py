@@ -98,6 +98,7 @@ class ReconstructOptions:
     perspective: Perspective | None = None  # camera foot and height: walls seen by their raised edges
     pixel_mm: float = 0.0  # the camera's pixel on the liquid plane (waterline placement)
     register_frames: bool = True  # frames moved back by their lateral stage play (registration.py)
+    pair_memo: dict | None = None  # the frame pairs' shifts measured before (registration.pair_shifts)
     explain_uncertainty: bool = False  # diagnostics["uncertainty_terms"]: each term on the output grid
 
 
@@ -173,7 +174,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     camera = opt.perspective
     if opt.register_frames:
         foot, height = (camera.xy, camera.height_mm) if camera is not None else (None, None)
-        slices, offsets = registered(slices, foot, height)
+        slices, offsets = registered(slices, foot, height, opt.pair_memo)
         diag["frame_offsets_mm"] = float(np.max(np.hypot(*offsets.T), initial=0.0))
     if camera is None:
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)

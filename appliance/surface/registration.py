@@ -28,6 +28,8 @@ Pure: observed slices in, slices out; reconstruct does it before anything else.
 
 from __future__ import annotations
 
+import hashlib
+
 import cv2
 import numpy as np
 
@@ -99,6 +101,23 @@ def _distance(s, nv):
     return np.abs(d, out=d)
 
 
+def _votes(n, s, move, D, block=64):
+    """Per candidate shift (rows of D), the points' votes summed: each point votes as a foot
+    or as a raised edge, whichever agrees better (the larger of the two Gaussians is the one
+    of the smaller distance: one exp, not two). In blocks of points: all at once, the
+    (points, candidates) arrays were 50 MB a pair, the processing child's peak."""
+    total = np.zeros(len(D))
+    for a in range(0, len(s), block):
+        nv = n[a : a + block] @ D.T
+        votes = _distance(s[a : a + block], nv)
+        np.minimum(votes, _distance((s - move)[a : a + block], nv), out=votes)
+        votes *= votes
+        votes *= -0.5
+        np.exp(votes, out=votes)
+        total += votes.sum(axis=0)
+    return total
+
+
 def pair_shift(upper: Slice, lower: Slice, camera_xy=None, camera_height_mm=None):
     """-> (shift of `lower` against `upper` in mm, 2x2 information matrix) from the points
     that agree on one shift along their normals; (zeros, zeros) when too few agree.
@@ -113,17 +132,10 @@ def pair_shift(upper: Slice, lower: Slice, camera_xy=None, camera_height_mm=None
     GX, GY = np.meshgrid(grid, grid)
     D = np.column_stack([GX.ravel(), GY.ravel()])
     every = max(1, len(s) // VOTERS)
-    nv = n[::every] @ D.T
-    # each point's vote as a foot or as a raised edge, whichever agrees better: the larger of
-    # the two Gaussians is the one of the smaller distance (one exp, not two: most of the time)
-    votes = _distance(s[::every], nv)
-    np.minimum(votes, _distance((s - move)[::every], nv), out=votes)
-    votes *= votes
-    votes *= -0.5
-    np.exp(votes, out=votes)
     # of two shifts the points agree on as well (a wall that is static one way, its raised
     # edge the other), the smaller: the stage plays by PLAY_MM
-    shift = D[int(np.argmax(votes.sum(axis=0) * np.exp(-0.5 * np.sum(D**2, axis=1) / PLAY_MM**2)))]
+    total = _votes(n[::every], s[::every], move[::every], D)
+    shift = D[int(np.argmax(total * np.exp(-0.5 * np.sum(D**2, axis=1) / PLAY_MM**2)))]
     for _ in range(3):  # least squares on the points that agree
         static, raised = s - n @ shift, s - move - n @ shift
         value = np.where(np.abs(static) <= np.abs(raised), s, s - move)
@@ -139,16 +151,26 @@ def pair_shift(upper: Slice, lower: Slice, camera_xy=None, camera_height_mm=None
     return shift, info / agree.sum() / PAIR_SIGMA_MM**2
 
 
-def pair_shifts(slices: list[Slice], camera_xy=None, camera_height_mm=None) -> dict:
+def pair_shifts(slices: list[Slice], camera_xy=None, camera_height_mm=None, memo=None) -> dict:
     """{(u, j): pair_shift} for the frames with the part (numbered among themselves), each
-    with the ones PAIRS above it."""
+    with the ones PAIRS above it. `memo`: {(slice_key, slice_key): pair_shift} of pairs
+    measured before (while the scan ran: daemon/processing_child.py), filled with the rest."""
     seen = [s for s in slices if not s.empty]
-    return {
-        (j - gap, j): pair_shift(seen[j - gap], seen[j], camera_xy, camera_height_mm)
-        for j in range(len(seen))
-        for gap in PAIRS
-        if j - gap >= 0
-    }
+    memo = {} if memo is None else memo
+    out = {}
+    for j in range(len(seen)):
+        for gap in PAIRS:
+            if j - gap >= 0:
+                key = (slice_key(seen[j - gap]), slice_key(seen[j]))
+                if key not in memo:
+                    memo[key] = pair_shift(seen[j - gap], seen[j], camera_xy, camera_height_mm)
+                out[(j - gap, j)] = memo[key]
+    return out
+
+
+def slice_key(s: Slice) -> tuple:
+    """A slice by its level and its points: two frames' pair shift depends on nothing else."""
+    return (s.level, hashlib.blake2b(np.ascontiguousarray(s.P).tobytes(), digest_size=16).digest())
 
 
 def frame_offsets(slices: list[Slice], camera_xy=None, camera_height_mm=None, pairs=None) -> np.ndarray:
@@ -216,11 +238,14 @@ def _trend(t: np.ndarray) -> np.ndarray:
     return out
 
 
-def registered(slices: list[Slice], camera_xy=None, camera_height_mm=None) -> tuple[list[Slice], np.ndarray]:
+def registered(
+    slices: list[Slice], camera_xy=None, camera_height_mm=None, memo=None
+) -> tuple[list[Slice], np.ndarray]:
     """-> (the slices each moved back by its frame's offset, the offsets (K, 2) in mm). When
     the offsets' rms is under NOTHING_TO_DO_MM, or the shifts do not look like play (_plays;
-    the offsets then come back as zeros), the slices come back as they were."""
-    pairs = pair_shifts(slices, camera_xy, camera_height_mm)
+    the offsets then come back as zeros), the slices come back as they were. `memo`: as
+    pair_shifts'."""
+    pairs = pair_shifts(slices, camera_xy, camera_height_mm, memo)
     offsets = frame_offsets(slices, camera_xy, camera_height_mm, pairs)
     seen = [k for k, s in enumerate(slices) if not s.empty]
     if np.sqrt(np.mean(np.sum(offsets[seen] ** 2, axis=1))) < NOTHING_TO_DO_MM:
