@@ -372,3 +372,60 @@ def test_a_scan_cut_while_refining_a_step_finishes_the_bisection_when_resumed(tm
         assert audit(svc.store) == []
     finally:
         svc.close()
+
+
+def _following_children():
+    """This process's children that are processing children following a capture."""
+    from pathlib import Path
+
+    pids = []
+    for task in Path("/proc/self/task").iterdir():
+        pids += (task / "children").read_text().split()
+    out = []
+    for pid in pids:
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"appliance.daemon.processing_child" in cmd and b"--follow" in cmd:
+            out.append(pid)
+    return out
+
+
+def test_the_child_that_followed_the_capture_gives_what_inkslice_process_gives(tmp_path):
+    from appliance.daemon.processing import child_process
+
+    svc, _ = service(tmp_path, faults={"stage": {"seconds_per_mm": 0.05}}, processor=child_process)
+    try:
+        job_id = svc.start_scan({**SCAN, "pipeline": "inkslice"})
+        seen_following = False
+        for st in svc.subscribe(timeout=120):
+            if st["state"] == "scanning" and (st.get("levels_done") or 0) >= 3:
+                seen_following = seen_following or bool(_following_children())
+            if st["state"] in ("done", "failed", "cancelled"):
+                break
+        job = wait_final(svc, job_id)
+        assert job["status"] == "done", job["reason"]
+        assert seen_following  # the child was there while the frames came in
+        ref = tmp_path / "ref"
+        process_scan(svc.store.job_dir(job_id) / "scan", ref, pipeline="inkslice")
+        assert (ref / "heightmap.csv").read_bytes() == svc.job_file(job_id, "heightmap.csv").read_bytes()
+        assert _following_children() == []
+    finally:
+        svc.close()
+
+
+def test_a_scan_cancelled_during_its_capture_leaves_no_processing_child(tmp_path):
+    from appliance.daemon.processing import child_process
+
+    svc, _ = service(tmp_path, faults={"stage": {"seconds_per_mm": 0.05}}, processor=child_process)
+    try:
+        job_id = svc.start_scan({**SCAN, "pipeline": "inkslice"})
+        for st in svc.subscribe(timeout=120):
+            if st["state"] == "scanning" and (st.get("levels_done") or 0) >= 2 and _following_children():
+                svc.cancel()
+                break
+        assert wait_final(svc, job_id)["status"] == "cancelled"
+        assert _following_children() == []
+    finally:
+        svc.close()
