@@ -363,32 +363,38 @@ from appliance.cam.zigzag import FinishSettings
 from appliance.sim import surfaces
 from appliance.surface.heightmap import HeightMap
 name, step, cutter, scallop = sys.argv[1], float(sys.argv[2]), sys.argv[3], float(sys.argv[4])
-rim = len(sys.argv) > 5 and sys.argv[5] == "rim"
+rim = "rim" in sys.argv[5:]
+if "bands" in sys.argv[5:]:  # as the processing child and the commands plan: on two cores
+    from appliance.cam.forks import allow_workers
+    allow_workers(2)
 s = surfaces.get(name)
 x0, x1, y0, y1 = s.bounds
 x = np.linspace(x0, x1, int(round((x1 - x0) / step)) + 1)
 y = np.linspace(y0, y1, int(round((y1 - y0) / step)) + 1)
 X, Y = np.meshgrid(x, y)
 hm = HeightMap(x, y, s.height(X, Y))
-t = time.process_time()
+t, wall = time.process_time(), time.perf_counter()
 kw = {"margin": float("inf")} if rim else {}  # float("inf") is zigzag.RIM
 job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=scallop, **kw))
 cpu = time.process_time() - t
+workers = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(json.dumps({"cpu": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                  "passes": job.summary["passes"], "lines": job.summary["lines"]}))
+                  "passes": job.summary["passes"], "lines": job.summary["lines"],
+                  "wall": time.perf_counter() - wall, "workers_cpu": workers.ru_utime + workers.ru_stime}))
 """
 
 OLD_REF = "30fd316"  # the planner before issue 20 (issue 20 measured it)
 
 
-def run_finishing(checkout, name, step, cutter, scallop, rim=False):
+def run_finishing(checkout, name, step, cutter, scallop, rim=False, bands=False):
     import json
     import os
 
     env = dict(os.environ, PYTHONPATH=str(checkout))
     r = subprocess.run(
         [sys.executable, "-c", FINISH_CHILD, name, str(step), cutter, str(scallop)]
-        + (["rim"] if rim else []),
+        + (["rim"] if rim else [])
+        + (["bands"] if bands else []),
         cwd=str(checkout),
         env=env,
         capture_output=True,
@@ -439,6 +445,15 @@ def bench_finishing(quick, old_ref=OLD_REF):
                     row += "         -            -       - |        -          -"
                 ok = new["cpu"] <= cpu_max and new["peak_mb"] <= 250
                 print(f"{row}  <= {cpu_max:g} s, <= 250 MB: {'OK' if ok else 'MISS'}", flush=True)
+                # the same planned in two bands on two cores (cam/bands.py), as the daemon's
+                # processing child and `inkslice toolpath` plan it: the wait, not the CPU
+                b = run_finishing(repo, "sample1", 0.5, "ball6", h, bands=True)
+                print(
+                    f"  bands  wall {b['wall']:.1f} s against {new['wall']:.1f} s in one "
+                    f"({new['wall'] / b['wall']:.2f}x); CPU {b['cpu']:.1f} s here + {b['workers_cpu']:.1f} s "
+                    f"in the worker; {b['passes']} passes",
+                    flush=True,
+                )
                 # the same with the rim finished (margin RIM), beside margin 0 for the ratio
                 # that decides whether it can be the default
                 r = run_finishing(repo, "sample1", 0.5, "ball6", h, rim=True)
