@@ -60,6 +60,7 @@ CURVATURE_LIMIT = 1.0  # |kappa l_c| beyond which the first-order correction sto
 CURVATURE_CLIP = 0.5  # 1/mm: a tighter bend is a crest's kink, not a contact line's
 CURVATURE_SMOOTHING_MM = 1.0
 CURVATURE_STEP_MM = 0.2  # the fine grid the curvature is taken on
+KNOWN_WEIGHT_MIN = 0.05  # a node this little of whose average falls on known nodes takes the nearest
 
 
 def curvature_shape(psi):
@@ -71,15 +72,32 @@ def curvature_shape(psi):
 
 
 def level_curve_curvature(
-    z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM
+    z, hy, hx, flat=CURVATURE_FLAT, clip=CURVATURE_CLIP, smoothing_mm=CURVATURE_SMOOTHING_MM, known=None
 ):
     """In-plane curvature (1/mm) of the level curves of a height grid (rows y, columns x):
     -div(grad z / |grad z|), > 0 round a peak, < 0 round a pit; limited to +-clip and
-    averaged over smoothing_mm (a meniscus feels the line's mean bend, not a crest's kink)."""
+    averaged over smoothing_mm (a meniscus feels the line's mean bend, not a crest's kink).
+    `known` (a mask, optional): the nodes where z is the part's top; the average is then
+    taken over those alone, and the rest get the nearest average."""
     zy, zx = np.gradient(np.asarray(z, float), hy, hx)
     norm = np.sqrt(zx * zx + zy * zy + flat * flat)
     k = np.clip(-(np.gradient(zx / norm, hx, axis=1) + np.gradient(zy / norm, hy, axis=0)), -clip, clip)
-    return ndimage.gaussian_filter(k, (smoothing_mm / hy, smoothing_mm / hx), mode="nearest")
+    sigma = (smoothing_mm / hy, smoothing_mm / hx)
+    mean = None if known is None else _mean_over(k, known, sigma)
+    return ndimage.gaussian_filter(k, sigma, mode="nearest") if mean is None else mean
+
+
+def _mean_over(k, known, sigma):
+    """The Gaussian mean of k over the `known` nodes alone; nodes whose window holds too
+    little of them take the nearest such mean. None when no node has enough."""
+    w = ndimage.gaussian_filter(known.astype(float), sigma, mode="constant")
+    ok = w > KNOWN_WEIGHT_MIN
+    if not ok.any():
+        return None
+    mean = ndimage.gaussian_filter(np.where(known, k, 0.0), sigma, mode="constant")
+    out = np.where(ok, mean / np.where(ok, w, 1.0), np.nan)
+    _, (iy, ix) = ndimage.distance_transform_edt(~ok, return_indices=True)
+    return out[iy, ix]
 
 
 @dataclass(frozen=True)
