@@ -164,6 +164,19 @@ d72c918, the /tmp/men10/m2 renders, physics2, Ea / interior p99 / max mm:
     steep-front 0.0735 0.622 0.699
 Within 0.05: sample1 only; the rest are 0.0025-0.045 over.
 
+The contact lines' bend averaged over the trusted top only (3 December 2026, session 12,
+48472d7: surface/contact_lines.py contact_line_curvature; the Gaussian mean over the
+footprint eroded by RIM_UNTRUSTED, not over nearest-filled nodes off the part and the rim).
+Fresh renders (/tmp/s4-men), commissioned 2.304 mm / 34.98 deg / 1.001, Ea / interior p99 /
+max mm, before -> after:
+    sample4 0.0947 0.052 0.837 -> 0.0840 0.050 0.734
+    sample1 0.0105 0.135 0.658 -> 0.0106 0.135 0.659
+    crater  0.0540 0.594 1.142 -> 0.0538 0.610 1.140
+Eroding one node more (the curvature's stencil off the rim as well) gave sample4 0.0836 but
+the crater 0.0575 / 0.635; one node less, sample4 0.0883, the crater 0.0542 / 0.595. Sample 4's
+near-flat strip (above) is untouched. The first ink commissions to weight 0, so this path is
+not taken there (benches/seed_table.py --effects physics, sample4: 0.0275, weight 0.0).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
