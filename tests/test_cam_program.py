@@ -401,3 +401,14 @@ def test_every_dialect_of_a_dissertation_sample_passes_its_checkers(tmp_path):
     ref = parse_gcode(jobs["linuxcnc"].text).xyz
     for d in ("grbl", "mach3", "fanuc"):
         assert np.nanmax(np.abs(parse_gcode(jobs[d].text).xyz - ref)) < 0.0011
+
+
+def test_words_written_in_one_pass_read_as_each_written_alone():
+    # motion_lines formats every coordinate of a program at once: the same digits as
+    # gcode_number, a negative that rounds to zero included ("-0.000" is written "0.000")
+    from appliance.cam.posts import _numbers, gcode_number
+
+    v = np.array([0.0, -0.0, -0.0004, -0.0005, -0.00049, 0.0005, -0.01, -10.0, 12.34565, -1e-12, 3e5])
+    for dec in (0, 1, 3, 4):
+        assert _numbers(v, dec) == [gcode_number(x, dec) for x in v]
+    assert _numbers(np.array([-0.0004]), 3) == ["0.000"]
