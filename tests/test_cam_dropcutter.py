@@ -185,3 +185,33 @@ def test_lines_meet_the_edges_as_the_same_points_one_by_one(angle, stride):
     assert np.max(np.abs(lines - points)) < 2e-5
     bare = drop_lines(Sampler(hm), BALL, origins, e1, n, 0.1, stride=stride)
     assert np.max(lines - bare) > 1.0  # the edges raised some tips
+
+
+@pytest.mark.parametrize("cutter", [BALL, BULL], ids=["ball", "bull"])
+@pytest.mark.parametrize("direction", [(1.0, 0.0), (0.6, 0.8)], ids=["along x", "oblique"])
+def test_points_a_sub_step_apart_read_on_one_lattice_are_where_they_are_said_to_be(cutter, direction):
+    # drop_fine_lines reads every sub-position on the line's own lattice (offsets a - j / sub
+    # steps along it) where the pass ends' fine lines read a lattice centred on each. On a
+    # tilted plane the tip is the plane at the axis plus R (sqrt(1 + g^2) - 1) for a ball:
+    # a point read a fraction of a step off its place is wrong by the slope times that
+    # (0.04 mm), the lattice's own shortfall is h'' d^2 / 8
+    from appliance.cam.dropcutter import drop_fine_lines
+
+    gx, gy = 0.5, 0.2
+    hm = grid_map(lambda X, Y: 20 + gx * X + gy * Y, -20, 20, -20, 20, 0.5)
+    s = Sampler(hm, edge_step=0.05)
+    e1 = np.array(direction)
+    origins = np.array([[-6.0, -2.0], [-6.0, 0.33], [-6.0, 4.1]])
+    sub, n = 8, 8 * 60
+    fine = drop_fine_lines(s, cutter, origins, e1, n, 0.1, sub)
+    centred = np.stack(
+        [drop_lines(s, cutter, origins + (j / sub) * 0.1 * e1, e1, n // sub, 0.1) for j in range(sub)], axis=2
+    ).reshape(fine.shape)
+    # the whole steps are the same (to single precision: each slab is relative to its top)
+    assert np.allclose(fine[:, ::sub], centred[:, ::sub], rtol=0, atol=1e-5)
+    assert np.max(np.abs(fine - centred)) < 0.002
+    if cutter is BALL:
+        t = 0.1 / sub * np.arange(n)
+        x, y = origins[:, :1] + t * e1[0], origins[:, 1:] + t * e1[1]
+        exact = 20 + gx * x + gy * y + 3 * (np.sqrt(1 + gx * gx + gy * gy) - 1)
+        assert np.all(fine <= exact + 1e-6) and np.max(exact - fine) < 0.001

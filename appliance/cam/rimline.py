@@ -11,9 +11,10 @@ the program's time.
 
 Here the moves that lie off the part and whose dropped midpoint stands above
 them by more than the tolerance get up to MAX_SUB - 1 tips each at once: one
-drop_lines call per sub-position over the window of columns where any pass
-has such a move, all those passes together (a point of a line costs a row of
-the disc, not the disc). Every other sub-position is a fine point, and the
+drop_fine_lines call over the window of columns where any pass has such a
+move, all those passes together, every sub-position read on the lines' own
+lattice (one slab for all of them; a lattice centred on each sub-position
+read a slab per sub-position, mostly its margins: 5-7x the time). Every other sub-position is a fine point, and the
 ones between are the fine moves' midpoints, checked as refine() checks: a
 midpoint above its fine move by more than the tolerance is inserted and
 both halves go on to refine(). Nothing is estimated: every move that stays
@@ -26,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .contact import drop_lines
+from .contact import drop_fine_lines
 
 MAX_SUB = 32  # sub-positions per off-part move: 15 fine points and 16 midpoints checking them
 
@@ -54,13 +55,9 @@ class FineEnds:
         for a, b in _windows(np.flatnonzero(self.flag.any(axis=0)), 2 * m):
             rows = np.flatnonzero(self.flag[:, a : b + 1].any(axis=1))
             sub = _subdivisions(float(np.max(sag[:, a : b + 1])), tol)
-            z = np.stack(
-                [
-                    drop_lines(sampler, cutter, origins[rows] + (a + j / sub) * d * e1, e1, b - a + 1, d)
-                    for j in range(1, sub)
-                ],
-                axis=2,
-            )
+            # every sub-position of the window's moves at once, on the lines' own lattice
+            z = drop_fine_lines(sampler, cutter, origins[rows] + a * d * e1, e1, (b - a + 1) * sub, d, sub)
+            z = z.reshape(rows.size, b - a + 1, sub)[:, :, 1:]
             self.windows.append((a, rows, sub, z + leave))
 
     def _fine(self, k, first, count):
