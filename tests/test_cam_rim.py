@@ -69,3 +69,25 @@ def test_where_a_pass_rolls_over_the_outline_no_move_runs_below_the_cutters_tip(
     # thinning holds the dropped points within the chord tolerance; between them a move may
     # pass a little lower (0.00212 measured)
     assert np.max(tip - p[:, 2]) <= 1.1 * st.chord
+
+
+def test_a_flat_end_runs_off_the_outline_to_a_tenth_of_a_step_short_of_its_radius_at_both_ends():
+    # a flat bottom reaches a cell at the outline only from within R of it, so a position a
+    # step short of the radius leaves the slope times the step there (sample 3's corner,
+    # benches/cam.py --only rim); on whole steps from the near end the far end stopped up to
+    # a step shorter still, so the positions close up to end on the margin at both ends
+    hm = grid_map(_dome, 0, 20.03, 0, 16, 0.5 * 20.03 / 20)
+    flat = parse_cutter("flat4")
+    st = FinishSettings(flat, scallop=0.05, margin=RIM)
+    assert st.margin == pytest.approx(2 - st.resolution / 10)
+    p = parse_gcode(finishing_gcode(hm, st).text)
+    cut = (p.kind == 1) & np.isfinite(p.xyz).all(axis=1)
+    x, y = p.xyz[cut, 0], p.xyz[cut, 1]
+    x0, x1 = float(hm.x[0]), float(hm.x[-1])
+    assert x.min() == pytest.approx(x0 - st.margin, abs=1e-4)
+    assert x.max() == pytest.approx(x1 + st.margin, abs=1e-4)
+    assert y.min() == pytest.approx(-st.margin, abs=1e-4) and y.max() == pytest.approx(
+        16 + st.margin, abs=1e-4
+    )
+    # a ball keeps a whole step short of its radius (its tip races there: see FinishSettings)
+    assert FinishSettings(parse_cutter("ball4"), margin=RIM).margin == pytest.approx(2 - 0.1)

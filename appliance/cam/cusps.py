@@ -181,10 +181,13 @@ class PassProbe(PassEnvelope):
         # (cut by the later passes) read as a cusp of slope x row step (sample 1 with the
         # rim at 0.01: 20 passes 0.01-0.06 mm apart before the first that reaches the
         # top). On the part the rows around the top are kept (sample 3's downhill corner),
-        # and so are margin-0 programs' (their candidates' columns beyond sample 4's outline)
+        # and so are margin-0 programs'. So are a flat end's: it does not pivot (its bottom
+        # reaches the same strip from every axis within R of it), and its contacts on the
+        # strip beside the outline are a band whose nearest rows are not where the cusp is
+        # (flat6 on sample 3 with the rim: 0.0558 left at y = 0.4 with them, 0.0485 without)
         ax, ay = self.along[cols_ok] * self.e1[0], self.along[cols_ok] * self.e1[1]
         off = (
-            (self.st.margin > 0)
+            (self.st.margin > 0 and self.st.cutter.kind != "flat")
             & (self.sampler.part_distance(ax + sa * self.e2[0], ay + sa * self.e2[1]) > 1e-9)
             & (self.sampler.part_distance(ax + sb * self.e2[0], ay + sb * self.e2[1]) > 1e-9)
         )

@@ -17,8 +17,9 @@ Boundary
 Tool positions are kept where the axis lies within `margin` of the footprint.
 Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
-the base). With margin RIM (the cutter's radius less a step) the passes run off the
-outline until the cutter has all but left the part, so the rim is finished
+the base). With margin RIM (the cutter's radius less a step, a tenth of one for a
+flat end; the positions close up a little so both ends of a pass reach it) the
+passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
 lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
 1.2-2x the CPU, see benches/cam.py, and the default must meet the speed row)
@@ -35,7 +36,7 @@ move is refined where it would cut in and thinned to the chord tolerance
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -71,8 +72,13 @@ class FinishSettings:
         if self.margin == RIM:
             # a radius less a step: at a full radius the cutter meets the outline with its
             # rim, where a ball's tip moves ~100x faster than its place and the 0.0001 mm
-            # of a G-code coordinate was 0.007 mm of gouge at sample 1's corner
-            self.margin = max(self.cutter.radius - self.resolution, 0.0)
+            # of a G-code coordinate was 0.007 mm of gouge at sample 1's corner. A flat end's
+            # tip moves no faster than the surface under it until its rim leaves the part
+            # (a cliff at exactly R), and its flat bottom reaches a cell at the outline only
+            # from within R of it: a step short left the slope times the step there (sample
+            # 3's corner, 0.0643 where 0.05 was asked), so it goes to a tenth of a step
+            short = self.resolution / 10 if self.cutter.kind == "flat" else self.resolution
+            self.margin = max(self.cutter.radius - short, 0.0)
         if self.chord is None:
             # a straight move may stand this far above the tips it replaces, which
             # adds directly to the scallop: keep it a twentieth of the request
@@ -151,8 +157,14 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     """Passes over the part; give `sampler` an edge_step (resolution / 2) so edges are contacts."""
     st.check()
     check_fits(sampler, st.cutter)
-    d = st.resolution
     e1, e2, (t0, t1), (s0, s1) = pass_frame(sampler, st.angle, st.margin)
+    short = (t1 - t0) - np.floor((t1 - t0) / st.resolution + 1e-9) * st.resolution
+    if st.margin > 0 and short > st.resolution / 20:
+        # positions a little closer than `resolution`, so the last one of a pass is on the
+        # margin as the first is: on whole steps they stopped up to a step short at the far
+        # end (flat6 on sample 3: 0.0631 left at x = 100, its last positions 2.91 mm out)
+        st = replace(st, resolution=(t1 - t0) / np.ceil((t1 - t0) / st.resolution))
+    d = st.resolution
     n = int(np.ceil((t1 - t0) / d - 1e-9)) + 1
     origin = lambda s: t0 * e1 + s * e2
     drop_cutter = st.cutter.offset(st.leave) if st.leave > 0 else st.cutter
