@@ -195,7 +195,7 @@ def test_points_a_sub_step_apart_read_on_one_lattice_are_where_they_are_said_to_
     # tilted plane the tip is the plane at the axis plus R (sqrt(1 + g^2) - 1) for a ball:
     # a point read a fraction of a step off its place is wrong by the slope times that
     # (0.04 mm), the lattice's own shortfall is h'' d^2 / 8
-    from appliance.cam.dropcutter import drop_fine_lines
+    from appliance.cam.fineline import fine_lattice_lines as drop_fine_lines
 
     gx, gy = 0.5, 0.2
     hm = grid_map(lambda X, Y: 20 + gx * X + gy * Y, -20, 20, -20, 20, 0.5)

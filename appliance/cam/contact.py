@@ -34,7 +34,6 @@ import numpy as np
 
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
-from .dropcutter import drop_fine_lines as fine_lattice_lines
 from .dropcutter import drop_lines as lattice_lines
 from .sampling import Sampler
 from .segments import min_over_segment
@@ -276,18 +275,6 @@ def drop_lines(sampler, cutter, origins, direction, n, d=DEFAULT_RESOLUTION):
     e1 = e1 / np.hypot(*e1)
     tip = lattice_lines(sampler, cutter, origins, e1, n, d)
     t = d * np.arange(n)
-    x = origins[:, :1] + t[None, :] * e1[0]
-    y = origins[:, 1:2] + t[None, :] * e1[1]
-    return polish(sampler, cutter, x, y, tip, d)
-
-
-def drop_fine_lines(sampler, cutter, origins, direction, n, d, sub):
-    """drop_lines at points d / sub apart (dropcutter.drop_fine_lines), polished the same way."""
-    origins = np.atleast_2d(np.asarray(origins, float))
-    e1 = np.asarray(direction, float)
-    e1 = e1 / np.hypot(*e1)
-    tip = fine_lattice_lines(sampler, cutter, origins, e1, n, d, sub)
-    t = (d / sub) * np.arange(n)
     x = origins[:, :1] + t[None, :] * e1[0]
     y = origins[:, 1:2] + t[None, :] * e1[1]
     return polish(sampler, cutter, x, y, tip, d)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .contact import drop_fine_lines
+from .fineline import drop_fine_lines
 
 MAX_SUB = 32  # sub-positions per off-part move: 15 fine points and 16 midpoints checking them
 
