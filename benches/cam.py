@@ -65,6 +65,29 @@ RIM 0.01 27.9 s / 151 MB (was 290: the linked runs' whole-run arrays were its pe
 Finishing at branch start of session 8 (e64d41a) vs now, margin 0, one run:
 0.05: 4.6 s / 175 MB; 0.01: 14.4 s / 186 MB vs 14.9 s / 202 MB.
 
+Session 12 (2026-12-03, branch s12-rim, loaded box: load 8-13 on 2 cores), `--only
+finishing --old-ref none`, new: 0.05: 5.8 s / 163 MB, RIM 7.5 s / 163 MB (1.29x margin 0's
+CPU); 0.01: 18.3 s / 203 MB, RIM 22.6 s / 207 MB (1.24x). Profile of RIM at 0.05 (idle box,
+cProfile): planner 4.1 s (its opening 1.6, candidate envelopes 1.3, candidate drops 0.7),
+the pass ends' fine lines 0.9, the mids' drop 0.4, posting 0.5; at 0.01 the fine lines were
+~20 % and the planner's envelopes (their exact sweep between positions ~7 s of 38 profiled)
+the rest of what margin 0 does not have. Two changes, the same programs: the fine lines
+read on the lines' own lattice (fineline.py: 0.95 -> 0.27 s at 0.05, 4.8 -> 1.45 s at 0.01,
+sample 1's RIM program byte for byte the same at 0.05) and posting in one pass per axis
+(motion_lines 2x, the same bytes). RIM is still not the default: 7.5 s at 0.05 and 22.6 s
+at 0.01 miss the 5 s and 20 s rows (margin 0 misses the first too on this loaded box); what
+is left is the planner's own cost, shared with margin 0. Tried and dropped: larger slab
+chunks for the fine lines (no gain measurable under the load, +19 MB), a sub-position count
+per move instead of per window (more slab margins read: 0.27 -> 0.42 s).
+`--only rim` rows with the rim fixes (one program each, verified over the whole part): sample3
+flat6 0.05: 0.0643 at (0, 100) MISS -> 0.0485 OK, gouge 0.0023, 0.00 % uncut (a flat end's
+positions now reach R - d/10 at both pass ends, and its cusps beside the outline are measured
+on all fine rows); sample1 flat6 0.05: 0.0486 OK, 0.0023, 0.00 % (was 0.0495); sample4 flat1
+0.05: 0.0508 OK, gouge 0.0036 at its corner (55, 55), 0.00 % (not recorded before). Sample4
+bull1r0.25 0.01 unchanged: 0.0572 at (55.0, 50.8) on its far edge MISS, gouge 0.0014,
+0.00 % uncut (its 0.48 mm margin stops the torus where its side is 67 degrees; the
+verification reaches the 80-degree faces' edge from positions up to 0.5 mm out).
+
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
 
