@@ -83,10 +83,14 @@ per move instead of per window (more slab margins read: 0.27 -> 0.42 s).
 flat6 0.05: 0.0643 at (0, 100) MISS -> 0.0485 OK, gouge 0.0023, 0.00 % uncut (a flat end's
 positions now reach R - d/10 at both pass ends, and its cusps beside the outline are measured
 on all fine rows); sample1 flat6 0.05: 0.0486 OK, 0.0023, 0.00 % (was 0.0495); sample4 flat1
-0.05: 0.0508 OK, gouge 0.0036 at its corner (55, 55), 0.00 % (not recorded before). Sample4
-bull1r0.25 0.01 unchanged: 0.0572 at (55.0, 50.8) on its far edge MISS, gouge 0.0014,
-0.00 % uncut (its 0.48 mm margin stops the torus where its side is 67 degrees; the
-verification reaches the 80-degree faces' edge from positions up to 0.5 mm out).
+0.05: 0.0508 OK, gouge 0.0036 at its corner (55, 55), 0.00 % (not recorded before); sample2
+flat6 0.05: 0.0488 OK, 0.0022, 0.00 %. Sample4 bull1r0.25 0.01: 0.0572 at (55.0, 50.8) on its
+far edge MISS, gouge 0.0014 (its 0.48 mm margin stopped the torus where its side is 67
+degrees; the verification reaches the 80-degree faces' edge from up to 0.5 mm out) -> a
+bull nose also to a tenth of a step short: 0.0102 OK, gouge 0.0036, 0.00 % uncut; sample1
+bull6r1 0.01 with it: 0.0098 OK, gouge 0.0028, 0.00 % (was 0.0098, <= 0.0029). Not re-run
+this session: sample1-3 ball6 (their programs are the same but for the fine lines' tips,
+byte for byte the same on sample1 at 0.05), sample2-3 bull6r1, sample4 ball1.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)

@@ -89,5 +89,7 @@ def test_a_flat_end_runs_off_the_outline_to_a_tenth_of_a_step_short_of_its_radiu
     assert y.min() == pytest.approx(-st.margin, abs=1e-4) and y.max() == pytest.approx(
         16 + st.margin, abs=1e-4
     )
-    # a ball keeps a whole step short of its radius (its tip races there: see FinishSettings)
+    # a ball keeps a whole step short of its radius (its tip races there: see FinishSettings),
+    # a bull nose a tenth of one, like a flat end
     assert FinishSettings(parse_cutter("ball4"), margin=RIM).margin == pytest.approx(2 - 0.1)
+    assert FinishSettings(parse_cutter("bull4r1"), margin=RIM).margin == pytest.approx(2 - 0.01)

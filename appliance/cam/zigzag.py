@@ -18,7 +18,7 @@ Tool positions are kept where the axis lies within `margin` of the footprint.
 Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
 the base). With margin RIM (the cutter's radius less a step, a tenth of one for a
-flat end; the positions close up a little so both ends of a pass reach it) the
+flat end or a bull nose; the positions close up a little so both ends of a pass reach it) the
 passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
 lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
@@ -76,8 +76,11 @@ class FinishSettings:
             # tip moves no faster than the surface under it until its rim leaves the part
             # (a cliff at exactly R), and its flat bottom reaches a cell at the outline only
             # from within R of it: a step short left the slope times the step there (sample
-            # 3's corner, 0.0643 where 0.05 was asked), so it goes to a tenth of a step
-            short = self.resolution / 10 if self.cutter.kind == "flat" else self.resolution
+            # 3's corner, 0.0643 where 0.05 was asked), so it goes to a tenth of a step. So
+            # does a bull nose: a step short its corner's side was 67 degrees for a 1 mm
+            # r0.25, and the strip along sample 4's 80-degree faces' edge, which the
+            # verification reaches from further out, was left at 0.057 (0.0102 at a tenth)
+            short = self.resolution if self.cutter.kind == "ball" else self.resolution / 10
             self.margin = max(self.cutter.radius - short, 0.0)
         if self.chord is None:
             # a straight move may stand this far above the tips it replaces, which
