@@ -22,7 +22,7 @@ flat end or a bull nose; the positions close up a little so both ends of a pass 
 passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
 lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
-1.2-2x the CPU, see benches/cam.py, and the default must meet the speed row)
+1.25-1.3x the CPU, see benches/cam.py, and the default must meet the speed row)
 the axis never leaves the part, and the strip the cutter could only reach
 from outside stays uncut. A pass broken by a hole or a bay of the
 footprint becomes several runs; the program builder retracts between them.
@@ -63,7 +63,7 @@ class FinishSettings:
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
     chord: float | None = None
-    # RIM (the cutter's radius less a step) finishes the rim, at 1.2-2x the CPU of
+    # RIM (the cutter's radius less a step) finishes the rim, at 1.25-1.3x the CPU of
     # margin 0 on sample 1 (benches/cam.py): not yet the default
     margin: float = 0.0
     leave: float = 0.0
