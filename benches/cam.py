@@ -90,7 +90,11 @@ degrees; the verification reaches the 80-degree faces' edge from up to 0.5 mm ou
 bull nose also to a tenth of a step short: 0.0102 OK, gouge 0.0036, 0.00 % uncut; sample1
 bull6r1 0.01 with it: 0.0098 OK, gouge 0.0028, 0.00 % (was 0.0098, <= 0.0029). Not re-run
 this session: sample1-3 ball6 (their programs are the same but for the fine lines' tips,
-byte for byte the same on sample1 at 0.05), sample2-3 bull6r1, sample4 ball1.
+byte for byte the same on sample1 at 0.05), sample2 bull6r1. New MISS, row not recorded
+before: sample4 ball1 0.01: 0.0371 at (55.0, 50.8), gouge 0.0013, 0.00 % uncut, on the same
+far edge as the bull nose's: at 0.48 mm out a 1 mm ball's side is 74 degrees, short of the
+80-degree faces; a tenth of a step (side 84 degrees) would reach them, but a ball's tip
+races there (11 mm per mm: 0.0055 mm for a 3-decimal dialect's rounding), not yet tried.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
