@@ -90,7 +90,8 @@ degrees; the verification reaches the 80-degree faces' edge from up to 0.5 mm ou
 bull nose also to a tenth of a step short: 0.0102 OK, gouge 0.0036, 0.00 % uncut; sample1
 bull6r1 0.01 with it: 0.0098 OK, gouge 0.0028, 0.00 % (was 0.0098, <= 0.0029). Not re-run
 this session: sample1-3 ball6 (their programs are the same but for the fine lines' tips,
-byte for byte the same on sample1 at 0.05), sample2 bull6r1. New MISS, row not recorded
+byte for byte the same on sample1 at 0.05), sample2 bull6r1. sample3 bull6r1 0.01 (not
+recorded before), with the tenth: 0.0099 OK, gouge 0.0026, 0.00 % (471 s to plan, loaded). New MISS, row not recorded
 before: sample4 ball1 0.01: 0.0371 at (55.0, 50.8), gouge 0.0013, 0.00 % uncut, on the same
 far edge as the bull nose's: at 0.48 mm out a 1 mm ball's side is 74 degrees, short of the
 80-degree faces; a tenth of a step (side 84 degrees) would reach them, but a ball's tip
