@@ -26,7 +26,14 @@ BRACKET_SLACK_LEVELS = 2  # one held sample 4's rim nodes 1.4 mm low (clean Ea 0
 
 
 def bracket(z, first, slices, rise_max=0.0):
-    """Clamp each node between the level where it came out and the one above it.
+    """Clamp each node between the level where it came out and the one above it
+    (bracket_bounds)."""
+    lo, hi = bracket_bounds(first, slices, rise_max)
+    return np.clip(z, lo, hi)
+
+
+def bracket_bounds(first, slices, rise_max=0.0):
+    """Per node, (lo, hi): the level where it came out and the one above it.
 
     A node exposed first at frame k and still under at frame k - 1 lies in
     between, whatever the fit's smoothness would rather do (extrapolating into
@@ -52,7 +59,7 @@ def bracket(z, first, slices, rise_max=0.0):
     lo_s = np.r_[lo[n:], [-np.inf] * n]
     hi_s = np.r_[[np.inf] * n, hi[:-n]]
     hi_s[K] = np.inf  # never exposed (nodes on the outline itself): no bracket
-    return np.clip(z, lo_s[first], hi_s[first])
+    return lo_s[first], hi_s[first]
 
 
 def _fit_nodes(problem, z_nodes, pts, zp, length_mm, point_weight, prior=None):

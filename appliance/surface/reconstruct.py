@@ -37,9 +37,10 @@ from ..errors import SettingError
 from . import seed as seed_methods
 from .corrections import corrected_levels
 from .dewetted import depression_depth
-from .fitpass import bracket, fit_pass, flat_face_rise, flat_far_mm
+from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
+from .inkbounds import node_bounds
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls
@@ -219,7 +220,11 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     rise_max = (
         0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)
     )  # h grows with the slope
-    z = np.where(np.isfinite(z_fe), z, bracket(z, first, slices, rise_max))
+    lo, hi = bracket_bounds(first, slices, rise_max)
+    # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
+    known = node_bounds(lat, seen, corrected, first, footprint, rise_max)
+    hi = np.where(known.hidden, known.ceiling, hi)
+    z = np.where(np.isfinite(z_fe) & ~known.hidden, z, np.clip(z, lo, hi))
     # a face that came out at once lies between its two levels, whatever the fit says
     # (an ink that dewets stands its depression above a flat face it has just left: the
     # face is that much below its levels, dewetted.place_dewetted_faces)
@@ -227,6 +232,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
     climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
     z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
+    # and every node stands where the frames saw it: out of the ink, or the ink over it
+    z = np.minimum(np.maximum(z, known.floor), known.ceiling)
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top

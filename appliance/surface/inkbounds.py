@@ -1,0 +1,130 @@
+"""What the frames say for sure about each node: a floor and a ceiling.
+
+A node inside a frame's waterline (the rims put back) was out of the ink: it stands at
+least at that level. A node outside a frame's waterline as the camera saw it (a
+silhouette included) showed ink there: it stands below that level. Both hold whatever
+the fit's smoothness would rather do, and behind a face that hid the ink they are all the
+frames say: with the rims put back, a node there comes out of the ink (in the corrected
+slices) only where the part around the face's foot does, at a level the ink was never seen
+at - its bracket has its upper end wrong. Its ceiling is the ray from the camera over the
+rim: on a face that leans like that ray (a blade's 84 deg flank), its height.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from .lattice import Lattice, exposed_mask
+from .slices import Slice, polyline_distance
+
+SEEN_TOL_MM = 0.05  # a node counts as in the ink or out of it this far from the waterline (a pixel)
+
+
+class NodeBounds(NamedTuple):
+    hidden: np.ndarray  # nodes whose crossing of the ink a face above it hid
+    floor: np.ndarray  # the highest level at which the node was out of the ink (-inf: none)
+    ceiling: np.ndarray  # the lowest level at which the camera saw ink there (inf: none)
+
+
+def node_bounds(
+    lat: Lattice,
+    seen: list[Slice],
+    corrected: list[Slice],
+    first: np.ndarray,
+    footprint: np.ndarray,
+    rise_max: float = 0.0,
+) -> NodeBounds:
+    """Floor and ceiling per node of the footprint. `seen`: the slices as observed;
+    `corrected`: the same with the rims put back and at their true levels; `first`: the
+    frame each node came out in by the corrected slices; rise_max: the most the ink
+    climbs the part (a node the ink covered stands up to that above its level)."""
+    idx = np.flatnonzero(footprint.ravel())
+    X, Y = np.meshgrid(lat.x, lat.y)
+    q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
+    levels = np.array([s.level for s in corrected])
+    first_seen, ceiling = _ceiling(lat, seen, corrected, levels, q, idx)
+    floor = _floor(lat, corrected, levels, q, idx)
+    out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf)]
+    out[0].ravel()[idx] = first_seen < first.ravel()[idx]
+    out[1].ravel()[idx] = floor
+    out[2].ravel()[idx] = ceiling + rise_max
+    return NodeBounds(*out)
+
+
+def _ceiling(lat, seen, corrected, levels, q, idx):
+    """-> (first frame showing each node inside its waterline as seen, ceiling). Where the
+    ink's edge next to the node was a silhouette, the ceiling is the ray over the rim,
+    between the frame that saw ink and the one below that did not."""
+    K = len(seen)
+    first_seen = np.full(len(q), K, np.int32)
+    ceiling = np.full(len(q), np.inf)
+    d_below = np.zeros(len(q))  # distance to the waterline of the frame below
+    ray_below = np.zeros(len(q), bool)  # and whether a silhouette is the nearest of it
+    todo = np.arange(len(q))
+    below = None
+    for k in range(K - 1, -1, -1):
+        if seen[k].empty or todo.size == 0:
+            continue
+        d, near = polyline_distance(seen[k], q[todo])
+        inside = _inside(lat, seen[k], q[todo], d, idx[todo])
+        first_seen[todo[inside]] = k
+        ink = ~inside & (d > SEEN_TOL_MM)
+        at = todo[ink]
+        ceiling[at] = levels[k]
+        if below is not None:
+            # the node between a silhouette that passed outside it and one inside: the ray
+            # over the rim crosses it in between, the silhouette creeping along that ray
+            # (not when the waterline below is another one, a lower tier's outline, say)
+            ray = _silhouette(corrected[k], near[ink]) & ray_below[at] & (d_below[at] > 0)
+            t = d_below[at] / np.maximum(d_below[at] + d[ink], 1e-9)
+            ceiling[at[ray]] = (levels[below] + t * (levels[k] - levels[below]))[ray]
+        d_below[todo] = d
+        ray_below[todo] = _silhouette(corrected[k], near)
+        todo = todo[~ink]
+        below = k
+    return first_seen, ceiling
+
+
+def _silhouette(s: Slice, points: np.ndarray) -> np.ndarray:
+    hidden = getattr(s, "hidden", None)
+    if hidden is None or len(hidden) != len(s.P):
+        return np.zeros(len(points), bool)
+    return hidden[points]
+
+
+def _floor(lat, corrected, levels, q, idx):
+    """The highest level whose waterline (the rims put back) has the node inside it, by
+    more than a pixel; with a meniscus that pulls the ink's edge below the level (an ink
+    that dewets), that much lower."""
+    floor = np.full(len(q), -np.inf)
+    todo = np.arange(len(q))
+    for k, s in enumerate(corrected):
+        if s.empty or todo.size == 0:
+            continue
+        d, _ = polyline_distance(s, q[todo])
+        out = _inside(lat, s, q[todo], d, idx[todo]) & (d > SEEN_TOL_MM)
+        curve = s.level_curve()
+        sink = min(float(np.min(curve.z - curve.level)), 0.0) if not curve.empty else 0.0
+        floor[todo[out]] = levels[k] + sink
+        todo = todo[~out]
+    return floor
+
+
+def _inside(lat: Lattice, sl: Slice, q: np.ndarray, d: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
+    """Which query nodes lie inside the slice's waterline, even-odd over its loops: the
+    raster mask far from the waterline, an exact point-in-polygon test within two nodes of
+    it (the raster takes in the nodes the waterline passes over, and on a silhouette that
+    creeps 0.1 mm a level a node's width is eight levels; a glitch in a silhouette can
+    turn the nearest segment's side, so not that either)."""
+    inside = exposed_mask(lat, sl).ravel()[flat_index]
+    near = np.flatnonzero(d < 2 * max(lat.hx, lat.hy))
+    if near.size:
+        count = np.zeros(near.size, int)
+        for lp in sl.loops:
+            poly = lp.astype(np.float32).reshape(-1, 1, 2)
+            count += [cv2.pointPolygonTest(poly, (float(x), float(y)), False) > 0 for x, y in q[near]]
+        inside[near] = count % 2 == 1
+    return inside
