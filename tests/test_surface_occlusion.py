@@ -13,8 +13,9 @@ from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.surface.exposure import first_exposure
 from appliance.surface.flatfaces import flat_faces, tilt_crossed_faces
+from appliance.surface.inkbounds import node_bounds
 from appliance.surface.lattice import Lattice
-from appliance.surface.perspective import Perspective, mark_walls
+from appliance.surface.perspective import Perspective, mark_walls, unproject_rims
 from appliance.surface.silhouettes import mark_silhouettes, silhouettes
 from appliance.surface.slices import check_waterlines, make_slice
 from appliance.vision.types import Waterline
@@ -81,6 +82,38 @@ def test_a_silhouette_is_not_read_as_a_waterline():
         assert ok.mean() > 0.9
         assert np.all(rim[ok, 0] > s.level) or s.level >= RIM_MM - 1
         assert np.median(rim[ok, 0]) >= RIM_MM - 2
+
+
+def test_the_frames_bound_each_node_and_a_silhouette_bounds_it_by_its_ray():
+    """Every node of the frustum stands between its floor (inside a frame's waterline, the
+    rims put back: out of the ink) and its ceiling (outside the waterline as seen: ink over
+    it). Behind the far wall the camera never saw the ink's edge, only the rim's silhouette
+    creeping out frame by frame: there the ceiling is the ray from the camera over the rim,
+    not the level of the frame that first showed ink (0.7 mm higher on average)."""
+    seen = _frustum_slices()
+    mark_walls(seen, 0.03, CAMERA)
+    mark_silhouettes(seen, CAMERA)
+    corrected = unproject_rims(seen, CAMERA, 0.03)
+    lat = Lattice(np.arange(36.0, 66.01, 0.25), np.arange(-14.0, 14.01, 0.25))
+    X, Y = np.meshgrid(lat.x, lat.y)
+    outside = np.maximum(np.maximum(np.abs(X - 50) - 10, np.abs(Y) - 10), 0.0)
+    truth = RIM_MM - outside / RUN
+    never = np.full(lat.shape, len(seen))
+    known = node_bounds(lat, seen, corrected, never, np.ones(lat.shape, bool))
+    assert known.floor[56, 56] == LEVELS[0]  # the plateau: out at the top frame
+    assert np.all(known.floor <= truth) and np.all(known.ceiling >= truth)
+    ray = RIM_MM - CAMERA.height_mm * (1 - 60.0 / X)  # the ray over the rim at x = 60
+    # (where it passes between the frames: above the top one no frame saw ink there)
+    behind = (X > 60) & (np.abs(Y) < 8) & (ray > LEVELS[-1] + 0.5) & (ray < LEVELS[0] - 0.5)
+    assert behind.sum() > 100
+    off = (known.ceiling - ray)[behind]
+    # (a frame a third of a pixel out or in moves its silhouette a tenth of a level; where a
+    # frame's silhouette went unmarked, the level that first showed ink is left)
+    assert np.median(np.abs(off)) < 0.1 and np.percentile(off, 90) < 0.2 and off.min() > -0.1
+    for s in corrected:
+        s.hidden = None  # no silhouettes known: the ceiling is the level that first showed ink
+    levels_only = node_bounds(lat, seen, corrected, never, np.ones(lat.shape, bool))
+    assert (levels_only.ceiling - ray)[behind].mean() > 0.4
 
 
 def test_a_face_the_camera_sees_has_no_silhouette():
