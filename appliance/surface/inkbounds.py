@@ -36,17 +36,20 @@ def node_bounds(
     first: np.ndarray,
     footprint: np.ndarray,
     rise_max: float = 0.0,
+    sink: float = 0.0,
 ) -> NodeBounds:
     """Floor and ceiling per node of the footprint. `seen`: the slices as observed;
     `corrected`: the same with the rims put back and at their true levels; `first`: the
     frame each node came out in by the corrected slices; rise_max: the most the ink
-    climbs the part (a node the ink covered stands up to that above its level)."""
+    climbs the part (a node the ink covered stands up to that above its level); sink: the
+    most an ink that dewets stands above a face it has left (a node out of it stands up
+    to that below its level)."""
     idx = np.flatnonzero(footprint.ravel())
     X, Y = np.meshgrid(lat.x, lat.y)
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
     levels = np.array([s.level for s in corrected])
     first_seen, ceiling = _ceiling(lat, seen, corrected, levels, q, idx)
-    floor = _floor(lat, corrected, levels, q, idx)
+    floor = _floor(lat, corrected, levels, q, idx) - sink
     out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf)]
     out[0].ravel()[idx] = first_seen < first.ravel()[idx]
     out[1].ravel()[idx] = floor
@@ -97,8 +100,7 @@ def _silhouette(s: Slice, points: np.ndarray) -> np.ndarray:
 
 def _floor(lat, corrected, levels, q, idx):
     """The highest level whose waterline (the rims put back) has the node inside it, by
-    more than a pixel; with a meniscus that pulls the ink's edge below the level (an ink
-    that dewets), that much lower."""
+    more than a pixel."""
     floor = np.full(len(q), -np.inf)
     todo = np.arange(len(q))
     for k, s in enumerate(corrected):
@@ -106,9 +108,7 @@ def _floor(lat, corrected, levels, q, idx):
             continue
         d, _ = polyline_distance(s, q[todo])
         out = _inside(lat, s, q[todo], d, idx[todo]) & (d > SEEN_TOL_MM)
-        curve = s.level_curve()
-        sink = min(float(np.min(curve.z - curve.level)), 0.0) if not curve.empty else 0.0
-        floor[todo[out]] = levels[k] + sink
+        floor[todo[out]] = levels[k]
         todo = todo[~out]
     return floor
 

@@ -13,6 +13,9 @@ Steps, each in its own module:
    priors for faces that came out at once (flatfaces.py) and the regularised
    grid fit (gridfit.py) on an internal lattice (lattice.py) of ~240 nodes a
    side; the smoothing length is chosen by cross-validation on held-out nodes;
+   after the last pass each node is held between what the frames saw for sure
+   (inkbounds.py): out of the ink, and ink over it (behind a silhouette, the ray
+   over the rim);
 5. meniscus (contact_lines.py): that fit is of the contact lines, the apparent
    surface top - h(beta); the top is solved from it, and each contact point's
    rise puts it back by the perspective for the next pass;
@@ -222,14 +225,14 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     )  # h grows with the slope
     lo, hi = bracket_bounds(first, slices, rise_max)
     # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
-    known = node_bounds(lat, seen, corrected, first, footprint, rise_max)
+    sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
+    known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink)
     hi = np.where(known.hidden, known.ceiling, hi)
     z = np.where(np.isfinite(z_fe) & ~known.hidden, z, np.clip(z, lo, hi))
     # a face that came out at once lies between its two levels, whatever the fit says
     # (an ink that dewets stands its depression above a flat face it has just left: the
     # face is that much below its levels, dewetted.place_dewetted_faces)
     sure = np.isfinite(flat[0])
-    sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
     climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
     z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
     # and every node stands where the frames saw it: out of the ink, or the ink over it
