@@ -25,6 +25,23 @@ the 18 mm jump: 9.0 mm on the 12 mm tier at the foot, 22.0 halfway up), the cell
 few mm of a wall or rim that are no face node and keep the fit's own tilt, and with the
 physics preset the meniscus on the faces' rims.
 
+3 December 2026 (session 12), main df51207 first (stepped-block clean 0.3526 / 2.967 / 6.620,
+blade 0.1653 / 2.400 / 12.118: the blade's hidden flank clamped at 6 mm, the level its foot came
+out at with the rims put back). With each node held between what the frames saw for sure
+(surface/inkbounds.py: out of the ink inside a waterline, ink over it outside one as seen, and
+behind a silhouette the ray over the rim), same renders, Ea / interior p99 / max mm:
+    stepped-block clean    0.3526 -> 0.2326  (p99 2.967 -> 2.682, max 6.620 -> 4.856)
+                  physics  0.9740 -> 0.9702  (p99 5.280 -> 5.180, max 7.621 -> 6.677; 41 holes)
+    blade         clean    0.1653 -> 0.0824  (p99 2.400 -> 0.642, max 12.118 -> 1.619)
+                  physics  0.4372 -> 0.4269  (p99 5.354 -> 4.256, max 7.282 -> 4.953)
+What is left (clean): the stepped block's 85 deg walls facing away from the camera lean 1.4 deg
+steeper than its ray, so the ray over the rim bounds them 4-5 mm high halfway down (the column
+of cells on the 18 mm jump's far wall; the cells on walls hold 0.165 of the 0.233); nothing the
+frames saw tells such a wall from one along the ray (the blade's flank, where that bound is its
+height). The blade's 3.6 mm slab came out at once between levels 3 and 4 and lies at the
+bracket's middle: 0.1 mm on each of its 1052 cells, 0.067 of its 0.082. With physics the
+ceiling carries the ink's largest rise (3.8 mm on a wall) and says little.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
