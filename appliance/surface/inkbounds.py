@@ -1,13 +1,14 @@
 """What the frames say for sure about each node: a floor and a ceiling.
 
 A node inside a frame's waterline (the rims put back) was out of the ink: it stands at
-least at that level. A node outside a frame's waterline as the camera saw it (a
-silhouette included) showed ink there: it stands below that level. Both hold whatever
-the fit's smoothness would rather do, and behind a face that hid the ink they are all the
-frames say: with the rims put back, a node there comes out of the ink (in the corrected
-slices) only where the part around the face's foot does, at a level the ink was never seen
-at - its bracket has its upper end wrong. Its ceiling is the ray from the camera over the
-rim: on a face that leans like that ray (a blade's 84 deg flank), its height.
+least at that level. A node outside a frame's waterline as the camera saw it (a silhouette
+included), and outside it with the walls put back, showed ink there: it stands below that
+level. Both hold whatever the fit's smoothness would rather do, and behind a face that hid
+the ink they are all the frames say: with the rims put back, a node there comes out of the
+ink (in the corrected slices) only where the part around the face's foot does, at a level
+the ink was never seen at - its bracket has its upper end wrong. Its ceiling is the ray
+from the camera over the rim: on a face that leans like that ray (a blade's 84 deg flank),
+its height.
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ def _ceiling(lat, seen, corrected, levels, q, idx):
         inside = _inside(lat, seen[k], q[todo], d, idx[todo])
         first_seen[todo[inside]] = k
         ink = ~inside & (d > SEEN_TOL_MM)
+        ink[ink] = _outside(lat, corrected[k], q[todo[ink]], idx[todo[ink]])
         at = todo[ink]
         ceiling[at] = levels[k]
         if below is not None:
@@ -89,6 +91,16 @@ def _ceiling(lat, seen, corrected, levels, q, idx):
         todo = todo[~ink]
         below = k
     return first_seen, ceiling
+
+
+def _outside(lat, s: Slice, q, flat_index) -> np.ndarray:
+    """Which of the nodes the camera saw ink at lie outside the waterline with its walls put
+    back too: a wall seen by its top edge looks further from the camera's foot than it is,
+    and the ink beside it is where the wall's foot is, not where its edge was seen."""
+    if s.empty or len(q) == 0:
+        return np.ones(len(q), bool)
+    d, _ = polyline_distance(s, q)
+    return ~_inside(lat, s, q, d, flat_index) & (d > SEEN_TOL_MM)
 
 
 def _silhouette(s: Slice, points: np.ndarray) -> np.ndarray:
