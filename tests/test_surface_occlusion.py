@@ -191,7 +191,7 @@ def test_a_flat_face_no_curve_crosses_keeps_its_middle():
     assert z[15, 15] == pytest.approx(12.5)
 
 
-# Ea (mm) on this small camera: stepped block 0.38 (4.84 with silhouettes read as waterlines,
+# Ea (mm) on this small camera: stepped block 0.37 (4.84 with silhouettes read as waterlines,
 # 0.49 with the nodes behind them bracketed by the rims put back), blade 0.108 (1.05, 0.146);
 # benches/occlusion.py has the full-size figures
 @pytest.mark.parametrize("name, ea_max", [("stepped-block", 0.45), ("blade", 0.125)])
