@@ -71,15 +71,20 @@ def tree_pids(pid: int) -> list[int]:
     return out
 
 
-def tree_pss_mb(pid: int) -> float:
+def tree_pss_mb(pid: int, each: dict | None = None) -> float:
     """The proportional set size of pid's whole tree in MB: each shared page (the libraries, a
-    forked worker's copy of its parent) counted once, shared out between the processes."""
+    forked worker's copy of its parent) counted once, shared out between the processes.
+    `each`: filled with {process: MB} (a process named by its command's last words)."""
     total = 0
     for p in tree_pids(pid):
         try:
             for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines():
                 if line.startswith("Pss:"):
-                    total += int(line.split()[1])
+                    kb = int(line.split()[1])
+                    total += kb
+                    if each is not None:
+                        name = Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+                        each[f"{p} {name[:60]}"] = kb / 1024
         except OSError:
             pass
     return total / 1024

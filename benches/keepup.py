@@ -64,6 +64,7 @@ sys.path.insert(0, str(REPO))
 from benchkit import bench_tmp, proc_status_mb, start_daemon, tree_pss_mb  # noqa: E402
 
 KINDS = {"RssAnon": 0.0, "RssFile": 0.0, "RssShmem": 0.0}  # the daemon's, at its largest while processing
+AT_PEAK: dict = {}  # each process's Pss when the tree's was at its largest
 AFTER_LAST_FRAME_S = 10.0
 PEAK_MB = 300.0
 
@@ -84,7 +85,12 @@ def run_scan(client, params, pid):
             if rss > processing_mb:
                 processing_mb = rss
                 KINDS.update({k: proc_status_mb(pid, k) for k in KINDS})
-            tree_mb = max(tree_mb, tree_pss_mb(pid))
+            each: dict = {}
+            now = tree_pss_mb(pid, each)
+            if now > tree_mb:
+                tree_mb = now
+                AT_PEAK.clear()
+                AT_PEAK.update(each)
         if st["state"] in ("done", "failed", "cancelled") and client.job(job_id)["status"] == st["state"]:
             return client.job(job_id), t_processing, processing_mb, tree_mb
         time.sleep(0.05)
@@ -150,6 +156,7 @@ def main(argv=None):
             f"result ready {after:.1f} s after the last frame (limit {AFTER_LAST_FRAME_S:g} s; "
             f"a Pi 4: ~{4.5 * after:.0f} s): {verdict(ok_time)}"
         )
+        print("the tree at its largest: " + "; ".join(f"{k}: {v:.0f} MB" for k, v in AT_PEAK.items()))
         print(
             "daemon at its largest while processing: "
             + ", ".join(f"{k} {v:.0f} MB" for k, v in KINDS.items())
