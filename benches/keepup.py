@@ -47,6 +47,21 @@ Session 11, main d72c918 (the planner's work above, the waterline loops held on 
 on an idle box: 84 frames, capture 59.2 s; result 15.6 s after the last frame (fit 4.75 s,
 toolpath 8.90 s, waterlines 0.49 s), child 16.9 s CPU; daemon 139 MB + child 178 MB = 317 MB.
 Both still MISS (10 s, 300 MB).
+
+Session 12 (3 December, the box quiet: load ~1), one run each. Memory is now the Pss of the
+daemon's whole tree, sampled every 0.05 s (each page once: the old figure, daemon RSS + the
+child's wait4 ru_maxrss, counted the libraries both map twice, and ru_maxrss of a forked
+child keeps its parent's RSS at the fork). Before (df51207, this bench): 14.9 s after the
+last frame (waterlines 0.43, fit 4.14, toolpath 9.03 s), child 15.9 s CPU, tree 284 MB
+(daemon 130, child 153). With the child started with the capture (it reads the waterlines
+and measures the registration's frame pairs as the frames land) and the finishing planned in
+two bands on two cores: 9.7, 10.2, 10.7 s (fit 2.5-3.0 s, toolpath 6.6-7.2 s), tree
+319-329 MB (daemon 133, child 119, its planning worker 72-75). After the occlusion bounds
+(inkbounds.py: +1 s of fit on this part) 11.5 and 11.7 s. In one band (MAX_WORKERS 1, same
+code otherwise): 12.5 s, tree 282 MB. So: time MISS by 0-1.7 s, memory MISS by ~25 MB with
+the second band (the worker's own planning state, ~40 MB), PASS without it. Left: the
+worker's envelopes and opening, and the fit (inkbounds' per-node point-in-polygon loop,
+polyline_distance's kd-tree queries: ~4000 a fit).
 """
 
 from __future__ import annotations
