@@ -29,11 +29,14 @@ def service(tmp_path, faults=None, processor=in_process, **kw):
 
 
 def wait_final(svc, job_id, timeout=60.0):
-    """The job once it and the bench have finished (done, failed or cancelled)."""
+    """The job once it and the bench have finished (done, failed or cancelled), its thread
+    included: the thread publishes the end, then closes the devices, and until it has a
+    commissioning step that moves the stage is refused (it was, on a loaded CI box)."""
 
     def finished():
         job = svc.job(job_id)
-        return job if job["status"] in FINAL and svc.state()["state"] in FINAL else None
+        ended = job["status"] in FINAL and svc.state()["state"] in FINAL and not svc.scan_running()
+        return job if ended else None
 
     return wait_until(finished, timeout, what=lambda: f"job {job_id} to finish: {svc.job(job_id)}")
 
