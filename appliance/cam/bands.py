@@ -12,9 +12,10 @@ which only lowers the real stock between them. What it costs is a pass or two pe
 The bands split the part's footprint into equal areas, which is what the planner's work
 follows. Each band's probe opens the design over its own rows and a cutter's reach beyond
 (envelope.py; the opening was a quarter of the planning), on the whole part's lattice, so
-the values are the same. Forked workers share the map without copying; each returns its
-passes and tips through a pipe. Where the bands may fork (forks.py: the processing child and the commands; never the
-daemon with its threads) is not this module's business; elsewhere it plans in one band.
+the values are the same (to the float32 rounding of the erosion's reference height).
+Forked workers share the map without copying; each returns its passes and tips through a
+pipe. Where the bands may fork is forks.py's business (the processing child and the
+commands; never the daemon with its threads); elsewhere it plans in one band.
 """
 
 from __future__ import annotations

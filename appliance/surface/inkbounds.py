@@ -118,10 +118,9 @@ def _outside(lat, s: Slice, q, flat_index) -> np.ndarray:
 
 
 def _silhouette(s: Slice, points: np.ndarray) -> np.ndarray:
-    hidden = getattr(s, "hidden", None)
-    if hidden is None or len(hidden) != len(s.P):
+    if s.hidden is None or len(s.hidden) != len(s.P):
         return np.zeros(len(points), bool)
-    return hidden[points]
+    return s.hidden[points]
 
 
 def _floor(lat, corrected, levels, q, idx):
