@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from cam_helpers import grid_map
 
-from appliance.cam.contact import drop_points
+from appliance.cam.contact import drop_points, facet_contacts
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.jobs import verify_gcode
 from appliance.cam.operations import Operation, plan_operations, post_operations
@@ -94,3 +94,26 @@ def test_waterline_loops_stand_on_their_levels_down_to_the_crease_at_the_foot(na
     # the lowest loop runs just above the floor (the crease where a cutter resting on the
     # floor meets the wall with its side), not up to a level step above it
     assert own.min() - 1.0 <= FOOT + 0.005, own.min()
+
+
+def swept_mesa(X, Y):
+    """benches/steep.py's mesa: 8 mm high on a 9 mm radius, its wall 60-85 degrees round it
+    (85 at +y), a low cap on top, on a floor at z = 1."""
+    r, phi = np.hypot(X - 20, Y - 20), np.arctan2(Y - 20, X - 20)
+    s = 8.0 / (4 * np.tan(np.radians(72.5 + 12.5 * np.sin(phi))))
+    return 1 + 8.0 / (1 + np.exp((r - 9) / s)) + 0.8 * np.clip(1 - (r / 9) ** 2, 0, 1)
+
+
+def test_on_the_crease_the_wall_behind_the_floors_contact_is_met():
+    # axes on the floor ~3.1 mm from the 85-degree wall's middle: the ball rests on the
+    # floor and touches the wall with its side. The floor's contact won the search by a
+    # hair and only its window was met exactly: 0.005-0.009 mm low at these points.
+    s = Sampler(grid_map(swept_mesa, 0, 40, 0, 40, 0.2))
+    c = parse_cutter("ball6")
+    x = np.array([22.76, 17.42, 25.52, 27.55])
+    y = np.array([31.80, 31.83, 30.81, 29.56])
+    tips = drop_points(s, c, x, y, 0.02)
+    span = int(np.ceil(c.radius / s.dx)) + 1
+    exact = facet_contacts(s, c, x, y, x, y, span)  # every triangle under the cutter
+    assert np.all(tips >= exact - 1e-6), tips - exact
+    assert np.all(tips <= exact + 1e-6), tips - exact

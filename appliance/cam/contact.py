@@ -175,19 +175,32 @@ def polish(sampler: Sampler, cutter: Cutter, x, y, tip, d, chunk=2_000, off_part
             best = np.maximum(best, fb)
             sp /= 4
         n = k0.size
-        second = best[n:] > best[:n]
-        cx, cy = np.where(second, cx[n:], cx[:n]), np.where(second, cy[n:], cy[:n])
         out[idx[k0]] = np.maximum(out[idx[k0]], np.maximum(best[:n], best[n:]))
         # steep faces within reach: meet their triangles exactly (the part's outline is met
         # exactly already, as edges, by the lattice drop)
         w = np.flatnonzero(faces[k0])
         if w.size:
-            k1 = k0[w]
-            exact = facet_contacts(
-                sampler, cutter, x[k1], y[k1], x[k1] + cx[w], y[k1] + cy[w], floor=out[idx[k1]]
-            )
-            out[idx[k1]] = np.maximum(out[idx[k1]], exact)
+            second = best[n + w] > best[w]
+            won, lost = np.where(second, n + w, w), np.where(second, w, n + w)
+            _meet_faces(sampler, cutter, x, y, k0[w], cx, cy, won, lost, out, idx)
     return out.reshape(shape)
+
+
+def _meet_faces(sampler, cutter, x, y, k1, cx, cy, won, lost, out, idx):
+    """Meet the triangles round the contacts cx[won], cy[won] exactly, for the points k1, and
+    round cx[lost], cy[lost] too where the losing start ended more than a window away.
+
+    Round the better start's contact only is not enough on a crease: a cutter on a floor
+    that touches the wall with its side has the floor's contact win the search by a hair,
+    and the wall's triangles lie beyond the window (0.009 mm low beside benches/steep.py's
+    85-degree side)."""
+    far = (np.abs(cx[won] - cx[lost]) > WINDOW * sampler.dx) | (
+        np.abs(cy[won] - cy[lost]) > WINDOW * sampler.dy
+    )
+    for k, c in ((k1, won), (k1[far], lost[far])):
+        if k.size:
+            exact = facet_contacts(sampler, cutter, x[k], y[k], x[k] + cx[c], y[k] + cy[c], floor=out[idx[k]])
+            out[idx[k]] = np.maximum(out[idx[k]], exact)
 
 
 def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int = WINDOW, floor=None):
