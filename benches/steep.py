@@ -60,8 +60,9 @@ On the crease itself the drop-cutter's polish misses the wall behind the
 floor's contact (0.026 mm low at x=22.7 y=31.8 against a brute-force drop:
 the ring scan's start loses to the floor's, so the exact facets are met
 around the wrong contact), hence the 0.0232 gouge: the lowest loop stands
-0.04 mm above the floor instead. That drop-cutter defect is contact.polish's
-and still there for any position exactly on such a crease. The level step:
+0.04 mm above the floor instead. That drop-cutter defect was contact.polish's
+(fixed 3 December, session 13: both starts' windows are met where they ended
+apart; FOOT kept, not re-measured). The level step:
 the 99th percentile of the tip field's slope (82 degrees) held 0.066 mm on the
 85-degree side; the steepest slope read, plus the degree the 0.2 mm lattice's
 differences take off an 85-degree wall, holds it at 27 levels instead of 22.
