@@ -89,7 +89,10 @@ def test_a_flat_end_runs_off_the_outline_to_a_tenth_of_a_step_short_of_its_radiu
     assert y.min() == pytest.approx(-st.margin, abs=1e-4) and y.max() == pytest.approx(
         16 + st.margin, abs=1e-4
     )
-    # a ball keeps a whole step short of its radius (its tip races there: see FinishSettings),
-    # a bull nose a tenth of one, like a flat end
-    assert FinishSettings(parse_cutter("ball4"), margin=RIM).margin == pytest.approx(2 - 0.1)
+    # a ball and a bull nose too: a whole step short, a 1 mm ball's side at the outline was
+    # 74 degrees (asin 0.48 / 0.5), short of sample 4's 80-degree faces beside it, and the
+    # strip the verification reaches from further out was left at 0.0371 for 0.01 asked
+    ball = FinishSettings(parse_cutter("ball1"), scallop=0.01, resolution=0.02, margin=RIM)
+    assert np.degrees(np.arcsin(ball.margin / 0.5)) > 82
+    assert FinishSettings(parse_cutter("ball4"), margin=RIM).margin == pytest.approx(2 - 0.01)
     assert FinishSettings(parse_cutter("bull4r1"), margin=RIM).margin == pytest.approx(2 - 0.01)

@@ -17,8 +17,8 @@ Boundary
 Tool positions are kept where the axis lies within `margin` of the footprint.
 Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
-the base). With margin RIM (the cutter's radius less a step, a tenth of one for a
-flat end or a bull nose; the positions close up a little so both ends of a pass reach it) the
+the base). With margin RIM (the cutter's radius less a tenth of a step; the positions
+close up a little so both ends of a pass reach it) the
 passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
 lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
@@ -63,25 +63,25 @@ class FinishSettings:
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
     chord: float | None = None
-    # RIM (the cutter's radius less a step) finishes the rim, at 1.25-1.3x the CPU of
+    # RIM (the cutter's radius less a tenth of a step) finishes the rim, at 1.25-1.3x the CPU of
     # margin 0 on sample 1 (benches/cam.py): not yet the default
     margin: float = 0.0
     leave: float = 0.0
 
     def __post_init__(self):
         if self.margin == RIM:
-            # a radius less a step: at a full radius the cutter meets the outline with its
-            # rim, where a ball's tip moves ~100x faster than its place and the 0.0001 mm
-            # of a G-code coordinate was 0.007 mm of gouge at sample 1's corner. A flat end's
-            # tip moves no faster than the surface under it until its rim leaves the part
-            # (a cliff at exactly R), and its flat bottom reaches a cell at the outline only
-            # from within R of it: a step short left the slope times the step there (sample
-            # 3's corner, 0.0643 where 0.05 was asked), so it goes to a tenth of a step. So
-            # does a bull nose: a step short its corner's side was 67 degrees for a 1 mm
-            # r0.25, and the strip along sample 4's 80-degree faces' edge, which the
-            # verification reaches from further out, was left at 0.057 (0.0102 at a tenth)
-            short = self.resolution if self.cutter.kind == "ball" else self.resolution / 10
-            self.margin = max(self.cutter.radius - short, 0.0)
+            # a tenth of a step short of a radius: at a full radius the cutter meets the
+            # outline with its rim, where a ball's tip moves ~100x faster than its place and
+            # the 0.0001 mm of a G-code coordinate was 0.007 mm of gouge at sample 1's
+            # corner (at a tenth short ~12x: 0.0006). A whole step short was too short: a
+            # flat end's bottom reaches a cell at the outline only from within R of it (the
+            # slope times the step was left at sample 3's corner, 0.0643 where 0.05 was
+            # asked), and the side of a ball or a bull nose's corner at the outline was not
+            # as steep as the face beside it, which the verification reaches from further
+            # out: along sample 4's 80-degree faces' edge a 1 mm ball's side was 74 degrees
+            # (0.0371 left where 0.01 was asked, 0.0109 at a tenth), a bull nose r0.25's 67
+            # (0.057, 0.0102 at a tenth)
+            self.margin = max(self.cutter.radius - self.resolution / 10, 0.0)
         if self.chord is None:
             # a straight move may stand this far above the tips it replaces, which
             # adds directly to the scallop: keep it a twentieth of the request

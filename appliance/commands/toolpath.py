@@ -65,8 +65,8 @@ def add_arguments(p):
     g.add_argument(
         "--rim",
         action="store_true",
-        help="run the passes off the outline by the cutter's radius less a step (a tenth of a step "
-        "for a flat end or a bull nose), so the rim is finished too (about 1.25x the time)",
+        help="run the passes off the outline by the cutter's radius less a tenth of a step, "
+        "so the rim is finished too (about 1.25x the time)",
     )
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
     g.add_argument(
