@@ -10,7 +10,7 @@ from appliance.cam.cutters import parse_cutter
 from appliance.cam.gcodeparse import parse_gcode
 from appliance.cam.jobs import finishing_gcode, verify_gcode
 from appliance.cam.sampling import Sampler
-from appliance.cam.zigzag import RIM, FinishSettings, finishing
+from appliance.cam.zigzag import RIM, FinishSettings, finishing, steep_outline
 
 
 def _dome(X, Y):
@@ -96,3 +96,18 @@ def test_a_flat_end_runs_off_the_outline_to_a_tenth_of_a_step_short_of_its_radiu
     assert np.degrees(np.arcsin(ball.margin / 0.5)) > 82
     assert FinishSettings(parse_cutter("ball4"), margin=RIM).margin == pytest.approx(2 - 0.01)
     assert FinishSettings(parse_cutter("bull4r1"), margin=RIM).margin == pytest.approx(2 - 0.01)
+
+
+def test_a_ball_runs_a_tenth_short_only_where_a_face_at_the_outline_is_steeper_than_its_side():
+    # a step short, a 2 mm ball's side at the outline is asin(1.9 / 2) = 72 degrees: enough for
+    # the dome, whose faces there are gentle, and its positions stay on the lattice's phase
+    gentle = grid_map(_dome, 0, 20, 0, 16, 0.5)
+    assert not steep_outline(Sampler(gentle), 2.0, 1.9)
+    fin = finishing(
+        Sampler(gentle, edge_step=0.05), FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=RIM)
+    )
+    assert fin.margin == pytest.approx(2 - 0.1)
+    # a face falling at 80 degrees to the far edge is not reached to its edge from 1.9 mm out
+    wall = grid_map(lambda X, Y: 1 + np.minimum(np.tan(np.radians(80)) * (20 - X), 6), 0, 20, 0, 16, 0.5)
+    assert steep_outline(Sampler(wall), 2.0, 1.9)
+    assert not steep_outline(Sampler(wall), 2.0, 1.99)  # a tenth short: its side is 84 degrees

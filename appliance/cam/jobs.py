@@ -133,7 +133,7 @@ def finishing_gcodes(
     )
     notes = [
         f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
-        f"stock to leave {settings.leave:g} mm, margin {settings.margin:g} mm"
+        f"stock to leave {settings.leave:g} mm, margin {fin.margin:g} mm"
     ]
     notes += header_notes(hm, uncertain_mm)
     so = fin.stepovers
