@@ -34,17 +34,16 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
     guess = flat_stepover(st.cutter, h)
     done = [probe.pass_at(s0)]
     passes = [s0]
-    steps = []  # (stepover, the scallop it left) of the passes placed by the search
     while passes[-1] < s1 - 1e-9:
         sa = passes[-1]
-        best_ok, best_p, best_sc, worst = None, None, 0.0, np.inf
-        s = min(_first_guess(guess, steps, aim), s_cap, s1 - sa)
+        best_ok, best_p, worst = None, None, np.inf
+        s = min(guess, s1 - sa)
         for _ in range(10):
             cand = probe.pass_at(sa + s)
             sc = probe.scallop(done, cand)
             if sc <= hi_ok:
                 if best_ok is None or s > best_ok:
-                    best_ok, best_p, best_sc = s, cand, sc
+                    best_ok, best_p = s, cand
                     probe.keep_only(cand[0])
                 if sc >= lo_ok or sa + s >= s1 - 1e-9 or s >= s_cap - 1e-9:
                     break
@@ -73,20 +72,4 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
         passes.append(nxt)
         done.append(best_p if best_p[0] == nxt else probe.pass_at(nxt))
         guess = best_ok
-        steps.append((best_ok, best_sc))
     return np.array(passes), np.stack([p[1] for p in done])
-
-
-def _first_guess(last, steps, aim):
-    """The first candidate's stepover: the last one scaled to the aim by the scallop it left
-    (a scallop grows as the square of the step). The last step alone left 0.98-1.0 of the
-    request on sample 1's dome, whose curvature drifts slowly, just above the window: a
-    second candidate for every third pass (163 candidates for 124 passes at 0.05, now 137;
-    at 0.01 the scallops scatter by a few per cent from pass to pass: 356 -> 350 for 276).
-    Carrying the trend of the last two steps on as well scattered more (404 at 0.01)."""
-    if not steps:
-        return last
-    s_b, sc_b = steps[-1]
-    if not (s_b == last and sc_b > 0.5 * aim):
-        return last
-    return s_b * np.sqrt(aim / sc_b)
