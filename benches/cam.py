@@ -97,6 +97,24 @@ far edge as the bull nose's: at 0.48 mm out a 1 mm ball's side is 74 degrees, sh
 80-degree faces; a tenth of a step (side 84 degrees) would reach them, but a ball's tip
 races there (11 mm per mm: 0.0055 mm for a 3-decimal dialect's rounding), not yet tried.
 
+Session 13 (2026-12-03, branch s13-rim, load 7-10). `--only rim` sample4 ball1 0.01: 0.0371 at
+(55.0, 50.8) MISS -> 0.0109 OK, gouge 0.0037 (was 0.0013), 0.00 % uncut, 324 passes: 0.48 mm
+out a 1 mm ball's side at the outline is 74 degrees, short of the 80-degree faces beside it. A
+ball now stops a tenth of a step short where a face at the outline is steeper than its side a
+step short (zigzag.steep_outline: sample 4 only), else a whole step: a tenth short everywhere
+put sample 1's positions off the 0.1 mm lattice's phase (refine() 3 -> 8 levels) and sample 3
+ball6 0.01 took 291 passes for 252 (0.0099 OK). Every other rim row's program is byte for byte
+ad05d23's (sample 1 RIM and margin 0 at 0.05: md5), so its figures stand; sample3 ball6 0.01, not
+recorded before: 0.0097 OK, gouge 0.0014, 0.00 %, 252 passes. Speed: no envelope columns beyond
+the footprint (RIM: 58 of ~440, the pass ends off the part), the same programs; one child each,
+alternately, new | ad05d23: 0.05: margin 0 5.98, 6.01 s | 6.13, 5.96 s (the same code:
+the noise), RIM 6.64, 6.95 | 6.38, 7.62 s, 134-143 MB; 0.01: margin 0 19.5 | 16.9 s, RIM 16.7
+| 21.4 s, 174 | 206 MB: no gain measurable here. RIM stays off by default: margin 0 itself
+misses 5 s on this box, and RIM is 1.04-1.28x it at 0.05 in the same run. Tried and reverted: the first candidate's
+stepover scaled by sqrt(aim / scallop the last step left): sample 1's candidates 163 -> 137 at
+0.05 (356 -> 350 at 0.01), but sample4 ball1 then left 0.0111 at (54.8, 48.8) MISS, a spot the
+planner under-measures (0.0117 there with the ball 0.4973 out): it moved the passes onto it.
+
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
 

@@ -17,8 +17,9 @@ Boundary
 Tool positions are kept where the axis lies within `margin` of the footprint.
 Off the part the surface is the base top, so the cutter rolls down over the
 edge onto it and never below it (the drop-cutter holds it on the edge and
-the base). With margin RIM (the cutter's radius less a tenth of a step; the positions
-close up a little so both ends of a pass reach it) the
+the base). With margin RIM (the cutter's radius less a tenth of a step; a ball's less
+a whole step where no face at the outline is steeper than its side there, see
+finishing(); the positions close up a little so both ends of a pass reach it) the
 passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
 lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
@@ -82,7 +83,8 @@ class FinishSettings:
             # as steep as the face beside it, which the verification reaches from further
             # out: along sample 4's 80-degree faces' edge a 1 mm ball's side was 74 degrees
             # (0.0371 left where 0.01 was asked, 0.0109 at a tenth), a bull nose r0.25's 67
-            # (0.057, 0.0102 at a tenth)
+            # (0.057, 0.0102 at a tenth). finishing() takes a ball back to a whole step
+            # short where the outline's faces are gentler than its side there
             self.margin = max(self.cutter.radius - self.resolution / 10, 0.0)
             self.rim = True
         if self.chord is None:
