@@ -112,8 +112,9 @@ the noise), RIM 6.64, 6.95 | 6.38, 7.62 s, 134-143 MB; 0.01: margin 0 19.5 | 16.
 | 21.4 s, 174 | 206 MB: no gain measurable here. RIM stays off by default: margin 0 itself
 misses 5 s on this box, and RIM is 1.04-1.28x it at 0.05 in the same run. Tried and reverted: the first candidate's
 stepover scaled by sqrt(aim / scallop the last step left): sample 1's candidates 163 -> 137 at
-0.05 (356 -> 350 at 0.01), but sample4 ball1 then left 0.0111 at (54.8, 48.8) MISS, a spot the
-planner under-measures (0.0117 there with the ball 0.4973 out): it moved the passes onto it.
+0.05 (356 -> 350 at 0.01), but sample4 ball1 then left 0.0111 at (54.82, 48.82) MISS: one cell
+on the steep face (its neighbours 0.0043-0.0068) between passes 48.7834 and 48.8328, which the
+planner measured at 0.0092 (0.0117 there with the ball 0.4973 out). Not yet looked into.
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
