@@ -222,24 +222,27 @@ def polyline_distance(sl: Slice, q: np.ndarray, signed: bool = False):
     if sl.empty:
         return np.full(len(q), np.inf), np.zeros(len(q), int)
     d, i = sl.tree.query(q)
-    best = d.copy()
-    side = np.zeros(len(q))
-    v = sl.P[i]
-    n_sum = np.zeros_like(q)
+    best = d
+    if signed:
+        side = np.zeros(len(q))
+        n_sum = np.zeros_like(q)
+    qx, qy = q[:, 0], q[:, 1]
     for a_idx, b_idx in ((i, sl.nxt[i]), (sl.prv[i], i)):
         a, b = sl.P[a_idx], sl.P[b_idx]
-        ab = b - a
-        L2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-        proj = a + t[:, None] * ab
-        dd = np.hypot(*(q - proj).T)
-        cross = ab[:, 0] * (q - a)[:, 1] - ab[:, 1] * (q - a)[:, 0]
-        inner = (t > 0) & (t < 1) & (dd <= best + 1e-12)
-        side = np.where(inner, np.sign(cross), side)
+        ax, ay = a[:, 0], a[:, 1]
+        abx, aby = b[:, 0] - ax, b[:, 1] - ay
+        aqx, aqy = qx - ax, qy - ay
+        L2 = abx * abx + aby * aby
+        t = np.clip((aqx * abx + aqy * aby) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        dd = np.hypot(qx - (ax + t * abx), qy - (ay + t * aby))
+        if signed:
+            inner = (t > 0) & (t < 1) & (dd <= best + 1e-12)
+            side = np.where(inner, np.sign(abx * aqy - aby * aqx), side)
+            n_sum += np.column_stack([aby, -abx]) / np.sqrt(np.maximum(L2, 1e-300))[:, None]
         best = np.minimum(best, dd)
-        n_sum += np.column_stack([ab[:, 1], -ab[:, 0]]) / np.sqrt(np.maximum(L2, 1e-300))[:, None]
     if not signed:
         return best, i
+    v = sl.P[i]
     at_vertex = side == 0
     side[at_vertex] = -np.sign(np.einsum("ij,ij->i", (q - v)[at_vertex], n_sum[at_vertex]))
     return np.where(side >= 0, best, -best), i
