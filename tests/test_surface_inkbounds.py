@@ -12,3 +12,22 @@ def test_a_node_out_of_the_ink_above_where_ink_was_seen_over_it_keeps_neither_bo
     out = _without_clashes(b)
     assert out.floor[0] == 5.0 and out.ceiling[0] == 8.0 and out.hidden[0]
     assert out.floor[1] == -np.inf and out.ceiling[1] == np.inf and not out.hidden[1]
+
+
+def test_in_polygon_agrees_with_opencvs_point_polygon_test_on_and_off_the_loop():
+    # lattice nodes (few rows, many on a vertex or a level edge of a half-mm loop) and loose
+    # points: inside exactly where cv2.pointPolygonTest says > 0, a point on the loop out
+    import cv2
+
+    from appliance.surface.inkbounds import in_polygon
+
+    rng = np.random.default_rng(5)
+    th = np.sort(rng.uniform(0, 2 * np.pi, 80))
+    loop = np.round(np.column_stack([9 * np.cos(th), 6 * np.sin(th)]) * 2) / 2
+    X, Y = np.meshgrid(np.arange(-10, 10.01, 0.5), np.arange(-7, 7.01, 0.5))
+    q = np.vstack([np.column_stack([X.ravel(), Y.ravel()]), loop, rng.uniform(-10, 10, (300, 2))])
+    poly = loop.astype(np.float32).reshape(-1, 1, 2)
+    want = np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), False) > 0 for x, y in q])
+    on_loop = np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), False) == 0 for x, y in q])
+    assert on_loop.sum() > 80 and 0 < want.sum() < len(q)  # the edge cases are there
+    np.testing.assert_array_equal(in_polygon(loop, q), want)

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 
 from .lattice import Lattice, exposed_mask
@@ -149,7 +148,42 @@ def _inside(lat: Lattice, sl: Slice, q: np.ndarray, d: np.ndarray, flat_index: n
     if near.size:
         count = np.zeros(near.size, int)
         for lp in sl.loops:
-            poly = lp.astype(np.float32).reshape(-1, 1, 2)
-            count += [cv2.pointPolygonTest(poly, (float(x), float(y)), False) > 0 for x, y in q[near]]
+            count += in_polygon(lp, q[near])
         inside[near] = count % 2 == 1
     return inside
+
+
+def in_polygon(loop: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Which points lie strictly inside the closed loop: cv2.pointPolygonTest(loop, point) > 0
+    for every point at once, by the same crossing count in the same arithmetic (float32
+    points, the crossing's sign in double), so a point on the loop is out as it is there.
+    Only the edges that reach a point's row can cross it or touch it: the lattice's nodes
+    share a few rows, so each row's edges are found once."""
+    v = loop.astype(np.float32)
+    v0 = np.roll(v, 1, axis=0)  # edge e runs from vertex e - 1 to vertex e
+    p = q.astype(np.float32)
+    rows, row_of = np.unique(p[:, 1], return_inverse=True)
+    ry = rows[:, None]
+    reach = ~(((v0[:, 1] <= ry) & (v[:, 1] <= ry)) | ((v0[:, 1] > ry) & (v[:, 1] > ry)))
+    r, e = np.nonzero(reach | (v[:, 1] == ry))  # by row, then edge
+    # every point meets its row's edges: the (point, edge) pairs, k indexing (r, e)
+    start = np.searchsorted(r, np.arange(len(rows) + 1))  # row i's edges: e[start[i]:start[i + 1]]
+    n_pairs = start[row_of + 1] - start[row_of]
+    point = np.repeat(np.arange(len(p)), n_pairs)
+    rank = np.arange(point.size) - np.repeat(np.cumsum(n_pairs) - n_pairs, n_pairs)
+    k = start[row_of[point]] + rank
+    e = e[k]
+    crossing, touch = _edge_tests(p[point, 0], p[point, 1], v0[e], v[e], reach[r[k], e])
+    odd = np.bincount(point, crossing, len(p)) % 2 == 1
+    return odd & (np.bincount(point, touch, len(p)) == 0)
+
+
+def _edge_tests(px, py, v0, v, reach):
+    """Per (point, edge) pair, as pointPolygonTest's loop: does the edge cross the ray to the
+    point's right, and does it touch the point (its end vertex, or along it when level)."""
+    x0, y0, x, y = v0[:, 0], v0[:, 1], v[:, 0], v[:, 1]
+    skip = ~reach | ((x0 < px) & (x < px))
+    at_end = (py == y) & ((px == x) | ((py == y0) & (((x0 <= px) & (px <= x)) | ((x <= px) & (px <= x0)))))
+    dist = (py - y0).astype(np.float64) * (x - x0) - (px - x0).astype(np.float64) * (y - y0)
+    dist = np.where(y < y0, -dist, dist)
+    return ~skip & (dist > 0), np.where(skip, at_end, dist == 0)
