@@ -47,7 +47,7 @@ from .segments import min_over_segment
 DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath points
 _SLAB_BUDGET = 250_000  # slab elements per chunk: reading the map there takes ~15 arrays
 # of its size (3 M elements were 370 MB of a finishing plan; 750 k, 20 MB of the daemon's)
-_EDGE_POINTS = 20_000  # tool positions whose edge contacts are found at once
+_EDGE_POINTS = 5_000  # tool positions whose edge contacts are found at once
 CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 

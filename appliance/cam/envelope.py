@@ -20,7 +20,7 @@ from .segments import min_over_segment
 
 PLAN_SPACING = 0.3  # mm between the points the planner measures along a pass
 _ROW = 0.05  # mm between the rows of the planner's cross-sections
-_ENV_BLOCK = 150_000  # elements of one envelope call (see envelope_many)
+_ENV_BLOCK = 50_000  # elements of one envelope call (see envelope_many)
 _BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which the
 # quadratic through three rows 0.1 apart gives within 1e-5 mm
 

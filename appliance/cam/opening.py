@@ -113,7 +113,7 @@ def _erode(tip, cutter, d):
 _PATTERN = np.stack([a.ravel() for a in np.meshgrid(np.arange(-2, 3), np.arange(-2, 3))])
 
 
-def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=10_000, rows=None):
+def _polish_minimum(sampler, cutter, tip, out, X, Y, d, chunk=2_500, rows=None):
     """Lower `out` (in place) on steep faces to nearer the continuous minimum.
 
     The erosion takes the min of tip(p + u) + h(|u|) over lattice offsets u;
