@@ -76,10 +76,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from benchkit import bench_tmp, proc_status_mb, start_daemon, tree_pss_mb  # noqa: E402
+from benchkit import bench_tmp, proc_status_mb, start_daemon, tree_own_mb, tree_pss_mb, tree_rss_mb  # noqa: E402
 
 KINDS = {"RssAnon": 0.0, "RssFile": 0.0, "RssShmem": 0.0}  # the daemon's, at its largest while processing
 AT_PEAK: dict = {}  # each process's Pss when the tree's was at its largest
+OWN = {"peak": 0.0}  # the tree's own pages at their largest while processing (MB)
 AFTER_LAST_FRAME_S = 10.0
 PEAK_MB = 300.0
 
@@ -91,6 +92,7 @@ def run_scan(client, params, pid):
     t0 = time.monotonic()
     job_id = client.start_scan(params)
     t_processing, processing_mb, tree_mb = None, 0.0, 0.0
+    rss_max, t_own = 0.0, 0.0
     while True:
         st = client.state()
         if st["state"] == "processing":
@@ -106,6 +108,13 @@ def run_scan(client, params, pid):
                 tree_mb = now
                 AT_PEAK.clear()
                 AT_PEAK.update(each)
+            # the tree's own pages take ~10 ms of CPU a process to count (taken from the
+            # processing on a 2-core box): at a new largest sum of resident sizes, and near
+            # it every half second
+            rss = tree_rss_mb(pid)
+            if rss > rss_max or (rss >= 0.95 * rss_max and time.monotonic() - t_own >= 0.5):
+                rss_max, t_own = max(rss_max, rss), time.monotonic()
+                OWN["peak"] = max(OWN["peak"], tree_own_mb(pid))
         if st["state"] in ("done", "failed", "cancelled") and client.job(job_id)["status"] == st["state"]:
             return client.job(job_id), t_processing, processing_mb, tree_mb
         time.sleep(0.05)
@@ -165,7 +174,11 @@ def main(argv=None):
         # worker shares with the child it forked from. The sum of the daemon's RSS and the
         # child's own peak (its VmHWM; wait4's ru_maxrss counted the daemon again, as it was
         # at the fork) counts those twice: printed beside it.
-        total_mb = tree_mb
+        # Pss shares the libraries' pages with every other Python on the box (on a loaded
+        # shared box, tens of MB): the tree's own pages, each counted once whoever else maps
+        # it, are what it needs on a board of its own, and are judged (Pss where they cannot
+        # be counted: not root)
+        total_mb = OWN["peak"] or tree_mb
         ok_time, ok_mem = after <= AFTER_LAST_FRAME_S, total_mb <= PEAK_MB
         print(
             f"result ready {after:.1f} s after the last frame (limit {AFTER_LAST_FRAME_S:g} s; "
@@ -180,8 +193,9 @@ def main(argv=None):
             f"daemon: idle {idle_mb:.0f} MB, peak (VmHWM, the virtual camera's renderer included) {daemon_mb:.0f} MB"
         )
         print(
-            f"while processing: the daemon's whole tree (Pss: each page once, the planning workers "
-            f"included, sampled every 0.05 s) {tree_mb:.0f} MB (limit {PEAK_MB:g} MB): {verdict(ok_mem)}; "
+            f"while processing: the daemon's whole tree (the planning workers included, sampled every "
+            f"0.05 s): its own pages {OWN['peak']:.0f} MB (limit {PEAK_MB:g} MB): {verdict(ok_mem)}; "
+            f"its Pss {tree_mb:.0f} MB; "
             f"RSS, shared pages in each: daemon {daemon_processing_mb:.0f} MB + processing child "
             f"{child_mb} MB = {daemon_processing_mb + (child_mb or 0.0):.0f} MB"
         )
@@ -197,6 +211,7 @@ def main(argv=None):
             "phases": {n: s for n, s, _ in phases},
         }
         summary["tree_pss_mb"] = round(tree_mb, 1)
+        summary["tree_own_mb"] = round(OWN["peak"], 1)
         print(json.dumps(summary))
         return 0 if ok_time and ok_mem else 1
 
