@@ -48,6 +48,7 @@ DEFAULT_RESOLUTION = 0.1  # mm, spacing of the offset lattice and of toolpath po
 _SLAB_BUDGET = 250_000  # slab elements per chunk: reading the map there takes ~15 arrays
 # of its size (3 M elements were 370 MB of a finishing plan; 750 k, 20 MB of the daemon's)
 _EDGE_POINTS = 5_000  # tool positions whose edge contacts are found at once
+_READ_BLOCK = 32_768  # slab elements read from the map at once (its temporaries: ~12 arrays)
 CACHE_ELEMENTS = 65_536  # float32 elements of one slice operation's arrays (256 kB: in L2)
 
 
@@ -102,7 +103,11 @@ def drop_lines(
     for s in range(0, L, chunk):
         o = origins[s : s + chunk]
         if axis is None:
-            slab = sampler.z(o[:, 0, None, None] + ox[None], o[:, 1, None, None] + oy[None])
+            slab = np.empty((o.shape[0],) + ox.shape)
+            step = max(1, _READ_BLOCK // ox.size)  # the map read a few lines at a time, as above
+            for r in range(0, o.shape[0], step):
+                p = o[r : r + step]
+                slab[r : r + step] = sampler.z(p[:, 0, None, None] + ox[None], p[:, 1, None, None] + oy[None])
             table, index = slab.reshape(-1, slab.shape[-1]), np.arange(slab.shape[0] * slab.shape[1])
             index = index.reshape(slab.shape[:2])
         else:
@@ -312,7 +317,13 @@ def _axis_rows(sampler, o, axis, b, c):
         rows = o[:, 0, None] - b[None, :]
         cols = o[0, 1] + c
     uniq, inv = np.unique(np.round(rows, 9), return_inverse=True)
-    grid = sampler.z_grid(cols, uniq) if axis == 0 else sampler.z_grid(uniq, cols).T
+    grid = np.empty((uniq.size, cols.size))
+    # the map read a few rows at a time: its ~12 temporaries of the slab's size (366 rows
+    # of 1060 a chunk of passes) were 37 MB of a worker's peak; every value is its own
+    step = max(1, _READ_BLOCK // max(cols.size, 1))
+    for r in range(0, uniq.size, step):
+        u = uniq[r : r + step]
+        grid[r : r + step] = sampler.z_grid(cols, u) if axis == 0 else sampler.z_grid(u, cols).T
     return grid, inv.reshape(rows.shape)
 
 
