@@ -82,3 +82,19 @@ def test_a_failing_or_killed_worker_is_an_error_naming_it():
     with pytest.raises(InkSliceError, match="signal 9"):
         forks.in_workers([lambda: 1, killed])
     assert forks.in_workers([lambda: "here", lambda: "there"]) == ["here", "there"]
+
+
+def test_in_parts_splits_the_items_by_weight_one_part_a_worker_and_joins_them_in_order(monkeypatch):
+    monkeypatch.setattr(forks, "workers", lambda: 2)
+
+    def work(a, b):
+        return [(i, a, b, os.getpid()) for i in range(a, b)]
+
+    weights = [5.0, 1.0, 1.0, 1.0, 1.0, 1.0]
+    out = forks.in_parts(work, weights, lambda parts: [x for p in parts for x in p])
+    assert [x[0] for x in out] == list(range(6))
+    assert {(x[1], x[2]) for x in out} == {(0, 1), (1, 6)}  # 5 against 5
+    assert out[0][3] == os.getpid() != out[-1][3]  # the second part ran in a forked worker
+    assert forks.in_parts(work, [], lambda parts: parts) == [[]]  # nothing to split: one call
+    monkeypatch.setattr(forks, "workers", lambda: 1)
+    assert {x[3] for x in forks.in_parts(work, weights, lambda parts: parts[0])} == {os.getpid()}

@@ -17,6 +17,8 @@ import signal
 import threading
 from contextlib import contextmanager
 
+import numpy as np
+
 from ..errors import InkSliceError
 from ..progress import TICKER
 
@@ -51,6 +53,17 @@ def workers() -> int:
     Python thread alive (a web server, a job runner) the planner stays in one."""
     alone = all(t is threading.main_thread() or t.name == TICKER for t in threading.enumerate())
     return _allowed if alone else 1
+
+
+def in_parts(work, weights, join):
+    """work(a, b) over items [a, b) of a list, the items split into contiguous parts of about
+    equal weight, one part a worker (as many as workers() allows) -> join([each part's result])."""
+    cum = np.cumsum(np.asarray(weights, float))
+    parts = workers() if cum.size > 1 and cum[-1] > 0 else 1
+    cuts = np.searchsorted(cum, cum[-1] * np.arange(1, parts) / parts) + 1 if parts > 1 else []
+    bounds = [0, *sorted({int(c) for c in cuts if 0 < c < len(cum)}), len(cum)]
+    tasks = [(lambda a=a, b=b: work(a, b)) for a, b in zip(bounds[:-1], bounds[1:])]
+    return join(in_workers(tasks) if len(tasks) > 1 else [tasks[0]()])
 
 
 def in_workers(tasks: list) -> list:

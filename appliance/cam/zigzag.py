@@ -47,6 +47,7 @@ from .bands import plan_in_bands
 from .contact import drop_lines
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
+from .forks import in_parts
 from .linking import links
 from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .rimline import FineEnds
@@ -203,8 +204,15 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     else:
         tips = drop_lines(sampler, drop_cutter, origins, e1, n, d) + st.leave
     # tips half-way between points, to catch where the tip height is concave
-    # (the cutter rolling over an edge) and a straight move would cut in
-    mids = drop_lines(sampler, drop_cutter, origins + 0.5 * d * e1[None, :], e1, n - 1, d) + st.leave
+    # (the cutter rolling over an edge) and a straight move would cut in; this and the
+    # refinement below are the serial tail after the planning: in halves on the cores
+    half_way = origins + 0.5 * d * e1[None, :]
+    mids = in_parts(
+        lambda a, b: drop_lines(sampler, drop_cutter, half_way[a:b], e1, n - 1, d),
+        np.ones(len(passes)),
+        np.concatenate,
+    )
+    mids += st.leave
     along = t0 + d * np.arange(n)
     tol = refine_tolerance(st.chord)
     out = sampler.part_distance(
@@ -221,8 +229,11 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
         if k % 2 == 1:
             pass_runs = [(r[::-1], len(r) - 2 - c) for r, c in pass_runs[::-1]]
         ordered.extend(pass_runs)
-    ordered = refine(
-        sampler, drop_cutter, [r for r, _ in ordered], tol, st.leave, d, cand=[np.sort(c) for _, c in ordered]
+    moves, cand = [r for r, _ in ordered], [np.sort(c) for _, c in ordered]
+    ordered = in_parts(
+        lambda a, b: refine(sampler, drop_cutter, moves[a:b], tol, st.leave, d, cand=cand[a:b]),
+        [c.size + len(r) / 100 for r, c in zip(moves, cand)],
+        lambda parts: [r for part in parts for r in part],
     )
     joins = links(sampler, drop_cutter, st, ordered, passes)
     runs: list[np.ndarray] = []
