@@ -62,6 +62,18 @@ code otherwise): 12.5 s, tree 282 MB. So: time MISS by 0-1.7 s, memory MISS by ~
 the second band (the worker's own planning state, ~40 MB), PASS without it. Left: the
 worker's envelopes and opening, and the fit (inkbounds' per-node point-in-polygon loop,
 polyline_distance's kd-tree queries: ~4000 a fit).
+
+Session 13 (2026-12-03, the box shared with other sessions). Memory is now judged by the
+tree's own pages (each physical page any of its processes maps counted once: Pss read 25-45
+MB low here, the libraries' pages shared out with the other sessions' Pythons). Back to
+back at load ~2.5, main ad05d23 | after (the fit's distances and point-in-polygon tests;
+smaller blocks in the opening, the envelopes and the map reads; the mid-point drops and the
+refinement in halves on the two cores; this scan's height map and program byte-identical):
+23.6 | 21.5 s after the last frame (fit 6.4 | 5.4 s, toolpath 16.4 | 15.3 s wall), child
+19.4 | 17.9 s CPU, own pages 291 | 262 MB (Pss 267 | 240), the child's peak 162 | 146 MB.
+At load ~10: own pages 287 | 255-258 MB. The own pages of main here are below session 12's
+quiet-box Pss (325), which they should not be: the absolute figure is uncertain by ~35 MB,
+the drop of ~29 MB is the surer one. Time is the load's here (quiet box, main: 11.5-11.7 s).
 """
 
 from __future__ import annotations
