@@ -185,6 +185,30 @@ before -> after, the same renders:
   solved top 0.09-0.15, more Levenberg-Marquardt steps no better. Sample 4 stays over all three
   targets (its left, gentle third +0.2..0.3 mm; the max at the y = 45 outline).
 
+(l) Sample 4's 0.2241 / 0.353 / 2.118 taken apart (3 December 2026, session 13, main ad05d23, the
+(k) renders; sample 4 re-rendered with one effect changed at a time, seed 1; Ea / p99 / max mm):
+  - the contact lines' bend is the largest part: the solve fed the renderer's own bend (its top
+    continued past the outline) gives 0.1247 / 0.087 / 1.958 on the same render; a render with
+    only displacement and the harsh meniscus 0.1153 (commissioned file; the renderer's 2.5 mm
+    and weight 1: 0.1016) -> 0.0218 with the renderer's bend; rendered without the bend (and
+    solved without it) 0.0310, with displacement alone 0.0188. The solve's bend is
+    shrunk towards 0 where the true one is strongest (+0.37/mm at x 46-48, y 48-51 -> +0.2;
+    -0.35 along y 45-47 -> -0.1): the top there +0.3 and -0.4..-0.6 mm. Its three fine steps
+    do not settle: with twelve, the top's mean error swings 0.06-0.10 mm from step to step.
+  - the stage play is not: the registration's offsets against the play the renderer drew
+    (default_rng([seed, frame]): r = 0.05 sqrt(u), angle 2 pi u) rms 0.025 mm left of 0.037;
+    undoing the TRUE play instead gives 0.258 / 0.338 / 5.34 (worse; with the true bend too,
+    0.199, against 0.125 with the registration's own offsets: the rim within 1 mm of the outline
+    0.57 / 0.26 mm, not looked into). Without registration 0.448; rendered without play 0.2037.
+  - the images: rendered without the bend and solved without it, 0.108 / 0.087 / 7.46; the
+    error then sits within 3 mm of the outline (interior p99 0.087).
+  Tried, not kept (sample 4 harsh / physics2): the top smoothed 0.3 mm before its level
+  curves' bend 0.183 / 0.117 (p99 0.353 -> 0.102 on harsh; physics2 0.0840 worse at its
+  y = 45 strip and the y = 55 rim), over the footprint only 0.163 / 0.119, 0.15 mm 0.173 / 0.100;
+  the bend under-relaxed (0.3-0.4) over 8-20 fine steps 0.212-0.223 / 0.096-0.098 (physics-only
+  render 0.066); the bend's mean over the trusted top made locally linear (a plane's bend
+  fitted, not averaged: on the true top 0.031 mm of rise error against 0.073) 0.262 / 0.098.
+
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
 """

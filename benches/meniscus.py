@@ -177,6 +177,12 @@ the crater 0.0575 / 0.635; one node less, sample4 0.0883, the crater 0.0542 / 0.
 near-flat strip (above) is untouched. The first ink commissions to weight 0, so this path is
 not taken there (benches/seed_table.py --effects physics, sample4: 0.0275, weight 0.0).
 
+Sample 4 on physics2 (3 December 2026, session 13, main ad05d23, the /tmp/s4-men renders, 0.0840
+/ 0.050 / 0.734): the solve fed the renderer's own contact-line bend gives 0.0556 / 0.030 /
+0.780; what is left is the y = 45 strip (+0.3..+0.6 mm over x 46-50, above) and the y = 55 rim.
+Every change to the solve's bend that helped the harsh bench's sample 4 made this one worse
+(0.096-0.119; benches/harsh.py (l)).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
