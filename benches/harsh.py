@@ -214,7 +214,12 @@ before -> after, the same renders:
   y = 45 strip and the y = 55 rim), over the footprint only 0.163 / 0.119, 0.15 mm 0.173 / 0.100;
   the bend under-relaxed (0.3-0.4) over 8-20 fine steps 0.212-0.223 / 0.096-0.098 (physics-only
   render 0.066); the bend's mean over the trusted top made locally linear (a plane's bend
-  fitted, not averaged: on the true top 0.031 mm of rise error against 0.073) 0.262 / 0.098.
+  fitted, not averaged: on the true top 0.031 mm of rise error against 0.073) 0.262 / 0.098;
+  three untrusted rim nodes, not two (contact_lines.RIM_UNTRUSTED): harsh sample 4 0.196-0.203
+  over the four draws above (0.215-0.258 with two: steadier and lower), physics2 sample 4
+  0.079-0.112 (0.062-0.164 with two), but on the same renders harsh sample3 max 0.219 -> 0.262,
+  plateau 0.0778 -> 0.0798, physics2 crater 0.0544 -> 0.0582 (p99 0.610 -> 0.633), physics2
+  sample4's own draw 0.0840 -> 0.1119 (sample1 harsh 0.0158 -> 0.0159, physics2 0.0106 -> 0.0096).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

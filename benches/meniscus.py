@@ -181,7 +181,8 @@ Sample 4 on physics2 (3 December 2026, session 13, main ad05d23, the /tmp/s4-men
 / 0.050 / 0.734): the solve fed the renderer's own contact-line bend gives 0.0556 / 0.030 /
 0.780; what is left is the y = 45 strip (+0.3..+0.6 mm over x 46-50, above) and the y = 55 rim.
 Every change to the solve's bend that helped the harsh bench's sample 4 made this one worse
-(0.096-0.119; benches/harsh.py (l)).
+(0.096-0.119; benches/harsh.py (l)). Its figure is not stable either: the waterlines moved a
+further random 0.005 mm a frame (three draws) give 0.0619 / 0.1640 / 0.1085 (max up to 4.9 mm).
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
