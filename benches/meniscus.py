@@ -184,6 +184,19 @@ Every change to the solve's bend that helped the harsh bench's sample 4 made thi
 (0.096-0.119; benches/harsh.py (l)). Its figure is not stable either: the waterlines moved a
 further random 0.005 mm a frame (three draws) give 0.0619 / 0.1640 / 0.1085 (max up to 4.9 mm).
 
+The whole bench (session 13, main ad05d23, fresh renders in /work/renders/men2 with the runner's
+refinement frames), physics2, Ea / interior p99 / max mm: sample1 0.0106 0.135 0.659, sample2
+0.0560 0.431 1.262, sample3 0.0534 0.499 0.809, sample4 0.0839 0.050 0.734, crater 0.0544 0.610
+1.140, twin-peaks 0.0392 0.462 0.562, steep-front 0.0736 0.624 0.695. Where samples 2 and 3 lose
+it: nodes flatter than 5 degrees hold 39 % / 49 % of the error sum (sample 2's 22.3 mm corner face,
+mottled +0.2..+0.68; sample 3's, +0.14 on average): the rise's V at a level top again. The V rows
+(d72c918 reverted) re-applied on these renders: sample3 0.0534 -> 0.0378 (p99 0.267), and the
+harsh plateau 0.0778 -> 0.4149, max 4.827. All of the plateau's loss is on the map's outermost
+ring of nodes (+1..4.8 mm all round its 10 mm shelf; inside it within +-0.2): nodes on the
+outline itself are never exposed, so bracket_bounds leaves them without a bracket, and the
+level rows let the top run there. A bound for those nodes (a shelf's outline cannot stand above
+the level that still covered the nodes just inside it) is the next thing to try with the V rows.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
