@@ -220,6 +220,15 @@ before -> after, the same renders:
   0.079-0.112 (0.062-0.164 with two), but on the same renders harsh sample3 max 0.219 -> 0.262,
   plateau 0.0778 -> 0.0798, physics2 crater 0.0544 -> 0.0582 (p99 0.610 -> 0.633), physics2
   sample4's own draw 0.0840 -> 0.1119 (sample1 harsh 0.0158 -> 0.0159, physics2 0.0106 -> 0.0096).
+(m) The whole bench on main ad05d23 (session 13, fresh renders in /work/renders/harsh, meniscus
+2.507 mm / 0.26 deg / 0.95), Ea / interior p99 / max mm, honest share (cells off > 0.1 mm):
+    sample1 0.0158 0.041 0.567 100% of 28   sample2 0.0193 0.049 0.227 100% of 7
+    sample3 0.0399 0.103 0.219  79% of 90   sample4 0.2243 0.353 2.118 100% of 1626
+    twin-peaks 0.0235 0.115 0.388 32% of 31 plateau 0.0778 0.564 0.643 88% of 339
+    ring 0.0585 0.209 1.178 100% of 259
+  all tuned: 96.6 % of 2380 marked (target >= 80 %: met), 38.0 % of the cells marked; held out
+  crater 0.0385 0.202 0.232 92% of 122, steep-front 0.0155 0.093 0.256 54% of 13: 88.1 % of 135.
+  Over the targets: sample4 (all three), plateau (Ea, p99), ring (Ea, p99 by 0.009, max 1.178).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
