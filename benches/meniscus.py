@@ -191,11 +191,14 @@ refinement frames), physics2, Ea / interior p99 / max mm: sample1 0.0106 0.135 0
 it: nodes flatter than 5 degrees hold 39 % / 49 % of the error sum (sample 2's 22.3 mm corner face,
 mottled +0.2..+0.68; sample 3's, +0.14 on average): the rise's V at a level top again. The V rows
 (d72c918 reverted) re-applied on these renders: sample3 0.0534 -> 0.0378 (p99 0.267), and the
-harsh plateau 0.0778 -> 0.4149, max 4.827. All of the plateau's loss is on the map's outermost
-ring of nodes (+1..4.8 mm all round its 10 mm shelf; inside it within +-0.2): nodes on the
-outline itself are never exposed, so bracket_bounds leaves them without a bracket, and the
-level rows let the top run there. A bound for those nodes (a shelf's outline cannot stand above
-the level that still covered the nodes just inside it) is the next thing to try with the V rows.
+harsh plateau 0.0778 -> 0.4149, max 4.827. The plateau's loss is on its 10 mm shelf next to the
+outline, all round: the apparent surface there is flat (10.21 on the solve's lattice's middle row),
+main's top follows it (10.06 10.17 10.22 10.24 ...), the V rows' top climbs 10.64 10.83 11.13
+11.65 12.61 14.19 16.39 over the last seven nodes: by ~1.6x a node, the exp(d / (l_c cos(theta /
+2))) mode of top - h(|grad top|) = A that a level top leaves free (the same runaway as the plain
+iteration's). The outline nodes came out (frames 20-22 of 29), so their bracket (slack of two
+levels plus the largest rise) holds only above 13.4 mm. Damping that mode near the outline is
+the next thing to try with the V rows.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
