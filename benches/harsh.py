@@ -220,7 +220,7 @@ before -> after, the same renders:
   0.079-0.112 (0.062-0.164 with two), but on the same renders harsh sample3 max 0.219 -> 0.262,
   plateau 0.0778 -> 0.0798, physics2 crater 0.0544 -> 0.0582 (p99 0.610 -> 0.633), physics2
   sample4's own draw 0.0840 -> 0.1119 (sample1 harsh 0.0158 -> 0.0159, physics2 0.0106 -> 0.0096).
-(m) The whole bench on main ad05d23 (session 13, fresh renders in /work/renders/harsh, meniscus
+(m) The whole bench on main ad05d23 (session 13, fresh renders (kept), meniscus
 2.507 mm / 0.26 deg / 0.95), Ea / interior p99 / max mm, honest share (cells off > 0.1 mm):
     sample1 0.0158 0.041 0.567 100% of 28   sample2 0.0193 0.049 0.227 100% of 7
     sample3 0.0399 0.103 0.219  79% of 90   sample4 0.2243 0.353 2.118 100% of 1626

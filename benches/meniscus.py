@@ -184,7 +184,7 @@ Every change to the solve's bend that helped the harsh bench's sample 4 made thi
 (0.096-0.119; benches/harsh.py (l)). Its figure is not stable either: the waterlines moved a
 further random 0.005 mm a frame (three draws) give 0.0619 / 0.1640 / 0.1085 (max up to 4.9 mm).
 
-The whole bench (session 13, main ad05d23, fresh renders in /work/renders/men2 with the runner's
+The whole bench (session 13, main ad05d23, fresh renders with the runner's
 refinement frames), physics2, Ea / interior p99 / max mm: sample1 0.0106 0.135 0.659, sample2
 0.0560 0.431 1.262, sample3 0.0534 0.499 0.809, sample4 0.0839 0.050 0.734, crater 0.0544 0.610
 1.140, twin-peaks 0.0392 0.462 0.562, steep-front 0.0736 0.624 0.695. Where samples 2 and 3 lose
