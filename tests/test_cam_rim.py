@@ -115,3 +115,13 @@ def test_a_ball_runs_a_tenth_short_only_where_a_face_at_the_outline_is_steeper_t
     wall = grid_map(lambda X, Y: 1 + np.minimum(np.tan(np.radians(80)) * (20 - X), 6), 0, 20, 0, 16, 0.5)
     assert steep_outline(Sampler(wall), 2.0, 1.9)
     assert not steep_outline(Sampler(wall), 2.0, 1.99)  # a tenth short: its side is 84 degrees
+
+
+def test_near_the_machines_travel_the_rim_runs_off_only_as_far_as_it_reaches():
+    # the map starts 1 mm inside the default machine's X travel (-10): a radius off the
+    # outline would leave it; the program runs 0.99 mm off and says so, rather than none
+    hm = grid_map(lambda X, Y: _dome(X + 9, Y), -9, 11, 0, 16, 0.5)
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05))
+    x = parse_gcode(job.text).xyz[:, 0]
+    assert np.nanmin(x) >= -10.0 - 1e-9 and np.nanmin(x) < -9.5, np.nanmin(x)
+    assert "the machine's travel ends there" in job.text

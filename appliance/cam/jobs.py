@@ -8,7 +8,7 @@ write them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -124,6 +124,7 @@ def finishing_gcodes(
     if not ours:
         return jobs
     cond, sampler = _prepare(hm, settings, su)
+    settings, clipped = _within_travel(hm, settings, su.machine)
     fin = finishing(sampler, settings)
     top = sampler.z_max + settings.leave if stock_top is None else float(stock_top)
     target = (
@@ -135,6 +136,8 @@ def finishing_gcodes(
         f"finishing zig-zag at {settings.angle:g} deg, {target}, {len(fin.passes)} passes, "
         f"stock to leave {settings.leave:g} mm, margin {fin.margin:g} mm"
     ]
+    if clipped:
+        notes.append(clipped)
     notes += header_notes(hm, uncertain_mm)
     so = fin.stepovers
     for d in ours:
@@ -162,6 +165,23 @@ def finishing_gcodes(
         )
         jobs[d] = Job(text, rt, summary)
     return jobs
+
+
+def _within_travel(hm: HeightMap, settings: FinishSettings, machine: Machine):
+    """-> (settings, note): the margin the passes run off the outline by, cut to what the
+    machine's X and Y travel leave beside the map on its tightest side (one margin for every
+    side: a part scanned near the travel's edge gets its rim finished that far, not no
+    program at all); note is '' when nothing was cut."""
+    (xlo, xhi), (ylo, yhi) = machine.travel[0], machine.travel[1]
+    room = min(hm.x.min() - xlo, xhi - hm.x.max(), hm.y.min() - ylo, yhi - hm.y.max())
+    if settings.margin <= 0 or room >= settings.margin:
+        return settings, ""
+    margin = max(room - 0.01, 0.0)
+    note = (
+        f"the passes run off the outline by {margin:.3f} mm, not {settings.margin:.3f}: the machine's "
+        "travel ends there (the rim beyond is left)"
+    )
+    return replace(settings, margin=margin), note
 
 
 def roughing_gcode(hm: HeightMap, settings: RoughSettings, *, dialect=DEFAULT_DIALECT, **setup) -> Job:
