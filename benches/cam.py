@@ -109,12 +109,24 @@ recorded before: 0.0097 OK, gouge 0.0014, 0.00 %, 252 passes. Speed: no envelope
 the footprint (RIM: 58 of ~440, the pass ends off the part), the same programs; one child each,
 alternately, new | ad05d23: 0.05: margin 0 5.98, 6.01 s | 6.13, 5.96 s (the same code:
 the noise), RIM 6.64, 6.95 | 6.38, 7.62 s, 134-143 MB; 0.01: margin 0 19.5 | 16.9 s, RIM 16.7
-| 21.4 s, 174 | 206 MB: no gain measurable here. RIM stays off by default: margin 0 itself
-misses 5 s on this box, and RIM is 1.04-1.28x it at 0.05 in the same run. Tried and reverted: the first candidate's
+| 21.4 s, 174 | 206 MB: no gain measurable here. (RIM was left off by default on that branch:
+margin 0 itself misses 5 s on this box, and RIM is 1.04-1.28x it at 0.05 in the same run.) Tried and reverted: the first candidate's
 stepover scaled by sqrt(aim / scallop the last step left): sample 1's candidates 163 -> 137 at
 0.05 (356 -> 350 at 0.01), but sample4 ball1 then left 0.0111 at (54.82, 48.82) MISS: one cell
 on the steep face (its neighbours 0.0043-0.0068) between passes 48.7834 and 48.8328, which the
 planner measured at 0.0092 (0.0117 there with the ball 0.4973 out). Not yet looked into.
+
+RIM is the default since session 13 (7ec8c50): kept inside the outline the acceptance table
+missed on every sample's edge. `--only acceptance`, margin 0 (main, 3 December, and ad05d23 alike)
+-> the RIM default, max scallop at 0.01: sample1 ball6 0.1135 (x 99.6) -> 0.0100, sample2 ball6
+0.5452 -> 0.0098, sample3 ball6 0.1275 -> 0.0097, sample4 ball1 0.0242 -> 0.0103 (gouge 0.0037);
+the full table with RIM: sample1 bull6r1 0.0098 (gouge 0.0028), flat6 0.05 0.0486 (0.0023),
+sample2 bull6r1 0.0098 (0.0026), flat6 0.05 0.0488 (0.0022), all OK (sample3 bull6r1/flat6 and
+sample4 bull1r0.25 not re-run: their rim rows are OK with no edge band). Sample 1 mills in 21
+min for 18. `--only finishing --old-ref none`, one run beside a CI (load ~2.5): 0.05: margin 0
+5.3 s / 134 MB, RIM 6.5 s / 132 MB (1.24x); 0.01: 14.6 s / 175 MB, RIM 15.7 s / 199 MB (1.08x):
+the 0.05 row misses 5 s either way. Near the machine's travel the margin is cut to what the
+travel leaves beside the map, with a header note (jobs._within_travel).
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
