@@ -57,7 +57,7 @@ class PassEnvelope:
         # a column beyond the footprint's extent along the passes is off the part on every
         # row, where nothing is measured: with the rim (margin RIM) the passes' ends are a
         # radius out, 13 % of the columns and of the envelopes' work on sample 1
-        lo, hi = _footprint_extent(sampler, e1)
+        lo, hi = sampler.footprint_extent(e1)
         t = t0 + st.resolution * idx
         idx = idx[(t >= lo - 1e-6) & (t <= hi + 1e-6)]
         self.idx = idx
@@ -242,18 +242,6 @@ class PassEnvelope:
             self.along[None, :] * self.e1[0] + np.asarray(s)[:, None] * self.e2[0],
             self.along[None, :] * self.e1[1] + np.asarray(s)[:, None] * self.e2[1],
         )
-
-
-def _footprint_extent(sampler, e1):
-    """(lowest, highest) of e1 . p over the corners of the footprint's cells: a point beyond
-    lies in no cell of the part."""
-    jj, ii = np.nonzero(sampler.cell_on)
-    if ii.size == 0:
-        return -np.inf, np.inf
-    cx = sampler.x0 + sampler.dx * np.concatenate([ii, ii + 1, ii, ii + 1])
-    cy = sampler.y0 + sampler.dy * np.concatenate([jj, jj, jj + 1, jj + 1])
-    t = cx * e1[0] + cy * e1[1]
-    return float(t.min()), float(t.max())
 
 
 def _opening_for(sampler, st, e2, across):

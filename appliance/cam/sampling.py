@@ -269,6 +269,17 @@ class Sampler:
             self.y0 + self.dy * (jj.max() + 1),
         )
 
+    def footprint_extent(self, e):
+        """(lowest, highest) of e . p over the corners of the footprint's cells (a point beyond
+        lies in no cell of the part); (-inf, inf) for an empty footprint."""
+        jj, ii = np.nonzero(self.cell_on)
+        if ii.size == 0:
+            return -np.inf, np.inf
+        cx = self.x0 + self.dx * np.concatenate([ii, ii + 1, ii, ii + 1])
+        cy = self.y0 + self.dy * np.concatenate([jj, jj, jj + 1, jj + 1])
+        t = cx * e[0] + cy * e[1]
+        return float(t.min()), float(t.max())
+
     @property
     def z_max(self):
         return float(np.nanmax(self.hm.z))

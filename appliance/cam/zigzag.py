@@ -154,31 +154,26 @@ def pass_frame(sampler: Sampler, angle_deg, margin):
     th = np.radians(angle_deg)
     e1 = np.array([np.cos(th), np.sin(th)])
     e2 = np.array([-e1[1], e1[0]])
-    jj, ii = np.nonzero(sampler.cell_on)
-    # corners of every on-part cell
-    cx = sampler.x0 + sampler.dx * np.concatenate([ii, ii + 1, ii, ii + 1])
-    cy = sampler.y0 + sampler.dy * np.concatenate([jj, jj, jj + 1, jj + 1])
-    t = cx * e1[0] + cy * e1[1]
-    s = cx * e2[0] + cy * e2[1]
-    return e1, e2, (t.min() - margin, t.max() + margin), (s.min() - margin, s.max() + margin)
+    (t0, t1), (s0, s1) = sampler.footprint_extent(e1), sampler.footprint_extent(e2)
+    return e1, e2, (t0 - margin, t1 + margin), (s0 - margin, s1 + margin)
 
 
 def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     """Passes over the part; give `sampler` an edge_step (resolution / 2) so edges are contacts."""
     st.check()
     check_fits(sampler, st.cutter)
-    short = st.cutter.radius - st.resolution
+    step_short = st.cutter.radius - st.resolution
     if (
         st.rim
         and st.cutter.kind == "ball"
-        and short > 0
-        and not steep_outline(sampler, st.cutter.radius, short)
+        and step_short > 0
+        and not steep_outline(sampler, st.cutter.radius, step_short)
     ):
         # a step short reaches every face at the outline, and keeps the positions on the
         # lattice's phase: a tenth short on sample 1's dome put them 0.01 mm off it, where the
         # drop's lattice error (~0.0004 mm) made 2400 moves at its top look bent to refine()
         # (3 -> 8 levels of scattered drops, ~6 % of the program's time)
-        st = replace(st, margin=st.cutter.radius - st.resolution)
+        st = replace(st, margin=step_short)
     e1, e2, (t0, t1), (s0, s1) = pass_frame(sampler, st.angle, st.margin)
     short = (t1 - t0) - np.floor((t1 - t0) / st.resolution + 1e-9) * st.resolution
     if st.margin > 0 and short > st.resolution / 20:
