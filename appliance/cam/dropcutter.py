@@ -103,11 +103,10 @@ def drop_lines(
     for s in range(0, L, chunk):
         o = origins[s : s + chunk]
         if axis is None:
-            slab = np.empty((o.shape[0],) + ox.shape)
-            step = max(1, _READ_BLOCK // ox.size)  # the map read a few lines at a time, as above
-            for r in range(0, o.shape[0], step):
-                p = o[r : r + step]
-                slab[r : r + step] = sampler.z(p[:, 0, None, None] + ox[None], p[:, 1, None, None] + oy[None])
+            slab = _in_blocks(
+                (o.shape[0],) + ox.shape,
+                lambda r, o=o: sampler.z(o[r, 0, None, None] + ox[None], o[r, 1, None, None] + oy[None]),
+            )
             table, index = slab.reshape(-1, slab.shape[-1]), np.arange(slab.shape[0] * slab.shape[1])
             index = index.reshape(slab.shape[:2])
         else:
@@ -317,14 +316,23 @@ def _axis_rows(sampler, o, axis, b, c):
         rows = o[:, 0, None] - b[None, :]
         cols = o[0, 1] + c
     uniq, inv = np.unique(np.round(rows, 9), return_inverse=True)
-    grid = np.empty((uniq.size, cols.size))
-    # the map read a few rows at a time: its ~12 temporaries of the slab's size (366 rows
-    # of 1060 a chunk of passes) were 37 MB of a worker's peak; every value is its own
-    step = max(1, _READ_BLOCK // max(cols.size, 1))
-    for r in range(0, uniq.size, step):
-        u = uniq[r : r + step]
-        grid[r : r + step] = sampler.z_grid(cols, u) if axis == 0 else sampler.z_grid(u, cols).T
-    return grid, inv.reshape(rows.shape)
+    read = (
+        (lambda r: sampler.z_grid(cols, uniq[r]))
+        if axis == 0
+        else (lambda r: sampler.z_grid(uniq[r], cols).T)
+    )
+    return _in_blocks((uniq.size, cols.size), read), inv.reshape(rows.shape)
+
+
+def _in_blocks(shape, read):
+    """An array of `shape` filled by read(slice of its first axis), _READ_BLOCK elements at a
+    time: reading the map takes ~12 temporaries of what is read (366 rows of 1060 a chunk of
+    passes were 37 MB of a worker's peak); every value is the same as read at once."""
+    out = np.empty(shape)
+    step = max(1, _READ_BLOCK // max(int(np.prod(shape[1:])), 1))
+    for r in range(0, shape[0], step):
+        out[r : r + step] = read(slice(r, r + step))
+    return out
 
 
 def _dilate_slab(table, index, groups, m, n, stride=1):
