@@ -30,12 +30,14 @@ from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from ..errors import InkSliceError
 from ..surface.base import interior_holes
 from ..surface.heightmap import HeightMap
 
 FLOOR = 0.0
+EXACT_WITHIN = 15.0  # mm: part_distance is exact this far out (a 25 mm cutter's radius and more)
 
 
 def check_heightmap(hm: HeightMap, where="height map"):
@@ -145,17 +147,52 @@ class Sampler:
         return inside & self.cell_on[j, i]
 
     def part_distance(self, x, y):
-        """How far (mm, approximately to one cell) a point is outside the footprint; 0 inside."""
+        """How far (mm) a point is outside the footprint (the union of the on-part cells); 0 inside.
+
+        Exact within EXACT_WITHIN of the footprint, to about a cell beyond. The margins compared
+        with it are at most a cutter's radius, and a position kept at a cell more than that
+        lets the cutter leave the part: on the daemon's 1.2 mm map of a sphere, whose wall
+        stands 6-9 mm at the outline, a ball's tip dropped from 6.0 to the base between two
+        positions 0.02 mm apart, and the move cut 1.08 mm into the wall.
+        """
         x = np.asarray(x, float)
         y = np.asarray(y, float)
         u, v, i, j, inside = self._cell(x, y)
-        d = self._dist[j, i]
-        # outside the lattice: add the distance to the lattice's edge
+        # a cell's distance from the nearest on-part cell's centre, less half a step: the
+        # approximation, within a cell of the truth, that picks the points to measure exactly
         xl, xh = self.x0, self.x0 + self.dx * (self.nx - 1)
         yl, yh = self.y0, self.y0 + self.dy * (self.ny - 1)
         ex = np.maximum(np.maximum(xl - x, x - xh), 0.0)
         ey = np.maximum(np.maximum(yl - y, y - yh), 0.0)
-        return np.where(self.cell_on[j, i] & inside, 0.0, np.hypot(d + 0 * ex, 0) + np.hypot(ex, ey))
+        out = np.where(self.cell_on[j, i] & inside, 0.0, self._dist[j, i] + np.hypot(ex, ey))
+        near = (out > 0) & (out <= EXACT_WITHIN)
+        if near.any():
+            out[near] = self._outline_distance(x[near], y[near])
+        return out
+
+    def _outline_distance(self, x, y):
+        """Exact distance from points off the part to the nearest on-part cell (a rectangle)."""
+        tree, centres = self._rim_cells
+        hx, hy = 0.5 * self.dx, 0.5 * self.dy
+        # the nearest cell is among those whose centre is within the nearest centre's
+        # distance plus half a cell's diagonal
+        dc, _ = tree.query(np.column_stack([x, y]))
+        hits = tree.query_ball_point(np.column_stack([x, y]), dc + np.hypot(hx, hy) + 1e-9)
+        count = np.fromiter((len(h) for h in hits), int, len(hits))
+        cell = np.concatenate(hits).astype(int)
+        point = np.repeat(np.arange(len(hits)), count)
+        gx = np.maximum(np.abs(x[point] - centres[cell, 0]) - hx, 0.0)
+        gy = np.maximum(np.abs(y[point] - centres[cell, 1]) - hy, 0.0)
+        return np.minimum.reduceat(np.hypot(gx, gy), np.cumsum(count) - count)
+
+    @cached_property
+    def _rim_cells(self):
+        """A k-d tree of the centres of the on-part cells beside an off-part one, and those centres."""
+        on = self.cell_on
+        inner = ndimage.binary_erosion(np.pad(on, 1), np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool))
+        j, i = np.nonzero(on & ~inner[1:-1, 1:-1])
+        centres = np.column_stack([self.x0 + (i + 0.5) * self.dx, self.y0 + (j + 0.5) * self.dy])
+        return cKDTree(centres), centres
 
     @property
     def edges(self):
