@@ -121,3 +121,37 @@ def test_near_the_machines_travel_the_rim_runs_off_only_as_far_as_it_reaches():
     x = parse_gcode(job.text).xyz[:, 0]
     assert np.nanmin(x) >= -10.0 - 1e-9 and np.nanmin(x) < -9.5, np.nanmin(x)
     assert "the machine's travel ends there" in job.text
+
+
+def _round_block(X, Y):
+    # a dome on a round block, coarse as the daemon's maps: its wall stands 4-5 mm at the outline
+    r2 = (X - 12) ** 2 + (Y - 12) ** 2
+    return np.where(r2 <= 81, 4 + 3 * np.exp(-r2 / 40), np.nan)
+
+
+def test_the_distance_to_a_round_outline_is_exact_not_a_cell_off():
+    hm = grid_map(_round_block, 0, 24, 0, 24, 1.2)
+    sampler = Sampler(hm)
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-4, 28, 4000), rng.uniform(-4, 28, 4000)
+    # brute force: the nearest on-part cell, each a rectangle
+    j, i = np.nonzero(sampler.cell_on)
+    cx, cy = hm.x[i] + 0.6, hm.y[j] + 0.6
+    gx = np.maximum(np.abs(x[:, None] - cx[None]) - 0.6, 0)
+    gy = np.maximum(np.abs(y[:, None] - cy[None]) - 0.6, 0)
+    truth = np.hypot(gx, gy).min(axis=1)
+    np.testing.assert_allclose(sampler.part_distance(x, y), truth, atol=1e-9)
+
+
+def test_off_a_wall_at_a_round_outline_no_pass_runs_past_the_cutters_reach():
+    # beyond R from the part a ball's tip falls from the wall's top less R to the base: a
+    # position kept there (the margin judged a cell off) made a move that cut into the wall
+    hm = grid_map(_round_block, 0, 24, 0, 24, 1.2)
+    st = FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=RIM)
+    sampler = Sampler(hm, edge_step=st.resolution / 2)
+    fin = finishing(sampler, st)
+    pts = np.vstack(fin.runs)
+    assert sampler.part_distance(pts[:, 0], pts[:, 1]).max() <= st.cutter.radius
+    assert pts[:, 2].min() > 1.0  # every position still leans on the wall
+    rep, _ = verify_gcode(finishing_gcode(hm, st).text, hm)
+    assert rep.gouge <= 0.005, rep.lines()
