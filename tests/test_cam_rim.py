@@ -44,11 +44,15 @@ def test_the_passes_run_off_the_outline_onto_the_base_and_never_below_it():
     assert (z + z0).min() >= -1e-6  # the tip never goes below the base top
 
 
-def test_the_default_program_kept_inside_the_outline_leaves_the_rim_uncut():
+def test_the_default_program_finishes_the_rim_and_margin_0_leaves_it_uncut():
     hm = grid_map(_dome, 0, 20, 0, 16, 0.5)
-    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05))  # margin 0
-    rep, _ = verify_gcode(job.text, hm)
-    assert rep.uncut_reachable > 0.02 or rep.scallop_max > 0.2, rep.lines()
+    ball = parse_cutter("ball4")
+    default = FinishSettings(ball, scallop=0.05)
+    assert default.rim and default.margin == FinishSettings(ball, scallop=0.05, margin=RIM).margin
+    rep, _ = verify_gcode(finishing_gcode(hm, default).text, hm, edge_band=0.0)
+    assert rep.uncut_reachable <= 0.01 and rep.scallop_max <= 0.055, rep.lines()
+    inside, _ = verify_gcode(finishing_gcode(hm, FinishSettings(ball, scallop=0.05, margin=0.0)).text, hm)
+    assert inside.uncut_reachable > 0.02 or inside.scallop_max > 0.2, inside.lines()
 
 
 def test_where_a_pass_rolls_over_the_outline_no_move_runs_below_the_cutters_tip():
@@ -117,7 +121,7 @@ def test_near_the_machines_travel_the_rim_runs_off_only_as_far_as_it_reaches():
     # the map starts 1 mm inside the default machine's X travel (-10): a radius off the
     # outline would leave it; the program runs 0.99 mm off and says so, rather than none
     hm = grid_map(lambda X, Y: _dome(X + 9, Y), -9, 11, 0, 16, 0.5)
-    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05, margin=RIM))
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball4"), scallop=0.05))
     x = parse_gcode(job.text).xyz[:, 0]
     assert np.nanmin(x) >= -10.0 - 1e-9 and np.nanmin(x) < -9.5, np.nanmin(x)
     assert "the machine's travel ends there" in job.text

@@ -22,10 +22,9 @@ a whole step where no face at the outline is steeper than its side there, see
 finishing(); the positions close up a little so both ends of a pass reach it) the
 passes run off the outline until the cutter has all but left the part, so the rim is finished
 like the rest; where a pass rolls over the outline its tips come from fine
-lines (rimline.py). With margin 0 (the default, for now: RIM costs sample 1
-1.25-1.3x the CPU, see benches/cam.py, and the default must meet the speed row)
-the axis never leaves the part, and the strip the cutter could only reach
-from outside stays uncut. A pass broken by a hole or a bay of the
+lines (rimline.py). RIM is the default. With margin 0 (1.1-1.3x faster on
+sample 1, see benches/cam.py) the axis never leaves the part, and the strip
+the cutter could only reach from outside stays uncut. A pass broken by a hole or a bay of the
 footprint becomes several runs; the program builder retracts between them.
 
 Neighbouring runs that end and start within two stepovers are linked by a
@@ -66,9 +65,10 @@ class FinishSettings:
     angle: float = 0.0
     resolution: float = DEFAULT_RESOLUTION
     chord: float | None = None
-    # RIM (the cutter's radius less a tenth of a step) finishes the rim, at 1.25-1.3x the CPU of
-    # margin 0 on sample 1 (benches/cam.py): not yet the default
-    margin: float = 0.0
+    # RIM (the cutter's radius less a tenth of a step) finishes the rim, at 1.1-1.3x the CPU of
+    # margin 0 on sample 1 (benches/cam.py); margin 0 leaves the strip only reachable from
+    # outside the outline uncut (the acceptance table's 0.11-0.55 mm at sample edges)
+    margin: float = RIM
     leave: float = 0.0
     rim: bool = field(default=False, init=False, repr=False)  # margin was RIM
 

@@ -59,14 +59,15 @@ def add_arguments(p):
     g.add_argument(
         "--margin",
         type=float,
-        default=0.0,
-        help="how far the cutter axis may go past the part's edge, mm (0..radius; default 0)",
+        default=None,
+        help="how far the cutter axis may go past the part's edge, mm (0..radius; default: the "
+        "cutter's radius less a tenth of a step, so the rim is finished; 0 is faster and leaves it)",
     )
     g.add_argument(
         "--rim",
         action="store_true",
         help="run the passes off the outline by the cutter's radius less a tenth of a step, "
-        "so the rim is finished too (about 1.25x the time)",
+        "so the rim is finished too (the default; kept for scripts that name it)",
     )
     g.add_argument("--leave", type=float, default=0.0, help="stock to leave on the finishing pass, mm")
     g.add_argument(
@@ -187,7 +188,7 @@ def run(args):
         angle=args.angle,
         resolution=args.resolution,
         chord=args.chord,
-        margin=RIM if args.rim else args.margin,
+        margin=RIM if args.rim or args.margin is None else args.margin,
         leave=args.leave,
     )
     if args.rough_out:
