@@ -116,16 +116,22 @@ stepover scaled by sqrt(aim / scallop the last step left): sample 1's candidates
 on the steep face (its neighbours 0.0043-0.0068) between passes 48.7834 and 48.8328, which the
 planner measured at 0.0092 (0.0117 there with the ball 0.4973 out). Not yet looked into.
 
-RIM is the default since session 13 (7ec8c50): kept inside the outline the acceptance table
-missed on every sample's edge. `--only acceptance`, margin 0 (main, 3 December, and ad05d23 alike)
--> the RIM default, max scallop at 0.01: sample1 ball6 0.1135 (x 99.6) -> 0.0100, sample2 ball6
-0.5452 -> 0.0098, sample3 ball6 0.1275 -> 0.0097, sample4 ball1 0.0242 -> 0.0103 (gouge 0.0037);
-the full table with RIM: sample1 bull6r1 0.0098 (gouge 0.0028), flat6 0.05 0.0486 (0.0023),
-sample2 bull6r1 0.0098 (0.0026), flat6 0.05 0.0488 (0.0022), all OK (sample3 bull6r1/flat6 and
-sample4 bull1r0.25 not re-run: their rim rows are OK with no edge band). Sample 1 mills in 21
-min for 18. `--only finishing --old-ref none`, one run beside a CI (load ~2.5): 0.05: margin 0
-5.3 s / 134 MB, RIM 6.5 s / 132 MB (1.24x); 0.01: 14.6 s / 175 MB, RIM 15.7 s / 199 MB (1.08x):
-the 0.05 row misses 5 s either way. Near the machine's travel the margin is cut to what the
+RIM was the default for a moment in session 13 (7ec8c50, reverted in 7779a44: on the daemon's
+demo map it cost 26.7 s and 687 MB), and is the default again since session 14, once the rim's
+fine lines were grouped per passes and polished per move, and the margin judged on the exact
+distance to the outline (a cell-centre distance had kept positions past the cutter's reach on
+a round outline: 1.08 mm of gouge in the demo map's RIM program). Kept inside the outline the
+acceptance table missed on every sample's edge: max scallop at 0.01, margin 0 -> RIM, sample1
+ball6 0.1135 (x 99.6) -> 0.0100, sample2 ball6 0.5452 -> 0.0098, sample3 ball6 0.1275 -> 0.0097,
+sample4 ball1 0.0242 -> 0.0103. `--only acceptance` with the RIM default (session 14, every row
+one program, gouge / max scallop / passes): sample1 ball6 0.0021 / 0.0100 / 280, bull6r1 0.0028 /
+0.0098 / 439, flat6 0.05 0.0023 / 0.0486 / 973; sample2 ball6 0.0014 / 0.0098 / 264, bull6r1
+0.0026 / 0.0097 / 354, flat6 0.0022 / 0.0488 / 401; sample3 ball6 0.0014 / 0.0097 / 252, bull6r1
+0.0026 / 0.0099 / 359 (328 s to make), flat6 0.0023 / 0.0485 / 324; sample4 ball1 0.0037 / 0.0103
+/ 324, bull1r0.25 0.0036 / 0.0102 / 417, flat1 0.0036 / 0.0508 / 386: all 12 OK. `--only
+finishing --old-ref none` (quiet box, the "margin 0" row is the old default beside it): 0.05:
+6.8 s / 141 MB (MISS 5 s), margin 0 6.0 s / 136 MB (1.15x), two bands 4.4 s wall; 0.01: 17.8 s /
+186 MB (OK), margin 0 13.3 s (1.33x). Near the machine's travel the margin is cut to what the
 travel leaves beside the map, with a header note (jobs._within_travel).
 
 OpenCAMLib is a reference only, never a runtime dependency:
@@ -426,7 +432,7 @@ from appliance.cam.zigzag import FinishSettings
 from appliance.sim import surfaces
 from appliance.surface.heightmap import HeightMap
 name, step, cutter, scallop = sys.argv[1], float(sys.argv[2]), sys.argv[3], float(sys.argv[4])
-rim = "rim" in sys.argv[5:]
+inside = "inside" in sys.argv[5:]
 if "bands" in sys.argv[5:]:  # as the processing child and the commands plan: on two cores
     from appliance.cam.forks import allow_workers
     allow_workers(2)
@@ -437,7 +443,7 @@ y = np.linspace(y0, y1, int(round((y1 - y0) / step)) + 1)
 X, Y = np.meshgrid(x, y)
 hm = HeightMap(x, y, s.height(X, Y))
 t, wall = time.process_time(), time.perf_counter()
-kw = {"margin": float("inf")} if rim else {}  # float("inf") is zigzag.RIM
+kw = {"margin": 0.0} if inside else {}  # the default is zigzag.RIM: the rim finished
 job = finishing_gcode(hm, FinishSettings(parse_cutter(cutter), scallop=scallop, **kw))
 cpu = time.process_time() - t
 workers = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -449,14 +455,14 @@ print(json.dumps({"cpu": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_SELF
 OLD_REF = "30fd316"  # the planner before issue 20 (issue 20 measured it)
 
 
-def run_finishing(checkout, name, step, cutter, scallop, rim=False, bands=False):
+def run_finishing(checkout, name, step, cutter, scallop, inside=False, bands=False):
     import json
     import os
 
     env = dict(os.environ, PYTHONPATH=str(checkout))
     r = subprocess.run(
         [sys.executable, "-c", FINISH_CHILD, name, str(step), cutter, str(scallop)]
-        + (["rim"] if rim else [])
+        + (["inside"] if inside else [])
         + (["bands"] if bands else []),
         cwd=str(checkout),
         env=env,
@@ -517,12 +523,13 @@ def bench_finishing(quick, old_ref=OLD_REF):
                     f"in the worker; {b['passes']} passes",
                     flush=True,
                 )
-                # the same with the rim finished (margin RIM), beside margin 0 for the ratio
-                # that decides whether it can be the default
-                r = run_finishing(repo, "sample1", 0.5, "ball6", h, rim=True)
+                # the same kept inside the outline (margin 0, the default until session 14),
+                # for what finishing the rim costs
+                r = run_finishing(repo, "sample1", 0.5, "ball6", h, inside=True)
                 print(
-                    f"  RIM    {r['cpu']:9.1f}  {r['peak_mb']:11.0f}  {r['passes']:6d} | "
-                    f"{r['cpu'] / new['cpu']:.2f}x the CPU of margin 0, {r['peak_mb'] / new['peak_mb']:.2f}x its peak",
+                    f"  margin 0 {r['cpu']:7.1f}  {r['peak_mb']:11.0f}  {r['passes']:6d} | "
+                    f"the default (the rim finished) takes {new['cpu'] / r['cpu']:.2f}x its CPU, "
+                    f"{new['peak_mb'] / r['peak_mb']:.2f}x its peak",
                     flush=True,
                 )
         finally:

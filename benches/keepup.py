@@ -74,6 +74,15 @@ refinement in halves on the two cores; this scan's height map and program byte-i
 At load ~10: own pages 287 | 255-258 MB. The own pages of main here are below session 12's
 quiet-box Pss (325), which they should not be: the absolute figure is uncertain by ~35 MB,
 the drop of ~29 MB is the surer one. Time is the load's here (quiet box, main: 11.5-11.7 s).
+
+Session 14 (2026-12-03, quiet box, one run each). Main 5d4faa6 (margin 0): 12.0 s after the
+last frame (fit 3.47, toolpath 7.87 s), child 17.4 s CPU, own pages 261 MB. The rim finished
+by default (margin RIM, with the rim's fine lines grouped per passes and polished per move,
+and the margin judged on the exact distance to the outline): 18.6 s (toolpath 14.59 s), child
+26.2 s CPU, own pages 263 MB: memory PASS, time MISS. (RIM before those changes: toolpath
+26.7 s, tree 780 MB.) The extra time is the sphere's wall at the outline: 147 passes for 103,
+its cusps measured and held where margin 0 never reached (the demo map's program: 15.70 % of
+the part uncut at margin 0, 0.34 % with the rim).
 """
 
 from __future__ import annotations
