@@ -37,7 +37,6 @@ from ..surface.base import interior_holes
 from ..surface.heightmap import HeightMap
 
 FLOOR = 0.0
-EXACT_WITHIN = 15.0  # mm: part_distance is exact this far out (a 25 mm cutter's radius and more)
 
 
 def check_heightmap(hm: HeightMap, where="height map"):
@@ -88,10 +87,6 @@ class Sampler:
         # p = max(u, v), q = min(u, v); three takes instead of four, one triangle computed
         self._P = np.column_stack([self._z10 - self._z00, self._z01 - self._z00]).ravel()
         self._Q = np.column_stack([self._z11 - self._z10, self._z11 - self._z01]).ravel()
-        # distance (mm) from each cell to the nearest on-part cell, for margins
-        step = min(self.dx, self.dy)
-        self._dist = ndimage.distance_transform_edt(~cell_on, sampling=(self.dy, self.dx))
-        self._dist = np.where(cell_on, 0.0, np.maximum(self._dist - 0.5 * step, 0.0))
 
     @property
     def corner_grids(self):
@@ -149,25 +144,19 @@ class Sampler:
     def part_distance(self, x, y):
         """How far (mm) a point is outside the footprint (the union of the on-part cells); 0 inside.
 
-        Exact within EXACT_WITHIN of the footprint, to about a cell beyond. The margins compared
-        with it are at most a cutter's radius, and a position kept at a cell more than that
-        lets the cutter leave the part: on the daemon's 1.2 mm map of a sphere, whose wall
-        stands 6-9 mm at the outline, a ball's tip dropped from 6.0 to the base between two
-        positions 0.02 mm apart, and the move cut 1.08 mm into the wall.
+        Exact: the margins compared with it are up to a cutter's radius, and a position kept
+        a cell further (a cell-centre distance transform was) lets the cutter leave the part:
+        on the daemon's 1.2 mm map of a sphere, whose wall stands 6-9 mm at the outline, a
+        ball's tip dropped from 6.0 to the base between two positions 0.02 mm apart, and the
+        move cut 1.08 mm into the wall.
         """
         x = np.asarray(x, float)
         y = np.asarray(y, float)
-        u, v, i, j, inside = self._cell(x, y)
-        # a cell's distance from the nearest on-part cell's centre, less half a step: the
-        # approximation, within a cell of the truth, that picks the points to measure exactly
-        xl, xh = self.x0, self.x0 + self.dx * (self.nx - 1)
-        yl, yh = self.y0, self.y0 + self.dy * (self.ny - 1)
-        ex = np.maximum(np.maximum(xl - x, x - xh), 0.0)
-        ey = np.maximum(np.maximum(yl - y, y - yh), 0.0)
-        out = np.where(self.cell_on[j, i] & inside, 0.0, self._dist[j, i] + np.hypot(ex, ey))
-        near = (out > 0) & (out <= EXACT_WITHIN)
-        if near.any():
-            out[near] = self._outline_distance(x[near], y[near])
+        out = np.zeros(np.broadcast_shapes(x.shape, y.shape))
+        x, y = np.broadcast_to(x, out.shape), np.broadcast_to(y, out.shape)
+        off = ~self.on_part(x, y)
+        if off.any():
+            out[off] = self._outline_distance(x[off], y[off])
         return out
 
     def _outline_distance(self, x, y):
