@@ -202,7 +202,7 @@ def test_points_a_sub_step_apart_read_on_one_lattice_are_where_they_are_said_to_
     e1 = np.array(direction)
     origins = np.array([[-6.0, -2.0], [-6.0, 0.33], [-6.0, 4.1]])
     sub, n = 8, 8 * 60
-    fine = drop_fine_lines(s, cutter, origins, e1, n, 0.1, sub)
+    fine = drop_fine_lines(s, cutter, origins, e1, n, 0.1, sub, np.ones((len(origins), n), bool))
     centred = np.stack(
         [drop_lines(s, cutter, origins + (j / sub) * 0.1 * e1, e1, n // sub, 0.1) for j in range(sub)], axis=2
     ).reshape(fine.shape)

@@ -12,30 +12,27 @@ import numpy as np
 
 from .contact import polish
 from .cutters import Cutter
-from .dropcutter import _EDGE_POINTS, _SLAB_BUDGET, _axis_aligned, _axis_rows, _edge_contacts
+from .dropcutter import _SLAB_BUDGET, _axis_aligned, _axis_rows, _edge_contacts
 from .sampling import Sampler
 
 
-def drop_fine_lines(sampler, cutter, origins, direction, n, d, sub, need=None):
-    """contact.drop_lines at points d / sub apart (fine_lattice_lines), polished the same way;
-    with `need` (bool, (lines, n)) only those points are polished, the others are nan."""
+def drop_fine_lines(sampler, cutter, origins, direction, n, d, sub, need):
+    """contact.drop_lines at points d / sub apart (fine_lattice_lines), polished the same way,
+    at the points `need` (bool, (lines, n)); nan at the others."""
     origins = np.atleast_2d(np.asarray(origins, float))
     e1 = np.asarray(direction, float)
     e1 = e1 / np.hypot(*e1)
     tip = fine_lattice_lines(sampler, cutter, origins, e1, n, d, sub, need)
     t = (d / sub) * np.arange(n)
-    x = origins[:, :1] + t[None, :] * e1[0]
-    y = origins[:, 1:2] + t[None, :] * e1[1]
-    if need is None:
-        return polish(sampler, cutter, x, y, tip, d)
-    x, y = np.broadcast_to(x, tip.shape), np.broadcast_to(y, tip.shape)
+    x = np.broadcast_to(origins[:, :1] + t[None, :] * e1[0], tip.shape)
+    y = np.broadcast_to(origins[:, 1:2] + t[None, :] * e1[1], tip.shape)
     out = np.full(tip.shape, np.nan)
     out[need] = polish(sampler, cutter, x[need], y[need], tip[need], d)
     return out
 
 
 def fine_lattice_lines(
-    sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: float, sub: int, need=None
+    sampler: Sampler, cutter: Cutter, origins, direction, n: int, d: float, sub: int, need
 ):
     """Tip heights at o_l + q (d / sub) e1 (q = 0..n-1) for each origin o_l: points a sub-th of
     a lattice step apart, read on one lattice of spacing d for all of them.
@@ -48,7 +45,7 @@ def fine_lattice_lines(
     The values taken are Z(p + u) - h(|u|) at real offsets |u| <= R, as on a centred
     lattice (a lower bound of the tip, short of it by the same h'' d^2 / 8); the part's
     outline is met exactly as in drop_lines, at the points `need` (bool, (lines, n)) only
-    when it is given. Not polished: see drop_fine_lines.
+    (found by a k-d tree: the pass ends' few points). Not polished: see drop_fine_lines.
     """
     origins = np.atleast_2d(np.asarray(origins, float))
     e1 = np.asarray(direction, float)
@@ -84,25 +81,13 @@ def fine_lattice_lines(
                 np.subtract(folded[:, m + a : m + a + nc, None], h[None, None, :], out=tmp)
                 np.maximum(res, tmp, out=res)
         out[s : s + chunk] = res.reshape(o.shape[0], nc * sub)[:, :n].astype(np.float64) + ref
-    if sampler.edges is not None and need is not None:
-        # the outline's edges met at the needed points only, found by a k-d tree
-        t = (d / sub) * np.arange(n)
+    if sampler.edges is not None:
         line, q = np.nonzero(need)
-        px, py = origins[line, 0] + t[q] * e1[0], origins[line, 1] + t[q] * e1[1]
+        t = (d / sub) * q
+        px, py = origins[line, 0] + t * e1[0], origins[line, 1] + t * e1[1]
         z = out[line, q]
         _edge_contacts(sampler.edges, cutter, px, py, z)
         out[line, q] = z
-    elif sampler.edges is not None:
-        along = (d / sub) * np.arange(n)
-        step = max(1, _EDGE_POINTS // max(n, 1))
-        for s in range(0, L, step):
-            o = origins[s : s + step]
-            px = o[:, 0, None] + along[None, :] * e1[0]
-            py = o[:, 1, None] + along[None, :] * e1[1]
-            lines = (o, e1, d / sub, n, 1) if n > 1 else None
-            _edge_contacts(
-                sampler.edges, cutter, px.ravel(), py.ravel(), out[s : s + step].reshape(-1), lines
-            )
     return out
 
 

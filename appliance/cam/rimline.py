@@ -68,9 +68,8 @@ class FineEnds:
             # move's own count needs it (one sag in a window asked 32 of every move: the
             # daemon's sphere, its whole wall at the outline's foot, 6 s of polish)
             j = np.arange(sub)
-            need = (
-                flag[:, :, None] & (j > 0) & (j % np.maximum(sub // np.maximum(each, 1), 1)[:, :, None] == 0)
-            )
+            stride = sub // np.maximum(each, 1)  # a move's own sub-positions among the window's
+            need = flag[:, :, None] & (j > 0) & (j % stride[:, :, None] == 0)
             z = drop_fine_lines(
                 sampler,
                 cutter,
@@ -155,32 +154,31 @@ def _tiles(flag, gap):
     few columns, and one box over all of them reads one slab. A round outline crosses
     every column somewhere: one box of the columns flagged by any pass, times every pass,
     was the whole map (the daemon's sphere: 20 s and 540 MB more). So consecutive passes
-    are grouped while their boxes' area stays within twice the moves their own windows
-    hold (a pass's windows: its flagged columns joined across gaps up to `gap`).
+    are grouped while the group's windows (its flagged columns joined across gaps up to
+    `gap`) times its passes stay within twice what each pass's own windows hold.
     """
-    passes = np.flatnonzero(flag.any(axis=1))
-    own = {k: _area(flag[k : k + 1], gap) for k in passes}
-    groups, start = [], 0
-    for i in range(1, passes.size + 1):
-        if i == passes.size or _area(flag[passes[start : i + 1]], gap) > 2 * sum(
-            own[k] for k in passes[start : i + 1]
-        ):
-            groups.append(passes[start:i])
-            start = i
+    groups, group, cols, own = [], [], np.zeros(flag.shape[1], bool), 0
+    for k in np.flatnonzero(flag.any(axis=1)):
+        width = _width(flag[k], gap)
+        union = cols | flag[k]
+        if group and (len(group) + 1) * _width(union, gap) > 2 * (own + width):
+            groups.append(group)
+            group, union, own = [], flag[k].copy(), 0
+        group.append(k)
+        cols, own = union, own + width
+    if group:
+        groups.append(group)
     boxes = []
-    for group in groups:
-        sub = flag[group]
+    for rows in map(np.array, groups):
+        sub = flag[rows]
         for a, b in _windows(np.flatnonzero(sub.any(axis=0)), gap):
-            boxes.append((a, b, group[sub[:, a : b + 1].any(axis=1)]))
+            boxes.append((a, b, rows[sub[:, a : b + 1].any(axis=1)]))
     return boxes
 
 
-def _area(flag, gap):
-    """Moves read by boxes over `flag`'s rows: each window's width times its flagged rows."""
-    return sum(
-        (b - a + 1) * int(flag[:, a : b + 1].any(axis=1).sum())
-        for a, b in _windows(np.flatnonzero(flag.any(axis=0)), gap)
-    )
+def _width(cols, gap):
+    """Columns the windows of a row of flags span."""
+    return sum(b - a + 1 for a, b in _windows(np.flatnonzero(cols), gap))
 
 
 def _windows(cols, gap):
