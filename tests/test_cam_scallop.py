@@ -147,3 +147,19 @@ def test_a_tiny_step_leaves_a_tiny_scallop_at_a_downhill_corner(cutter, h):
     first = [probe.pass_at(0.0)]
     assert probe.scallop(first, probe.pass_at(0.01)) < 0.5 * h
     assert 0.5 * h < probe.scallop(first, probe.pass_at(0.5 if cutter == "flat6" else 0.1)) < 3 * h
+
+
+def test_the_stepover_search_takes_the_exponent_the_candidates_show():
+    from appliance.cam.passplan import _secant
+
+    aim = 0.95
+    # a scallop growing as s^0.6 (a wall along the passes): one step lands on the aim,
+    # where the plane's s^2 crept up to it over many candidates
+    grow = lambda s: 0.9 * (s / 0.5) ** 0.6
+    s = _secant([(0.3, grow(0.3)), (0.35, grow(0.35))], aim)
+    assert grow(s) == pytest.approx(aim, rel=1e-9)
+    assert _secant([(0.35, grow(0.35))], aim) < s  # one pair: the plane's exponent, too short
+    # on a plane it is the plane's step; a nil scallop doubles the step
+    plane = lambda s: 0.5 * s * s
+    assert plane(_secant([(1.0, plane(1.0)), (1.2, plane(1.2))], aim)) == pytest.approx(aim)
+    assert _secant([(0.4, 0.0)], aim) == pytest.approx(0.8)
