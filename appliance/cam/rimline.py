@@ -29,6 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from .fineline import drop_fine_lines
+from .forks import in_parts
 
 MAX_SUB = 32  # sub-positions per off-part move: 15 fine points and 16 midpoints checking them
 
@@ -51,38 +52,22 @@ class FineEnds:
         with np.errstate(invalid="ignore"):
             self.flag = both & (rise > tol) & (off[:, 1:] | off[:, :-1])
         sag = np.where(self.flag, rise, 0.0)
-        self.windows = []  # (first move, passes, slots per fine move (passes, moves), tips on slots)
         m = int(np.ceil(cutter.radius / d))
-        for a, b, rows in _tiles(self.flag, 2 * m):
-            flag = self.flag[rows, a : b + 1]
-            # a move's count from the largest sag of it and its neighbours, for a quarter of
-            # the tolerance: thinning (reduce_polyline) checks the chord only at these
-            # points, and from the move's own sag at the tolerance a point between two of
-            # them stood 0.0022 mm above the thinned move where 0.002 was asked (the window's
-            # largest sag for every move, as before: 0.0020)
-            near = ndimage.maximum_filter1d(sag[rows], 3, axis=1)[:, a : b + 1]
-            each = np.where(flag, _subdivisions(4 * near, tol), 0)
-            sub = int(each.max())
-            # every sub-position of the window's moves read at once on the lines' own lattice;
-            # polished (the exact contacts: most of the cost on a coarse map) only where a
-            # move's own count needs it (one sag in a window asked 32 of every move: the
-            # daemon's sphere, its whole wall at the outline's foot, 6 s of polish)
-            j = np.arange(sub)
-            stride = sub // np.maximum(each, 1)  # a move's own sub-positions among the window's
-            need = flag[:, :, None] & (j > 0) & (j % stride[:, :, None] == 0)
-            z = drop_fine_lines(
-                sampler,
-                cutter,
-                origins[rows] + a * d * e1,
-                e1,
-                (b - a + 1) * sub,
-                d,
-                sub,
-                need=need.reshape(rows.size, -1),
+        boxes = _tiles(self.flag, 2 * m)
+        # (first move, passes, slots per fine move (passes, moves), tips on slots) per box; the
+        # boxes on the cores, in parts of about equal area (the daemon's sphere: 1.7 s alone)
+        self.windows = (
+            in_parts(
+                lambda i, j: [
+                    _window(sampler, cutter, origins, e1, d, self.flag, sag, tol, leave, *box)
+                    for box in boxes[i:j]
+                ],
+                [rows.size * (b - a + 1) for a, b, rows in boxes],
+                lambda parts: [w for part in parts for w in part],
             )
-            slots = np.full((rows.size, b - a + 1, MAX_SUB - 1), np.nan)
-            slots[:, :, (MAX_SUB // sub) * j[1:] - 1] = z.reshape(rows.size, b - a + 1, sub)[:, :, 1:] + leave
-            self.windows.append((a, rows, np.where(flag, MAX_SUB // np.maximum(each, 1), 0), slots))
+            if boxes
+            else []
+        )
 
     def _fine(self, k, first, count):
         """Sub-position tips of pass k's moves first..first+count-1 on MAX_SUB - 1 slots (a move
@@ -144,6 +129,39 @@ class FineEnds:
         out = np.insert(pts, seg + 1, new, axis=0)
         q = (seg + 1 + np.arange(seg.size))[checked[seg, j]]  # inserted midpoints' indices in out
         return out, np.unique(np.concatenate([q - 1, q])).astype(int)
+
+
+def _window(sampler, cutter, origins, e1, d, flag_all, sag, tol, leave, a, b, rows):
+    """One box's fine tips: (first move, passes, slots per fine move, tips on slots)."""
+    flag = flag_all[rows, a : b + 1]
+    # a move's count from the largest sag of it and its neighbours, for a quarter of
+    # the tolerance: thinning (reduce_polyline) checks the chord only at these
+    # points, and from the move's own sag at the tolerance a point between two of
+    # them stood 0.0022 mm above the thinned move where 0.002 was asked (the window's
+    # largest sag for every move, as before: 0.0020)
+    near = ndimage.maximum_filter1d(sag[rows], 3, axis=1)[:, a : b + 1]
+    each = np.where(flag, _subdivisions(4 * near, tol), 0)
+    sub = int(each.max())
+    # every sub-position of the window's moves read at once on the lines' own lattice;
+    # polished (the exact contacts: most of the cost on a coarse map) only where a
+    # move's own count needs it (one sag in a window asked 32 of every move: the
+    # daemon's sphere, its whole wall at the outline's foot, 6 s of polish)
+    j = np.arange(sub)
+    stride = sub // np.maximum(each, 1)  # a move's own sub-positions among the window's
+    need = flag[:, :, None] & (j > 0) & (j % stride[:, :, None] == 0)
+    z = drop_fine_lines(
+        sampler,
+        cutter,
+        origins[rows] + a * d * e1,
+        e1,
+        (b - a + 1) * sub,
+        d,
+        sub,
+        need=need.reshape(rows.size, -1),
+    )
+    slots = np.full((rows.size, b - a + 1, MAX_SUB - 1), np.nan)
+    slots[:, :, (MAX_SUB // sub) * j[1:] - 1] = z.reshape(rows.size, b - a + 1, sub)[:, :, 1:] + leave
+    return a, rows, np.where(flag, MAX_SUB // np.maximum(each, 1), 0), slots
 
 
 def _tiles(flag, gap):
