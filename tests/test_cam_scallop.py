@@ -163,3 +163,25 @@ def test_the_stepover_search_takes_the_exponent_the_candidates_show():
     plane = lambda s: 0.5 * s * s
     assert plane(_secant([(1.0, plane(1.0)), (1.2, plane(1.2))], aim)) == pytest.approx(aim)
     assert _secant([(0.4, 0.0)], aim) == pytest.approx(0.8)
+
+
+def test_no_candidate_steps_past_the_cap(monkeypatch):
+    # on a gentle slope across the passes a flat end leaves half the request at the largest
+    # step allowed (0.95 x its diameter): the next pass, re-aimed from there, must still
+    # start within it (a candidate past the diameter left no stock measured, and the
+    # search failed on sample 2)
+    from appliance.cam import cusps
+
+    steps = []
+    measure = cusps.PassProbe.scallop
+
+    def spy(self, done, b):
+        steps.append(b[0] - done[-1][0])
+        return measure(self, done, b)
+
+    monkeypatch.setattr(cusps.PassProbe, "scallop", spy)
+    hm = grid_map(lambda X, Y: 5.0 + 0.005 * Y, 0, 40, 0, 40, 1.0)
+    flat = parse_cutter("flat6")
+    finishing_gcode(hm, FinishSettings(flat, scallop=0.05, margin=0.0))
+    assert len(steps) > 5
+    assert max(steps) <= 0.95 * flat.diameter + 1e-9

@@ -37,7 +37,7 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
     while passes[-1] < s1 - 1e-9:
         sa = passes[-1]
         best_ok, best_p, best_sc, worst = None, None, 0.0, np.inf
-        s = min(guess, s1 - sa)
+        s = min(guess, s_cap, s1 - sa)
         tried = []
         for _ in range(10):
             cand = probe.pass_at(sa + s)
@@ -89,6 +89,7 @@ def _secant(tried, aim):
     p = 2.0
     if len(tried) >= 2:
         s_b, sc_b = tried[-2]
-        if sc_b > 1e-12 and abs(np.log(s / s_b)) > 1e-3 and abs(np.log(sc / sc_b)) > 1e-6:
+        usable = 1e-12 < min(sc, sc_b) and max(sc, sc_b) < np.inf
+        if usable and abs(np.log(s / s_b)) > 1e-3 and abs(np.log(sc / sc_b)) > 1e-6:
             p = float(np.clip(np.log(sc / sc_b) / np.log(s / s_b), 0.5, 4.0))
     return s * (aim / sc) ** (1.0 / p)
