@@ -249,10 +249,10 @@ def _opening_for(sampler, st, e2, across):
     over `across` only, over the rows they and their cusps reach (two cutter radii and the
     margin beyond, the lattice the whole part's would have: the same values there)."""
     if across is None or abs(e2[1] - 1.0) > 1e-12:
-        return Opening.over(sampler, st.cutter, st.resolution, pad=st.margin, screen=True)
+        return Opening.over(sampler, st.cutter, st.resolution, pad=st.margin)
     d = st.resolution
     reach = 2 * st.cutter.radius + st.margin + 4 * d
     _, _, by0, by1 = sampler.bounds
     y0 = by0 + d * max(0, int(np.floor((across[0] - reach - by0) / d)))
     y1 = min(by1, across[1] + reach)
-    return Opening.over(sampler, st.cutter, d, y0=y0, y1=y1, pad=st.margin, screen=True)
+    return Opening.over(sampler, st.cutter, d, y0=y0, y1=y1, pad=st.margin)

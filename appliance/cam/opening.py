@@ -28,108 +28,36 @@ from .sampling import Sampler
 REACH_TOL = 0.005  # mm: a cell is reachable when the opening is within this of the design
 
 
-def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d, screen=False):
-    """The design opened by the cutter on the lattice x0 + i d, y0 + j d; shape (ny, nx).
-
-    screen: where an opening on a lattice twice as coarse shows that the cutter reaches
-    the design, the design itself is taken (_need); the planner's, not the verification's."""
-    screen = screen and cutter.kind != "flat" and _steep_share(sampler) < SCREEN_STEEP_SHARE
-    need = _need(sampler, cutter, x0, y0, nx, ny, d) if screen else None
+def opening(sampler: Sampler, cutter: Cutter, x0, y0, nx, ny, d):
+    """The design opened by the cutter on the lattice x0 + i d, y0 + j d; shape (ny, nx)."""
     # the tips a program has (contact.py): the lattice alone stands low on steep
     # faces (0.02-0.03 mm for a 1 mm ball on sample 4's 80-degree faces) and, for a
     # flat end, by slope x its shortfall from the rim everywhere, and would call a
     # strip reachable that no tool position reaches
     # in bands of rows: the drop's and the polish's temporaries over a whole map
     # at 0.1 mm were 220 MB, half of a finishing plan's peak
-    m = int(np.ceil(cutter.radius / d - 1e-9))
-    positions = None if need is None else _box_dilation(need, m)  # what the needed nodes reach
-    tip = np.full((ny, nx), np.inf)
+    tip = np.empty((ny, nx))
     xs = x0 + d * np.arange(nx)
     for j0, j1 in _bands(ny, nx):
-        c0, c1 = _span(positions, j0, j1, nx)
-        if c0 >= c1:
-            continue
-        X, Y = np.meshgrid(xs[c0:c1], y0 + d * np.arange(j0, j1))
-        tip[j0:j1, c0:c1] = polish(
+        X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
+        tip[j0:j1] = polish(
             sampler,
             cutter,
             X,
             Y,
-            drop_grid(sampler, cutter, x0 + d * c0, y0 + d * j0, c1 - c0, j1 - j0, d),
+            drop_grid(sampler, cutter, x0, y0 + d * j0, nx, j1 - j0, d),
             d,
             off_part=False,
         )
-    out = _erode(tip, cutter, d, need)
+    out = _erode(tip, cutter, d)
     if cutter.kind == "flat":
         np.minimum(out, _rim_minimum(tip, cutter.radius / d), out=out)
         np.minimum(out, _side_ends(tip, cutter.radius / d), out=out)
-        return out
-    for j0, j1 in _bands(ny, nx):
-        if need is None or need[j0:j1].any():
+    else:
+        for j0, j1 in _bands(ny, nx):
             X, Y = np.meshgrid(xs, y0 + d * np.arange(j0, j1))
             _polish_minimum(sampler, cutter, tip, out, X, Y, d, rows=slice(j0, j1))
-    if need is not None:
-        for j0, j1 in _bands(ny, nx):
-            rest = ~need[j0:j1]
-            if rest.any():
-                out[j0:j1][rest] = sampler.z_grid(xs, y0 + d * np.arange(j0, j1))[rest]
     return out
-
-
-# Screening pays where the needed nodes and the tips they reach are a small part of the
-# lattice. Around steep faces they are not (the walls are where the opening leaves the design,
-# and their tips are the polished, costly ones): with a fifth of the part steeper than 45
-# degrees (the daemon's sphere 46 %, the ring 44 %, samples 1-3 at most 1 %) the coarse pass
-# was spent for nothing (+0-8 % on those openings; samples 1-3: 4-6x less)
-SCREEN_STEEP_SHARE = 0.2
-
-
-def _steep_share(sampler):
-    """The share of the part's cells with a facet steeper than 45 degrees."""
-    slope = sampler.facet_slope(sampler.cell_on)
-    return float(np.mean(slope > 1.0)) if slope.size else 0.0
-
-
-def _need(sampler, cutter, x0, y0, nx, ny, d):
-    """The nodes whose opening may stand above the design by more than the planner forgives.
-
-    On most of a part the cutter reaches every point (on sample 1 the opening is nowhere
-    0.001 mm above the design, on the daemon's sphere 2 % of the nodes are), and there the
-    planner reads the opening only to learn that. An opening on a lattice twice as coarse
-    costs a quarter of the drops and a sixteenth of the erosion, and it stands above the
-    fine one (its positions are a subset) by at most its lattice error d_c^2 / (4 rc)
-    where the tips are smooth (steep faces are polished on both). Where the coarse one is
-    within that of the design, so is the fine one: its residue is at most a few microns
-    over the slack Opening.above forgives, and taking the design there leaves the planner
-    measuring a little more stock than the verification, never less. Off the part the
-    planner reads nothing (beside a wall the base's corner is out of reach a radius wide:
-    most of the work on sample 1), so only nodes on it or beside them are needed."""
-    dc, rc = 2 * d, cutter.corner_radius
-    # within the fine lattice's bounds: a position beyond them would lower the coarse opening
-    nxc, nyc = (nx - 1) // 2 + 1, (ny - 1) // 2 + 1
-    coarse = opening(sampler, cutter, x0, y0, nxc, nyc, dc)
-    xc, yc = x0 + dc * np.arange(nxc), y0 + dc * np.arange(nyc)
-    Xc, Yc = np.meshgrid(xc, yc)
-    above = (coarse - sampler.z_grid(xc, yc) > dc * dc / (4 * rc)) & sampler.on_part(Xc, Yc)
-    # a fine node between coarse ones is needed where any of its four is
-    above = ndimage.binary_dilation(above, np.ones((3, 3), bool))
-    fine = np.repeat(np.repeat(above, 2, axis=0), 2, axis=1)
-    return np.pad(fine, ((0, max(ny - fine.shape[0], 0)), (0, max(nx - fine.shape[1], 0))), mode="edge")[
-        :ny, :nx
-    ]
-
-
-def _box_dilation(mask, m):
-    grown = ndimage.maximum_filter1d(mask.astype(np.uint8), 2 * m + 1, axis=0)
-    return ndimage.maximum_filter1d(grown, 2 * m + 1, axis=1).astype(bool)
-
-
-def _span(mask, j0, j1, nx):
-    """Columns [c0, c1) holding every marked node of rows j0..j1-1 (all of them without a mask)."""
-    if mask is None:
-        return 0, nx
-    cols = np.flatnonzero(mask[j0:j1].any(axis=0))
-    return (int(cols[0]), int(cols[-1]) + 1) if cols.size else (0, 0)
 
 
 def _bands(ny, nx, cells=40_000):
@@ -139,7 +67,7 @@ def _bands(ny, nx, cells=40_000):
     return [(j0, min(j0 + rows, ny)) for j0 in range(0, ny, rows)]
 
 
-def _erode(tip, cutter, d, need=None):
+def _erode(tip, cutter, d):
     """min over the disc's lattice offsets u of tip(p + u) + h(|u|); inf off the lattice.
 
     h is symmetric in both offsets, so rows b and -b are folded first, then
@@ -166,12 +94,7 @@ def _erode(tip, cutter, d, need=None):
     rows = np.empty((band, nx + 2 * m), np.float32)
     for j0 in range(0, ny, band):
         j1 = min(j0 + band, ny)
-        # only the columns of needed nodes (all without a mask); others stay inf
-        c0, c1 = _span(need, j0, j1, nx)
-        if c0 >= c1:
-            continue
-        w = c1 - c0
-        o, t, rw = out[j0:j1, c0:c1], tmp[: j1 - j0, :w], rows[: j1 - j0]
+        o, t, rw = out[j0:j1], tmp[: j1 - j0], rows[: j1 - j0]
         for b, offsets in quarter:
             if b == 0:
                 rw[...] = pad[m + j0 : m + j1]
@@ -179,9 +102,9 @@ def _erode(tip, cutter, d, need=None):
                 np.minimum(pad[m + j0 + b : m + j1 + b], pad[m + j0 - b : m + j1 - b], out=rw)
             for a, h in offsets:
                 if a == 0:
-                    np.add(rw[:, m + c0 : m + c1], h, out=t)
+                    np.add(rw[:, m : m + nx], h, out=t)
                 else:
-                    np.minimum(rw[:, m + c0 + a : m + c1 + a], rw[:, m + c0 - a : m + c1 - a], out=t)
+                    np.minimum(rw[:, m + a : m + a + nx], rw[:, m - a : m - a + nx], out=t)
                     np.add(t, h, out=t)
                 np.minimum(o, t, out=o)
     return out.astype(np.float64) + ref
@@ -280,12 +203,10 @@ class Opening:
     z: np.ndarray
 
     @classmethod
-    def over(
-        cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None, pad=0.0, screen=False
-    ):
+    def over(cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None, pad=0.0):
         """The opening on a lattice of spacing d from (x0, y0) to (x1, y1) (default: the footprint's
         bounds), with tool positions up to `pad` beyond them (whole steps of d): a program that
-        runs off the outline onto the base reaches the rim from there. `screen`: see opening()."""
+        runs off the outline onto the base reaches the rim from there."""
         bx0, bx1, by0, by1 = sampler.bounds
         x0 = bx0 if x0 is None else x0
         y0 = by0 if y0 is None else y0
@@ -297,9 +218,7 @@ class Opening:
         x0, y0, x1, y1 = x0 - k * d, y0 - k * d, x1 + k * d, y1 + k * d
         nx = np.arange(x0, x1 + d / 2, d).size
         ny = np.arange(y0, y1 + d / 2, d).size
-        return cls(
-            cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d, screen)
-        )
+        return cls(cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d))
 
     def at(self, X, Y):
         X, Y = np.asarray(X, float), np.asarray(Y, float)

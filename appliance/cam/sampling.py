@@ -93,14 +93,6 @@ class Sampler:
         """Each cell's corner heights (z00, z10, z01, z11), floor on cells off the part."""
         return self._g00, self._g10, self._g01, self._g11
 
-    def facet_slope(self, cells):
-        """|grad z| of the steeper of the two triangles of each cell picked by the mask `cells`
-        (the cell is split from (i, j) to (i+1, j+1))."""
-        g00, g10, g01, g11 = (g[cells] for g in self.corner_grids)
-        upper = np.hypot((g10 - g00) / self.dx, (g11 - g10) / self.dy)
-        lower = np.hypot((g11 - g01) / self.dx, (g01 - g00) / self.dy)
-        return np.maximum(upper, lower)
-
     @cached_property
     def cell_top(self):
         """Each cell's highest corner (floor off the part): no point of its triangles is higher."""

@@ -255,6 +255,10 @@ def steep_outline(sampler: Sampler, radius: float, margin: float) -> bool:
     (sample 4's 80-degree faces: a 1 mm ball's side at 0.48 mm out is 74 degrees)."""
     on = sampler.cell_on
     edge = on & ~ndimage.binary_erosion(np.pad(on, 1), np.ones((3, 3), bool))[1:-1, 1:-1]
-    slope = float(np.max(sampler.facet_slope(edge), initial=0.0))
+    g00, g10, g01, g11 = (g[edge] for g in sampler.corner_grids)
+    # the cell's two triangles' gradients (sampling.py splits it from (i, j) to (i+1, j+1))
+    upper = np.hypot((g10 - g00) / sampler.dx, (g11 - g10) / sampler.dy)
+    lower = np.hypot((g11 - g01) / sampler.dx, (g01 - g00) / sampler.dy)
+    slope = float(np.max(np.maximum(upper, lower), initial=0.0))
     side = margin / np.sqrt(max(radius * radius - margin * margin, 1e-12))  # tan of the side's angle
     return slope > side
