@@ -134,6 +134,19 @@ finishing --old-ref none` (quiet box, the "margin 0" row is the old default besi
 186 MB (OK), margin 0 13.3 s (1.33x). Near the machine's travel the margin is cut to what the
 travel leaves beside the map, with a header note (jobs._within_travel).
 
+Session 15 (2026-12-04, quiet box): the stepover search's exponent taken from its last two
+candidates and each pass started re-aimed (sample 1 at 0.05: 163 -> 134 candidates for 124
+passes). `--only finishing --old-ref 68448e3`: 0.05: 5.0 s / 135 MB | 6.0 s / 132 MB (1.2x; at
+the limit: whole-process medians of 5 pinned runs 5.59 | 6.37 s, imports included); 0.01: 15.3
+s / 208 MB | 14.1 s / 209 MB (OK, one run). `--only acceptance`: 12 of 12 OK, gouge / max
+scallop / passes: sample1 ball6 0.0021 / 0.0100 / 280, bull6r1 0.0030 / 0.0098 / 438, flat6
+0.0022 / 0.0494 / 972; sample2 0.0014 / 0.0099 / 264, 0.0026 / 0.0098 / 353, 0.0022 / 0.0483 /
+403; sample3 0.0015 / 0.0099 / 252, 0.0026 / 0.0101 / 369 (458 s to make), 0.0042 / 0.0490 /
+321; sample4 ball1 0.0025 / 0.0100 / 325, bull1r0.25 0.0027 / 0.0104 / 417, flat1 0.0029 /
+0.0504 / 386. A screened opening (a coarse one deciding where the fine one is needed) was
+tried and reverted: at its lattice error as the tolerance sample 3's bull6r1 was left 0.0157
+at its edge, at a tolerance the planner's contact test stands it saved ~10 % of the opening.
+
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
 

@@ -83,6 +83,11 @@ and the margin judged on the exact distance to the outline): 18.6 s (toolpath 14
 26.7 s, tree 780 MB.) The extra time is the sphere's wall at the outline: 147 passes for 103,
 its cusps measured and held where margin 0 never reached (the demo map's program: 15.70 % of
 the part uncut at margin 0, 0.34 % with the rim).
+
+Session 15 (2026-12-04, quiet box, one run): with the planner's exponent secant and the rim's
+fine boxes and the links' refinement on both cores: 18.8 s after the last frame (fit 3.22,
+toolpath 15.10 s), child 27.1 s CPU, own pages 268 MB: memory PASS, time MISS, as before. The
+toolpath alone on a kept demo map: 11.8 | 12.3 s wall (3 runs, medians), CPU the same.
 """
 
 from __future__ import annotations
