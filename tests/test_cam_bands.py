@@ -91,7 +91,7 @@ def test_in_parts_splits_the_items_by_weight_one_part_a_worker_and_joins_them_in
         return [(i, a, b, os.getpid()) for i in range(a, b)]
 
     weights = [5.0, 1.0, 1.0, 1.0, 1.0, 1.0]
-    out = forks.in_parts(work, weights, lambda parts: [x for p in parts for x in p])
+    out = forks.in_parts(work, weights, forks.joined)
     assert [x[0] for x in out] == list(range(6))
     assert {(x[1], x[2]) for x in out} == {(0, 1), (1, 6)}  # 5 against 5
     assert out[0][3] == os.getpid() != out[-1][3]  # the second part ran in a forked worker

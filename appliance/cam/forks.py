@@ -66,6 +66,11 @@ def in_parts(work, weights, join):
     return join(in_workers(tasks) if len(tasks) > 1 else [tasks[0]()])
 
 
+def joined(parts: list) -> list:
+    """in_parts' join for work that returns a list per part: the parts' items in order."""
+    return [item for part in parts for item in part]
+
+
 def in_workers(tasks: list) -> list:
     """Each task's result, the first run here and the others in forked children."""
     children, parent = [], os.getpid()

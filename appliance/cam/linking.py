@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .contact import drop_lines
-from .forks import in_parts
+from .forks import in_parts, joined
 from .polyline import refine, refine_tolerance
 
 
@@ -58,14 +58,10 @@ def links(sampler, cutter, st, runs, passes):
     todo = [i for i, l in enumerate(out) if l is not None]
     full = [np.vstack([runs[i][-1:], out[i], runs[i + 1][:1]]) for i in todo]
     # on the cores (the daemon's sphere: links rolling over its wall, 1 s alone)
-    full = (
-        in_parts(
-            lambda a, b: refine(sampler, cutter, full[a:b], refine_tolerance(st.chord), st.leave, d),
-            [len(f) for f in full],
-            lambda parts: [f for part in parts for f in part],
-        )
-        if full
-        else []
+    full = in_parts(
+        lambda a, b: refine(sampler, cutter, full[a:b], refine_tolerance(st.chord), st.leave, d),
+        [len(f) for f in full],
+        joined,
     )
     for i, f in zip(todo, full):
         out[i] = f[1:-1]

@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from .fineline import drop_fine_lines
-from .forks import in_parts
+from .forks import in_parts, joined
 
 MAX_SUB = 32  # sub-positions per off-part move: 15 fine points and 16 midpoints checking them
 
@@ -56,17 +56,13 @@ class FineEnds:
         boxes = _tiles(self.flag, 2 * m)
         # (first move, passes, slots per fine move (passes, moves), tips on slots) per box; the
         # boxes on the cores, in parts of about equal area (the daemon's sphere: 1.7 s alone)
-        self.windows = (
-            in_parts(
-                lambda i, j: [
-                    _window(sampler, cutter, origins, e1, d, self.flag, sag, tol, leave, *box)
-                    for box in boxes[i:j]
-                ],
-                [rows.size * (b - a + 1) for a, b, rows in boxes],
-                lambda parts: [w for part in parts for w in part],
-            )
-            if boxes
-            else []
+        self.windows = in_parts(
+            lambda i, j: [
+                _window(sampler, cutter, origins, e1, d, self.flag, sag, tol, leave, *box)
+                for box in boxes[i:j]
+            ],
+            [rows.size * (b - a + 1) for a, b, rows in boxes],
+            joined,
         )
 
     def _fine(self, k, first, count):

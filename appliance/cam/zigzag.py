@@ -46,7 +46,7 @@ from .bands import plan_in_bands
 from .contact import drop_lines
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
-from .forks import in_parts
+from .forks import in_parts, joined
 from .linking import links
 from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .rimline import FineEnds
@@ -228,7 +228,7 @@ def finishing(sampler: Sampler, st: FinishSettings) -> Finish:
     ordered = in_parts(
         lambda a, b: refine(sampler, drop_cutter, moves[a:b], tol, st.leave, d, cand=cand[a:b]),
         [c.size + len(r) / 100 for r, c in zip(moves, cand)],
-        lambda parts: [r for part in parts for r in part],
+        joined,
     )
     joins = links(sampler, drop_cutter, st, ordered, passes)
     runs: list[np.ndarray] = []
