@@ -230,6 +230,17 @@ before -> after, the same renders:
   crater 0.0385 0.202 0.232 92% of 122, steep-front 0.0155 0.093 0.256 54% of 13: 88.1 % of 135.
   Over the targets: sample4 (all three), plateau (Ea, p99), ring (Ea, p99 by 0.009, max 1.178).
 
+(n) The level rows back, held where they run away (4 December 2026, session 16; see
+benches/meniscus.py for the runaway and what was tried). (m)'s kept renders and meniscus file,
+processed by main 0ee8c1a -> this, Ea / interior p99 / max mm:
+    sample1    0.0158 0.041 0.567 -> 0.0154 0.041 0.547   sample2 0.0193 0.049 0.227 -> 0.0187 0.049 0.214
+    sample3    0.0399 0.103 0.219 -> 0.0426 0.107 0.407   sample4 0.2243 0.353 2.118 -> 0.2097 0.337 2.106
+    twin-peaks 0.0235 0.115 0.388 -> 0.0226 0.085 0.275   plateau 0.0778 0.564 0.643 -> 0.0373 0.201 0.295
+    ring       0.0585 0.209 1.178 -> 0.0490 0.199 1.056
+  held out: crater 0.0385 0.202 0.232 -> 0.0356 0.198 0.243, steep-front 0.0155 0.093 0.256 ->
+  0.0144 0.085 0.151. Over the targets now: sample4 (all three), plateau (p99 by 0.001), ring
+  (max by 0.056: at its crest, not looked into). The honesty share was not re-run.
+
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
 """

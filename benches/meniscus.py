@@ -200,6 +200,39 @@ iteration's). The outline nodes came out (frames 20-22 of 29), so their bracket 
 levels plus the largest rise) holds only above 13.4 mm. Damping that mode near the outline is
 the next thing to try with the V rows.
 
+The level rows back, held where they run away (4 December 2026, session 16; contact_lines.py
+top_from_apparent). The same kept renders and meniscus file as session 13's whole-bench row,
+processed again by main 0ee8c1a -> the V rows alone (d72c918 reverted) -> the V rows with the
+runaway tie, Ea / interior p99 / max mm:
+    sample1     0.0106 0.135 0.659 -> 0.0100 0.137 0.553 -> 0.0100 0.137 0.553
+    sample2     0.0560 0.431 1.262 -> 0.0482 0.238 1.383 -> 0.0473 0.238 1.383
+    sample3     0.0534 0.499 0.809 -> 0.0378 0.267 0.534 -> 0.0375 0.260 0.536
+    sample4     0.0839 0.050 0.734 -> 0.0533 0.044 0.734 -> 0.0529 0.047 0.696   > 0.05
+    crater      0.0544 0.610 1.140 -> 0.0252 0.248 0.726 -> 0.0252 0.248 0.726
+    steep-front 0.0736 0.624 0.695 -> 0.0551 0.546 0.678 -> 0.0541 0.546 0.678   > 0.05
+    twin-peaks  0.0392 0.462 0.562 -> 0.0351 0.190 1.621 -> 0.0285 0.228 0.665
+What the V rows lost on the harsh plateau (0.0778 -> 0.4149, max 4.83) is a runaway, now
+understood: on its 10 mm shelf the apparent surface is flat at 9.96 to the outline, and the
+top, smoothed itself there, climbed 10.08 10.16 10.40 10.91 11.45 12.46 over the last nodes,
+set off by the shoulder's foot (A 10.04-10.12 then 9.26 a few nodes in). Both tops fit the
+data: top - l_c |grad top| = A holds for top = A + C exp(d / l_c) as well, and only the rim,
+which has no data term, could say which. The same shelf on an exact apparent surface (a test
+now) puts the level-only solve 6.9 mm off at the edge. So the top is solved twice, with and
+without the level rows; where, within 3 nodes of the trusted outline, the level solve stands
+more than 0.2 mm above the plain one and the plain one is level, it is solved a third time
+tied to the plain one there. It costs time: processing the plateau 20 -> 34 s, sample 3
+(second ink) 45 -> 59 s, sample 4 11 -> 17 s, the ring 15 -> 20 s (one run each, back to back).
+Tried before it, on the same renders: a margin of plain rows along the outline (3 nodes:
+plateau 0.1631, physics2 sample2 0.0519, sample4 0.0673), a tie on the whole outline band
+(weight 1: plateau 0.0373, but physics2 sample2 0.0555, sample4 0.0649; weight 0.1: plateau
+0.0561 max 0.608), and on its level nodes only (plateau 0.0373, ring max 0.963, physics2
+sample2 0.0552, sample4 0.0504). The runaway tie is the one that keeps sample 2's corner face,
+a level face at the outline that does not run away, on the level rows. Still over 0.05:
+sample 4 (by 0.003: its y = 45 strip, 20 % of its error sum on 100 nodes flatter than 5 deg)
+and the steep front (by 0.004: 68 % of its error sum is on its flat apron, whose median node
+is +0.019 mm; the rest is a line of nodes at the front's foot, +0.5..0.68, where the fit rounds
+the concave corner between the apron and the wall).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

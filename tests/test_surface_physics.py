@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from appliance.errors import SettingError
 from appliance.sim import surfaces
@@ -190,12 +191,14 @@ def test_top_from_the_apparent_surface_is_the_top(top, extent):
     inner = np.zeros(A.shape, bool)
     inner[3:-3, 3:-3] = True  # the outline's nodes are left to the smoothness
     assert np.abs(T - A).max() > 1.0  # the rise is there to take out
-    # (measured: mean 0.0049 / 0.0036 mm, all nodes 0.0059 / 0.0081; the largest, 0.26 /
-    # 0.12 mm, at the critical points, where the rise is a cone - |grad| grows linearly
-    # from them - and smoothed. The solve stops after three fine steps, which rendered
-    # frames want; settled, it gives 0.0012 / 0.0022: see meniscus.FINE_ITERATIONS)
+    # (measured: mean 0.0017 / 0.0050 mm, all nodes 0.0028 / 0.0101; the largest, 0.07 /
+    # 0.17 mm, at the critical points, where the rise is a cone - |grad| grows linearly
+    # from them. Smoothing phi there, not the level top (contact_lines.LevelRows), gave
+    # 0.0042 / 0.0036, all nodes 0.0053 / 0.0081, largest 0.22 / 0.12: the dome's summit
+    # better, the saddle's broad flat corner, where phi has no V to keep, a little worse.
+    # The solve stops after three fine steps, which rendered frames want; see FINE_ITERATIONS)
     assert err[inner].mean() < 0.006 and err[inner].max() < 0.3
-    assert err.mean() < 0.01
+    assert err.mean() < 0.012
 
 
 def test_the_apparent_surface_at_the_rim_is_not_trusted():
@@ -227,6 +230,33 @@ def test_the_contact_lines_bend_is_not_read_off_the_untrusted_rim():
     A, T = _apparent(lambda X, Y: 30.0 - 1.5 * X - 2.0 * Y, model, x, x)
     got = top_from_apparent(Lattice(x, x), A, np.ones(A.shape, bool), model)
     assert np.abs(got - T).mean() < 0.03 and np.abs(got - T).max() < 0.2
+
+
+@pytest.mark.parametrize("lc,theta_deg", [(2.3, 35.0), (2.7, 0.0)])
+def test_a_ridges_crest_keeps_the_v_of_its_rise(lc, theta_deg):
+    """A ring-shaped ridge round a crater (the bench's `crater`, cresting at 22 mm on radius
+    20 mm). Where the top is level the rise h(|grad top|) has a V (dh/d|grad| = l_c cos(theta/2)
+    at 0), so phi = top - A is kinked along the crest while the top is smooth. Smoothing phi
+    there rounded the V off: the crest came out 0.56 mm (second ink) and 0.76 mm (first)
+    high on exact apparent surfaces; smoothing the top where it is level, 0.058 and 0.052
+    (measured, 61 x 61 nodes at 1 mm)."""
+    from appliance.surface.contact_lines import top_from_apparent
+    from appliance.surface.lattice import Lattice
+
+    def crater(x, y):
+        return 5 + 17 * np.exp(-(((np.hypot(x - 50, y - 50) - 20) / 9) ** 2))
+
+    model = MeniscusModel(lc, np.radians(theta_deg))
+    x = np.linspace(20.0, 80.0, 61)
+    A, T = _apparent(crater, model, x, x)
+    got = top_from_apparent(Lattice(x, x), A, np.ones(A.shape, bool), model)
+    X, Y = np.meshgrid(x, x)
+    inner = np.zeros(A.shape, bool)
+    inner[3:-3, 3:-3] = True
+    crest = inner & (np.abs(np.hypot(X - 50, Y - 50) - 20) < 2)
+    err = np.abs(got - T)
+    assert err[crest].mean() < 0.1 and err[inner].max() < 0.25
+    assert err[inner & ~crest].mean() < 0.02  # and the flanks and the floor stay as they were
 
 
 def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it():
@@ -362,3 +392,31 @@ def test_the_ink_climbs_a_face_that_came_out_at_once_no_more_than_a_face_that_fl
     assert abs(climb[0] - 2 * 2.5 * np.sin(np.arctan(0.09 / 2.0) / 2)) < 1e-12
     assert 0.11 < climb[0] < 0.12 and climb[1] == 0.0
     assert np.all(flat_face_rise(None, (lo, hi), 2.0) == 0.0)  # no meniscus: the bracket itself
+
+
+def test_a_level_shelf_at_the_outline_does_not_run_away():
+    """The harsh bench's plateau: a mesa (flat at 25 mm, smooth shoulders) on a 10 mm shelf
+    that runs flat to the outline. Smoothing the top where it is level (LevelRows) leaves free
+    a mode of top - h(|grad top|) = A that grows as exp(d / l_c) towards the outline; set off
+    at the shoulder's foot it put the shelf's edge 6.9 mm high on this exact apparent surface
+    (4.8 mm on the rendered scan). Held to the plain solve where it runs away, the edge comes
+    out 0.40 mm off and the whole 0.054 mm on average, against 0.103 for the plain solve
+    (measured, 99 x 99 nodes)."""
+    from appliance.surface.contact_lines import _top_from_apparent, top_from_apparent
+    from appliance.surface.lattice import Lattice
+
+    def mesa(x, y):
+        s = np.clip((np.hypot(x - 50, y - 45) - 22) / 16, 0, 1)
+        return 25 - 15 * (3 * s**2 - 2 * s**3)
+
+    model = MeniscusModel(2.5, 0.0)
+    lat = Lattice(np.linspace(0.0, 100.0, 99), np.linspace(0.0, 90.0, 99))
+    A, T = _apparent(mesa, model, lat.x, lat.y)
+    fp = np.ones(A.shape, bool)
+    edge = ~ndimage.binary_erosion(fp, iterations=3, border_value=0)
+    level_only = np.abs(_top_from_apparent(lat, A, fp, model) - T)
+    plain = np.abs(_top_from_apparent(lat, A, fp, model, level_rows=False) - T)
+    got = np.abs(top_from_apparent(lat, A, fp, model) - T)
+    assert level_only[edge].max() > 3.0  # the mode is there to be stopped
+    assert got[edge].max() < 0.5 and got.mean() < 0.07
+    assert got.mean() < 0.7 * plain.mean()  # and the level rows' gain is kept

@@ -7,8 +7,9 @@ which the ordinary fit reconstructs from them as if they were waterlines (first 
 thin plate, cross-validated smoothing: nothing about the meniscus). The top then solves
     top - h(atan |grad top|) = A
 node by node: a first-order equation, solved as least squares with a little smoothness
-on the rise phi = top - A (third-order, so it bends phi only where its curvature changes)
-by damped Gauss-Newton (Levenberg-Marquardt; h(|grad|) linearised along the slope).
+on the rise phi = top - A (third-order, so it bends phi only where its curvature changes;
+where the top is level, on the top itself: LevelRows) by damped Gauss-Newton
+(Levenberg-Marquardt; h(|grad|) linearised along the slope).
 
 Why not the obvious iteration (rise from the current fit's slope, refit, repeat)? Where
 the top is flat it runs away: raising a contact line steepens the fit's drop beside it,
@@ -46,6 +47,9 @@ from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
 SOLVE_MAX_SIDE = 101  # the rise is smooth: solved on at most this many nodes a side
 FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
 RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve ignores
+LEVEL_SLOPE = 0.15  # slopes (rise over run) round which the rise's V is the top's, not phi's
+RUNAWAY_BAND = 3  # nodes inside the trusted outline where the level solve may run away
+RUNAWAY_MM = 0.2  # how far above the plain solve it must stand there to count as running away
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
@@ -57,7 +61,45 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     steep front's apron came out 0.18 mm high).
     `ceiling`: the highest the top can stand (summit.summit_ceiling), held at every step, so
     that the rise on the flanks follows a crest held under it (the harsh ring: interior p99
-    0.326 mm with the top clamped after the solve, 0.207 held during it)."""
+    0.326 mm with the top clamped after the solve, 0.207 held during it).
+
+    Where the top is level the solve smooths the top, not the rise (LevelRows). That leaves
+    free a mode of top - h(|grad top|) = A that grows as exp(d / (l_c cos(theta / 2))) towards
+    the outline, where the untrusted rim holds nothing down: on a level shelf at the outline
+    (the harsh plateau's 10 mm shelf, its apparent surface flat at 9.96) a bump in A a few
+    millimetres in set it off and the top climbed 10.1 -> 12.5 over the last eight nodes. The
+    rise smoothed everywhere (`plain`) has no such mode. So where, within RUNAWAY_BAND nodes
+    of the trusted outline, the level solve stands more than RUNAWAY_MM above a level plain
+    one, the top is solved again held to the plain one there (a data-weight tie): the mode needs
+    the rim to grow into, and tied there it cannot start. Elsewhere the level solve stands."""
+    top = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling)
+    k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))  # the solve's nodes, in lat's
+    rim = footprint & ~ndimage.binary_erosion(
+        footprint, iterations=k * (RIM_UNTRUSTED + RUNAWAY_BAND), border_value=0
+    )
+    # a rise the apparent surface's own slope cannot explain is the runaway's mark (on a crest
+    # or a slope the top's slope is at most A's, and so is its rise): only then are the plain
+    # solve and the tied one worth their time (processing the harsh plateau: 20 -> 34 s)
+    g_a = np.hypot(*np.gradient(fill_nearest(apparent), lat.y, lat.x))
+    unexplained = np.nan_to_num(top - apparent) - 1.5 * model.rise_on_slope(g_a)
+    if not (rim & (g_a < 2 * LEVEL_SLOPE) & (unexplained > RUNAWAY_MM)).any():
+        return top
+    plain = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, level_rows=False)
+    # the mode grows out of a level top: where the plain solve is level (on a wall the two
+    # solves' rises differ for other reasons: sample 4's walls, all within its rim band)
+    g_plain = np.hypot(*np.gradient(fill_nearest(plain), lat.y, lat.x))
+    high = (np.nan_to_num(top - plain) > RUNAWAY_MM) & (g_plain < 2 * LEVEL_SLOPE)
+    ran = rim & ndimage.binary_dilation(high, iterations=k)
+    if not ran.any():
+        return top
+    return _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain))
+
+
+def _top_from_apparent(
+    lat, apparent, footprint, model, faces=None, ceiling=np.inf, level_rows=True, anchor=None
+):
+    """top_from_apparent's solve: coarse, then fine. `level_rows`: smooth the top where it is
+    level (LevelRows), else the rise everywhere. `anchor`: (nodes, top) to hold the solve to."""
     k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
     sub = Lattice(lat.x[::k], lat.y[::k])
     A = fill_nearest(apparent)[::k, ::k]
@@ -67,6 +109,8 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     h = max(sub.hx, sub.hy)
     straight = None if faces is None else faces[::k, ::k]
     kappa = contact_line_curvature(sub, A, fp) if model.curvature else None
+    if anchor is not None:
+        anchor = (np.asarray(anchor[0], float)[::k, ::k], np.nan_to_num(anchor[1])[::k, ::k])
     if min(sub.shape) >= 20:
         coarse = Lattice(sub.x[::2], sub.y[::2])
         Ac = A[::2, ::2]
@@ -83,6 +127,8 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
             kappa=kc,
             straight=None if straight is None else straight[::2, ::2],
             ceiling=ceiling,
+            level_rows=level_rows,
+            anchor=None if anchor is None else (anchor[0][::2, ::2], anchor[1][::2, ::2]),
         )
         start = A + _resample_rise(tc - Ac, coarse, sub)
         top = _solve_top(
@@ -97,6 +143,8 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
             kappa=kappa,
             straight=straight,
             ceiling=ceiling,
+            level_rows=level_rows,
+            anchor=anchor,
         )
     else:
         top = _solve_top(
@@ -111,6 +159,8 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
             kappa=kappa,
             straight=straight,
             ceiling=ceiling,
+            level_rows=level_rows,
+            anchor=anchor,
         )
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
@@ -161,13 +211,16 @@ def _solve_top(
     kappa=None,
     straight=None,
     ceiling=np.inf,
+    level_rows=True,
+    anchor=None,
 ):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
     problem = FitProblem(lat, footprint)
     act = problem.active
     Dx, Dy = problem.gradient()
-    R = problem.third_order()
+    rows = problem.third_order_rows()
+    R = (rows.T @ rows).tocsc()
     lam = length_mm**6 / (lat.hx * lat.hy)
     # the apparent surface's outline nodes are the fit's least sure (their first exposure
     # comes from the wall's waterline, a level step wide): where the top rises to a rim the
@@ -176,6 +229,13 @@ def _solve_top(
     if trusted.sum() < 9:
         trusted = footprint
     a, on = A[act], trusted[act].astype(float)
+    level = LevelRows(rows, on, straight if straight is None else straight[act]) if level_rows else None
+    if anchor is not None:
+        w_anchor, top_anchor = anchor[0][act], anchor[1][act]
+    else:
+        w_anchor, top_anchor = np.zeros(problem.n), np.zeros(problem.n)
+    of_a = rows @ a
+    target = of_a  # smoothing phi = top - A: the top's third differences are to follow A's
     I = sp.identity(problem.n, format="csc")
     t = np.minimum(start[act].astype(float), ceiling)
     curved = kappa is not None
@@ -192,8 +252,9 @@ def _solve_top(
 
     def objective(t, m):
         r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
-        p = t - a
-        return float(r @ r + lam * (p @ (R @ p)))
+        p = rows @ t - target
+        q = np.sqrt(w_anchor) * (t - top_anchor)
+        return float(r @ r + lam * (p @ p) + q @ q)
 
     mu = 1.0
     for f in steps:
@@ -203,11 +264,13 @@ def _solve_top(
                 kap = curvature_of(t)
             gx, gy = Dx @ t, Dy @ t
             g = np.hypot(gx, gy)
+            if level is not None:
+                target = level.target(of_a, g, t < ceiling)
             r = on * (t - m.rise_on_slope(g, kap) - a)
             c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
-            M = (J.T @ J + lam * R).tocsc()
-            rhs = -(J.T @ r) - lam * (R @ (t - a))
+            M = (J.T @ J + lam * R + sp.diags(w_anchor)).tocsc()
+            rhs = -(J.T @ r) - lam * (rows.T @ (rows @ t - target)) - w_anchor * (t - top_anchor)
             f0 = objective(t, m)
             for _ in range(8):
                 step = splu((M + mu * I).tocsc(), permc_spec="COLAMD").solve(rhs)
@@ -222,6 +285,35 @@ def _solve_top(
     out = np.full(lat.shape, np.nan)
     out[act] = t
     return out
+
+
+class LevelRows:
+    """Which smoothness rows smooth the top itself rather than the rise phi = top - A.
+
+    The rise h(|grad top|) has a V where the top is level (a crest, a floor, a saddle's
+    centre): dh/d|grad| = l_c cos(theta / 2) there, 2.2 mm for the second ink, so phi is
+    kinked while the top is smooth, and smoothing phi rounds the V off (the crater's crest
+    came out 0.21 mm high, its floor 0.38). A row with a node flatter than about
+    LEVEL_SLOPE smooths the top instead; one that reaches the untrusted outline nodes (their
+    heights are the smoothness' alone) keeps smoothing phi, which continues the rise there.
+    So do faces that came out at once (`faces`): no contact line crossed them, their rise is
+    the flat depression, with no V (a 6 mm face under the second ink came out 0.10 mm high
+    with the top smoothed there), and nodes a summit's ceiling holds (summit.py): level
+    because they are held, not a crest the contact lines went round (a mesa's shoulder
+    came out 1.3 mm off with the top smoothed there)."""
+
+    def __init__(self, rows, trusted, faces=None):
+        self.crossed = 1.0 if faces is None else (~faces).astype(float)
+        self.reach = abs(rows).tocsr()
+        self.reach.data[:] = 1.0  # the nodes each row touches
+        self.inside = (self.reach @ (1.0 - trusted)) == 0
+
+    def target(self, of_a, g, free=True):
+        """-> what the rows applied to the top should be: those applied to A (`of_a`) where
+        the top slopes (phi smooth), 0 where it is level (the top smooth); g: |grad top|."""
+        w = self.crossed * free / (1.0 + (g / LEVEL_SLOPE) ** 2)
+        level = np.asarray(self.reach.multiply(w[None, :]).max(axis=1).todense()).ravel()
+        return of_a * (1.0 - level * self.inside)
 
 
 def contact_points(slices, lat, rise, model: MeniscusModel):

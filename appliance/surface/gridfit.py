@@ -96,6 +96,11 @@ class FitProblem:
     def third_order(self):
         """Integral of the squared third derivatives (z_xxx^2 + 3 z_xxy^2 + 3 z_xyy^2 + z_yyy^2):
         zero on any quadric, so it bends a field only where its curvature changes."""
+        R = self.third_order_rows()
+        return (R.T @ R).tocsc()
+
+    def third_order_rows(self):
+        """The rows R of third_order (R.T @ R): one third difference each, scaled."""
         hx, hy = self.lat.hx, self.lat.hy
         s = np.sqrt(hx * hy)
         d3 = (-1.0, 3.0, -3.0, 1.0)
@@ -115,7 +120,7 @@ class FitProblem:
                 ),
             ],
         )
-        return (R.T @ R).tocsc()
+        return R
 
     def gradient(self):
         """(Dx, Dy): the slope of the field at each unknown, central where both
