@@ -73,21 +73,21 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     one, the top is solved again held to the plain one there (a data-weight tie): the mode needs
     the rim to grow into, and tied there it cannot start. Elsewhere the level solve stands."""
     top = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling)
-    k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))  # the solve's nodes, in lat's
+    k = _solve_stride(lat)
     rim = footprint & ~ndimage.binary_erosion(
         footprint, iterations=k * (RIM_UNTRUSTED + RUNAWAY_BAND), border_value=0
     )
     # a rise the apparent surface's own slope cannot explain is the runaway's mark (on a crest
     # or a slope the top's slope is at most A's, and so is its rise): only then are the plain
     # solve and the tied one worth their time (processing the harsh plateau: 20 -> 34 s)
-    g_a = np.hypot(*np.gradient(fill_nearest(apparent), lat.y, lat.x))
+    g_a = _slope(lat, apparent)
     unexplained = np.nan_to_num(top - apparent) - 1.5 * model.rise_on_slope(g_a)
     if not (rim & (g_a < 2 * LEVEL_SLOPE) & (unexplained > RUNAWAY_MM)).any():
         return top
     plain = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, level_rows=False)
     # the mode grows out of a level top: where the plain solve is level (on a wall the two
     # solves' rises differ for other reasons: sample 4's walls, all within its rim band)
-    g_plain = np.hypot(*np.gradient(fill_nearest(plain), lat.y, lat.x))
+    g_plain = _slope(lat, plain)
     high = (np.nan_to_num(top - plain) > RUNAWAY_MM) & (g_plain < 2 * LEVEL_SLOPE)
     ran = rim & ndimage.binary_dilation(high, iterations=k)
     if not ran.any():
@@ -95,12 +95,22 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     return _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain))
 
 
+def _solve_stride(lat) -> int:
+    """Every how many of `lat`'s nodes the solve takes one (at most SOLVE_MAX_SIDE a side)."""
+    return max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
+
+
+def _slope(lat, z):
+    """|grad z| on `lat`, gaps filled by the nearest value."""
+    return np.hypot(*np.gradient(fill_nearest(z), lat.y, lat.x))
+
+
 def _top_from_apparent(
     lat, apparent, footprint, model, faces=None, ceiling=np.inf, level_rows=True, anchor=None
 ):
     """top_from_apparent's solve: coarse, then fine. `level_rows`: smooth the top where it is
     level (LevelRows), else the rise everywhere. `anchor`: (nodes, top) to hold the solve to."""
-    k = max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
+    k = _solve_stride(lat)
     sub = Lattice(lat.x[::k], lat.y[::k])
     A = fill_nearest(apparent)[::k, ::k]
     fp = footprint[::k, ::k]
