@@ -8,6 +8,7 @@ from appliance.errors import SettingError
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines, meniscus_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf
+from appliance.surface.dewetted import depression_depth
 from appliance.surface.displacement import emerged_volumes, true_levels
 from appliance.surface.meniscus import MeniscusModel, calibrate_meniscus
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
@@ -278,6 +279,29 @@ def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it
     # no meniscus: under at 37, two levels of slack (BRACKET_SLACK_LEVELS) -> at most 39
     assert list(bracket(z, first, slices)) == [39.0, 36.5]
     assert list(bracket(z, first, slices, rise)) == [39.5, 36.5]
+
+
+def test_a_face_the_ink_dewetted_is_not_clamped_up_to_the_level_that_uncovered_it():
+    """An ink that dewets leaves a flat face while its depression still stands over it: a
+    node first out at 36 mm may be that much lower (the steep front's 4 mm apron, out at
+    5.4 mm, was clamped up to 4.6-5.1 where no contact line crossed it)."""
+    from appliance.surface.fitpass import bracket
+    from appliance.surface.slices import check_waterlines
+    from appliance.vision.types import Waterline
+
+    def ring(a):
+        t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+        return np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
+
+    levels = (40.0, 39.0, 38.0, 37.0, 36.0, 35.0, 34.0)
+    slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
+    z = np.array([32.9, 34.5])
+    first = np.array([4, 4])  # both came out in the 36 mm frame
+    # no depression: two levels of slack below 36 (BRACKET_SLACK_LEVELS) -> at least 34
+    assert list(bracket(z, first, slices)) == [34.0, 34.5]
+    sink = depression_depth(MeniscusModel(2.3, np.radians(35.0), curvature=1.0))
+    assert 1.3 < sink < 1.5
+    assert list(bracket(z, first, slices, sink=sink)) == [max(32.9, 34.0 - sink), 34.5]
 
 
 SECOND = dict(capillary_length_mm=2.3, contact_angle_rad=np.radians(35.0))

@@ -25,14 +25,14 @@ from .summit import summit_ceiling
 BRACKET_SLACK_LEVELS = 2  # one held sample 4's rim nodes 1.4 mm low (clean Ea 0.0220 -> 0.0174 with two)
 
 
-def bracket(z, first, slices, rise_max=0.0):
+def bracket(z, first, slices, rise_max=0.0, sink=0.0):
     """Clamp each node between the level where it came out and the one above it
     (bracket_bounds)."""
-    lo, hi = bracket_bounds(first, slices, rise_max)
+    lo, hi = bracket_bounds(first, slices, rise_max, sink)
     return np.clip(z, lo, hi)
 
 
-def bracket_bounds(first, slices, rise_max=0.0):
+def bracket_bounds(first, slices, rise_max=0.0, sink=0.0):
     """Per node, (lo, hi): the level where it came out and the one above it.
 
     A node exposed first at frame k and still under at frame k - 1 lies in
@@ -40,7 +40,10 @@ def bracket_bounds(first, slices, rise_max=0.0):
     a gap beside a wall, say). Meniscus-corrected heights widen the bracket, and
     with a meniscus a node may stand up to its largest rise above the level that
     still covered it (`rise_max`): the ink climbs a rim and keeps it under (sample
-    4's 39 mm summit rim, exposed at 36 mm, was clamped there, 3 mm low).
+    4's 39 mm summit rim, exposed at 36 mm, was clamped there, 3 mm low). An ink that
+    dewets leaves a flat face up to its depression (`sink`) above it, so a node may
+    also stand that far below the level that exposed it (the steep front's apron, out at
+    5.4 mm and 4.0-4.4 mm high, was clamped up to 4.6-5.1 where no contact line crossed).
     """
     K = len(slices)
     top = next(k for k, s in enumerate(slices) if not s.empty)
@@ -49,7 +52,7 @@ def bracket_bounds(first, slices, rise_max=0.0):
     lo_rise = [float(np.min(c.z - c.level)) if not c.empty else 0.0 for c in curves]
     hi_rise = [float(np.max(c.z - c.level)) if not c.empty else 0.0 for c in curves]
     lv = np.array([s.level for s in slices] + [-np.inf])
-    lo = np.array([lv[k] + min(lo_rise[k], 0.0) for k in range(K)] + [-np.inf])
+    lo = np.array([lv[k] + min(lo_rise[k], 0.0) - sink for k in range(K)] + [-np.inf])
     hi = np.array([np.inf] + [lv[k - 1] + max(hi_rise[k - 1], rise_max, 0.0) for k in range(1, K)] + [np.inf])
     hi[top] = np.inf
     # BRACKET_SLACK_LEVELS of slack each way: where waterlines crowd (a saddle's corner, a

@@ -223,9 +223,9 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     rise_max = (
         0.0 if opt.meniscus is None else max(float(opt.meniscus.rise(np.pi / 2)), 0.0)
     )  # h grows with the slope
-    lo, hi = bracket_bounds(first, slices, rise_max)
-    # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
     sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
+    lo, hi = bracket_bounds(first, slices, rise_max, sink)
+    # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
     known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink)
     hi = np.where(known.hidden, known.ceiling, hi)
     z = np.where(np.isfinite(z_fe) & ~known.hidden, z, np.clip(z, lo, hi))
