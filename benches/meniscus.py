@@ -233,6 +233,30 @@ and the steep front (by 0.004: 68 % of its error sum is on its flat apron, whose
 is +0.019 mm; the rest is a line of nodes at the front's foot, +0.5..0.68, where the fit rounds
 the concave corner between the apron and the wall).
 
+A dewetted face's bracket reaches a depression down (4 December 2026, session 17; fitpass.py
+bracket_bounds). The "line of nodes at the front's foot" was not the fit: the fit had them right
+(4.40 where the truth is 4.39), and the bracket clamped them up to 5.07. An ink that dewets leaves
+a flat face while its depression (1.385 mm for this one) still stands over it, so the apron, 4.0
+to 4.4 mm high, came out in the frames at 5.07-5.44 mm; the bracket's floor was the level that
+exposed a node less two levels of slack, and where no contact line crossed the apron (no first-
+exposure height) the node was held there. The floor is now that level less the depression too.
+Same kept renders and meniscus file, main 2571953 -> now, Ea / interior p99 / max mm:
+    steep-front 0.0541 0.546 0.678 -> 0.0362 0.349 0.540
+    crater      0.0252 0.248 0.726 -> 0.0200 0.164 0.385
+    twin-peaks  0.0285 0.228 0.665 -> 0.0242 0.228 0.421
+    sample1-4   unchanged (0.0100, 0.0473, 0.0375, 0.0529)
+The harsh bench is unchanged (its ink wets: no depression), as are the seed table's inks.
+Still over 0.05: sample 4, by 0.003. Its error is the corner face at y = 45, x 45-49 (T 22.2-
+22.35, 45 % of the error sum): it came out at once in the 22.99 mm frame, whose waterline runs
+0.3 mm inside the outline there; first exposure puts the apparent surface at that level (the
+Lagrange value falls below the bracket and is held at its floor), and the solve sets the top a
+depression below it, 21.6, where the truth is 22.32 (0.67 below the level). Tried on it, none
+kept: leaving such clamped values to the fit (0.0618); counting that waterline as a pinned rim
+(0.10-0.15: the solve then climbs the corner 1.6 mm); the runner's refinement frames over a
+narrower face (3 mm instead of 8: four frames at 23.25-23.5, 0.1464, the same climb); a wider or
+narrower untrusted rim (1 node 0.194, 3 0.074, 4 0.089); a runaway band of a capillary length
+(no change: the plain solve climbs as well).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
