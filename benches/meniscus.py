@@ -256,6 +256,22 @@ kept: leaving such clamped values to the fit (0.0618); counting that waterline a
 narrower face (3 mm instead of 8: four frames at 23.25-23.5, 0.1464, the same climb); a wider or
 narrower untrusted rim (1 node 0.194, 3 0.074, 4 0.089); a runaway band of a capillary length
 (no change: the plain solve climbs as well).
+A finding for the next try: sample 4's figure is partly two errors cancelling. On the renderer-
+free exact apparent surface of its saddle (tests' _saddle4, second ink), the top solve is right
+on lattices of 61, 81 or 121 nodes (corner mean error 0.003-0.012 mm) and 0.22-0.24 mm high over
+the flat corner on 99 or 101 (0.10 mm spacing), which is sample 4's lattice: the solve's
+smoothing length is counted in lattice spacings and falls under what holds the corner there.
+With a floor on it (0.067 l_c) every lattice size gives 0.002, but the kept scans get worse
+(physics2 sample 4 0.0529 -> 0.0678, harsh 0.2097 -> 0.2239): the corner's apparent surface held
+at its floor (above) is no longer offset, and the saddle point's contact lines, at x 48-51 by
+y 45-47, come out 0.6 mm further out than the model's rise says (+0.3..0.6 mm on the top).
+The runaway's mark for an ink that dewets (session 17, contact_lines.py top_from_apparent): it
+took a rise beyond 1.5 h(|grad A|), and with h < 0 on level faces that is below h itself, so every
+scan of this ink ran the plain solve as well (and the tie where the two differed). Now a rise
+beyond h + |h| / 2. Processing the steep front (second ink), whole process, 3 runs each, paired:
+CPU 34.7 -> 19.1 s (ratio 0.54), peak 205 -> 207 MiB. Figures: the same on sample 1-4, crater and
+twin-peaks; the steep front 0.0362 -> 0.0372 (the tie had been lowering its apron's edge); the
+harsh plateau, ring and twin-peaks the same (that ink wets).
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
