@@ -260,19 +260,23 @@ def test_a_ridges_crest_keeps_the_v_of_its_rise(lc, theta_deg):
     assert err[inner & ~crest].mean() < 0.02  # and the flanks and the floor stay as they were
 
 
+def _widening_rings(levels):
+    """Slices of a cone-like part: at the k-th level a circle of radius 1 + k round (50, 50)."""
+    from appliance.surface.slices import check_waterlines
+    from appliance.vision.types import Waterline
+
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    ring = lambda a: np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
+    slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
+    return slices
+
+
 def test_a_rim_the_ink_keeps_under_is_not_clamped_to_the_level_that_uncovered_it():
     """A node first out at 36 mm under a meniscus may stand up to the largest rise above
     the levels that still covered it (sample 4's 39 mm summit rim was clamped to 36)."""
     from appliance.surface.fitpass import bracket
-    from appliance.surface.slices import check_waterlines
-    from appliance.vision.types import Waterline
 
-    def ring(a):
-        t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-        return np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
-
-    levels = (40.0, 39.0, 38.0, 37.0, 36.0)
-    slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
+    slices = _widening_rings((40.0, 39.0, 38.0, 37.0, 36.0))
     z = np.array([39.5, 36.5])
     first = np.array([4, 4])  # both came out in the 36 mm frame
     rise = MeniscusModel(2.7, 0.0).rise(np.linspace(0.0, np.pi / 2, 91)).max()
@@ -286,15 +290,8 @@ def test_a_face_the_ink_dewetted_is_not_clamped_up_to_the_level_that_uncovered_i
     node first out at 36 mm may be that much lower (the steep front's 4 mm apron, out at
     5.4 mm, was clamped up to 4.6-5.1 where no contact line crossed it)."""
     from appliance.surface.fitpass import bracket
-    from appliance.surface.slices import check_waterlines
-    from appliance.vision.types import Waterline
 
-    def ring(a):
-        t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-        return np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
-
-    levels = (40.0, 39.0, 38.0, 37.0, 36.0, 35.0, 34.0)
-    slices, _ = check_waterlines([Waterline(L, [ring(1.0 + k)]) for k, L in enumerate(levels)])
+    slices = _widening_rings((40.0, 39.0, 38.0, 37.0, 36.0, 35.0, 34.0))
     z = np.array([32.9, 34.5])
     first = np.array([4, 4])  # both came out in the 36 mm frame
     # no depression: two levels of slack below 36 (BRACKET_SLACK_LEVELS) -> at least 34
