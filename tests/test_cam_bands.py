@@ -9,10 +9,12 @@ import pytest
 from cam_helpers import grid_map
 
 from appliance.cam import bands, forks
-from appliance.cam.bands import band_bounds, plan_in_bands
+from appliance.cam.bands import Meeting, plan_in_bands
+from appliance.cam.cusps import PassProbe
 from appliance.cam.cutters import parse_cutter
 from appliance.cam.passplan import plan_passes
 from appliance.cam.sampling import Sampler
+from appliance.cam.scallop import flat_stepover
 from appliance.cam.zigzag import FinishSettings, pass_frame
 from appliance.errors import InkSliceError
 from appliance.progress import TICKER
@@ -31,27 +33,75 @@ def _planner_inputs():
     return sampler, st, e1, e2, t0, n, s0, s1
 
 
-def test_bands_split_the_footprint_into_equal_areas_and_never_thinner_than_the_minimum():
-    sampler, _, _, e2, _, _, s0, s1 = _planner_inputs()
-    mid = band_bounds(sampler, e2, s0, s1, 2)
-    assert mid[0] == s0 and mid[-1] == s1 and len(mid) == 3
-    assert mid[1] == pytest.approx(25.0, abs=1.0)  # the dome is symmetric about y 25
-    assert band_bounds(sampler, e2, s0, s0 + 30, 2) == [s0, s0 + 30]  # two 15 mm bands: one
-    assert band_bounds(sampler, e2, s0, s1, 1) == [s0, s1]
-
-
-def test_banded_plan_is_each_band_planned_alone_joined_on_the_boundary_pass(monkeypatch):
+def test_two_planners_from_the_two_ends_meet_on_one_pass_and_hold_the_scallop(monkeypatch):
     sampler, st, e1, e2, t0, n, s0, s1 = _planner_inputs()
     monkeypatch.setattr(bands, "workers", lambda: 2)  # whatever threads the test run has
     passes, tips = plan_in_bands(sampler, st, e1, e2, t0, n, s0, s1)
-    b = band_bounds(sampler, e2, s0, s1, 2)[1]
-    low, low_tips = plan_passes(sampler, st, e1, e2, t0, n, s0, b)
-    high, high_tips = plan_passes(sampler, st, e1, e2, t0, n, b, s1)
-    # the low band ends on the boundary and the high one starts there: that pass once
-    assert low[-1] == b == high[0]
-    assert np.array_equal(passes, np.concatenate([low, high[1:]]))
-    assert np.array_equal(tips, np.concatenate([low_tips, high_tips[1:]]))
-    assert np.all(np.diff(passes) > 0) and passes[0] == s0 and passes[-1] == s1
+    alone, alone_tips = plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
+    assert passes[0] == s0 and passes[-1] == s1 and np.all(np.diff(passes) > 0)
+    # the same planner from each end: its first steps are the ones planned alone from that
+    # end (the upper one across -e2), up to where the two met (one pass, kept once)
+    down, _ = plan_passes(sampler, st, e1, -e2, t0, n, -s1, -s0)
+    assert np.array_equal(passes[:5], alone[:5])
+    assert np.array_equal(passes[-5:], -down[:5][::-1])
+    # every step within what the planner allows, and the meeting costs at most a pass or two
+    cap = min(0.95 * st.cutter.diameter, 1.5 * flat_stepover(st.cutter, st.scallop))
+    assert np.max(np.diff(passes)) <= cap + 1e-9
+    assert len(alone) - 1 <= len(passes) <= len(alone) + 2
+    # each pass's tips are the cutter dropped along that pass
+    probe = PassProbe(sampler, st, e1, e2, t0, n)
+    for k in (0, len(passes) // 2, len(passes) - 1):
+        assert np.array_equal(tips[k], probe.pass_at(passes[k])[1])
+
+
+def test_the_planners_meet_where_their_passes_cross_at_the_same_clock():
+    # each side: its passes in order (the upper's mirrored: s' = -s) and the candidates it
+    # had measured by then; the lower decides, from the upper's passes up to its own clock
+    meeting = Meeting()
+    lower, upper = meeting.lower(), meeting.upper()
+    step = 2.0
+    assert upper.end(-50.0, 0.0, 0, step) == 0.0  # not met: it goes on
+    assert upper.end(-48.0, 0.0, 3, step) == 0.0
+    assert lower.end(0.0, 50.0, 0, step) == 50.0  # at clock 0 the upper stood at 50
+    for at, clock in ((-47.0, 5), (-44.5, 8), (-43.0, 11)):
+        assert upper.end(at, 0.0, clock, step) == 0.0
+    assert lower.end(30.0, 50.0, 9, step) == 50.0  # at clock 9 the upper stood at 44.5
+    # at clock 9 the upper stood at 44.5 and the lower is past it: they meet on the upper's
+    # last pass above the lower's, 47.0; the lower plans up to it
+    assert lower.end(45.0, 50.0, 9, step) == 47.0
+    assert lower.end(46.0, 50.0, 10, step) == 47.0
+    # the upper, asked next, ends there and drops what it placed beyond: 44.5, 43.0, 41.0
+    assert upper.end(-41.0, 0.0, 14, step) == -47.0
+    assert upper.drop == 3
+    # a lower planner whose clock is ahead of the upper's waits for it, unless the upper
+    # cannot reach its front by then (a pass costs a candidate at least, moves `step` at most)
+    late = Meeting()
+    lo, up = late.lower(), late.upper()
+    assert up.end(-20.0, 0.0, 0, step) == 0.0
+    assert lo.end(1.0, 20.0, 5, step) == 20.0  # 19 mm away, at most 6 x 2 by clock 5
+    answer = []
+    waiter = threading.Thread(target=lambda: answer.append(lo.end(19.0, 20.0, 6, step)))
+    waiter.start()
+    waiter.join(0.2)
+    assert waiter.is_alive() and not answer
+    assert up.end(-18.5, 0.0, 7, step) == 0.0  # clock 7 > 6: the lower knows enough now
+    waiter.join(5.0)
+    assert answer == [20.0]  # at clock 6 the upper still stood at 20: not met
+
+
+def test_a_failing_upper_planner_does_not_leave_the_lower_one_waiting(monkeypatch):
+    sampler, st, e1, e2, t0, n, s0, s1 = _planner_inputs()
+    monkeypatch.setattr(bands, "workers", lambda: 2)
+    real = bands.plan_passes
+
+    def upper_fails(*a, meet=None, **k):
+        if a[3][1] < 0:  # the upper planner plans across -e2
+            raise ValueError("the map went away")
+        return real(*a, meet=meet, **k)
+
+    monkeypatch.setattr(bands, "plan_passes", upper_fails)
+    with pytest.raises(ValueError, match="the map went away"):
+        plan_in_bands(sampler, st, e1, e2, t0, n, s0, s1)
 
 
 def test_without_permission_or_with_another_thread_alive_the_planner_stays_in_one_band(monkeypatch):

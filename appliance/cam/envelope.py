@@ -28,9 +28,10 @@ _BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which t
 class PassEnvelope:
     """Tip heights and envelopes of a candidate pass, on the planner's sparse points."""
 
-    def __init__(self, sampler, st, e1, e2, t0, n, across=None):
-        """`across`: (s0, s1), the only passes this probe will measure (a band, bands.py):
-        the opening is then built over them and a cutter's reach beyond, not the whole part."""
+    def __init__(self, sampler, st, e1, e2, t0, n, across=None, opening=None):
+        """`across`: (s0, s1), the only passes this probe will measure: the opening is then
+        built over them and a cutter's reach beyond, not the whole part. `opening`: the
+        one to read (bands.py builds it once for both of its planners)."""
         self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
         # A flat end's cusp beside its rim is the riser m s less |grad_x| x the half
         # chord sqrt(2 R s) its bottom spans there: where the gradient along the pass
@@ -63,7 +64,7 @@ class PassEnvelope:
         self.idx = idx
         self.along = t0 + st.resolution * idx
         # what an infinitely fine stepover would leave, on the verification's lattice
-        self.opening = _opening_for(sampler, st, e2, across)
+        self.opening = _opening_for(sampler, st, e2, across) if opening is None else opening
 
     def pass_at(self, s):
         """(across position, tips at every point of the pass; inf where not in the program).
@@ -226,15 +227,19 @@ class PassEnvelope:
         n = full.shape[1]
         pos = at[None, :] + best
         rows = np.broadcast_to(pid[None, :], pos.shape)
-        out = env
+        dy = np.broadcast_to(dy, pos.shape)
+        out = env.copy()
         for j0 in (pos - 1, pos):
             ok = np.isfinite(env) & (j0 >= 0) & (j0 <= n - 2)
             j0 = np.clip(j0, 0, n - 2)
             a, b = full[rows, j0], full[rows, j0 + 1]
             ok &= np.isfinite(a) & np.isfinite(b)
-            a, b = np.where(ok, a, 0.0), np.where(ok, b, 0.0)
-            swept = min_over_segment(cut, (at[None, :] - j0) * d, dy, d, 0.0, b - a, a)
-            out = np.where(ok, np.minimum(out, swept), out)
+            # only the elements in reach of a move (rows beyond the cutter's reach are
+            # inf: 10-20 % of a candidate's, whose sweep was thrown away)
+            k = np.nonzero(ok)
+            a, b = a[k], b[k]
+            swept = min_over_segment(cut, (at[k[1]] - j0[k]) * d, dy[k], d, 0.0, b - a, a)
+            out[k] = np.minimum(out[k], swept)
         return out
 
     def points(self, s):

@@ -203,10 +203,14 @@ class Opening:
     z: np.ndarray
 
     @classmethod
-    def over(cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None, pad=0.0):
+    def over(
+        cls, sampler: Sampler, cutter: Cutter, d, x0=None, y0=None, x1=None, y1=None, pad=0.0, split=None
+    ):
         """The opening on a lattice of spacing d from (x0, y0) to (x1, y1) (default: the footprint's
         bounds), with tool positions up to `pad` beyond them (whole steps of d): a program that
-        runs off the outline onto the base reaches the rim from there."""
+        runs off the outline onto the base reaches the rim from there. `split`: a forks.in_parts
+        that computes it in parts of rows on the cores (each with a cutter's reach of rows
+        beyond it, so a row's value is what the whole lattice gives it)."""
         bx0, bx1, by0, by1 = sampler.bounds
         x0 = bx0 if x0 is None else x0
         y0 = by0 if y0 is None else y0
@@ -218,7 +222,15 @@ class Opening:
         x0, y0, x1, y1 = x0 - k * d, y0 - k * d, x1 + k * d, y1 + k * d
         nx = np.arange(x0, x1 + d / 2, d).size
         ny = np.arange(y0, y1 + d / 2, d).size
-        return cls(cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d))
+        if split is None:
+            return cls(cutter, float(x0), float(y0), float(d), opening(sampler, cutter, x0, y0, nx, ny, d))
+        reach = int(np.ceil(cutter.radius / d)) + 2  # the erosion's and its polish's rows
+
+        def rows(j0, j1):
+            a, b = max(0, j0 - reach), min(ny, j1 + reach)
+            return opening(sampler, cutter, x0, y0 + a * d, nx, b - a, d)[j0 - a : j1 - a]
+
+        return cls(cutter, float(x0), float(y0), float(d), split(rows, np.ones(ny), np.concatenate))
 
     def at(self, X, Y):
         X, Y = np.asarray(X, float), np.asarray(Y, float)

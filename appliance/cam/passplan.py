@@ -16,11 +16,15 @@ from .cusps import PassProbe
 from .scallop import ball_stepover, flat_stepover
 
 
-def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
-    """(across positions from s0 to s1, both included; the tips of each pass)."""
+def plan_passes(sampler, st, e1, e2, t0, n, s0, s1, meet=None, opening=None):
+    """(across positions from s0 to s1, both included; the tips of each pass).
+
+    `meet`: a planner working towards this one from the far end (bands.py): its
+    `end(sa, s1, measured, step_max)`, asked before each pass with the candidates measured so
+    far, is where this one is to stop now."""
     h = st.scallop
     lo_ok, hi_ok, aim = 0.90 * h, 0.98 * h, 0.95 * h
-    probe = PassProbe(sampler, st, e1, e2, t0, n, (s0, s1))
+    probe = PassProbe(sampler, st, e1, e2, t0, n, (s0, s1), opening=opening)
     # never more than 1.5 x the flat-surface stepover: convex surfaces allow a
     # little more, but a cross-section where nothing could be measured (the
     # pass along an uphill edge touching only the edge) must not open a gap
@@ -33,15 +37,21 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1):
     )
     guess = flat_stepover(st.cutter, h)
     done = [probe.pass_at(s0)]
+    measured = 0  # candidates measured: the planner's clock (bands.py)
     passes = [s0]
-    while passes[-1] < s1 - 1e-9:
+    while True:
         sa = passes[-1]
+        if meet is not None:
+            s1 = meet.end(sa, s1, measured, 1.01 * s_cap)
+        if sa >= s1 - 1e-9:
+            break
         best_ok, best_p, best_sc, worst = None, None, 0.0, np.inf
         s = min(guess, s_cap, s1 - sa)
         tried = []
         for _ in range(10):
             cand = probe.pass_at(sa + s)
             sc = probe.scallop(done, cand)
+            measured += 1
             tried.append((s, sc))
             if sc <= hi_ok:
                 if best_ok is None or s > best_ok:
