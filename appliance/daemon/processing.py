@@ -35,6 +35,7 @@ import gc
 import json
 import logging
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -148,6 +149,14 @@ def child_process(
         return child.result(stop, poll_s)
 
 
+def _pidfd(pid: int) -> int | None:
+    """A descriptor that becomes readable when process `pid` ends (Linux 5.3), or None."""
+    try:
+        return os.pidfd_open(pid)
+    except (AttributeError, OSError):
+        return None
+
+
 class _Child:
     """A processing child: its process and the files its stdout and stderr go to."""
 
@@ -178,16 +187,26 @@ class _Child:
         self.err.close()
 
     def result(self, stop, poll_s) -> dict:
-        while True:
-            # wait4, not wait: it also gives the child's peak memory, which the job records
-            pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
-            if pid:
-                self.proc.returncode = rc = os.waitstatus_to_exitcode(status)
-                break
-            if stop is not None and stop.is_set():
-                self.close()
-                raise Cancelled()
-            time.sleep(poll_s)
+        # the child's end wakes us at once (a pidfd is readable when it ends: polled every
+        # 0.2 s, the result came 0.1 s late on average); `stop` is looked at every poll_s
+        ended = _pidfd(self.proc.pid)
+        try:
+            while True:
+                # wait4, not wait: it also gives the child's peak memory, which the job records
+                pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
+                if pid:
+                    self.proc.returncode = rc = os.waitstatus_to_exitcode(status)
+                    break
+                if stop is not None and stop.is_set():
+                    self.close()
+                    raise Cancelled()
+                if ended is None:
+                    time.sleep(poll_s)
+                else:
+                    select.select([ended], [], [], poll_s)
+        finally:
+            if ended is not None:
+                os.close(ended)
         self.out.seek(0)
         self.err.seek(0)
         stdout, stderr = self.out.read().decode(errors="replace"), self.err.read().decode(errors="replace")
