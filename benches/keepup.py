@@ -88,6 +88,14 @@ Session 15 (2026-12-04, quiet box, one run): with the planner's exponent secant 
 fine boxes and the links' refinement on both cores: 18.8 s after the last frame (fit 3.22,
 toolpath 15.10 s), child 27.1 s CPU, own pages 268 MB: memory PASS, time MISS, as before. The
 toolpath alone on a kept demo map: 11.8 | 12.3 s wall (3 runs, medians), CPU the same.
+
+Session 18 (2026-12-04, the box quiet but its speed drifting by a fifth within the hour, so
+old and new in turn). d2996fb | bdf7de1 (the finishing planner from both ends, meeting where
+its passes cross, instead of two bands of equal area; the child's end taken at once): 14.74 |
+13.10 s and 13.71 | 12.95 s after the last frame (toolpath 11.23 | 9.83 and 10.23 | 10.05 s,
+fit 2.6-3.1 s), child 21-22 | 20.2-20.3 s CPU, own pages 270 | 262-263 MB. The toolpath alone
+on this scan's map, in-process: 9.5-10.5 | 7.9-8.2 s; the two planners 3.8-4.0 s each where
+the bands were 5.6 and 7.0. Time still MISS (by 3 s); memory PASS.
 """
 
 from __future__ import annotations
