@@ -3,6 +3,7 @@
 import os
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -52,6 +53,21 @@ def test_two_planners_from_the_two_ends_meet_on_one_pass_and_hold_the_scallop(mo
     probe = PassProbe(sampler, st, e1, e2, t0, n)
     for k in (0, len(passes) // 2, len(passes) - 1):
         assert np.array_equal(tips[k], probe.pass_at(passes[k])[1])
+
+
+def test_the_meeting_does_not_depend_on_which_planner_is_faster(monkeypatch):
+    sampler, st, e1, e2, t0, n, s0, s1 = _planner_inputs()
+    monkeypatch.setattr(bands, "workers", lambda: 2)
+    plans = []
+    for slow in (None, bands._Upper, bands._Lower):
+        with monkeypatch.context() as m:
+            if slow is not None:  # this side takes 20 ms more over every pass
+                real = slow.end
+                m.setattr(slow, "end", lambda self, *a, real=real: (time.sleep(0.02), real(self, *a))[1])
+            plans.append(plan_in_bands(sampler, st, e1, e2, t0, n, s0, s1))
+    (p0, t0_), (p1, t1_), (p2, t2_) = plans
+    assert np.array_equal(p0, p1) and np.array_equal(p0, p2)
+    assert np.array_equal(t0_, t1_) and np.array_equal(t0_, t2_)
 
 
 def test_the_planners_meet_where_their_passes_cross_at_the_same_clock():
