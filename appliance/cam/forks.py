@@ -28,8 +28,9 @@ _allowed = 1
 
 
 def allow_workers(n: int | None = None) -> int:
-    """Let finishing plan in up to `n` bands at once (default: the cores this process may use,
-    at most MAX_WORKERS), for the rest of this process: the processing child's main."""
+    """Let finishing work in up to `n` processes at once (default: the cores this process may
+    use, at most MAX_WORKERS), for the rest of this process: the processing child's main.
+    Two is what the planner uses (bands.py: one planner from each end)."""
     global _allowed
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     _allowed = max(1, min(MAX_WORKERS, cores) if n is None else int(n))
