@@ -43,8 +43,8 @@ import time
 import numpy as np
 
 from ..errors import InkSliceError
-from .forks import in_parts, in_workers, workers
-from .opening import Opening
+from .envelope import planner_opening
+from .forks import in_workers, workers
 from .passplan import plan_passes
 
 MIN_BAND_MM = 20.0  # parts narrower than two of these are planned in one piece
@@ -188,7 +188,7 @@ def plan_in_bands(sampler, st, e1, e2, t0, n, s0, s1):
     """plan_passes over [s0, s1]: from both ends at once on forked workers where allowed."""
     if workers() < 2 or s1 - s0 < 2 * MIN_BAND_MM:
         return plan_passes(sampler, st, e1, e2, t0, n, s0, s1)
-    opening = Opening.over(sampler, st.cutter, st.resolution, pad=st.margin, split=in_parts)
+    opening = planner_opening(sampler, st)
     meeting = Meeting()
 
     def side(which, e, a, b):

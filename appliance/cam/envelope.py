@@ -14,6 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from .contact import drop_lines
+from .forks import in_parts
 from .opening import Opening
 from .scallop import flat_stepover
 from .segments import min_over_segment
@@ -28,10 +29,9 @@ _BALL_ROW = 0.1  # for a ball: its envelope is a circle across the cusp, which t
 class PassEnvelope:
     """Tip heights and envelopes of a candidate pass, on the planner's sparse points."""
 
-    def __init__(self, sampler, st, e1, e2, t0, n, across=None, opening=None):
-        """`across`: (s0, s1), the only passes this probe will measure: the opening is then
-        built over them and a cutter's reach beyond, not the whole part. `opening`: the
-        one to read (bands.py builds it once for both of its planners)."""
+    def __init__(self, sampler, st, e1, e2, t0, n, opening=None):
+        """`opening`: the one to read (bands.py builds it once for both of its planners);
+        by default it is built here, over the whole part, in halves of rows on the cores."""
         self.sampler, self.st, self.e1, self.e2, self.t0, self.n = sampler, st, e1, e2, t0, n
         # A flat end's cusp beside its rim is the riser m s less |grad_x| x the half
         # chord sqrt(2 R s) its bottom spans there: where the gradient along the pass
@@ -64,7 +64,7 @@ class PassEnvelope:
         self.idx = idx
         self.along = t0 + st.resolution * idx
         # what an infinitely fine stepover would leave, on the verification's lattice
-        self.opening = _opening_for(sampler, st, e2, across) if opening is None else opening
+        self.opening = planner_opening(sampler, st) if opening is None else opening
 
     def pass_at(self, s):
         """(across position, tips at every point of the pass; inf where not in the program).
@@ -249,15 +249,7 @@ class PassEnvelope:
         )
 
 
-def _opening_for(sampler, st, e2, across):
-    """The opening the planner reads: over the whole part, or, for passes along X planned
-    over `across` only, over the rows they and their cusps reach (two cutter radii and the
-    margin beyond, the lattice the whole part's would have: the same values there)."""
-    if across is None or abs(e2[1] - 1.0) > 1e-12:
-        return Opening.over(sampler, st.cutter, st.resolution, pad=st.margin)
-    d = st.resolution
-    reach = 2 * st.cutter.radius + st.margin + 4 * d
-    _, _, by0, by1 = sampler.bounds
-    y0 = by0 + d * max(0, int(np.floor((across[0] - reach - by0) / d)))
-    y1 = min(by1, across[1] + reach)
-    return Opening.over(sampler, st.cutter, d, y0=y0, y1=y1, pad=st.margin)
+def planner_opening(sampler, st) -> Opening:
+    """What an infinitely fine stepover would leave, on the verification's lattice: over the
+    whole part and the margin, in halves of rows on the cores where forking is allowed."""
+    return Opening.over(sampler, st.cutter, st.resolution, pad=st.margin, split=in_parts)

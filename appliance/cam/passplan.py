@@ -24,7 +24,7 @@ def plan_passes(sampler, st, e1, e2, t0, n, s0, s1, meet=None, opening=None):
     far, is where this one is to stop now."""
     h = st.scallop
     lo_ok, hi_ok, aim = 0.90 * h, 0.98 * h, 0.95 * h
-    probe = PassProbe(sampler, st, e1, e2, t0, n, (s0, s1), opening=opening)
+    probe = PassProbe(sampler, st, e1, e2, t0, n, opening=opening)
     # never more than 1.5 x the flat-surface stepover: convex surfaces allow a
     # little more, but a cross-section where nothing could be measured (the
     # pass along an uphill edge touching only the edge) must not open a gap
