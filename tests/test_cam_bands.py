@@ -2,6 +2,8 @@
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -103,6 +105,23 @@ def test_the_planners_meet_where_their_passes_cross_at_the_same_clock():
     assert up.end(-18.5, 0.0, 7, step) == 0.0  # clock 7 > 6: the lower knows enough now
     waiter.join(5.0)
     assert answer == [20.0]  # at clock 6 the upper still stood at 20: not met
+
+
+def test_an_upper_planner_far_ahead_stops_waiting_for_a_lower_one_that_was_killed():
+    meeting = Meeting()
+    up = meeting.upper()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # reaped: no such process any more
+    meeting.pid[0] = dead.pid  # as the lower planner's worker writes it when it begins
+    # 100 candidates measured, none by the lower: far beyond LEAD, so it waits for the
+    # lower until it sees that process gone (every 0.1 s of waiting)
+    answer = []
+    waiter = threading.Thread(target=lambda: answer.append(up.end(-50.0, 0.0, 100, 2.0)), daemon=True)
+    waiter.start()
+    waiter.join(5.0)
+    assert answer == [0.0] and meeting.ended[0] == 1.0
+    assert bands._alive(os.getpid(), 0.0) and not bands._alive(dead.pid, 0.0)
+    assert bands._alive(0, 1.0) and not bands._alive(0, 61.0)  # not begun: at most a minute
 
 
 def test_a_failing_upper_planner_does_not_leave_the_lower_one_waiting(monkeypatch):
