@@ -2,6 +2,7 @@
 cancel and resume, and faults leaving the hardware safe with a clear reason."""
 
 import json
+import time
 
 import cv2
 import numpy as np
@@ -390,6 +391,18 @@ def _following_children():
         if b"appliance.daemon.processing_child" in cmd and b"--follow" in cmd:
             out.append(pid)
     return out
+
+
+def test_the_childs_result_is_taken_when_it_ends_not_on_the_next_poll(tmp_path, monkeypatch):
+    from appliance.daemon.processing import child_process
+
+    # a stand-in for the processing child: it answers as the real one does, at once
+    (tmp_path / "quick_child.py").write_text('import json\nprint(json.dumps({"outputs": []}))\n')
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    t = time.monotonic()
+    result = child_process(tmp_path, tmp_path, {}, poll_s=30.0, module="quick_child")
+    assert result["outputs"] == [] and "cpu_s" in result
+    assert time.monotonic() - t < 10.0  # polled, it came 30 s after the start
 
 
 def test_the_child_that_followed_the_capture_gives_what_inkslice_process_gives(tmp_path):
