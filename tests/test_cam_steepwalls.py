@@ -117,3 +117,65 @@ def test_on_the_crease_the_wall_behind_the_floors_contact_is_met():
     exact = facet_contacts(s, c, x, y, x, y, span)  # every triangle under the cutter
     assert np.all(tips >= exact - 1e-6), tips - exact
     assert np.all(tips <= exact + 1e-6), tips - exact
+
+
+def _every_triangle(s, c, x, y, cells):
+    """Reference for facet_contacts: every cell of the window, both planes and all five
+    sides met, one point at a time, nothing pruned."""
+    from appliance.cam.contact import plane_contact
+    from appliance.cam.segments import min_over_segment
+
+    out = np.full(x.size, -np.inf)
+    for n, (px, py) in enumerate(zip(x, y)):
+        ic, jc = int(np.floor((px - s.x0) / s.dx)), int(np.floor((py - s.y0) / s.dy))
+        for j in range(max(jc - cells, 0), min(jc + cells, s.ny - 2) + 1):
+            for i in range(max(ic - cells, 0), min(ic + cells, s.nx - 2) + 1):
+                z00, z10, z01, z11 = (g[j, i] for g in s.corner_grids)
+                x0, y0 = s.x0 + s.dx * i, s.y0 + s.dy * j
+                for upper, sx, sy in (
+                    (True, (z10 - z00) / s.dx, (z11 - z10) / s.dy),
+                    (False, (z11 - z01) / s.dx, (z01 - z00) / s.dy),
+                ):
+                    ux, uy = plane_contact(c, np.array([sx]), np.array([sy]))
+                    u, v = (px + ux[0] - x0) / s.dx, (py + uy[0] - y0) / s.dy
+                    if min(u, v) >= 0 and max(u, v) <= 1 and ((u >= v) if upper else (u <= v)):
+                        h = c.profile(np.hypot(ux[0], uy[0]))
+                        out[n] = max(out[n], z00 + sx * (px + ux[0] - x0) + sy * (py + uy[0] - y0) - h)
+                corners = {(0, 0): z00, (1, 0): z10, (0, 1): z01, (1, 1): z11}
+                for a, b in (
+                    ((0, 0), (1, 0)),
+                    ((0, 0), (0, 1)),
+                    ((0, 0), (1, 1)),
+                    ((1, 0), (1, 1)),
+                    ((0, 1), (1, 1)),
+                ):
+                    ax, ay, za, zb = x0 + a[0] * s.dx, y0 + a[1] * s.dy, corners[a], corners[b]
+                    m = min_over_segment(
+                        c, px - ax, py - ay, (b[0] - a[0]) * s.dx, (b[1] - a[1]) * s.dy, za - zb, -za
+                    )
+                    out[n] = max(out[n], -float(m))
+    return out
+
+
+@pytest.mark.parametrize("cutter", ["ball6", "bull6r1"])
+@pytest.mark.parametrize("cells", [1, 2])
+def test_facet_contacts_prunes_only_what_cannot_rise_above_the_floor(cutter, cells):
+    # a coarse map (the daemon's 2 mm cells) of a round 79-degree mesa with a rough top: the window
+    # is taken by rows and columns and each side is met by one cell only. Against every
+    # triangle met one by one the tips agree wherever they can matter: above the floor given,
+    # just under the tip at most points (a small window: contacts on its last row's and
+    # column's far sides too)
+    rng = np.random.default_rng(3)
+    rough = lambda X, Y: 0.4 * np.sin(1.3 * X) * np.cos(0.9 * Y)
+    mesa = lambda X, Y: 1 + 6.0 / (1 + np.exp((np.hypot(X - 10, Y - 10) - 5) / 0.3)) + rough(X, Y)
+    s = Sampler(grid_map(mesa, 0, 20, 0, 20, 1.6))
+    c = parse_cutter(cutter)
+    x, y = rng.uniform(2, 18, 400), rng.uniform(2, 18, 400)
+    exact = _every_triangle(s, c, x, y, cells)
+    assert np.allclose(facet_contacts(s, c, x, y, x, y, cells), exact, atol=1e-9)
+    floor = exact - np.where(
+        rng.random(x.size) < 0.8, rng.uniform(0, 0.02, x.size), rng.uniform(-0.3, 0.3, x.size)
+    )
+    pruned = facet_contacts(s, c, x, y, x, y, cells, floor=floor)
+    assert np.allclose(np.maximum(pruned, floor), np.maximum(exact, floor), atol=1e-9)
+    assert (floor < exact).sum() > 250  # most points still had something to find

@@ -31,6 +31,7 @@ move the tip towards the true one, never above it (no scallop added).
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
@@ -217,53 +218,102 @@ def facet_contacts(sampler: Sampler, cutter: Cutter, px, py, gx, gy, cells: int 
     h at its nearest point to the axis cannot rise above it is not met (it could not change
     max(floor, result)). Of a window's 25 cells one to four pass on a sphere's wall; every
     (cell, point) pair left is met in one call per side, not one per cell.
+
+    The window is taken as its rows and its columns apart first: a row whose highest cell,
+    less h at the row's own distance from the axis, cannot rise above `floor` has no cell
+    that can (and so for a column), so only the cells of the rows and columns left are
+    looked at one by one (the whole window's were a third of the daemon's polish).
     """
     px, py = np.ravel(np.asarray(px, float)), np.ravel(np.asarray(py, float))
     best = np.full(px.shape, -np.inf)
     dx, dy, R = sampler.dx, sampler.dy, cutter.radius
-    off = np.arange(-cells, cells + 1)
-    di, dj = (a.ravel()[:, None] for a in np.meshgrid(off, off))
+    off = np.arange(-cells, cells + 1)[:, None]
     ic = np.floor((np.ravel(gx) - sampler.x0) / dx).astype(np.intp)
     jc = np.floor((np.ravel(gy) - sampler.y0) / dy).astype(np.intp)
-    i = np.clip(ic[None, :] + di, 0, sampler.nx - 2)  # (cells, points)
-    j = np.clip(jc[None, :] + dj, 0, sampler.ny - 2)
-    x0, y0 = sampler.x0 + dx * i, sampler.y0 + dy * j
-    # the nearest point of each cell to the axis; beyond the radius nothing touches
-    ex = np.maximum(np.maximum(x0 - px, px - x0 - dx), 0.0)
-    ey = np.maximum(np.maximum(y0 - py, py - y0 - dy), 0.0)
-    near = np.hypot(ex, ey)
-    live = near <= R * (1 + 1e-9) + 1e-12
+    cols = np.clip(ic[None, :] + off, 0, sampler.nx - 2)  # (window, points)
+    rows = np.clip(jc[None, :] + off, 0, sampler.ny - 2)
+    # each column's and each row's distance from the axis
+    ex = np.maximum(np.maximum(sampler.x0 + dx * cols - px, px - sampler.x0 - dx * (cols + 1)), 0.0)
+    ey = np.maximum(np.maximum(sampler.y0 + dy * rows - py, py - sampler.y0 - dy * (rows + 1)), 0.0)
+    reach = R * (1 + 1e-9) + 1e-12
+    row_ok, col_ok = ey <= reach, ex <= reach
     if floor is not None:
-        top = sampler.cell_top[j, i] - cutter.profile(np.minimum(near, R))
-        live &= top > np.ravel(floor)[None, :]
-    c, p = np.nonzero(live)
+        along_x, along_y = _window_tops(sampler, cells)
+        f = np.ravel(floor)[None, :]
+        icc, jcc = np.clip(ic, 0, sampler.nx - 2), np.clip(jc, 0, sampler.ny - 2)
+        row_ok &= along_x[rows, icc[None, :]] - cutter.profile(np.minimum(ey, R)) > f
+        col_ok &= along_y[jcc[None, :], cols] - cutter.profile(np.minimum(ex, R)) > f
+    r, c, p = np.nonzero(row_ok[:, None, :] & col_ok[None, :, :])
+    near = np.hypot(ey[r, p], ex[c, p])
+    i, j = cols[c, p], rows[r, p]
+    cell = j * (sampler.nx - 1) + i
+    live = near <= reach
+    if floor is not None:
+        live &= sampler.cell_top.ravel()[cell] - cutter.profile(np.minimum(near, R)) > np.ravel(floor)[p]
+    keep = np.flatnonzero(live)
+    p, i, j, cell = p[keep], i[keep], j[keep], cell[keep]
     if p.size == 0:
         return best.reshape(np.shape(gx))
-    i, j, x0, y0, px, py = i[c, p], j[c, p], x0[c, p], y0[c, p], px[p], py[p]
-    z00, z10, z01, z11 = (g[j, i] for g in sampler.corner_grids)
-    val = np.full(p.size, -np.inf)
-    for upper, sx, sy in (
-        (True, (z10 - z00) / dx, (z11 - z10) / dy),
-        (False, (z11 - z01) / dx, (z01 - z00) / dy),
+    qx, qy = px[p] - (sampler.x0 + dx * i), py[p] - (sampler.y0 + dy * j)  # from the cell's origin
+    val = _plane_contacts(sampler, cutter, cell, qx, qy)
+    # each cell meets its bottom and left sides and its diagonal. Its top and right sides are
+    # the bottom and left of the cells above and beside it, met there when that cell is
+    # live; when it is not, its bound holds for its sides as well, and they cannot rise above
+    # `floor`. Only the window's last row and column have no cell beyond them to meet theirs.
+    zc = dict(zip(((0, 0), (1, 0), (0, 1), (1, 1)), (g.ravel()[cell] for g in sampler.corner_grids)))
+    for (a, b), only in (
+        (((0, 0), (1, 0)), None),
+        (((0, 0), (0, 1)), None),
+        (((0, 0), (1, 1)), None),
+        (((0, 1), (1, 1)), j == rows[-1][p]),
+        (((1, 0), (1, 1)), i == cols[-1][p]),
     ):
-        ux, uy = plane_contact(cutter, sx, sy)
-        u, v = (px + ux - x0) / dx, (py + uy - y0) / dy
-        inside = (np.minimum(u, v) >= 0) & (np.maximum(u, v) <= 1) & ((u >= v) if upper else (u <= v))
-        at = z00 + sx * dx * u + sy * dy * v - cutter.profile(np.hypot(ux, uy))
-        np.maximum(val, np.where(inside, at, -np.inf), out=val)
-    # the cell's sides and diagonal, each a drop onto a segment
-    for (a, za), (b, zb) in (
-        (((0, 0), z00), ((1, 0), z10)),
-        (((0, 0), z00), ((0, 1), z01)),
-        (((0, 0), z00), ((1, 1), z11)),
-        (((1, 0), z10), ((1, 1), z11)),
-        (((0, 1), z01), ((1, 1), z11)),
-    ):
-        ax, ay = x0 + a[0] * dx, y0 + a[1] * dy
-        m = min_over_segment(cutter, px - ax, py - ay, (b[0] - a[0]) * dx, (b[1] - a[1]) * dy, za - zb, -za)
-        np.maximum(val, -m, out=val)
+        k = slice(None) if only is None else np.flatnonzero(only)
+        za = zc[a][k]
+        m = min_over_segment(
+            cutter,
+            qx[k] - a[0] * dx,
+            qy[k] - a[1] * dy,
+            (b[0] - a[0]) * dx,
+            (b[1] - a[1]) * dy,
+            za - zc[b][k],
+            -za,
+        )
+        val[k] = np.maximum(val[k], -m)
     np.maximum.at(best, p, val)
     return best.reshape(np.shape(gx))
+
+
+def _plane_contacts(sampler, cutter, cell, qx, qy):
+    """Tips of a cutter at (qx, qy) from each cell's origin touching the inside of the cell's
+    triangles (-inf where the touch falls outside both). Where a plane touches the cutter
+    depends on the plane's slope alone: it is found once per cell of the call."""
+    cells, back = np.unique(cell, return_inverse=True)
+    g00, g10, g01, g11 = (g.ravel()[cells] for g in sampler.corner_grids)
+    dx, dy = sampler.dx, sampler.dy
+    val = np.full(cell.size, -np.inf)
+    for upper, sx, sy in (
+        (True, (g10 - g00) / dx, (g11 - g10) / dy),
+        (False, (g11 - g01) / dx, (g01 - g00) / dy),
+    ):
+        ux, uy = plane_contact(cutter, sx, sy)
+        at0 = g00 + sx * ux + sy * uy - cutter.profile(np.hypot(ux, uy))  # the tip over the origin
+        ux, uy, sx, sy, at0 = ux[back], uy[back], sx[back], sy[back], at0[back]
+        u, v = (qx + ux) / dx, (qy + uy) / dy
+        inside = (np.minimum(u, v) >= 0) & (np.maximum(u, v) <= 1) & ((u >= v) if upper else (u <= v))
+        np.maximum(val, np.where(inside, at0 + sx * qx + sy * qy, -np.inf), out=val)
+    return val
+
+
+def _window_tops(sampler, cells):
+    """Each cell's highest neighbour top within `cells` columns (along x) and within `cells`
+    rows (along y), kept on the sampler: a bound for a whole row or column of a window."""
+    cache = sampler.__dict__.setdefault("_window_tops", {})
+    if cells not in cache:
+        cache[cells] = tuple(
+            ndimage.maximum_filter1d(sampler.cell_top, 2 * cells + 1, axis=a, mode="nearest") for a in (1, 0)
+        )
+    return cache[cells]
 
 
 _RING_R = np.array([0.6, 0.75, 0.85, 0.92, 0.97, 0.995])
