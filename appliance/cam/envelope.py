@@ -100,6 +100,26 @@ class PassEnvelope:
         """
         return self.envelope_many([p], np.zeros(np.size(cols), int), dy, cols)
 
+    def envelope_reached(self, p, dy):
+        """envelope() at every column, computed only at the columns pass p reaches: a column
+        with none of its tips in the program within the cutter's reach is inf, which is what
+        the whole computation gives it. Off a round part's outline (the dense columns at the
+        passes' ends most of all) that is some half of a pass's columns."""
+        cols = self.reached_columns(p[1])
+        env = np.full(np.broadcast_shapes(np.shape(dy), (1, self.along.size)), np.inf)
+        if cols.size:
+            env[:, cols] = self.envelope(p, dy, cols)
+        return env
+
+    def reached_columns(self, tips):
+        """The columns with a finite tip within the cutter's reach along the pass, and one
+        position more (a flat end's rim is read between two positions)."""
+        m = int(np.floor(self.st.cutter.radius / self.st.resolution + 1e-9)) + 1
+        count = np.concatenate([[0], np.cumsum(np.isfinite(tips))])
+        lo = np.clip(self.idx - m, 0, tips.size)
+        hi = np.clip(self.idx + m + 1, 0, tips.size)
+        return np.flatnonzero(count[hi] > count[lo])
+
     def envelope_many(self, passes, pid, dy, cols):
         """envelope() with column j's pass passes[pid[j]]: the cusp's fine search asks
         for many passes, each at a few columns, and one call costs what one pass's does.
