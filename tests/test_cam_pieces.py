@@ -2,6 +2,7 @@
 and the exact wall contacts told the tip already known."""
 
 import numpy as np
+import pytest
 from cam_helpers import grid_map
 
 from appliance.cam import polyline
@@ -36,3 +37,21 @@ def test_wall_contacts_told_the_known_tip_skip_only_cells_that_could_not_raise_i
     met = low & np.isfinite(free)
     assert met.sum() > 5
     np.testing.assert_allclose(told[met], free[met])  # where the known tip was low, the wall still met
+
+
+@pytest.mark.parametrize("cutter", ["ball6", "flat6", "ball1"])
+def test_a_move_direction_shared_by_every_element_gives_the_same_bits(cutter):
+    # min_over_segment with the move given once (a scalar direction: the planner's moves
+    # between positions, a cell's sides) takes a shorter path; it must be the same numbers
+    from appliance.cam.segments import min_over_segment
+
+    rng = np.random.default_rng(1)
+    c = parse_cutter(cutter)
+    n = 20_000
+    dx, dy = (rng.uniform(-1.3, 1.3, n) * c.diameter for _ in range(2))
+    wz, az = rng.uniform(-3, 3, n), rng.uniform(-5, 5, n)
+    for wx, wy in [(0.1, 0.0), (1.28, 1.28), (0.0, 1.28), (-0.3, 0.7)]:
+        shared = min_over_segment(c, dx, dy, wx, wy, wz, az)
+        each = min_over_segment(c, dx, dy, np.full(n, wx), np.full(n, wy), wz, az)
+        assert np.isfinite(shared).sum() > n // 10
+        assert np.array_equal(shared, each)

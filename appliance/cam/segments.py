@@ -35,6 +35,10 @@ _GOLD = (np.sqrt(5.0) - 1.0) / 2.0
 def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     """m(q) for q - A = (dx, dy) and w = B - A; +inf where q is never under the cutter."""
     R = cutter.radius
+    if np.ndim(wx) == 0 and np.ndim(wy) == 0 and cutter.kind != "bull":
+        W2 = float(wx) * float(wx) + float(wy) * float(wy)
+        if W2 >= 1e-18:
+            return _along_one_move(cutter, dx, dy, float(wx), float(wy), W2, wz, az)
     dx, dy, wx, wy, wz, az = np.broadcast_arrays(*(np.asarray(v, float) for v in (dx, dy, wx, wy, wz, az)))
     shape = dx.shape
     # flat from here on: the bull nose's search picks elements by flat index
@@ -69,6 +73,34 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     else:
         prof = cutter.profile(np.sqrt(rho2))
     val = az + wz * t + prof
+    return np.where(ok, val, np.inf).reshape(shape)
+
+
+def _along_one_move(cutter, dx, dy, wx, wy, W2, wz, az):
+    """min_over_segment for one move direction shared by every element (a cell's side, the
+    move between two positions of a pass) of a ball or a flat end: the same arithmetic with
+    the direction a scalar, so nothing of it is spread over the elements (the planner's sweep
+    between positions and the facets' sides are most of the calls)."""
+    R = cutter.radius
+    dx, dy, wz, az = np.broadcast_arrays(*(np.asarray(v, float) for v in (dx, dy, wz, az)))
+    shape = dx.shape
+    dx, dy, wz, az = (v.ravel() for v in (dx, dy, wz, az))
+    tm = (dx * wx + dy * wy) / W2
+    dperp2 = np.maximum(dx * dx + dy * dy - tm * tm * W2, 0.0)
+    ok = dperp2 <= R * R + 1e-9
+    A2 = np.maximum(R * R - dperp2, 0.0)
+    delta = np.sqrt(A2 / W2)
+    lo = np.maximum(tm - delta, 0.0)
+    hi = np.minimum(tm + delta, 1.0)
+    ok &= lo <= hi + 1e-9
+    hi = np.maximum(hi, lo)
+    if cutter.kind == "ball":
+        t = np.clip(tm + -wz * np.sqrt(A2) / np.sqrt(W2 * (W2 + wz * wz)), lo, hi)
+        rho2 = np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)
+        val = az + wz * t + (R - np.sqrt(R * R - rho2))
+    else:
+        t = np.where(wz >= 0, lo, hi)
+        val = az + wz * t + 0.0
     return np.where(ok, val, np.inf).reshape(shape)
 
 
