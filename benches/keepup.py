@@ -96,6 +96,15 @@ its passes cross, instead of two bands of equal area; the child's end taken at o
 fit 2.6-3.1 s), child 21-22 | 20.2-20.3 s CPU, own pages 270 | 262-263 MB. The toolpath alone
 on this scan's map, in-process: 9.5-10.5 | 7.9-8.2 s; the two planners 3.8-4.0 s each where
 the bands were 5.6 and 7.0. Time still MISS (by 3 s); memory PASS.
+
+Session 19 (2026-12-04, the box's speed drifting as before). fc8aa2d | a258cbf (the facets'
+window by rows and columns, a pass's envelope only where it reaches, the segment sweep with a
+shared direction, the min-plus product over the positions a row reaches: the CAM's CPU, not
+its structure), three pairs in turn: 12.69 | 13.72, 11.31 | 12.74, 13.19 | 11.80 s after the
+last frame (toolpath 9.55 | 10.44, 8.68 | 9.54, 10.13 | 8.50 s), own pages 262-263 | 259-260
+MB. The bench's spread (11.3-13.7 s on the same code) hides the change here; the same
+processing of this bench's scan in-process, 5 pairs in turn: 12.99 | 11.57 s wall (ratio
+0.92), 20.1 | 17.6 s CPU (0.91). Time still MISS (by 1.5-3 s); memory PASS.
 """
 
 from __future__ import annotations
