@@ -147,6 +147,18 @@ scallop / passes: sample1 ball6 0.0021 / 0.0100 / 280, bull6r1 0.0030 / 0.0098 /
 tried and reverted: at its lattice error as the tolerance sample 3's bull6r1 was left 0.0157
 at its edge, at a tolerance the planner's contact test stands it saved ~10 % of the opening.
 
+Session 19 (2026-12-04): the facets' window by rows and columns, a pass's envelope only
+where it reaches, the shared-direction segment sweep and the min-plus product over the
+positions a row reaches. `--only finishing --old-ref fc8aa2d`, one run: 0.05: 4.8 s / 133 MB
+| 5.3 s / 133 MB, 124 passes (two cores 3.2 s wall); 0.01: 14.2 s / 209 MB | 13.5 s / 208 MB,
+276 passes (two cores 8.9 s): this dome has no wall, so the facets never run here, and the
+rest is one run's noise. `--only acceptance`: 12 of 12 OK, samples 1-3 as session 15's;
+sample4 ball1 0.0027 / 0.0102 / 325, bull1r0.25 0.0025 / 0.0099 / 417, flat1 0.0028 /
+0.0498 / 386 (the facets agree to 1.4e-13 mm, which moves a planner's search). `--only rim`:
+12 of 12 OK, 0.00 % uncut everywhere; max scallop 0.0098-0.0102 on the 0.01 rows of samples
+1-3, flat6 0.0494 / 0.0483 / 0.0539 (sample 3's corner), sample4 ball1 0.0102, bull1r0.25
+0.0109, flat1 0.0521; gouge at most 0.0042 (sample3 flat6).
+
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
 
