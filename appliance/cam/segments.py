@@ -35,21 +35,24 @@ _GOLD = (np.sqrt(5.0) - 1.0) / 2.0
 def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     """m(q) for q - A = (dx, dy) and w = B - A; +inf where q is never under the cutter."""
     R = cutter.radius
-    if np.ndim(wx) == 0 and np.ndim(wy) == 0 and cutter.kind != "bull":
-        W2 = float(wx) * float(wx) + float(wy) * float(wy)
-        if W2 >= 1e-18:
-            return _along_one_move(cutter, dx, dy, float(wx), float(wy), W2, wz, az)
-    dx, dy, wx, wy, wz, az = np.broadcast_arrays(*(np.asarray(v, float) for v in (dx, dy, wx, wy, wz, az)))
-    shape = dx.shape
-    # flat from here on: the bull nose's search picks elements by flat index
-    dx, dy, wx, wy, wz, az = (v.ravel() for v in (dx, dy, wx, wy, wz, az))
+    args = [np.asarray(v, float) for v in (dx, dy, wx, wy, wz, az)]
+    shape = np.broadcast_shapes(*(v.shape for v in args))
+    # flat from here on: the bull nose's search picks elements by flat index. A direction
+    # given once for every element (a cell's side, the move between two positions of a
+    # pass) stays a scalar: spread over the elements it was a quarter of the call
+    dx, dy, wx, wy, wz, az = (
+        v if k in (2, 3) and v.ndim == 0 else np.broadcast_to(v, shape).ravel() for k, v in enumerate(args)
+    )
     W2 = wx * wx + wy * wy
     still = W2 < 1e-18
-    Ws = np.where(still, 1.0, W2)
-    tm = np.where(still, 0.0, (dx * wx + dy * wy) / Ws)
+    moving = not np.any(still)  # every segment has an xy extent: the guards below are no-ops
+    Ws = W2 if moving else np.where(still, 1.0, W2)
+    tm = (dx * wx + dy * wy) / Ws
+    tm = tm if moving else np.where(still, 0.0, tm)
     dperp2 = np.maximum(dx * dx + dy * dy - tm * tm * W2, 0.0)
     ok = dperp2 <= R * R + 1e-9  # rounding must not drop a cell at exactly the rim
-    delta = np.where(still, np.inf, np.sqrt(np.maximum(R * R - dperp2, 0.0) / Ws))
+    delta = np.sqrt(np.maximum(R * R - dperp2, 0.0) / Ws)
+    delta = delta if moving else np.where(still, np.inf, delta)
     lo = np.maximum(tm - delta, 0.0)
     hi = np.minimum(tm + delta, 1.0)
     ok &= lo <= hi + 1e-9
@@ -62,9 +65,9 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     elif kind == "flat":
         t = np.where(wz >= 0, lo, hi)
     else:
-        t = _golden(cutter, az, wz, W2, tm, dperp2, lo, hi)
-    # a segment with no xy extent: the lower end counts
-    t = np.where(still, np.where(wz >= 0, 0.0, 1.0), t)
+        t = _golden(cutter, az, wz, np.broadcast_to(W2, tm.shape), tm, dperp2, lo, hi)
+    if not moving:  # a segment with no xy extent: the lower end counts
+        t = np.where(still, np.where(wz >= 0, 0.0, 1.0), t)
     rho2 = np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)
     if kind == "ball":
         prof = R - np.sqrt(R * R - rho2)
@@ -73,34 +76,6 @@ def min_over_segment(cutter: Cutter, dx, dy, wx, wy, wz, az):
     else:
         prof = cutter.profile(np.sqrt(rho2))
     val = az + wz * t + prof
-    return np.where(ok, val, np.inf).reshape(shape)
-
-
-def _along_one_move(cutter, dx, dy, wx, wy, W2, wz, az):
-    """min_over_segment for one move direction shared by every element (a cell's side, the
-    move between two positions of a pass) of a ball or a flat end: the same arithmetic with
-    the direction a scalar, so nothing of it is spread over the elements (the planner's sweep
-    between positions and the facets' sides are most of the calls)."""
-    R = cutter.radius
-    dx, dy, wz, az = np.broadcast_arrays(*(np.asarray(v, float) for v in (dx, dy, wz, az)))
-    shape = dx.shape
-    dx, dy, wz, az = (v.ravel() for v in (dx, dy, wz, az))
-    tm = (dx * wx + dy * wy) / W2
-    dperp2 = np.maximum(dx * dx + dy * dy - tm * tm * W2, 0.0)
-    ok = dperp2 <= R * R + 1e-9
-    A2 = np.maximum(R * R - dperp2, 0.0)
-    delta = np.sqrt(A2 / W2)
-    lo = np.maximum(tm - delta, 0.0)
-    hi = np.minimum(tm + delta, 1.0)
-    ok &= lo <= hi + 1e-9
-    hi = np.maximum(hi, lo)
-    if cutter.kind == "ball":
-        t = np.clip(tm + -wz * np.sqrt(A2) / np.sqrt(W2 * (W2 + wz * wz)), lo, hi)
-        rho2 = np.minimum(dperp2 + W2 * (t - tm) ** 2, R * R)
-        val = az + wz * t + (R - np.sqrt(R * R - rho2))
-    else:
-        t = np.where(wz >= 0, lo, hi)
-        val = az + wz * t + 0.0
     return np.where(ok, val, np.inf).reshape(shape)
 
 
