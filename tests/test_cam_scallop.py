@@ -185,3 +185,28 @@ def test_no_candidate_steps_past_the_cap(monkeypatch):
     finishing_gcode(hm, FinishSettings(flat, scallop=0.05, margin=0.0))
     assert len(steps) > 5
     assert max(steps) <= 0.95 * flat.diameter + 1e-9
+
+
+@pytest.mark.parametrize("cutter", ["ball6", "flat6", "bull6r1"])
+def test_a_pass_envelope_skips_only_columns_it_cannot_reach(cutter):
+    # a round part with the passes run off its outline: the pass's positions beyond the
+    # margin are not in the program (inf), and envelope() does not compute the columns none
+    # of its tips reaches. envelope_many computes every column: the two must agree exactly
+    from appliance.cam.cusps import PassProbe
+    from appliance.cam.sampling import Sampler
+    from appliance.cam.zigzag import pass_frame
+
+    dome = lambda X, Y: 1 + np.sqrt(np.maximum(100 - (X - 20) ** 2 - (Y - 20) ** 2, 0))
+    hm = grid_map(dome, 0, 40, 0, 40, 1.0)
+    hm.z[np.hypot(*np.meshgrid(hm.x - 20, hm.y - 20)) > 12] = np.nan
+    st = FinishSettings(parse_cutter(cutter), scallop=0.05)
+    s = Sampler(hm, edge_step=0.05)
+    e1, e2, (t0, t1), _ = pass_frame(s, 0.0, st.margin)
+    probe = PassProbe(s, st, e1, e2, t0, int(np.ceil((t1 - t0) / st.resolution - 1e-9)) + 1)
+    p = probe.pass_at(33.5)  # off the outline: only its middle is in the program
+    dy = np.linspace(-3.5, 3.5, 29)[:, None]
+    cols = np.arange(probe.along.size)
+    skipped = probe.envelope(p, dy, cols)
+    every = probe.envelope_many([p], np.zeros(cols.size, int), dy, cols)
+    assert np.array_equal(skipped, every)
+    assert np.isfinite(every).any() and (~np.isfinite(every)).all(axis=0).sum() > 5

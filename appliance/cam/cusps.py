@@ -58,7 +58,7 @@ class PassProbe(PassEnvelope):
         if known is not None and known[0] <= j0 and known[0] + known[1].shape[0] >= j1:
             return known[1][j0 - known[0] : j1 - known[0]]
         ys = step * np.arange(j0, j1)
-        return self.envelope_reached(p, (ys - p[0])[:, None])
+        return self.envelope(p, (ys - p[0])[:, None], np.arange(self.along.size))
 
     def forget_candidates(self):
         """A pass was placed: the candidates measured for it are of no use to the next one."""
@@ -100,7 +100,7 @@ class PassProbe(PassEnvelope):
         # flat bottom on a cross slope, 90 of them), merged once on a global grid
         grid = self._placed(step, done)
         Z, on, op, placed, owner, env_a = grid.rows(k0, k1)
-        env_b = self.envelope_reached(b, (ys - b[0])[:, None])
+        env_b = self.envelope(b, (ys - b[0])[:, None], np.arange(self.along.size))
         # the pass placed next is one of these candidates: its rows are merged from here
         self._forget_others()
         self._measured[(b[0], step)] = (k0, env_b)

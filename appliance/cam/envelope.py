@@ -97,28 +97,29 @@ class PassEnvelope:
         smooth interior one, so positions 0.1 mm apart miss it by a second-order
         amount; a flat end's minimum sits where its rim leaves the column, so
         the tips there are interpolated at exactly that reach as well.
-        """
-        return self.envelope_many([p], np.zeros(np.size(cols), int), dy, cols)
 
-    def envelope_reached(self, p, dy):
-        """envelope() at every column, computed only at the columns pass p reaches: a column
-        with none of its tips in the program within the cutter's reach is inf, which is what
-        the whole computation gives it. Off a round part's outline (the dense columns at the
-        passes' ends most of all) that is some half of a pass's columns."""
-        cols = self.reached_columns(p[1])
-        env = np.full(np.broadcast_shapes(np.shape(dy), (1, self.along.size)), np.inf)
-        if cols.size:
-            env[:, cols] = self.envelope(p, dy, cols)
+        A column with none of the pass's tips in the program within the cutter's reach is
+        inf, which is what the whole computation gives it: such columns are not computed
+        (off a round part's outline, the dense columns at the passes' ends most of all, a
+        fifth of the daemon's sphere's).
+        """
+        cols = np.asarray(cols)
+        reached = self._reaches(p[1])[cols]
+        dy = np.asarray(dy, float)
+        env = np.full(np.broadcast_shapes(dy.shape, (1, cols.size)), np.inf)
+        if reached.any():
+            dy_r = dy[:, reached] if dy.ndim == 2 and dy.shape[1] > 1 else dy
+            env[:, reached] = self.envelope_many([p], np.zeros(int(reached.sum()), int), dy_r, cols[reached])
         return env
 
-    def reached_columns(self, tips):
-        """The columns with a finite tip within the cutter's reach along the pass, and one
-        position more (a flat end's rim is read between two positions)."""
+    def _reaches(self, tips):
+        """Per column: a finite tip within the cutter's reach along the pass, or one position
+        more (a flat end's rim is read between two positions)."""
         m = int(np.floor(self.st.cutter.radius / self.st.resolution + 1e-9)) + 1
         count = np.concatenate([[0], np.cumsum(np.isfinite(tips))])
         lo = np.clip(self.idx - m, 0, tips.size)
         hi = np.clip(self.idx + m + 1, 0, tips.size)
-        return np.flatnonzero(count[hi] > count[lo])
+        return count[hi] > count[lo]
 
     def envelope_many(self, passes, pid, dy, cols):
         """envelope() with column j's pass passes[pid[j]]: the cusp's fine search asks
