@@ -117,10 +117,20 @@ class PassProbe(PassEnvelope):
         cols = np.arange(Z.shape[1])
         rows = np.arange(ys.size)[:, None]
         if cut.kind == "ball":
-            # a ball touches at one row of a column; a column where either pass
-            # touches nothing (a concave region tighter than the cutter) is left out
-            touch = (gap_a[ca, cols] <= 0.3 * self.st.scallop) & (gap_b[cb, cols] <= 0.3 * self.st.scallop)
-            inside = touch[None, :] & on
+            # a ball touches at one row of a column; a column the candidate touches nothing
+            # in (a concave region tighter than the cutter) is left out. One the placed pass
+            # touches nothing in is measured from that pass's axis: the rows between it and
+            # the candidate's contact are no later pass's to cut. The pass run off the
+            # outline beside a wall reaches the wall's top edge only at the full radius, a
+            # hair the rows miss: left out, the step from it went unmeasured, and the
+            # daemon's sphere kept a 2.1 mm ridge along its edge (1.6 mm steps off both ends)
+            reached = gap_b[cb, cols] <= 0.3 * self.st.scallop
+            placed_off = gap_a[ca, cols] > 0.3 * self.st.scallop
+            axis_a = int(np.clip(np.rint((sa - ys[0]) / step), 0, ys.size - 1))
+            ca = np.where(placed_off, axis_a, ca)
+            # there only where the candidate leaves the stock: an earlier pass's cusp that it
+            # cannot reach does not shrink with the step (the planner crawled at it)
+            inside = reached[None, :] & on & (~placed_off[None, :] | (who == len(done)))
         else:
             # A flat bottom touches a whole band at once (on a flat, under all
             # its bottom): of equal contacts take a's nearest b and b's nearest a
