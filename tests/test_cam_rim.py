@@ -159,3 +159,21 @@ def test_off_a_wall_at_a_round_outline_no_pass_runs_past_the_cutters_reach():
     assert pts[:, 2].min() > 1.0  # every position still leans on the wall
     rep, _ = verify_gcode(finishing_gcode(hm, st).text, hm)
     assert rep.gouge <= 0.005, rep.lines()
+
+
+def _ball_seen_from_above(X, Y):
+    # the demo's part, smaller: a ball whose outline the camera saw 0.6 mm inside its equator,
+    # so the map ends on a 75-degree face 4 mm above the base, along the passes at its ends
+    r2 = (X - 18.4) ** 2 + (Y - 18.4) ** 2
+    return np.where(r2 <= 17.4**2, np.sqrt(np.maximum(18.0**2 - r2, 0.0)), np.nan)
+
+
+def test_a_wall_along_the_passes_at_the_outline_is_finished_to_its_top_edge():
+    # the pass run off the outline meets the wall's top edge only at the full radius; the
+    # step from it went unmeasured and left a 1.6 mm ridge along the edge (0.45 % uncut)
+    hm = grid_map(_ball_seen_from_above, 0, 36.8, 0, 36.8, 1.18)
+    job = finishing_gcode(hm, FinishSettings(parse_cutter("ball6"), scallop=0.05))
+    rep, _ = verify_gcode(job.text, hm)
+    assert rep.uncut_reachable <= 0.001, rep.lines()
+    assert rep.scallop_max <= 0.1, rep.lines()  # 0.064 at the outline's diagonal corners
+    assert rep.gouge <= 0.005
