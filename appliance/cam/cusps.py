@@ -117,20 +117,8 @@ class PassProbe(PassEnvelope):
         cols = np.arange(Z.shape[1])
         rows = np.arange(ys.size)[:, None]
         if cut.kind == "ball":
-            # a ball touches at one row of a column; a column the candidate touches nothing
-            # in (a concave region tighter than the cutter) is left out. One the placed pass
-            # touches nothing in is measured from that pass's axis: the rows between it and
-            # the candidate's contact are no later pass's to cut. The pass run off the
-            # outline beside a wall reaches the wall's top edge only at the full radius, a
-            # hair the rows miss: left out, the step from it went unmeasured, and the
-            # daemon's sphere kept a 2.1 mm ridge along its edge (1.6 mm steps off both ends)
-            reached = gap_b[cb, cols] <= 0.3 * self.st.scallop
-            placed_off = gap_a[ca, cols] > 0.3 * self.st.scallop
-            axis_a = int(np.clip(np.rint((sa - ys[0]) / step), 0, ys.size - 1))
-            ca = np.where(placed_off, axis_a, ca)
-            # there only where the candidate leaves the stock: an earlier pass's cusp that it
-            # cannot reach does not shrink with the step (the planner crawled at it)
-            inside = reached[None, :] & on & (~placed_off[None, :] | (who == len(done)))
+            # a ball touches at one row of a column
+            touch_a, touch_b = gap_a[ca, cols], gap_b[cb, cols]
         else:
             # A flat bottom touches a whole band at once (on a flat, under all
             # its bottom): of equal contacts take a's nearest b and b's nearest a
@@ -139,14 +127,27 @@ class PassProbe(PassEnvelope):
             near_b = gap_b <= gap_b.min(axis=0) + tie
             ca = ys.size - 1 - np.argmax(near_a[::-1], axis=0)
             cb = np.argmax(near_b, axis=0)
-            # and a column either pass touches nothing in is left out as for a ball: on
-            # sample 3's corner (x 99, y 0; slopes 0.83 across, 0.15 along, downhill to
-            # both) only positions 2.6 mm in reach the edge row, the first pass stood
-            # 0.40 above it whatever the step, and the planner crawled at its 0.01 minimum
-            touch = (gap_a.min(axis=0) <= 0.3 * self.st.scallop) & (
-                gap_b.min(axis=0) <= 0.3 * self.st.scallop
-            )
-            inside = touch[None, :] & on
+            touch_a, touch_b = gap_a.min(axis=0), gap_b.min(axis=0)
+        # A column the candidate touches nothing in (a concave region tighter than the
+        # cutter) is left out. One the placed pass touches nothing in is measured from that
+        # pass's axis: the rows between it and the candidate's contact are no later pass's
+        # to cut. The pass run off the outline beside a wall reaches the wall's top edge
+        # only at the full radius, a hair the rows miss: left out, the step from it went
+        # unmeasured, and the daemon's sphere kept a 2.1 mm ridge along its edges parallel
+        # to the passes (1.6 mm steps off both ends; a bull nose 8 mm, the whole wall).
+        # Only where the candidate leaves the stock, though: an earlier pass's cusp out of
+        # its reach does not shrink with the step, and measured the planner crawls at it
+        # (sample 3's corner for a flat end: the first pass 0.40 above the edge row
+        # whatever the step, which only positions 2.6 mm in reach). Not for a flat end yet:
+        # its passes then stand on that wall, where its drops cut 0.015 mm in at the pass
+        # ends (it leaves the wall as it did, 8 mm)
+        reached = touch_b <= 0.3 * self.st.scallop
+        placed_off = touch_a > 0.3 * self.st.scallop
+        if cut.kind == "flat":
+            reached &= ~placed_off
+        axis_a = int(np.clip(np.rint((sa - ys[0]) / step), 0, ys.size - 1))
+        ca = np.where(placed_off, axis_a, ca)
+        inside = reached[None, :] & on & (~placed_off[None, :] | (who == len(done)))
         # The rows between the contacts: positions between a and b touch there,
         # later passes touch beyond b's contact, so the rows beyond are not b's to
         # hold (on a cross slope a flat bottom leaves m x 2R under its own bottom
