@@ -159,21 +159,18 @@ sample4 ball1 0.0027 / 0.0102 / 325, bull1r0.25 0.0025 / 0.0099 / 417, flat1 0.0
 1-3, flat6 0.0494 / 0.0483 / 0.0539 (sample 3's corner), sample4 ball1 0.0102, bull1r0.25
 0.0109, flat1 0.0521; gouge at most 0.0042 (sample3 flat6).
 
-Session 20 (2026-12-04): the step from a pass that touches nothing in a column is measured
-from that pass's axis where the candidate leaves the stock (ball and bull nose; cusps.py).
-The daemon's demo map (a ball seen from above, its outline on a 74-degree face 8 mm above
-the base) at 0.05: max scallop 2.1484 -> 0.0827 mm, uncut 0.70 -> 0.00 % of the reachable
-area, 140 -> 152 passes, 7.2-8.4 -> 7.4 s on two cores. The same shape smaller (tests'
+Session 20 (2026-12-04): on a plan's first step, the columns its placed pass (run off the
+outline) touches nothing in are measured from that pass's axis, where the candidate leaves
+the stock (ball and bull nose; cusps.py). The daemon's demo map (a ball seen from above, its
+outline on a 74-degree face 8 mm above the base) at 0.05 on two cores: max scallop 2.1484 ->
+0.0874 mm, uncut 0.70 -> 0.00 % of the reachable area. The same shape smaller (tests'
 _ball_seen_from_above): ball6 1.6452 -> 0.0642, bull6r1 8.1569 -> 0.0627 (7.31 -> 0.00 %
 uncut). A flat end keeps the old rule: measured, its passes on that wall gouged 0.0150.
-`--only acceptance`: 12 of 12 OK; every row as session 19's except sample4 ball1 0.0024 /
-0.0099 / 334 (was 0.0027 / 0.0102 / 325). `--only rim`: 11 of 12 OK, all 0.00 % uncut, the
-same figures as session 19 except sample4 ball1: 0.0113 at (54.8, 48.8), MISS by 0.0003
-(was 0.0102). Not this rule (no column there had a pass touching nothing): the passes moved,
-and a pass end met an old disagreement, the planner measuring 0.943 of the request between
-the passes at 49.0003 and 49.0603 where verify finds 1.13 (likely the two openings' reach
-past the outline: the planner's positions stop a step short of the radius, verify's do not).
-`benches/steep.py --only walls`: the same programs as before (33573 and 10310 lines).
+Measured on every step (tried first), the planner crawled at pass ends mid-part: the demo
+scan's map 6.6 -> 9.9 s and 126 -> 169 MB on two cores (the first step alone: 7.6 s, 132 MB),
+and sample4 ball1's rim row went to 0.0113 (MISS) as its passes moved. `--only acceptance`
+and `--only rim`: every row as session 19's (the first step on the samples' outlines is
+unchanged). `benches/steep.py --only walls`: the same programs (33573 and 10310 lines).
 
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
