@@ -117,8 +117,8 @@ class PassProbe(PassEnvelope):
         cols = np.arange(Z.shape[1])
         rows = np.arange(ys.size)[:, None]
         if cut.kind == "ball":
-            # a ball touches at one row of a column
-            touch_a, touch_b = gap_a[ca, cols], gap_b[cb, cols]
+            # a ball touches at one row of a column: its gap there is the column's
+            closest_a, closest_b = gap_a[ca, cols], gap_b[cb, cols]
         else:
             # A flat bottom touches a whole band at once (on a flat, under all
             # its bottom): of equal contacts take a's nearest b and b's nearest a
@@ -127,7 +127,7 @@ class PassProbe(PassEnvelope):
             near_b = gap_b <= gap_b.min(axis=0) + tie
             ca = ys.size - 1 - np.argmax(near_a[::-1], axis=0)
             cb = np.argmax(near_b, axis=0)
-            touch_a, touch_b = gap_a.min(axis=0), gap_b.min(axis=0)
+            closest_a, closest_b = gap_a.min(axis=0), gap_b.min(axis=0)
         # A column the candidate touches nothing in (a concave region tighter than the
         # cutter) is left out, and so is one the placed pass touches nothing in - except
         # for the first step of a plan. Its placed pass runs off the outline, and beside a
@@ -140,8 +140,8 @@ class PassProbe(PassEnvelope):
         # pass ends mid-part (the demo's far planner 4.8 s of measuring for 2.5, +43 MB).
         # Not for a flat end yet: its passes then stand on that wall, where its drops cut
         # 0.015 mm in at the pass ends (it leaves the wall as it did, 8 mm)
-        reached = touch_b <= 0.3 * self.st.scallop
-        placed_off = touch_a > 0.3 * self.st.scallop
+        reached = closest_b <= 0.3 * self.st.scallop
+        placed_off = closest_a > 0.3 * self.st.scallop
         if cut.kind == "flat" or len(done) > 1:
             reached &= ~placed_off
         axis_a = int(np.clip(np.rint((sa - ys[0]) / step), 0, ys.size - 1))
