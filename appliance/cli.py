@@ -19,8 +19,8 @@ import pkgutil
 import sys
 
 from . import __version__, commands, progress
-from .cam.forks import workers_allowed
 from .errors import InkSliceError
+from .forks import workers_allowed
 
 WRITE_REFUSED = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
 

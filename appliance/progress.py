@@ -22,7 +22,7 @@ import time
 from contextlib import contextmanager
 
 BAR = 24
-TICKER = "progress"  # the bar's redrawing thread (cam/forks.py knows it is harmless)
+TICKER = "progress"  # the bar's redrawing thread (forks.py knows it is harmless)
 TICK_S = 0.25
 _display = None
 

@@ -472,7 +472,7 @@ from appliance.surface.heightmap import HeightMap
 name, step, cutter, scallop = sys.argv[1], float(sys.argv[2]), sys.argv[3], float(sys.argv[4])
 inside = "inside" in sys.argv[5:]
 if "bands" in sys.argv[5:]:  # as the processing child and the commands plan: on two cores
-    from appliance.cam.forks import allow_workers
+    from appliance.forks import allow_workers
     allow_workers(2)
 s = surfaces.get(name)
 x0, x1, y0, y1 = s.bounds

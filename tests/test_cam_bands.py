@@ -1,4 +1,4 @@
-"""The stepover planner in bands on forked workers (cam/bands.py, cam/forks.py)."""
+"""The stepover planner in bands on forked workers (cam/bands.py, forks.py)."""
 
 import os
 import signal
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from cam_helpers import grid_map
 
-from appliance.cam import bands, forks
+from appliance import forks
+from appliance.cam import bands
 from appliance.cam.bands import Meeting, plan_in_bands
 from appliance.cam.cusps import PassProbe
 from appliance.cam.cutters import parse_cutter

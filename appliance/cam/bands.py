@@ -43,8 +43,8 @@ import time
 import numpy as np
 
 from ..errors import InkSliceError
+from ..forks import in_workers, workers
 from .envelope import planner_opening
-from .forks import in_workers, workers
 from .passplan import plan_passes
 
 MIN_BAND_MM = 20.0  # parts narrower than two of these are planned in one piece

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..forks import in_parts
 from .contact import drop_lines
-from .forks import in_parts
 from .opening import Opening
 from .scallop import flat_stepover
 from .segments import min_over_segment

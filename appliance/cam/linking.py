@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..forks import in_parts, joined
 from .contact import drop_lines
-from .forks import in_parts, joined
 from .polyline import refine, refine_tolerance
 
 

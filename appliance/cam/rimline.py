@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..forks import in_parts, joined
 from .fineline import drop_fine_lines
-from .forks import in_parts, joined
 
 MAX_SUB = 32  # sub-positions per off-part move: 15 fine points and 16 midpoints checking them
 

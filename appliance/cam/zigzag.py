@@ -42,11 +42,11 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import SettingError, check_mm
+from ..forks import in_parts, joined
 from .bands import plan_in_bands
 from .contact import drop_lines
 from .cutters import Cutter
 from .dropcutter import DEFAULT_RESOLUTION
-from .forks import in_parts, joined
 from .linking import links
 from .polyline import reduce_polyline, refine, refine_tolerance, true_runs
 from .rimline import FineEnds

@@ -21,7 +21,7 @@ def main(argv, truth_for=lambda scan_folder: None):
     """`truth_for(scan_folder)`: the part's ground truth for the statistics, or None (a real scan)."""
     scan, out, options = argv[0], argv[1], json.loads(argv[2])
     from .. import progress
-    from ..cam.forks import allow_workers
+    from ..forks import allow_workers
     from ..process import process_scan
 
     allow_workers()  # this process has no other thread: the planner may fork its bands

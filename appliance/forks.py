@@ -1,4 +1,5 @@
-"""Work forked onto the other cores, where that is safe.
+"""Work forked onto the other cores, where that is safe: the fit's sweeps over the frames
+and the nodes (surface/), the finishing planner and its tails (cam/).
 
 A fork copies only the thread that calls it: in a process with another thread alive (the
 daemon's web server and job runner) a lock that thread held stays held in the copy forever.
@@ -19,8 +20,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..errors import InkSliceError
-from ..progress import TICKER
+from .errors import InkSliceError
+from .progress import TICKER
 
 MAX_WORKERS = 2  # each worker holds its own envelopes (~30 MB on the demo's part): 1 GB boxes
 
@@ -28,8 +29,9 @@ _allowed = 1
 
 
 def allow_workers(n: int | None = None) -> int:
-    """Let finishing work in up to `n` processes at once (default: the cores this process may
-    use, at most MAX_WORKERS), for the rest of this process: the processing child's main.
+    """Let the fit and the finishing work in up to `n` processes at once (default: the cores
+    this process may use, at most MAX_WORKERS), for the rest of this process: the
+    processing child's main.
     Two is what the planner uses (bands.py: one planner from each end)."""
     global _allowed
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
