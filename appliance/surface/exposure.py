@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..forks import in_parts, joined
 from .lattice import Lattice, exposed_mask
 from .slices import Slice, polyline_distance
 
@@ -106,78 +107,91 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         near = ndimage.minimum_filter(inner, size=3, mode="nearest")[on_outline]
         first[on_outline] = np.where(fr > near + 1, _passed_near(slices, oq, near, fr, 2 * tol), fr)
     hmax = max(lat.hx, lat.hy)
-    for k in range(top, K):
-        sel = first == k
-        if not sel.any():
-            continue
-        q = np.column_stack([X[sel], Y[sel]])
-        kq = first[sel]
-        rim = on_outline[sel]
-        lo_span = order // 2
-        # one more level uphill than the rule needs: where the lower waterlines are
-        # walls the node is extrapolated from the uphill ones alone
-        js = [j for j in range(k - (order - lo_span) - 1, k + lo_span) if top <= j < K]
-        if k == top:  # the cap: every neighbouring waterline lies downhill
-            js = [j for j in range(top, min(K, top + max(order - 1, 2)))]
-        S = np.zeros((len(q), len(js)))
-        Z = np.zeros_like(S)
-        ok = np.zeros(S.shape, bool)
-        for c, j in enumerate(js):
-            sl = slices[j]
-            sd, i = polyline_distance(sl, q, signed=True)
-            # far from the waterline the raster mask's side is the robust one; near it
-            # (within a node and a half) the exact side of the nearest segment
-            in_mask = kq <= j
-            far_node = np.abs(sd) > 1.5 * hmax
-            side = np.where(far_node | rim, in_mask, sd >= 0)
-            # the distance that places the node is the one to the level curve: a wall
-            # beside the node says nothing about where the top crosses the level
-            cv = sl.level_curve()
-            if cv.empty:
-                continue
-            d, ic = polyline_distance(cv, q)
-            S[:, c] = np.where(side, d, -d)
-            Z[:, c] = cv.z[ic]
-            ok[:, c] = True
-        below = ok & (S >= 0)
-        n_ok = ok.sum(axis=1)
-        if k == top:
-            good = n_ok >= 2
-        else:
-            # bracketed: drop the extra uphill level; else extrapolate from >= 2 uphill ones
-            two_sided = below.any(axis=1)
-            extra = k - (order - lo_span) - 1
-            if extra in js:
-                ok[two_sided, js.index(extra)] = False
-            n_ok = ok.sum(axis=1)
-            # one-sided: trust it only as far out as the uphill waterlines are apart
-            far = np.zeros(len(q), bool)
-            up = ok & (S < 0)
-            if (~two_sided).any():
-                Sn = np.where(up, -S, np.inf)
-                srt = np.sort(Sn, axis=1)
-                if srt.shape[1] > 1:
-                    with np.errstate(invalid="ignore"):
-                        far = ~two_sided & ~(srt[:, 0] <= (srt[:, 1] - srt[:, 0]))
-            good = (n_ok >= 2) & ~far
-        # the node came out between the two bracketing levels (told by the exact signs,
-        # the raster mask can be a node off): the answer must lie between them
-        levels = np.array([slices[j].level for j in js])
-        inside = S >= 0
-        c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
-        zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
-        zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
-        rise = np.where(ok, Z - levels, 0.0)  # meniscus-corrected heights widen it
-        zmin = zmin + np.minimum(rise.min(axis=1), 0)
-        zmax = zmax + np.maximum(rise.max(axis=1), 0)
-        raw = _lagrange_at_zero(S, Z, ok)
-        zz = np.clip(raw, zmin, zmax)
-        # a polynomial that leaves its bracket is not to be trusted: let the fit decide
-        zz[np.abs(raw - zz) > 0.25 * (zmax - zmin)] = np.nan
-        zz[~good] = np.nan
-        # nor one that lands far outside the levels it was made from (near-equal distances
-        # to two waterlines blow the Lagrange weights up)
-        spread = levels.max() - levels.min()
-        zz[~np.isfinite(raw) | (raw < levels.min() - spread) | (raw > levels.max() + spread)] = np.nan
-        z[sel] = zz
+    ks = [k for k in range(top, K) if (first == k).any()]
+
+    def heights(a, b):  # of the nodes that came out at levels ks[a:b]
+        out = []
+        for k in ks[a:b]:
+            sel = first == k
+            q = np.column_stack([X[sel], Y[sel]])
+            out.append(_came_out_at(slices, k, top, q, on_outline[sel], hmax, order))
+        return out
+
+    # each level's nodes need nothing of the others': on the cores where forking is allowed
+    counts = [int((first == k).sum()) for k in ks]
+    for k, zz in zip(ks, in_parts(heights, np.add(counts, 20), joined)):
+        z[first == k] = zz
     return z, first, footprint
+
+
+def _came_out_at(slices, k, top, q, rim, hmax, order):
+    """Heights of the nodes q that came out at level k (rim: those on the outline), NaN where
+    the waterlines do not place one (first_exposure)."""
+    K = len(slices)
+    lo_span = order // 2
+    # one more level uphill than the rule needs: where the lower waterlines are
+    # walls the node is extrapolated from the uphill ones alone
+    js = [j for j in range(k - (order - lo_span) - 1, k + lo_span) if top <= j < K]
+    if k == top:  # the cap: every neighbouring waterline lies downhill
+        js = [j for j in range(top, min(K, top + max(order - 1, 2)))]
+    S = np.zeros((len(q), len(js)))
+    Z = np.zeros_like(S)
+    ok = np.zeros(S.shape, bool)
+    for c, j in enumerate(js):
+        sl = slices[j]
+        sd, i = polyline_distance(sl, q, signed=True)
+        # far from the waterline the raster mask's side is the robust one; near it
+        # (within a node and a half) the exact side of the nearest segment
+        in_mask = k <= j  # every node here came out at k
+        far_node = np.abs(sd) > 1.5 * hmax
+        side = np.where(far_node | rim, in_mask, sd >= 0)
+        # the distance that places the node is the one to the level curve: a wall
+        # beside the node says nothing about where the top crosses the level
+        cv = sl.level_curve()
+        if cv.empty:
+            continue
+        d, ic = polyline_distance(cv, q)
+        S[:, c] = np.where(side, d, -d)
+        Z[:, c] = cv.z[ic]
+        ok[:, c] = True
+    below = ok & (S >= 0)
+    n_ok = ok.sum(axis=1)
+    if k == top:
+        good = n_ok >= 2
+    else:
+        # bracketed: drop the extra uphill level; else extrapolate from >= 2 uphill ones
+        two_sided = below.any(axis=1)
+        extra = k - (order - lo_span) - 1
+        if extra in js:
+            ok[two_sided, js.index(extra)] = False
+        n_ok = ok.sum(axis=1)
+        # one-sided: trust it only as far out as the uphill waterlines are apart
+        far = np.zeros(len(q), bool)
+        up = ok & (S < 0)
+        if (~two_sided).any():
+            Sn = np.where(up, -S, np.inf)
+            srt = np.sort(Sn, axis=1)
+            if srt.shape[1] > 1:
+                with np.errstate(invalid="ignore"):
+                    far = ~two_sided & ~(srt[:, 0] <= (srt[:, 1] - srt[:, 0]))
+        good = (n_ok >= 2) & ~far
+    # the node came out between the two bracketing levels (told by the exact signs,
+    # the raster mask can be a node off): the answer must lie between them
+    levels = np.array([slices[j].level for j in js])
+    inside = S >= 0
+    c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
+    zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
+    zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
+    rise = np.where(ok, Z - levels, 0.0)  # meniscus-corrected heights widen it
+    zmin = zmin + np.minimum(rise.min(axis=1), 0)
+    zmax = zmax + np.maximum(rise.max(axis=1), 0)
+    raw = _lagrange_at_zero(S, Z, ok)
+    zz = np.clip(raw, zmin, zmax)
+    # a polynomial that leaves its bracket is not to be trusted: let the fit decide
+    zz[np.abs(raw - zz) > 0.25 * (zmax - zmin)] = np.nan
+    zz[~good] = np.nan
+    # nor one that lands far outside the levels it was made from (near-equal distances
+    # to two waterlines blow the Lagrange weights up)
+    spread = levels.max() - levels.min()
+    zz[~np.isfinite(raw) | (raw < levels.min() - spread) | (raw > levels.max() + spread)] = np.nan
+    return zz

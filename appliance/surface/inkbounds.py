@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..forks import in_parts
 from .lattice import Lattice, exposed_mask
 from .slices import Slice, polyline_distance
 
@@ -48,13 +49,24 @@ def node_bounds(
     X, Y = np.meshgrid(lat.x, lat.y)
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
     levels = np.array([s.level for s in corrected])
-    first_seen, ceiling = _ceiling(lat, seen, corrected, levels, q, idx)
-    floor = _floor(lat, corrected, levels, q, idx) - sink
+
+    def bounds(a, b):  # of nodes a..b: each node's sweep down the frames is its own
+        first_seen, ceiling = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
+        return first_seen, ceiling, _floor(lat, corrected, levels, q[a:b], idx[a:b])
+
+    # in halves of the nodes on the cores where forking is allowed (0.55 s of the demo
+    # scan's 2.3 s fit in one)
+    first_seen, ceiling, floor = in_parts(bounds, np.ones(len(q)), _joined_columns)
+    floor = floor - sink
     out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf)]
     out[0].ravel()[idx] = first_seen < first.ravel()[idx]
     out[1].ravel()[idx] = floor
     out[2].ravel()[idx] = ceiling + rise_max
     return _without_clashes(NodeBounds(*out))
+
+
+def _joined_columns(parts):
+    return [np.concatenate(column) for column in zip(*parts)]
 
 
 def _without_clashes(b: NodeBounds) -> NodeBounds:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..forks import in_parts, joined
 from .slices import Slice, polyline_distance
 
 
@@ -53,43 +54,52 @@ def mark_walls(
     (before the displacement is known: 1 to 2.5, the ink dropping further as
     the part comes out): the neighbour is looked for along that stretch of ray.
     """
-    total = 0
     top = next((s.level for s in slices if not s.empty), 0.0)
-    for k, s in enumerate(slices):
-        if s.empty:
-            continue
-        static = np.zeros(len(s.P), bool)  # a wall facing the camera shows its foot: no move
-        raised = np.zeros(len(s.P), bool)
-        for j in (k - 1, k + 1):
-            if not (0 <= j < len(slices)) or slices[j].empty:
-                continue
-            static |= polyline_distance(slices[j], s.P)[0] < wall_tol_mm
-            if camera is not None:
-                dl = s.level - slices[j].level  # > 0: the neighbour is lower
-                # the edge's height above the ink is unknown (0 .. top - level): take the
-                # middle and widen the tolerance by what the rest of the range moves it
-                h_max = max(top - s.level, 0.0) + abs(dl)
-                raised |= _ray_match(
-                    camera,
-                    s.P,
-                    slices[j],
-                    dl,
-                    0.5 * h_max,
-                    step_range[1] * 0.5 * h_max,
-                    wall_tol_mm,
-                    step_range,
-                )[1]
-        s.wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
-        # a raised edge moves as the perspective says (near the camera's foot it also
-        # looks static: the move is then too small to matter)
-        s.edge = (
-            s.wall & _close_gaps(s, raised, WALL_GAP_POINTS)
-            if camera is not None
-            else np.zeros(len(s.P), bool)
-        )
-        s.walls_changed()
-        total += int(s.wall.sum())
+
+    def marks(a, b):
+        return [_wall_marks(slices, k, top, wall_tol_mm, camera, step_range) for k in range(a, b)]
+
+    # each frame against its neighbours as seen, none needing another's marks: on the cores
+    total = 0
+    for s, m in zip(slices, in_parts(marks, [len(s.P) + 20 for s in slices], joined)):
+        if m is not None:
+            s.wall, s.edge = m
+            s.walls_changed()
+            total += int(s.wall.sum())
     return total
+
+
+def _wall_marks(slices, k, top, wall_tol_mm, camera, step_range):
+    """(wall, raised edge) per point of frame k (mark_walls), None for an empty frame."""
+    s = slices[k]
+    if s.empty:
+        return None
+    static = np.zeros(len(s.P), bool)  # a wall facing the camera shows its foot: no move
+    raised = np.zeros(len(s.P), bool)
+    for j in (k - 1, k + 1):
+        if not (0 <= j < len(slices)) or slices[j].empty:
+            continue
+        static |= polyline_distance(slices[j], s.P)[0] < wall_tol_mm
+        if camera is not None:
+            dl = s.level - slices[j].level  # > 0: the neighbour is lower
+            # the edge's height above the ink is unknown (0 .. top - level): take the
+            # middle and widen the tolerance by what the rest of the range moves it
+            h_max = max(top - s.level, 0.0) + abs(dl)
+            raised |= _ray_match(
+                camera,
+                s.P,
+                slices[j],
+                dl,
+                0.5 * h_max,
+                step_range[1] * 0.5 * h_max,
+                wall_tol_mm,
+                step_range,
+            )[1]
+    wall = _close_gaps(s, raised | static, WALL_GAP_POINTS)
+    # a raised edge moves as the perspective says (near the camera's foot it also
+    # looks static: the move is then too small to matter)
+    edge = wall & _close_gaps(s, raised, WALL_GAP_POINTS) if camera is not None else np.zeros(len(s.P), bool)
+    return wall, edge
 
 
 EDGE_HISTORY = 2  # a wall point may continue an edge seen this many level steps up
