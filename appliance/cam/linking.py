@@ -19,15 +19,24 @@ from .polyline import refine, refine_tolerance
 def links(sampler, cutter, st, runs, passes):
     """Surface-following moves between consecutive runs that are neighbours, else None.
 
+    A link needs only the ends of the two runs it joins, so the links are made in parts on
+    the cores where forking is allowed (the daemon's sphere: 0.5 s in one, after the
+    passes' refinement, which it waited for)."""
+    limit = min(2.0 * (np.max(np.diff(passes)) if passes.size > 1 else st.cutter.radius), st.cutter.diameter)
+    ends = [(runs[i][-1], runs[i + 1][0]) for i in range(len(runs) - 1)]
+    return in_parts(lambda a, b: _links(sampler, cutter, st, ends[a:b], limit), np.ones(len(ends)), joined)
+
+
+def _links(sampler, cutter, st, ends, limit):
+    """The links of (end, start) pairs: each None where it is not made.
+
     Links in the same direction are dropped together (one drop_lines call), so
     the ~200 links of a program cost about as much as one pass.
     """
     d = st.resolution
-    limit = min(2.0 * (np.max(np.diff(passes)) if passes.size > 1 else st.cutter.radius), st.cutter.diameter)
-    out = [None] * max(len(runs) - 1, 0)
+    out = [None] * len(ends)
     groups = {}
-    for i in range(len(runs) - 1):
-        p, q = runs[i][-1], runs[i + 1][0]
+    for i, (p, q) in enumerate(ends):
         gap = float(np.hypot(*(q[:2] - p[:2])))
         if gap > limit + 1e-9:
             continue
@@ -55,14 +64,9 @@ def links(sampler, cutter, st, runs, passes):
             out[i] = np.column_stack([xy, z[row, : k - 1]])
     # a link runs across the passes, where the tip height may be concave: refine it
     # together with its end points, then keep only its inner points
-    todo = [i for i, l in enumerate(out) if l is not None]
-    full = [np.vstack([runs[i][-1:], out[i], runs[i + 1][:1]]) for i in todo]
-    # on the cores (the daemon's sphere: links rolling over its wall, 1 s alone)
-    full = in_parts(
-        lambda a, b: refine(sampler, cutter, full[a:b], refine_tolerance(st.chord), st.leave, d),
-        [len(f) for f in full],
-        joined,
-    )
+    todo = [i for i, link in enumerate(out) if link is not None]
+    full = [np.vstack([ends[i][0][None, :], out[i], ends[i][1][None, :]]) for i in todo]
+    full = refine(sampler, cutter, full, refine_tolerance(st.chord), st.leave, d)
     for i, f in zip(todo, full):
         out[i] = f[1:-1]
     return out
