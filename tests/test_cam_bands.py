@@ -184,3 +184,24 @@ def test_in_parts_splits_the_items_by_weight_one_part_a_worker_and_joins_them_in
     assert forks.in_parts(work, [], lambda parts: parts) == [[]]  # nothing to split: one call
     monkeypatch.setattr(forks, "workers", lambda: 1)
     assert {x[3] for x in forks.in_parts(work, weights, lambda parts: parts[0])} == {os.getpid()}
+
+
+def test_a_finish_in_parts_on_two_cores_is_the_finish_in_one(monkeypatch):
+    """With the stepover given (no planner), every other piece of a finish runs in parts
+    where forking is allowed: the mid-point drops, the pass ends' fine lines, the
+    refinement and the links. Its moves come out the same, but for the last digits of a
+    float32: a drop reads its slab in float32 relative to the highest height of the lines
+    dropped with it, and in parts a line is dropped with others (1e-6 mm here)."""
+    from appliance.cam.zigzag import finishing
+
+    hm = grid_map(_dome, 0, 50, 0, 50, 1.0)
+    st = FinishSettings(parse_cutter("ball6"), scallop=0.05, stepover=1.5)
+    finishes = []
+    for n in (1, 2):
+        monkeypatch.setattr(forks, "workers", lambda n=n: n)
+        finishes.append(finishing(Sampler(hm, edge_step=st.resolution / 2), st))
+    one, two = finishes
+    assert len(one.passes) > 30 and len(one.runs) < len(one.passes)  # passes joined by links
+    assert len(one.runs) == len(two.runs) and one.linked == two.linked
+    assert all(a.shape == b.shape for a, b in zip(one.runs, two.runs))
+    assert max(float(np.max(np.abs(a - b))) for a, b in zip(one.runs, two.runs)) < 1e-5
