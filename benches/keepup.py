@@ -111,6 +111,16 @@ last frame (toolpath 9.55 | 10.44, 8.68 | 9.54, 10.13 | 8.50 s), own pages 262-2
 MB. The bench's spread (11.3-13.7 s on the same code) hides the change here; the same
 processing of this bench's scan in-process, 5 pairs in turn: 12.99 | 11.57 s wall (ratio
 0.92), 20.1 | 17.6 s CPU (0.91). Time still MISS (by 1.5-3 s); memory PASS.
+
+Session 21 (2026-12-04, quiet box). The weighing was found to take ~3 s of CPU from the
+~10 s of processing it watched (the tree's own pages counted at every new high of the
+resident sizes: ~12 ms a process each time, 20 times a second while the planner grows). This
+bench, main 39910e4, one scan of each kind: 9.2 s after the last frame timed, 10.3 s weighed
+(the weighing 3.2 s of CPU). Then the fit's sweeps over frames and nodes in forked parts and
+the links in parts (the same height map to the bit, the demo's program the same): main |
+after, 3 timed scans each: 8.78, 9.02, 8.74 | 8.15, 8.13 s (a first one at 12.89 while other
+work ran on the box), fit 2.22 | 1.74 s, toolpath 6.32 | 6.18 s; weighed 10.1 | 9.7 s; own
+pages 259 | 258 MB. Time PASS (8.1 s against 10), memory PASS (258 MB against 300).
 """
 
 from __future__ import annotations
