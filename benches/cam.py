@@ -172,6 +172,12 @@ and sample4 ball1's rim row went to 0.0113 (MISS) as its passes moved. `--only a
 and `--only rim`: every row as session 19's (the first step on the samples' outlines is
 unchanged). `benches/steep.py --only walls`: the same programs (33573 and 10310 lines).
 
+Session 21 (2026-12-04): the links made in parts on the two cores (linking.py; the demo map's
+program byte-identical). `--only finishing --old-ref none`: 0.05: 4.4 s / 140 MB, 124 passes
+(two cores 2.6 s wall); 0.01: 11.7 s / 207 MB, 276 passes (7.5 s wall): OK, OK. `--only rim`
+and `--only acceptance`: 12 of 12 OK each, every row as session 19's. `benches/steep.py
+--only walls`: the same programs (33573 and 10310 lines), the same figures.
+
 OpenCAMLib is a reference only, never a runtime dependency:
     .venv/bin/pip install opencamlib      (or: pip install -e '.[bench]'; Python 3.11 wheels)
 
