@@ -23,6 +23,7 @@ import numpy as np
 from .errors import InkSliceError
 from .progress import TICKER
 
+ITEM_POINTS = 20  # an item's fixed cost (its calls, its tree), in the points its weight counts
 MAX_WORKERS = 2  # each worker holds its own envelopes (~30 MB on the demo's part): 1 GB boxes
 
 _allowed = 1

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..forks import in_parts, joined
+from ..forks import ITEM_POINTS, in_parts, joined
 from .lattice import Lattice, exposed_mask
 from .slices import Slice, polyline_distance
 
@@ -119,7 +119,7 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
 
     # each level's nodes need nothing of the others': on the cores where forking is allowed
     counts = [int((first == k).sum()) for k in ks]
-    for k, zz in zip(ks, in_parts(heights, np.add(counts, 20), joined)):
+    for k, zz in zip(ks, in_parts(heights, np.add(counts, ITEM_POINTS), joined)):
         z[first == k] = zz
     return z, first, footprint
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..forks import in_parts, joined
+from ..forks import ITEM_POINTS, in_parts, joined
 from .slices import Slice, polyline_distance
 
 
@@ -61,7 +61,7 @@ def mark_walls(
 
     # each frame against its neighbours as seen, none needing another's marks: on the cores
     total = 0
-    for s, m in zip(slices, in_parts(marks, [len(s.P) + 20 for s in slices], joined)):
+    for s, m in zip(slices, in_parts(marks, [len(s.P) + ITEM_POINTS for s in slices], joined)):
         if m is not None:
             s.wall, s.edge = m
             s.walls_changed()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..forks import in_parts, joined
+from ..forks import ITEM_POINTS, in_parts, joined
 from .lattice import Lattice, exposed_mask
 from .perspective import Perspective
 from .slices import Slice, polyline_distance
@@ -60,7 +60,7 @@ def silhouettes(
         return out
 
     # each frame against the frames above it, none needing another's: on the cores
-    out = in_parts(seen_hidden, [len(s.P) + 20 for s in slices], joined)
+    out = in_parts(seen_hidden, [len(s.P) + ITEM_POINTS for s in slices], joined)
     # The first frames under a rim have no frame above that shows the face (it came out
     # less than a step higher): their silhouette is the one the frames below continue
     # along the same rays. Going up, a point where a hidden point's ray meets the frame
@@ -125,7 +125,7 @@ def rim_brackets(
         return out
 
     # each frame's rays read up the frames above it, none needing another's: on the cores
-    return in_parts(brackets, [int(np.count_nonzero(h)) + 20 for h in hidden], joined)
+    return in_parts(brackets, [int(np.count_nonzero(h)) + ITEM_POINTS for h in hidden], joined)
 
 
 def _in_runs(s: Slice, flag, n):
