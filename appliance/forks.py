@@ -75,6 +75,12 @@ def joined(parts: list) -> list:
     return [item for part in parts for item in part]
 
 
+def each_in_parts(item, weights) -> list:
+    """[item(i) for each i of range(len(weights))], the items in parts of about equal weight
+    (in_parts): for items that need nothing of each other's results."""
+    return in_parts(lambda a, b: [item(i) for i in range(a, b)], weights, joined)
+
+
 def in_workers(tasks: list) -> list:
     """Each task's result, the first run here and the others in forked children."""
     children, parent = [], os.getpid()

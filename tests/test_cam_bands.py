@@ -186,6 +186,14 @@ def test_in_parts_splits_the_items_by_weight_one_part_a_worker_and_joins_them_in
     assert {x[3] for x in forks.in_parts(work, weights, lambda parts: parts[0])} == {os.getpid()}
 
 
+def test_each_in_parts_gives_each_item_its_own_result_in_order(monkeypatch):
+    monkeypatch.setattr(forks, "workers", lambda: 2)
+    out = forks.each_in_parts(lambda i: (i * i, os.getpid()), [1.0, 1.0, 1.0, 1.0])
+    assert [v for v, _ in out] == [0, 1, 4, 9]
+    assert out[0][1] == os.getpid() != out[-1][1]  # the later items ran in a forked worker
+    assert forks.each_in_parts(lambda i: i, []) == []
+
+
 def test_a_finish_in_parts_on_two_cores_is_the_finish_in_one(monkeypatch):
     """With the stepover given (no planner), every other piece of a finish runs in parts
     where forking is allowed: the mid-point drops, the pass ends' fine lines, the

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..forks import ITEM_POINTS, in_parts, joined
+from ..forks import ITEM_POINTS, each_in_parts
 from .lattice import Lattice, exposed_mask
 from .slices import Slice, polyline_distance
 
@@ -107,19 +107,16 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         near = ndimage.minimum_filter(inner, size=3, mode="nearest")[on_outline]
         first[on_outline] = np.where(fr > near + 1, _passed_near(slices, oq, near, fr, 2 * tol), fr)
     hmax = max(lat.hx, lat.hy)
-    ks = [k for k in range(top, K) if (first == k).any()]
+    counts = np.bincount(first.ravel(), minlength=K + 1)
+    ks = [k for k in range(top, K) if counts[k]]
 
-    def heights(a, b):  # of the nodes that came out at levels ks[a:b]
-        out = []
-        for k in ks[a:b]:
-            sel = first == k
-            q = np.column_stack([X[sel], Y[sel]])
-            out.append(_came_out_at(slices, k, top, q, on_outline[sel], hmax, order))
-        return out
+    def heights(i):  # of the nodes that came out at level ks[i]
+        sel = first == ks[i]
+        q = np.column_stack([X[sel], Y[sel]])
+        return _came_out_at(slices, ks[i], top, q, on_outline[sel], hmax, order)
 
     # each level's nodes need nothing of the others': on the cores where forking is allowed
-    counts = [int((first == k).sum()) for k in ks]
-    for k, zz in zip(ks, in_parts(heights, np.add(counts, ITEM_POINTS), joined)):
+    for k, zz in zip(ks, each_in_parts(heights, counts[ks] + ITEM_POINTS)):
         z[first == k] = zz
     return z, first, footprint
 

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import SettingError
-from ..forks import in_parts, joined
+from ..forks import each_in_parts
 from .contact_lines import contact_points, top_from_apparent
 from .dewetted import bracket_dewetted_faces, dewetted_nodes, pinned_rims_as_walls, place_dewetted_faces
 from .exposure import first_exposure
@@ -92,16 +92,13 @@ def _cross_validate(problem, z_fe, pts, zp, point_weight, seed=0):
     train.ravel()[held] = np.nan
     lengths = min(problem.lat.hx, problem.lat.hy) * np.array([0.5, 1, 2, 4])
 
-    def scores(a, b):
-        out = []
-        for length in lengths[a:b]:
-            z = _fit_nodes(problem, train, pts, zp, length, point_weight)
-            r = z.ravel()[held] - z_fe.ravel()[held]
-            out.append((float(length), float(np.sqrt(np.mean(r**2)))))
-        return out
+    def score(i):
+        z = _fit_nodes(problem, train, pts, zp, lengths[i], point_weight)
+        r = z.ravel()[held] - z_fe.ravel()[held]
+        return float(lengths[i]), float(np.sqrt(np.mean(r**2)))
 
     # four fits that need nothing of each other: on the cores where forking is allowed
-    curve = in_parts(scores, np.ones(lengths.size), joined)
+    curve = each_in_parts(score, np.ones(lengths.size))
     best = min(curve, key=lambda c: c[1])[0]
     return best, curve
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..forks import ITEM_POINTS, in_parts, joined
+from ..forks import ITEM_POINTS, each_in_parts
 from .slices import Slice, polyline_distance
 
 
@@ -55,13 +55,13 @@ def mark_walls(
     the part comes out): the neighbour is looked for along that stretch of ray.
     """
     top = next((s.level for s in slices if not s.empty), 0.0)
-
-    def marks(a, b):
-        return [_wall_marks(slices, k, top, wall_tol_mm, camera, step_range) for k in range(a, b)]
-
     # each frame against its neighbours as seen, none needing another's marks: on the cores
+    marks = each_in_parts(
+        lambda k: _wall_marks(slices, k, top, wall_tol_mm, camera, step_range),
+        [len(s.P) + ITEM_POINTS for s in slices],
+    )
     total = 0
-    for s, m in zip(slices, in_parts(marks, [len(s.P) + ITEM_POINTS for s in slices], joined)):
+    for s, m in zip(slices, marks):
         if m is not None:
             s.wall, s.edge = m
             s.walls_changed()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..forks import ITEM_POINTS, in_parts, joined
+from ..forks import ITEM_POINTS, each_in_parts
 from .lattice import Lattice, exposed_mask
 from .perspective import Perspective
 from .slices import Slice, polyline_distance
@@ -45,22 +45,19 @@ def silhouettes(
     C = np.asarray(camera.xy, float)
     H = camera.height_mm
 
-    def seen_hidden(a, b):
-        out = []
-        for k in range(a, b):
-            s = slices[k]
-            hidden = np.zeros(len(s.P), bool)
-            above = [j for j in range(k - 1, -1, -1) if not slices[j].empty][:frames]
-            for j in above:
-                if not hidden.all() and not s.empty:
-                    Q = s.P + (C - s.P) * ((slices[j].level - s.level) / H)
-                    sd, _ = polyline_distance(slices[j], Q, signed=True)
-                    hidden |= sd >= -tol_mm
-            out.append(hidden)
-        return out
+    def seen_hidden(k):
+        s = slices[k]
+        hidden = np.zeros(len(s.P), bool)
+        above = [j for j in range(k - 1, -1, -1) if not slices[j].empty][:frames]
+        for j in above:
+            if not hidden.all() and not s.empty:
+                Q = s.P + (C - s.P) * ((slices[j].level - s.level) / H)
+                sd, _ = polyline_distance(slices[j], Q, signed=True)
+                hidden |= sd >= -tol_mm
+        return hidden
 
     # each frame against the frames above it, none needing another's: on the cores
-    out = in_parts(seen_hidden, [len(s.P) + ITEM_POINTS for s in slices], joined)
+    out = each_in_parts(seen_hidden, [len(s.P) + ITEM_POINTS for s in slices])
     # The first frames under a rim have no frame above that shows the face (it came out
     # less than a step higher): their silhouette is the one the frames below continue
     # along the same rays. Going up, a point where a hidden point's ray meets the frame
@@ -97,35 +94,31 @@ def rim_brackets(
     C = np.asarray(camera.xy, float)
     H = camera.height_mm
 
-    def brackets(a, b):
-        out = []
-        for k in range(a, b):
-            s = slices[k]
-            span = np.full((len(s.P), 2), np.nan)
-            h = np.flatnonzero(hidden[k]) if not s.empty else np.zeros(0, int)
-            if h.size == 0:
-                out.append(span)
-                continue
-            above = [j for j in range(k - 1, -1, -1)]
-            span[h, 0] = s.level
-            span[h, 1] = slices[above[0]].level if above else np.inf
-            going, misses = h, np.zeros(h.size, int)
-            for n, j in enumerate(above):
-                if going.size == 0 or slices[j].empty:
-                    break
-                Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / H)
-                sd, _ = polyline_distance(slices[j], Q, signed=True)
-                on = sd >= -tol_mm
-                span[going[on], 0] = slices[j].level
-                span[going[on], 1] = slices[above[n + 1]].level if n + 1 < len(above) else np.inf
-                misses = np.where(on, 0, misses + 1)
-                keep = misses < RIM_MISSES
-                going, misses = going[keep], misses[keep]
-            out.append(span)
-        return out
+    def bracket(k):
+        s = slices[k]
+        span = np.full((len(s.P), 2), np.nan)
+        h = np.flatnonzero(hidden[k]) if not s.empty else np.zeros(0, int)
+        if h.size == 0:
+            return span
+        above = list(range(k - 1, -1, -1))
+        span[h, 0] = s.level
+        span[h, 1] = slices[above[0]].level if above else np.inf
+        going, misses = h, np.zeros(h.size, int)
+        for n, j in enumerate(above):
+            if going.size == 0 or slices[j].empty:
+                break
+            Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / H)
+            sd, _ = polyline_distance(slices[j], Q, signed=True)
+            on = sd >= -tol_mm
+            span[going[on], 0] = slices[j].level
+            span[going[on], 1] = slices[above[n + 1]].level if n + 1 < len(above) else np.inf
+            misses = np.where(on, 0, misses + 1)
+            keep = misses < RIM_MISSES
+            going, misses = going[keep], misses[keep]
+        return span
 
     # each frame's rays read up the frames above it, none needing another's: on the cores
-    return in_parts(brackets, [int(np.count_nonzero(h)) + ITEM_POINTS for h in hidden], joined)
+    return each_in_parts(bracket, [int(np.count_nonzero(h)) + ITEM_POINTS for h in hidden])
 
 
 def _in_runs(s: Slice, flag, n):
