@@ -361,3 +361,28 @@ def test_stl_is_watertight_and_encloses_the_volume(dome_lines):
     dx, dy = hm.spacing
     assert vol > 0
     assert abs(vol - np.nansum(hm.z) * dx * dy) / vol < 0.1
+
+
+def test_the_fit_past_the_direct_solve_s_size_starts_from_the_gap_fill_and_agrees(monkeypatch):
+    """Above DIRECT_MAX unknowns the fit is solved by CG from the gap-filled data (only then
+    is the gap fill computed): it must land where the direct solve does."""
+    from appliance.surface import gridfit
+    from appliance.surface.lattice import Lattice
+
+    lat = Lattice(np.linspace(0, 20, 41), np.linspace(0, 20, 41))
+    X, Y = np.meshgrid(lat.x, lat.y)
+    footprint = (X - 10) ** 2 + (Y - 10) ** 2 < 81
+    z = np.where(footprint, 5 - ((X - 10) ** 2 + (Y - 10) ** 2) / 30, np.nan)
+    z[::3, ::2] = np.nan  # gaps the start fills
+    problem = gridfit.FitProblem(lat, footprint)
+    blocks = [problem.node_rows(z, 1.0)]
+    direct = problem.solve(blocks, 0.01, start=z)
+    calls = []
+    real_fill = gridfit.FitProblem.gap_fill
+    monkeypatch.setattr(gridfit.FitProblem, "gap_fill", lambda self, s: calls.append(1) or real_fill(self, s))
+    assert np.allclose(problem.solve(blocks, 0.01, start=z), direct, equal_nan=True)
+    assert not calls  # the direct solve needs no start
+    monkeypatch.setattr(gridfit, "DIRECT_MAX", 0)
+    by_cg = problem.solve(blocks, 0.01, start=z, maxiter=2000)
+    assert calls == [1]
+    assert np.nanmax(np.abs(by_cg - direct)) < 1e-4
