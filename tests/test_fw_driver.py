@@ -146,6 +146,23 @@ def test_a_damaged_reply_makes_the_driver_resend_the_same_line():
         fake.close()
 
 
+def test_a_damaged_reply_is_resent_at_once_not_waited_out_as_silence():
+    """Noise, not slowness: the link answered within milliseconds, the answer was hit. Waiting
+    out each damaged reply (and growing the wait as for a slow link) cost a soak run's status
+    polls most of their budget."""
+    fake = FakeController(firmware(damage_first=3))
+    try:
+        t = time.monotonic()
+        stage = SerialStage(fake.port, reply_timeout=0.5)
+        took = time.monotonic() - t
+        assert stage.counters["damaged_lines"] == 3 and stage.counters["resends"] == 3
+        assert took < 0.5  # waited out, the three would have taken 0.5 + 0.75 + 1.1 s
+        assert stage.rtt.wait() == stage.reply_timeout  # and the wait did not grow
+        stage.close()
+    finally:
+        fake.close()
+
+
 def test_on_a_link_that_slows_down_the_driver_waits_as_long_as_the_measured_round_trip_needs():
     """The replies slow from 10 ms to 1.5 s, past the driver's 1 s timeout (a loaded host, a
     congested hub). A fixed wait would give up; this one has measured the round trips on the way

@@ -7,7 +7,10 @@ each re-home -- and no driver command takes longer than its budget.
 
 Under load (issue 19: 5 runs in a row beside 2 busy processes) the simulated
 MCU runs slower and its replies come late: the driver's budget follows the
-measured round trip instead of a fixed 3 s (hw/stage.py). The figures printed
+measured round trip instead of a fixed 3 s (hw/stage.py). A damaged reply is
+resent at once: waiting it out as silence made the waits grow until a status
+poll had four tries in its budget (2 of 4 CI runs failed on it)
+(1000 moves then took ~80 s; now ~12 s). The figures printed
 are the run's time, the worst round trip and the largest budget given."""
 
 import random
@@ -69,6 +72,7 @@ def test_1000_moves_through_a_noisy_line_and_3_resets_each_execute_exactly_once(
     assert c["rehomes"] >= RESETS  # every reset was noticed and recovered from
     assert c["idle_off_target"] == 0  # no acknowledged move was ever found not done
     assert c["over_budget"] == 0  # no command outlived its budget,
+    assert c["longest_command_s"] < stage.timeout / 3  # noise costs tries, not waits: none came near it,
     assert c["longest_budget_s"] <= max(stage.timeout, ATTEMPTS * MAX_WAIT_S)  # and that stays bounded
     assert s["stalls"] == 0
     assert s["rx_overruns"] == 0  # a real 2-byte receive FIFO would have kept up

@@ -20,7 +20,11 @@ The rules it follows (appliance/firmware/stepper/PROTOCOL.md has the whole contr
 * The waits follow the line, not a fixed clock.  Every reply that answers a
   single send is a round-trip sample; the wait for one reply is the smoothed
   round trip plus four deviations (as TCP does), never below `reply_timeout`,
-  and half as long again after each silent one.  A command may keep trying for
+  and half as long again after each silent one.  A damaged line is not
+  silence: the link answered, fast, and the answer was hit by noise, so the
+  line goes out again at once and the wait does not grow (on a noisy line,
+  counting damage as slowness stretched the waits until a command had only
+  four tries in its budget).  A command may keep trying for
   `timeout` or ATTEMPTS such waits, whichever is longer: on a slow link (a
   loaded host, a USB hub) commands get the time the link needs, while a dead
   line, which gives no samples, still fails after `timeout`.
@@ -41,6 +45,7 @@ from appliance.hw.base import Stage, StageStatus
 BAUD = 115200
 ATTEMPTS = 8  # a command's budget: at least this many waits at the measured pace
 MAX_WAIT_S = 2.0  # no single wait for a reply is longer, however slow the line looked
+DAMAGED = object()  # _readline's answer for a line that arrived whole but damaged
 
 
 class RoundTrip:
@@ -139,7 +144,8 @@ class SerialStage(Stage):
         return self._seq
 
     def _readline(self, deadline: float):
-        """One intact line before the deadline (None on timeout); damaged lines are counted and skipped."""
+        """One intact line before the deadline: None on timeout, DAMAGED (counted) for a line that
+        arrived whole but fails its checksum or its grammar."""
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
@@ -154,6 +160,7 @@ class SerialStage(Stage):
                 return P.parse_line(raw)
             except P.ProtocolError:
                 self.counters["damaged_lines"] += 1
+                return DAMAGED
 
     def budget(self) -> float:
         """How long one command may keep trying: `timeout`, or longer on a link measured slow."""
@@ -196,6 +203,8 @@ class SerialStage(Stage):
                     if item is None:
                         self.rtt.silence()  # silence: resend, waiting longer
                         break
+                    if item is DAMAGED:
+                        break  # perhaps our reply, hit by noise: resend now
                     if isinstance(item, P.Banner):
                         self._note_reset()
                         continue
@@ -245,6 +254,8 @@ class SerialStage(Stage):
                     if item is None:
                         self.rtt.silence()
                         break
+                    if item is DAMAGED:
+                        break  # a report hit by noise: ask again now
                     if isinstance(item, P.Banner):
                         self._note_reset()
                     elif isinstance(item, P.Status):
