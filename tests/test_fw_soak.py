@@ -19,7 +19,8 @@ import time
 
 import pytest
 
-from appliance.hw.stage import ATTEMPTS, MAX_WAIT_S, SerialStage
+from appliance.hw.roundtrip import MAX_WAIT_S
+from appliance.hw.stage import ATTEMPTS, SerialStage
 from appliance.sim.hil import SimulatedBench
 
 MOVES = 1000

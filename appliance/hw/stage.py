@@ -20,11 +20,9 @@ The rules it follows (appliance/firmware/stepper/PROTOCOL.md has the whole contr
 * The waits follow the line, not a fixed clock.  Every reply that answers a
   single send is a round-trip sample; the wait for one reply is the smoothed
   round trip plus four deviations (as TCP does), never below `reply_timeout`,
-  and half as long again after each silent one.  A damaged line is not
-  silence: the link answered, fast, and the answer was hit by noise, so the
-  line goes out again at once and the wait does not grow (on a noisy line,
-  counting damage as slowness stretched the waits until a command had only
-  four tries in its budget).  A command may keep trying for
+  and half as long again after each silent one.  A damaged reply is no
+  silence (the link answered, noise hit it): the line goes out again at once,
+  the wait unchanged.  A command may keep trying for
   `timeout` or ATTEMPTS such waits, whichever is longer: on a slow link (a
   loaded host, a USB hub) commands get the time the link needs, while a dead
   line, which gives no samples, still fails after `timeout`.
@@ -41,42 +39,12 @@ import serial
 from appliance.errors import DeviceError, SettingError
 from appliance.hw import protocol as P
 from appliance.hw.base import Stage, StageStatus
+from appliance.hw.roundtrip import RoundTrip
 
 BAUD = 115200
 ATTEMPTS = 8  # a command's budget: at least this many waits at the measured pace
-MAX_WAIT_S = 2.0  # no single wait for a reply is longer, however slow the line looked
 DAMAGED = object()  # _readline's answer for a line that arrived whole but damaged
-
-
-class RoundTrip:
-    """The line's reply time, measured (Jacobson/Karels smoothing, Karn's rule: only a
-    reply to a single send is a sample, a resent line's reply is ambiguous)."""
-
-    def __init__(self, floor: float):
-        self.floor = floor
-        self.srtt: float | None = None
-        self.var = 0.0
-        self.carry = floor  # grown by silence, kept until the next clean sample
-        self.worst = 0.0
-
-    def sample(self, rtt: float) -> None:
-        self.worst = max(self.worst, rtt)
-        if self.srtt is None:
-            self.srtt, self.var = rtt, rtt / 2
-        else:
-            self.var += (abs(self.srtt - rtt) - self.var) / 4
-            self.srtt += (rtt - self.srtt) / 8
-        self.carry = self.floor
-
-    def wait(self) -> float:
-        """How long to wait for one reply before sending again."""
-        base = self.floor if self.srtt is None else self.srtt + 4 * self.var
-        return min(MAX_WAIT_S, max(self.floor, base, self.carry))
-
-    def silence(self) -> None:
-        """A wait ended without a reply: the next ones wait half as long again (a slow link then
-        gets replies within the wait, hence samples; a lost byte costs one longer wait)."""
-        self.carry = min(MAX_WAIT_S, self.wait() * 1.5)
+RESEND = object()  # an answer that asks for the line again at once (the controller saw it damaged)
 
 
 class SerialStage(Stage):
@@ -144,8 +112,7 @@ class SerialStage(Stage):
         return self._seq
 
     def _readline(self, deadline: float):
-        """One intact line before the deadline: None on timeout, DAMAGED (counted) for a line that
-        arrived whole but fails its checksum or its grammar."""
+        """One intact line before the deadline: None on timeout, DAMAGED (counted) if it fails."""
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
@@ -181,49 +148,65 @@ class SerialStage(Stage):
         if self._ready:
             self.counters["resets_seen"] += 1
 
+    def _exchange(self, send, answers):
+        """send(tries) until answers(line) is true for an intact line (RESEND: send again now)
+        -> (that line, or None when the budget ran out; tries; budget)."""
+        start = time.monotonic()
+        budget = self.budget()
+        deadline = start + budget
+        tries = 0
+        while time.monotonic() < deadline:
+            tries += 1
+            send(tries)
+            sent = time.monotonic()
+            attempt_end = min(deadline, sent + self.rtt.wait())
+            while True:
+                item = self._readline(attempt_end)
+                if item is None:
+                    self.rtt.silence()  # silence: send again, waiting longer
+                    break
+                if item is DAMAGED:
+                    break  # perhaps the answer, hit by noise: send again now
+                if isinstance(item, P.Banner):
+                    self._note_reset()
+                    continue
+                verdict = answers(item)
+                if verdict is RESEND:
+                    break
+                if verdict:
+                    if tries == 1:  # Karn: only the answer to a single send is a sample
+                        self._note_round_trip(time.monotonic() - sent)
+                    self._note_took(start, budget)
+                    return item, tries, budget
+        return None, tries, budget
+
     def transact(self, verb: str, *args) -> P.Reply:
         """Send one command until a reply to it arrives; return the reply (ok or error)."""
         with self._lock:
             seq = self._next_seq()
             data = P.encode_command(seq, verb, *args)
             self.counters["commands"] += 1
-            start = time.monotonic()
-            budget = self.budget()
-            deadline = start + budget
-            tries = 0
-            while time.monotonic() < deadline:
-                if tries:
+
+            def send(tries):
+                if tries > 1:
                     self.counters["resends"] += 1
-                tries += 1
                 self._ser.write(data)
-                sent = time.monotonic()
-                attempt_end = min(deadline, sent + self.rtt.wait())
-                while True:
-                    item = self._readline(attempt_end)
-                    if item is None:
-                        self.rtt.silence()  # silence: resend, waiting longer
-                        break
-                    if item is DAMAGED:
-                        break  # perhaps our reply, hit by noise: resend now
-                    if isinstance(item, P.Banner):
-                        self._note_reset()
-                        continue
-                    if not isinstance(item, P.Reply):
-                        continue  # a stray status report
-                    if item.seq == seq:
-                        if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
-                            break  # our line arrived damaged: resend
-                        if tries == 1:
-                            self._note_round_trip(time.monotonic() - sent)
-                        self._note_took(start, budget)
-                        return item
-                    if item.seq == 0 and not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
-                        break  # a damaged line, perhaps ours: resend
-            raise DeviceError(
-                self._where(),
-                f"no valid reply to {verb} after {tries} tries in "
-                f"{budget:.1f} s: is the controller connected and powered?",
-            )
+
+            def answers(item):
+                if not isinstance(item, P.Reply) or item.seq not in (seq, 0):
+                    return False  # a stray status report or an older reply
+                if not item.ok and item.error == P.ERROR_NUMBER["bad_checksum"]:
+                    return RESEND  # a damaged line, perhaps ours
+                return item.seq == seq
+
+            reply, tries, budget = self._exchange(send, answers)
+            if reply is None:
+                raise DeviceError(
+                    self._where(),
+                    f"no valid reply to {verb} after {tries} tries in "
+                    f"{budget:.1f} s: is the controller connected and powered?",
+                )
+            return reply
 
     def command(self, verb: str, *args) -> str:
         """transact() and turn an error reply into a DeviceError naming the code."""
@@ -237,33 +220,17 @@ class SerialStage(Stage):
 
     def raw_status(self) -> P.Status:
         """A real-time status report ('?'), retried until one arrives intact."""
+
+        def send(tries):
+            self._ser.reset_input_buffer()  # drop stale reports
+            self._ser.write(P.RT_STATUS)
+            self.counters["status_polls"] += 1
+
         with self._lock:
-            start = time.monotonic()
-            budget = self.budget()
-            deadline = start + budget
-            polls = 0
-            while time.monotonic() < deadline:
-                self._ser.reset_input_buffer()  # drop stale reports
-                self._ser.write(P.RT_STATUS)
-                sent = time.monotonic()
-                polls += 1
-                self.counters["status_polls"] += 1
-                attempt_end = min(deadline, sent + self.rtt.wait())
-                while True:
-                    item = self._readline(attempt_end)
-                    if item is None:
-                        self.rtt.silence()
-                        break
-                    if item is DAMAGED:
-                        break  # a report hit by noise: ask again now
-                    if isinstance(item, P.Banner):
-                        self._note_reset()
-                    elif isinstance(item, P.Status):
-                        if polls == 1:
-                            self._note_round_trip(time.monotonic() - sent)
-                        self._note_took(start, budget)
-                        return item
+            report, _, budget = self._exchange(send, lambda item: isinstance(item, P.Status))
+        if report is None:
             raise DeviceError(self._where(), f"no status report in {budget:.1f} s")
+        return report
 
     # ---- the Stage interface ---------------------------------------------
     def identify(self) -> dict:
