@@ -252,6 +252,13 @@ that band and the outline near the level above (8.5-8.6 where the truth's appare
 7.6-7.9): the top comes out +1.06. The plateau's p99 is its shelf next to the shoulder's foot:
 nodes under 3 mm from the frame above's waterline get no face bracket (bracketing them too gave
 p99 0.158, but held-out steep-front 0.085 -> 0.150 and crater Ea 0.0356 -> 0.0393: not kept).
+(p) Session 22 (5 December 2026, main 5338250), fresh renders of the ring and the plateau,
+meniscus commissioned again (2.507 mm / 0.26 deg / 0.95): ring 0.0487 0.199 1.060, 100 % of 196
+cells over 0.1 mm marked (72.7 % of all); plateau 0.0372 0.201 0.295, 89 % of 107 (27.6 %). The
+same places as (o): the ring's three worst cells at r 43.3-44.9, 62-64 deg (+1.02..1.06), where
+the 7.31 mm frame's wet band meets the ink outside and its waterline dents in to r 43.24; the
+plateau's at its shelf, r 35-44 (+0.22..0.30). Leaving first exposure's heights held at their
+bracket's bound to the fit (0 or 0.1 of the bracket instead of 0.25): ring max 1.046 / 1.053.
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

@@ -273,6 +273,37 @@ CPU 34.7 -> 19.1 s (ratio 0.54), peak 205 -> 207 MiB. Figures: the same on sampl
 twin-peaks; the steep front 0.0362 -> 0.0372 (the tie had been lowering its apron's edge); the
 harsh plateau, ring and twin-peaks the same (that ink wets).
 
+Which nodes count as a face that came out at once (5 December 2026, session 22, main 5338250,
+the session-20 kept renders and meniscus file). Sample 4's corner face (x 45-49, y 45-49, truth
+22.32) comes out in the 22.99 frame, whose waterline runs 0.28-0.38 mm inside the outline there
+and 4.5-5.9 mm from the frame above's contact line. Main, Ea / interior p99 / max mm:
+    sample1 0.0100 0.137 0.553   sample2 0.0473 0.238 1.383   sample3 0.0375 0.260 0.536
+    sample4 0.0527 0.047 0.696   crater  0.0200 0.164 0.385   twin-peaks 0.0242 0.228 0.421
+    steep-front 0.0372 0.347 0.539   sphere 0.0252 0.168 0.701
+Tried, none kept (Ea unless said):
+ - a pinned rim's test "no contact line above within l_c" replaced by the run of a slope of the
+   contact angle over the step (step / tan theta, 1.43 mm): sample4 0.0509, sample3 0.0388 (worse);
+ - that, and the face's nodes taken by distance alone (no frame-k contact line within l_c), first
+   exposure's extrapolated height or not, for the placement, the bracket and the no-bend mask:
+   sample1 0.0100 (max 0.627), sample2 0.0328 (p99 0.078), sample3 0.0368 (p99 0.307), sample4
+   0.0501, crater 0.0195, twin-peaks 0.0202, steep-front 0.0351, sphere 0.0243. But the no-bend
+   mask then covers a gentle dome's top, whose contact lines do cross it, 5-10 mm apart: the
+   ideal second-ink dome (tests/test_surface_physics.py) comes out 0.022 mm off for 0.015. With
+   the mask kept to the old nodes plus the deep ones: dome passes, sample2 0.0451, sample4 0.0509;
+   for the placement and bracket alone: sample2 0.0481, sample3 0.0389, sample4 0.0503. The
+   sample-2 gain is the no-bend mask on near-flat faces that are not deep;
+ - the corner's waterline as a pinned rim (tolerance + f d / tan theta): f 0.25 0.146, f 1 0.276
+   (the apparent surface then drops 0.7 mm over the last 0.4 mm to the outline, and the solve
+   reads that slope as a rise: the top climbs to 24.4-24.75); the same with the pinned points
+   moved onto the outline, so the strip inside it comes out with the face: 0.079 / 0.331;
+ - first exposure's heights clamped at their bracket's bound left to the fit: tried on the
+   harsh ring's outer rim (benches/harsh.py), no better there (max 1.046-1.053 for 1.060).
+What would close it: telling a gentle slope's far-apart contact lines from a face that came out
+at once by something the frames show (a dewetted face's edge hugs the outline or a wall; a dome's
+lines are concentric), and the convex corner's shallower depression (the renderer's 1.15 mm
+against the straight 1.38), whose bend the renderer takes from the part's formula continued past
+the outline.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
