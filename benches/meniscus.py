@@ -290,8 +290,10 @@ Tried, none kept (Ea unless said):
    mask then covers a gentle dome's top, whose contact lines do cross it, 5-10 mm apart: the
    ideal second-ink dome (tests/test_surface_physics.py) comes out 0.022 mm off for 0.015. With
    the mask kept to the old nodes plus the deep ones: dome passes, sample2 0.0451, sample4 0.0509;
-   for the placement and bracket alone: sample2 0.0481, sample3 0.0389, sample4 0.0503. The
-   sample-2 gain is the no-bend mask on near-flat faces that are not deep;
+   for the placement and bracket alone: sample2 0.0481, sample3 0.0389, sample4 0.0503; by
+   distance alone but only where frame k's nearest waterline point lies within 0.5 mm of the
+   outline: sample2 0.0400, sample4 0.0518, the dome 0.018. The sample-2 gain is the no-bend
+   mask on near-flat faces that are not deep;
  - the corner's waterline as a pinned rim (tolerance + f d / tan theta): f 0.25 0.146, f 1 0.276
    (the apparent surface then drops 0.7 mm over the last 0.4 mm to the outline, and the solve
    reads that slope as a rise: the top climbs to 24.4-24.75); the same with the pinned points
