@@ -107,17 +107,19 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         near = ndimage.minimum_filter(inner, size=3, mode="nearest")[on_outline]
         first[on_outline] = np.where(fr > near + 1, _passed_near(slices, oq, near, fr, 2 * tol), fr)
     hmax = max(lat.hx, lat.hy)
+    # the nodes grouped by the level they came out at, once (stable: lattice order in each)
     counts = np.bincount(first.ravel(), minlength=K + 1)
+    by_level = np.split(np.argsort(first.ravel(), kind="stable"), np.cumsum(counts)[:-1])
     ks = [k for k in range(top, K) if counts[k]]
 
     def heights(i):  # of the nodes that came out at level ks[i]
-        sel = first == ks[i]
-        q = np.column_stack([X[sel], Y[sel]])
-        return _came_out_at(slices, ks[i], top, q, on_outline[sel], hmax, order)
+        idx = by_level[ks[i]]
+        q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
+        return _came_out_at(slices, ks[i], top, q, on_outline.ravel()[idx], hmax, order)
 
     # each level's nodes need nothing of the others': on the cores where forking is allowed
     for k, zz in zip(ks, each_in_parts(heights, counts[ks] + ITEM_POINTS)):
-        z[first == k] = zz
+        z.ravel()[by_level[k]] = zz
     return z, first, footprint
 
 
