@@ -8,9 +8,9 @@ each re-home -- and no driver command takes longer than its budget.
 Under load (issue 19: 5 runs in a row beside 2 busy processes) the simulated
 MCU runs slower and its replies come late: the driver's budget follows the
 measured round trip instead of a fixed 3 s (hw/stage.py). A damaged reply is
-resent at once: waiting it out as silence made the waits grow until a status
-poll had four tries in its budget (2 of 4 CI runs failed on it)
-(1000 moves then took ~80 s; now ~12 s). The figures printed
+resent at once: waited out as silence, it made the waits grow until a status
+poll had four tries in its budget, which failed 2 of 4 CI runs, and the 1000
+moves took ~80 s (now ~12 s). The figures printed
 are the run's time, the worst round trip and the largest budget given."""
 
 import random

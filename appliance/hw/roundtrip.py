@@ -11,8 +11,7 @@ MAX_WAIT_S = 2.0  # no single wait for a reply is longer, however slow the line 
 
 
 class RoundTrip:
-    """The line's reply time, measured (Jacobson/Karels smoothing, Karn's rule: only a
-    reply to a single send is a sample, a resent line's reply is ambiguous)."""
+    """The line's reply time, as measured so far (the rules: the module's docstring)."""
 
     def __init__(self, floor: float):
         self.floor = floor
