@@ -46,6 +46,7 @@ class Effects:
     ripple_mm: float = 0.0  # amplitude of the free surface's oscillation just after a move
     ripple_age_s: float = 0.0  # time since the move stopped (VirtualCamera sets it)
     ripple_decay_s: float = 0.6
+    trapped_ink: bool = False  # pockets in the part's top stay full once their rim is out (pockets.py)
     base_shows: bool = False  # the base top, once at or above the ink, is drawn (lit, like the part)
     base_half_mm: float = 60.0  # half the side of the square base, centred under the parts
     # A scan's worth of nuisances that move (the harsh bench). Off, glare and dust are drawn

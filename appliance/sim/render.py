@@ -33,6 +33,7 @@ from . import physics
 from . import surfaces as _surfaces
 from .effects import PRESETS, Effects, camera_effects, effects_preset, liquid_layer, wobbled
 from .partgrid import curvature_grid, lookup, surface_grid
+from .pockets import held_level, under_pool
 from .rig import PixelMap, Rig, pixel_map
 from .trace import trace, trace_image
 from .waterline import waterline_layer
@@ -238,12 +239,19 @@ def part_layer_roi(surface, level, rig: Rig, effects: Effects, pm: PixelMap = No
     else:
         lvl = np.full(x0.size, np.float32(level))
 
+    # ink a pocket holds stands above the tank's level there (pockets.py)
+    xw, yw = x0, y0
+    if effects.trapped_ink:
+        xw, yw, lvl = held_level(surface, x0, y0, kx, ky, level, lvl)
+
     # -- layer 1: the waterline (or, with a meniscus, the contact line) ----------------
-    wl = waterline_layer(surface, grid, effects, x0, y0, kx, ky, pix, lvl)
+    wl = waterline_layer(surface, grid, effects, xw, yw, kx, ky, pix, lvl)
     a_wl, lc, wtier, wwall, fgx, fgy, band = wl.alpha, wl.level, wl.tier, wl.wall, wl.fgx, wl.fgy, wl.band
 
     # -- layer 2: the part above the liquid, in perspective ------------------------------
     hit, zh, htier, hwall = trace_image(grid, x0, y0, kx, ky, level, pix, r1 - r0, c1 - c0)
+    if effects.trapped_ink and hit.any():
+        hit &= ~under_pool(surface, x0, y0, kx, ky, level, zh, hit)
     # how far (in the plane) the part the ray meets lies from where the ray crosses the
     # waterline's height: beyond two pixels the part hides what is behind it. With a
     # meniscus that height is the contact line's: part below it is under the ink.
