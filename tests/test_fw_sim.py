@@ -225,7 +225,9 @@ def test_driver_rehomes_after_an_mcu_reset_and_then_moves(bench):
         bench.reset_mcu()
         stage.move_to(7.0)
         assert bench.stage_position_mm() == pytest.approx(7.0, abs=1e-9)
-        assert stage.counters["rehomes"] == 1
+        # seen as a banner, a fresh_boot status and a refused MOVE: one reset
+        assert stage.counters["rehomes"] == 1 and stage.counters["resets_seen"] == 1
+        assert stage.counters["spurious_estops"] == 0
     finally:
         stage.close()
 
@@ -277,6 +279,24 @@ def test_driver_recovers_from_an_emergency_stop_byte_forged_by_line_noise(bench)
         t.join()
         assert bench.stage_position_mm() == pytest.approx(60.0, abs=1e-9)
         assert stage.counters["spurious_estops"] == 1 and stage.counters["rehomes"] == 1
+    finally:
+        noise.close()
+        stage.close()
+
+
+def test_a_forged_emergency_stop_between_moves_is_counted_as_one_not_as_a_reset(bench):
+    """The next MOVE is refused with not_homed; the state (estop, not fresh_boot) says why."""
+    stage = SerialStage(bench.port, timeout=10.0)
+    noise = RawLink(bench.port)
+    try:
+        stage.home()
+        stage.move_to(3.0)
+        noise.send_raw(P.RT_ESTOP)
+        time.sleep(0.05)
+        stage.move_to(6.0)
+        assert bench.stage_position_mm() == pytest.approx(6.0, abs=1e-9)
+        assert stage.counters["spurious_estops"] == 1 and stage.counters["resets_seen"] == 0
+        assert stage.counters["rehomes"] == 1
     finally:
         noise.close()
         stage.close()

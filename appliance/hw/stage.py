@@ -80,6 +80,9 @@ class SerialStage(Stage):
         self.rtt = RoundTrip(self.reply_timeout)
         self._stop_requested = False
         self._ready = False  # the boot banner seen while connecting is no reset
+        # one lost position is seen several ways (a banner, a fresh_boot status, a MOVE refused
+        # with not_homed): it is counted once, until a home finds the position again
+        self._loss_counted = False
         self._lock = threading.RLock()
         self._seq = int.from_bytes(os.urandom(2), "big") % 60000 + 1  # unlike a previous session's last seq
         self._target: int | None = None
@@ -145,8 +148,12 @@ class SerialStage(Stage):
             self.counters["over_budget"] += 1
 
     def _note_reset(self):
-        if self._ready:
-            self.counters["resets_seen"] += 1
+        self._note_loss("resets_seen")
+
+    def _note_loss(self, counter: str):
+        if self._ready and not self._loss_counted:
+            self.counters[counter] += 1
+            self._loss_counted = True
 
     def _exchange(self, send, answers):
         """send(tries) until answers(line) is true for an intact line (RESEND: send again now)
@@ -295,7 +302,7 @@ class SerialStage(Stage):
             st = self.raw_status()
             if self._lost(st):
                 if st.state == "estop":
-                    self.counters["spurious_estops"] += 1
+                    self._note_loss("spurious_estops")
                 return st
             if st.state in ("alarm", "estop"):
                 raise DeviceError(
@@ -341,6 +348,7 @@ class SerialStage(Stage):
                     self._note_reset()  # reset mid-homing: start over
                     continue
                 self._target = st.position
+                self._loss_counted = False
                 return
 
     def move_to(self, position_mm: float, timeout: float = 60.0) -> None:
@@ -369,6 +377,10 @@ class SerialStage(Stage):
                 r = self.transact("MOVE", target)
                 if not r.ok:
                     if r.error == P.ERROR_NUMBER["not_homed"]:
+                        # lost since the last status: a forged Ctrl-X leaves the state at
+                        # estop, a reset does not
+                        if not self._stop_requested and self.raw_status().state == "estop":
+                            self._note_loss("spurious_estops")
                         self._recover_or_raise("a move")
                         self.home(max(1.0, deadline - time.monotonic()))
                         continue
