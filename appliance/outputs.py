@@ -2,7 +2,7 @@
 
 heightmap.csv: x,y,z first (spreadsheets and other tools read those), then,
 for a map that knows them, `source` (how the cell was obtained: seen,
-interpolated, extrapolated, occluded, wall, clamped, filled) and
+interpolated, extrapolated, occluded, wall, clamped, filled, held) and
 `uncertainty_mm` (surface/uncertainty.py). Files with only x,y,z still load.
 
 All writes are atomic (see atomicio). Readers validate and raise

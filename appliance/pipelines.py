@@ -199,6 +199,8 @@ def run_inkslice(
                     "displacement",
                     "silhouette_points",
                     "occluded_nodes",
+                    "held_pools",
+                    "held_notes",
                 )
             },
         }

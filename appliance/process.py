@@ -107,7 +107,9 @@ def process(
         )
         job.heightmaps.update(hms)
         job.notes += [
-            f"{label('inkslice:' + m)}: {n}" for m in methods for n in job.diagnostics[m]["base_notes"]
+            f"{label('inkslice:' + m)}: {n}"
+            for m in methods
+            for n in job.diagnostics[m].get("held_notes", []) + job.diagnostics[m]["base_notes"]
         ]
         job.timings["inkslice_s"] = time.perf_counter() - t0
     if surface is not None:

@@ -47,6 +47,7 @@ from .inkbounds import node_bounds
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls
+from .pools import cover_held_pools, held_pools
 from .registration import registered
 from .silhouettes import occluded_nodes
 from .slices import check_waterlines, outline_bounds
@@ -288,7 +289,17 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         }
     )
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
-    return Reconstruction(HeightMap(xo, yo, zo, so, srco), length, diag)
+    hm = HeightMap(xo, yo, zo, so, srco)
+    # a pocket that held ink: its floor never showed (pools.py)
+    true = [t.level for t in slices] if len(slices) == len(seen) else [s.level for s in seen]
+    pools = held_pools([(level, s.loops) for s, level in zip(seen, true)], camera)
+    if pools:
+        hm, said = cover_held_pools(hm, pools, rise_max)
+        diag["held_notes"] = said
+        diag["held_pools"] = [
+            {"centre_mm": p.centre, "area_mm2": p.area_mm2, "bracket_mm": p.bracket} for p in pools
+        ]
+    return Reconstruction(hm, length, diag)
 
 
 def _occluded_cells(src, sig, occluded, slices):

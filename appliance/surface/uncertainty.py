@@ -57,8 +57,8 @@ from .lattice import Lattice, bilinear, fill_nearest
 from .slices import polyline_distance
 
 # the sources, in the order of their codes (HeightMap.source holds the codes)
-SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled")
-SEEN, INTERPOLATED, EXTRAPOLATED, OCCLUDED, WALL, CLAMPED, FILLED = range(len(SOURCES))
+SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled", "held")
+SEEN, INTERPOLATED, EXTRAPOLATED, OCCLUDED, WALL, CLAMPED, FILLED, HELD = range(len(SOURCES))
 NO_SOURCE = -1  # off the part, or a map that does not say
 
 DEFAULT_UNCERTAIN_MM = 0.1  # cells above this are low confidence (G-code header, report)
@@ -419,7 +419,9 @@ def header_notes(hm, threshold_mm=DEFAULT_UNCERTAIN_MM, most=8):
             f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
             "of the part"
         )
-    return lines
+    from .pools import held_notes
+
+    return lines + held_notes(hm)
 
 
 def source_summary(hm):

@@ -15,7 +15,10 @@ All are keywords of WaterlineExtractor(camera, **options):
   threshold_fraction: where the part/ink threshold sits between the ink and
     the part levels (default 0.3: near the flat ink, below shaded part faces);
   no_part: "raise" (default: NoPartError) or "empty" (an empty Waterline) for
-    a frame with no part above the liquid - a scan's top frames are like that.
+    a frame with no part above the liquid - a scan's top frames are like that;
+  raised_shores: the lower frames also confirm part as edges standing above the ink
+    would have shown in this frame (support.Raised; default False: a scan read again
+    when a pocket may have held ink, waterlines.py).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ DEFAULTS = dict(
     half_width=4,
     threshold_fraction=0.3,
     no_part="raise",
+    raised_shores=False,
 )
 
 

@@ -56,7 +56,7 @@ from .frames import (
 from .islands import Event, IslandTracker
 from .options import check_roi, extractor_options
 from .subpixel import bumps, refine, refine_colour
-from .support import LowerFrames
+from .support import LowerFrames, Raised
 from .types import Waterline, signed_area
 
 __all__ = ["WaterlineExtractor", "FrameError", "NoPartError", "AllPartError", "Event"]
@@ -95,7 +95,19 @@ class WaterlineExtractor:
         self.islands = IslandTracker(self.options["band_px"], self.options["min_new_island_px"], self.events)
         self.last_mode = None  # "coarse", "band" or "full": how the last frame was read
         self.outline = []  # the last frame's kept loops: (pixel contour, is a hole)
-        self.lower = LowerFrames(self.roi, (self.height, self.width))
+        self.lower = LowerFrames(self.roi, (self.height, self.width), self._raised())
+
+    def _raised(self):
+        """How an edge above the ink moves between frames (support.Raised), or None when the
+        option is off or the camera's pose is not known."""
+        cam = self.camera
+        if not self.options["raised_shores"]:
+            return None
+        foot = cam.centre_xy() if cam.height_mm else None
+        if foot is None:
+            return None
+        u, v = cam.mm_to_pixels(np.array([foot], float))[0]
+        return Raised((float(u), float(v)), float(cam.height_mm))
 
     LATTICE = 16  # px between the samples that watch the rest of the tank
 
@@ -106,7 +118,7 @@ class WaterlineExtractor:
         (level_mm, frame) pairs, nearest first; a pixel is part only if they agree."""
         cut = self.glare_cut
         self.outline = []
-        self.lower.use(below)
+        self.lower.use(below, level_mm)
         try:
             return self._extract(frame, level_mm)
         except NoPartError:

@@ -8,9 +8,22 @@ lower frames (`below`, nearest first; processing reads two ahead): a pixel
 counts as part only if it is part-like in each of them too (the same threshold
 and colour test, without the glare cut, grown by a pixel for the stage's play).
 Only 8-bit masks of those frames are kept, one per frame.
+
+One thing fixed to the part does recede as the ink drops: an edge standing above the ink.
+The part rises towards the camera, so the edge is seen further from the camera's foot at
+every lower level, by |x - C| dL / H (1.3 px at 30 mm from the foot, 1 mm steps, 300 mm
+up). Where that edge has ink on the foot's side of it - the far shore of a pool a pocket
+held when the ink went down (the tank's ink stands at the foot of its walls instead) - the
+lower frames show ink where this one shows part, and the edge would be cut away as if it
+were glare. Asked to (the extractor's raised_shores, for a scan whose pocket may have held
+ink: waterlines.py), each lower frame also confirms as it would look with such edges put back
+where they stood in this frame: scaled towards the camera's foot by 1 - dL / H (`Raised`).
+Glare that vanishes is still cut: it is nowhere near part in the lower frames.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -18,6 +31,23 @@ import numpy as np
 from .frames import Hue, channel_view
 
 GROW = np.ones((3, 3), np.uint8)
+
+
+@dataclass(frozen=True)
+class Raised:
+    """Where the camera is, in the frame: its foot (the pixel over which it stands, u, v)
+    and its height above the ink (mm); how an edge standing above the ink moves."""
+
+    foot_px: tuple
+    height_mm: float
+
+    def put_back(self, mask, dl):
+        """`mask` of a frame dl mm lower as raised edges would show in this frame."""
+        f = 1.0 - dl / self.height_mm
+        u, v = self.foot_px
+        M = np.float32([[f, 0, (1 - f) * u], [0, f, (1 - f) * v]])
+        h, w = mask.shape
+        return cv2.warpAffine(mask, M, (w, h), flags=cv2.INTER_NEAREST)
 
 
 def support_mask(frame, roi, shape, channel: int, threshold: int, hue: Hue | None) -> np.ndarray:
@@ -40,15 +70,19 @@ def support_mask(frame, roi, shape, channel: int, threshold: int, hue: Hue | Non
 class LowerFrames:
     """The next lower frames of the frame being read, their masks, and where they cut it."""
 
-    def __init__(self, roi, shape):
+    def __init__(self, roi, shape, raised: Raised | None = None):
         self.roi, self.shape = roi, shape
+        self.raised = raised  # None: no camera geometry known, lower frames as they are
+        self.level: float | None = None  # of the frame being read
         self.frames: list = []  # (level_mm, frame), nearest first
         self.masks: dict = {}  # level -> support_mask of that frame, made once
-        self.cut = None  # (box, mask): where this frame's part was cut back by them
+        self.cut: tuple | None = None  # (box, mask): where this frame's part was cut back by them
 
-    def use(self, below) -> None:
-        """The lower frames of the next frame; masks of frames no longer among them go."""
+    def use(self, below, level=None) -> None:
+        """The lower frames of the next frame (at `level`); masks of frames no longer among
+        them go."""
         self.frames = [(float(lv), f) for lv, f in below]
+        self.level = None if level is None else float(level)
         self.cut = None
         levels = {lv for lv, _ in self.frames}
         for lv in list(self.masks):
@@ -72,7 +106,10 @@ class LowerFrames:
         inside = binary[y0:y1, x0:x1]
         before = inside.copy()
         for level, frame in self.frames:
-            cv2.bitwise_and(inside, self.mask(level, frame, channel, threshold, hue)[y0:y1, x0:x1], inside)
+            m = self.mask(level, frame, channel, threshold, hue)
+            if self.raised is not None and self.level is not None and self.level > level:
+                m = cv2.bitwise_or(m, self.raised.put_back(m, self.level - level))
+            cv2.bitwise_and(inside, m[y0:y1, x0:x1], inside)
         cut = cv2.subtract(before, inside)
         if cv2.countNonZero(cut):
             # the contour along a cut follows the lower frames' part, not an edge of this

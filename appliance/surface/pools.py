@@ -1,0 +1,224 @@
+"""Pockets that held ink: a hole in the part whose far shore recedes as the ink drops.
+
+As the base rises the ink drains off the part wherever it can run down to the tank. A pocket
+in the top (a bowl, a mould cavity, a crater inside its ridge) cannot drain: once its rim is
+out, the pocket stays full to its spill height S and its floor is never seen. Every frame
+below S shows the pool as a hole in the part, and without this module the fit read that hole
+as a hole down to the base: the program milled the pocket out to z = 0 (the crater's bowl,
+floor at 5 mm, came out 21 mm deep at its worst).
+
+What tells such a pool from a hole the tank's ink reaches: its shore stands above the ink,
+S - L at level L, and the part rises towards the camera, so the shore is seen further from
+the camera's foot at every lower level. The hole as observed grows as the ink drops, by
+2 dL / (H - h) of its area per level step dL (0.7 % a millimetre, 300 mm up). A hole the
+tank's ink reaches never grows: its shore is a waterline on a slope, which closes in as the
+ink drops, or at the foot of a wall, which stays put (on its near side the wall's raised top
+edge moves in: it shrinks a little).
+
+So a hole of the lowest frame whose observed area grows, going down the frames that show it,
+by at least GROWTH_SHARE of what a raised shore would, is a held pool. It held ink from the
+first frame that shows it enclosed (the level above showed no such hole), so S lies between
+those two levels. The cells inside the shore, put back from where the
+lowest frame saw it, are set to the top of that bracket (plus what a meniscus can cling):
+above any floor under the pool, so the program leaves the pocket uncut rather than guess. They are marked `held`, uncertain by a
+floor anywhere between the base and S, and the report says where the pool was.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from ..vision.types import signed_area
+from .heightmap import HeightMap
+from .perspective import Perspective
+from .uncertainty import HELD
+
+GROWTH_SHARE = 0.5  # of the growth a shore standing above the ink would show, the least that counts
+MIN_DROP_MM = 2.0  # a hole followed over less than this drop of the ink says nothing either way
+MIN_AREA_MM2 = 4.0  # smaller holes are left to the base plane's rules
+
+
+@dataclass(frozen=True)
+class HeldPool:
+    shore: np.ndarray  # (N, 2) mm: the pool's edge on the part, put back where it stands
+    bracket: tuple  # (lo, hi) mm: the pool's surface lies between these levels
+    area_mm2: float  # inside the shore
+
+    @property
+    def centre(self):
+        return tuple(float(v) for v in self.shore.mean(axis=0))
+
+
+def held_pools(frames: list, camera: Perspective | None) -> list[HeldPool]:
+    """The held pools among the holes of the lowest frame. `frames`: (level, loops as
+    observed) top first, the levels the ink's true ones where known; camera: where the
+    camera stands (without it no shore can be told from a waterline: none)."""
+    if camera is None:
+        return []
+    out = []
+    for low, loop, inside in _low_holes(frames):
+        track = _follow_up(frames, low, inside)
+        if _grows_like_a_raised_shore(track, camera.height_mm):
+            out.append(_pool(track, frames, camera, loop))
+    return out
+
+
+def pools_suspected(frames: list, camera_height_mm) -> bool:
+    """Whether a pocket may have held ink, as a read that confirms part by the lower frames
+    alone shows it: a hole of the lowest frame that a frame less than MIN_DROP_MM above has
+    not got round the same point (that read cuts a receding shore away, and a pool's hole
+    goes with it), or has smaller. Such a scan is read again with raised shores kept
+    (waterlines.py); a hole the tank's ink reaches is never smaller above."""
+    if not camera_height_mm:
+        return False
+    return any(_shrinks_above(frames, low, inside, camera_height_mm) for low, _, inside in _low_holes(frames))
+
+
+def _shrinks_above(frames, low, inside, camera_height_mm) -> bool:
+    level_low, area_low = frames[low][0], None
+    for k in range(low, -1, -1):
+        level, loops = frames[k]
+        if level - level_low > MIN_DROP_MM or not len(loops):
+            return False
+        hole = _hole_round(loops, inside)
+        if hole is None:
+            return True  # gone above, where the part still shows
+        area = -signed_area(hole)
+        if area_low is None:
+            area_low = area
+        elif area < area_low * (1.0 - GROWTH_SHARE * 2.0 * (level - level_low) / camera_height_mm):
+            return True
+    return False
+
+
+def _low_holes(frames):
+    """(frame index, hole loop, a point inside it) for the lowest frame's holes."""
+    shown = [k for k, (_, loops) in enumerate(frames) if len(loops)]
+    if len(shown) < 2:
+        return
+    low = shown[-1]
+    for loop in frames[low][1]:
+        if -signed_area(loop) < MIN_AREA_MM2:  # outer loops (counter-clockwise) and specks
+            continue
+        inside = _point_inside(loop)
+        if inside is not None:
+            yield low, loop, inside
+
+
+def _point_inside(loop):
+    """A point inside the hole `loop` (its vertices' mean, when that is inside), or None."""
+    c = loop.mean(axis=0)
+    return c if cv2.pointPolygonTest(loop.astype(np.float32), (float(c[0]), float(c[1])), False) > 0 else None
+
+
+def _follow_up(frames, low, point):
+    """[(frame index, level, area)] of the holes round `point`, from the lowest frame up while
+    each frame has one."""
+    track = []
+    for k in range(low, -1, -1):
+        hole = _hole_round(frames[k][1], point)
+        if hole is None:
+            break
+        track.append((k, frames[k][0], -signed_area(hole)))
+    return track
+
+
+def _hole_round(loops, point):
+    for loop in loops:
+        if (
+            signed_area(loop) < 0
+            and cv2.pointPolygonTest(loop.astype(np.float32), (float(point[0]), float(point[1])), False) > 0
+        ):
+            return loop
+    return None
+
+
+def _grows_like_a_raised_shore(track, camera_height_mm) -> bool:
+    """The hole's observed area grows as the ink drops (d ln A / dL against -2 / H)."""
+    if len(track) < 3:
+        return False
+    L = np.array([t[1] for t in track])
+    if L.max() - L.min() < MIN_DROP_MM:
+        return False
+    slope = np.polyfit(L, np.log([t[2] for t in track]), 1)[0]  # per mm of level, < 0: grows going down
+    return slope < -GROWTH_SHARE * 2.0 / camera_height_mm
+
+
+def _pool(track, frames, camera, loop) -> HeldPool:
+    k_high, level_high, _ = track[-1]
+    above = [frames[k][0] for k in range(k_high)]  # the frames above the first enclosed one
+    hi = min(above) if above else level_high + 1.0
+    lo = level_high
+    level_low = track[0][1]
+    # the lowest frame saw the shore (S - level_low) above the ink: put it back, S as the
+    # bracket's middle (the pool's height is settled later from the map)
+    shore = camera.true_xy(np.asarray(loop, float), np.full(len(loop), 0.5 * (lo + hi) - level_low))
+    return HeldPool(shore, (float(lo), float(hi)), float(-signed_area(shore)))
+
+
+def cover_held_pools(
+    hm: HeightMap, pools: list[HeldPool], rise_mm: float = 0.0
+) -> tuple[HeightMap, list[str]]:
+    """hm with the cells inside each pool's shore at the highest its surface can have stood,
+    marked HELD; and a sentence per pool for the report.
+
+    That height is the top of its bracket, the level above the first frame that showed the
+    pool enclosed, plus the most the ink can cling to a rim (`rise_mm`, the meniscus' rise
+    on a wall): everything under the pool is lower, so the program cuts none of it. The
+    part's own heights round the shore are no surer bound: a thin rim's cells mix in its
+    wall (a bowl's came out 2-3 mm low there, and a pool held at them 1 mm into its side)."""
+    if not pools:
+        return hm, []
+    X, Y = hm.grid()
+    z = hm.z.copy()
+    sigma = None if hm.sigma is None else hm.sigma.copy()
+    source = None if hm.source is None else hm.source.copy()
+    notes = []
+    for pool in pools:
+        inside = _cells_inside(pool.shore, X, Y)
+        if not inside.any():
+            continue
+        surface = pool.bracket[1] + rise_mm
+        z[inside] = surface
+        if sigma is not None:
+            sigma[inside] = surface / np.sqrt(12.0)  # a floor anywhere between the base and the surface
+        if source is not None:
+            source[inside] = HELD
+        x, y = pool.centre
+        notes.append(
+            f"a pocket held ink (around x {x:.1f}, y {y:.1f} mm, {pool.area_mm2:.0f} mm²): its floor was "
+            f"never seen, so the map holds it at {surface:.2f} mm, the highest the ink in it can have "
+            "stood, and the program leaves it uncut. Fill it flush or drill a drain hole at its lowest "
+            "point to scan it"
+        )
+    return HeightMap(hm.x, hm.y, z, sigma, source), notes
+
+
+def _cells_inside(shore, X, Y):
+    """Cells whose centres lie inside the polygon `shore` (mm), on the map's regular grid."""
+    x0, y0 = X[0, 0], Y[0, 0]
+    dx, dy = X[0, 1] - x0, Y[1, 0] - y0
+    px = np.round(np.column_stack([(shore[:, 0] - x0) / dx, (shore[:, 1] - y0) / dy]) * 16).astype(np.int32)
+    mask = np.zeros(X.shape, np.uint8)
+    cv2.fillPoly(mask, [px.reshape(-1, 1, 2)], 1, lineType=cv2.LINE_8, shift=4)
+    return mask.astype(bool)
+
+
+def held_notes(hm):
+    """A G-code header line per pocket that held ink: where, and the height it is left at."""
+    if hm.source is None or not (hm.source == HELD).any():
+        return []
+    lab, _ = ndimage.label(hm.source == HELD, structure=np.ones((3, 3)))
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(lab), start=1):
+        m = lab[sl] == k
+        out.append(
+            f"pocket that held ink: X {hm.x[sl[1].start]:.1f}..{hm.x[sl[1].stop - 1]:.1f} "
+            f"Y {hm.y[sl[0].start]:.1f}..{hm.y[sl[0].stop - 1]:.1f} mm left uncut at "
+            f"Z{float(np.median(hm.z[sl][m])):.2f}; its floor was not seen"
+        )
+    return out
