@@ -89,6 +89,22 @@ def test_a_held_pool_is_covered_at_the_highest_its_ink_can_have_stood():
     assert len(notes) == 1 and "x 50.0, y 50.0" in notes[0] and "22.50 mm" in notes[0]
 
 
+def test_what_stands_out_of_a_pool_keeps_its_own_heights():
+    # a boss in the pool: where the pool meets it stands as high above the ink as the shore
+    frames = [
+        (level, loops + [_seen(_circle(4, False), 20.5 - level)] if len(loops) > 1 else loops)
+        for level, loops in _pool_frames()
+    ]
+    (pool,) = held_pools(frames, CAMERA)
+    assert len(pool.islands) == 1
+    x = y = np.arange(30.0, 70.01, 0.5)
+    X, Y = np.meshgrid(x, y)
+    hm = HeightMap(x, y, np.full(X.shape, 30.0))  # a boss 30 mm high in the middle of the pool
+    covered, _ = cover_held_pools(hm, [pool])
+    r = np.hypot(X - 50, Y - 50)
+    assert np.all(covered.z[r < 3.5] == 30.0) and np.all(covered.z[(r > 4.5) & (r < 14)] == 21.0)
+
+
 BOWL = Surface(
     "bowl",
     "a bowl 30 mm across, its rim at 16 mm and its floor at 10",

@@ -18,10 +18,11 @@ edge moves in: it shrinks a little).
 So a hole of the lowest frame whose observed area grows, going down the frames that show it,
 by at least GROWTH_SHARE of what a raised shore would, is a held pool. It held ink from the
 first frame that shows it enclosed (the level above showed no such hole), so S lies between
-those two levels. The cells inside the shore, put back from where the
-lowest frame saw it, are set to the top of that bracket (plus what a meniscus can cling):
-above any floor under the pool, so the program leaves the pocket uncut rather than guess. They are marked `held`, uncertain by a
-floor anywhere between the base and S, and the report says where the pool was.
+those two levels. The cells inside the shore, put back from where the lowest frame saw it
+(and outside any island the pool surrounds), are set to the top of that bracket plus what a
+meniscus can cling: above any floor under the pool, so the program leaves the pocket uncut
+rather than guess. They are marked `held`, uncertain by a floor anywhere between the base
+and S, and the report says where the pool was.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ class HeldPool:
     shore: np.ndarray  # (N, 2) mm: the pool's edge on the part, put back where it stands
     bracket: tuple  # (lo, hi) mm: the pool's surface lies between these levels
     area_mm2: float  # inside the shore
+    islands: tuple = ()  # (N, 2) mm outlines of what stands out of the pool, put back likewise
 
     @property
     def centre(self):
@@ -149,15 +151,27 @@ def _grows_like_a_raised_shore(track, camera_height_mm) -> bool:
 
 
 def _pool(track, frames, camera, loop) -> HeldPool:
+    k_low, level_low, _ = track[0]
     k_high, level_high, _ = track[-1]
     above = [frames[k][0] for k in range(k_high)]  # the frames above the first enclosed one
     hi = min(above) if above else level_high + 1.0
     lo = level_high
-    level_low = track[0][1]
-    # the lowest frame saw the shore (S - level_low) above the ink: put it back, S as the
-    # bracket's middle (the pool's height is settled later from the map)
-    shore = camera.true_xy(np.asarray(loop, float), np.full(len(loop), 0.5 * (lo + hi) - level_low))
-    return HeldPool(shore, (float(lo), float(hi)), float(-signed_area(shore)))
+    poly = loop.astype(np.float32)
+    islands = [
+        i
+        for i in frames[k_low][1]
+        if signed_area(i) > 0
+        and all(cv2.pointPolygonTest(poly, (float(u), float(v)), False) > 0 for u, v in i[::8])
+    ]
+
+    # the lowest frame saw the shore S - level_low above the ink: put back, S the bracket's middle
+    def put_back(outline):
+        return camera.true_xy(np.asarray(outline, float), np.full(len(outline), 0.5 * (lo + hi) - level_low))
+
+    shore = put_back(loop)
+    return HeldPool(
+        shore, (float(lo), float(hi)), float(-signed_area(shore)), tuple(put_back(i) for i in islands)
+    )
 
 
 def cover_held_pools(
@@ -180,6 +194,8 @@ def cover_held_pools(
     notes = []
     for pool in pools:
         inside = _cells_inside(pool.shore, X, Y)
+        for island in pool.islands:
+            inside &= ~_cells_inside(island, X, Y)
         if not inside.any():
             continue
         surface = pool.bracket[1] + rise_mm
