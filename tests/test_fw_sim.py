@@ -217,18 +217,36 @@ def test_driver_homes_moves_and_the_stage_really_is_there(bench):
         stage.close()
 
 
-def test_driver_rehomes_after_an_mcu_reset_and_then_moves(bench):
+def _reset(bench, noise):
+    bench.reset_mcu()
+
+
+def _forged_estop(bench, noise):
+    noise.send_raw(P.RT_ESTOP)  # a Ctrl-X the driver never sent
+    time.sleep(0.05)
+
+
+@pytest.mark.parametrize(
+    "lose, resets, estops",
+    [
+        (_reset, 1, 0),  # seen as a banner, a fresh_boot status and a refused MOVE: one reset
+        (_forged_estop, 0, 1),  # the next MOVE refused with not_homed; the state says estop
+    ],
+    ids=["mcu-reset", "forged-estop"],
+)
+def test_a_position_lost_between_moves_is_found_again_and_counted_once(bench, lose, resets, estops):
     stage = SerialStage(bench.port, timeout=10.0)
+    noise = RawLink(bench.port)  # a second writer on the same line
     try:
         stage.home()
         stage.move_to(5.0)
-        bench.reset_mcu()
+        lose(bench, noise)
         stage.move_to(7.0)
         assert bench.stage_position_mm() == pytest.approx(7.0, abs=1e-9)
-        # seen as a banner, a fresh_boot status and a refused MOVE: one reset
-        assert stage.counters["rehomes"] == 1 and stage.counters["resets_seen"] == 1
-        assert stage.counters["spurious_estops"] == 0
+        assert stage.counters["rehomes"] == 1
+        assert (stage.counters["resets_seen"], stage.counters["spurious_estops"]) == (resets, estops)
     finally:
+        noise.close()
         stage.close()
 
 
@@ -279,24 +297,6 @@ def test_driver_recovers_from_an_emergency_stop_byte_forged_by_line_noise(bench)
         t.join()
         assert bench.stage_position_mm() == pytest.approx(60.0, abs=1e-9)
         assert stage.counters["spurious_estops"] == 1 and stage.counters["rehomes"] == 1
-    finally:
-        noise.close()
-        stage.close()
-
-
-def test_a_forged_emergency_stop_between_moves_is_counted_as_one_not_as_a_reset(bench):
-    """The next MOVE is refused with not_homed; the state (estop, not fresh_boot) says why."""
-    stage = SerialStage(bench.port, timeout=10.0)
-    noise = RawLink(bench.port)
-    try:
-        stage.home()
-        stage.move_to(3.0)
-        noise.send_raw(P.RT_ESTOP)
-        time.sleep(0.05)
-        stage.move_to(6.0)
-        assert bench.stage_position_mm() == pytest.approx(6.0, abs=1e-9)
-        assert stage.counters["spurious_estops"] == 1 and stage.counters["resets_seen"] == 0
-        assert stage.counters["rehomes"] == 1
     finally:
         noise.close()
         stage.close()
