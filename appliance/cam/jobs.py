@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import InkSliceError, SettingError, check_mm
 from ..surface.heightmap import HeightMap
+from ..surface.pools import held_notes
 from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM, header_notes
 from .cutters import Cutter, parse_cutter
 from .feeds import DEFAULT_MATERIAL, conditions
@@ -138,7 +139,7 @@ def finishing_gcodes(
     ]
     if clipped:
         notes.append(clipped)
-    notes += header_notes(hm, uncertain_mm)
+    notes += header_notes(hm, uncertain_mm) + held_notes(hm)
     so = fin.stepovers
     for d in ours:
         prog, text, rt, slowed = _post(

@@ -419,9 +419,7 @@ def header_notes(hm, threshold_mm=DEFAULT_UNCERTAIN_MM, most=8):
             f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
             "of the part"
         )
-    from .pools import held_notes
-
-    return lines + held_notes(hm)
+    return lines
 
 
 def source_summary(hm):
