@@ -16,6 +16,7 @@ from appliance.surface.heightmap import HeightMap
 from appliance.surface.perspective import Perspective
 from appliance.surface.pools import cover_held_pools, held_pools, pools_suspected
 from appliance.surface.uncertainty import HELD, SOURCES
+from appliance.vision.types import signed_area
 
 CAMERA = Perspective((0.0, 0.0), 300.0)  # its foot well off the part: shores recede outwards
 CENTRE = np.array([50.0, 50.0])
@@ -56,6 +57,22 @@ def test_a_hole_whose_shore_stands_above_the_ink_is_a_held_pool():
     r = np.hypot(*(pool.shore - CENTRE).T)
     assert abs(r.mean() - 15.0) < 0.2  # put back from where the lowest frame saw it
     assert pools_suspected(frames, CAMERA.height_mm)  # a hole growing as the ink drops
+
+
+def test_a_crescent_shaped_pool_is_found_too():
+    """Its vertices' mean lies outside it: the point it is followed by must not."""
+    t = np.linspace(0.0, 2 * np.pi, 400, endpoint=False)
+    outer = np.column_stack([np.cos(t), np.sin(t)]) * 15.0
+    inner = np.column_stack([np.cos(t), np.sin(t)]) * 11.0 + [6.0, 0.0]  # bitten out of it
+    crescent = np.array([p for p in outer if np.hypot(*(p - [6.0, 0.0])) > 11.0])
+    bite = np.array([p for p in inner if np.hypot(*p) < 15.0])[::-1]
+    loop = CENTRE + np.vstack([crescent, bite])
+    loop = loop if signed_area(loop) < 0 else loop[::-1]  # a hole: clockwise
+    frames = [(22.0, [])] + [
+        (float(L), [_circle(40, False), _seen(loop, 20.5 - L)]) for L in np.arange(20.0, 1.5, -1.0)
+    ]
+    (pool,) = held_pools(frames, CAMERA)
+    assert pool.bracket == (20.0, 22.0)
 
 
 def test_holes_the_tanks_ink_reaches_are_no_pools():

@@ -111,10 +111,17 @@ def _low_holes(frames):
             yield low, loop, inside
 
 
-def _point_inside(loop):
-    """A point inside the hole `loop` (its vertices' mean, when that is inside), or None."""
-    c = loop.mean(axis=0)
-    return c if cv2.pointPolygonTest(loop.astype(np.float32), (float(c[0]), float(c[1])), False) > 0 else None
+def _point_inside(loop, cell_mm=0.25):
+    """The point of the hole `loop` furthest from its shore (on a cell_mm raster): inside it
+    whatever its shape, a crescent's too. None for a hole under a cell across."""
+    lo = loop.min(axis=0) - cell_mm
+    px = np.round((loop - lo) / cell_mm * 16).astype(np.int32).reshape(-1, 1, 2)
+    w, h = (np.ceil((loop.max(axis=0) - lo) / cell_mm) + 2).astype(int)
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(mask, [px], 1, shift=4)
+    depth = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    j, i = np.unravel_index(int(np.argmax(depth)), depth.shape)
+    return lo + cell_mm * np.array([i, j], float) if depth[j, i] > 1 else None
 
 
 def _follow_up(frames, low, point):
