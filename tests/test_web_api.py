@@ -10,7 +10,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from web_helpers import QUICK, login, make_app, wait_state
+from web_helpers import NOTE, QUICK, login, make_app, wait_state
 
 from appliance.sim.surfaces import get as get_surface
 from appliance.web.eta import EtaSmoother
@@ -80,6 +80,7 @@ def test_a_scan_from_start_to_downloads(client):
     assert c.get("/api/jobs/19990101-000000-0000").status_code == 404
     page = c.get(f"/jobs/{job_id}").get_data(as_text=True)
     assert "0.0722" in page and 'id="view3d"' in page  # the report's statistics, the 3D view
+    assert f"<li>{NOTE}</li>" in page  # and what the processing has to say (a pocket that held ink)
     assert all(f'data-file="{name}"' in page for name in info["outputs"])  # every download
 
 

@@ -38,13 +38,19 @@ def light_processor(scan_folder, out_folder, options, stop=None, size=5):
     )
     write_json(
         out / "report.json",
-        {"statistics": {"inkslice:fit": {"n": len(frames), "Ea": 0.0722, "sigma": 0.144}}},
+        {
+            "statistics": {"inkslice:fit": {"n": len(frames), "Ea": 0.0722, "sigma": 0.144}},
+            "notes": [NOTE],
+        },
     )
     write_text(out / "report.md", "# report\n")
     write_bytes(out / "error_inkslice_fit.png", Path(scan_folder, frames[0]["file"]).read_bytes())
     return {
         "outputs": ["error_inkslice_fit.png", "heightmap.csv", "report.json", "report.md", "toolpath.gcode"]
     }
+
+
+NOTE = "InkSlice regularised fit: a pocket held ink (around x 50.0, y 50.0 mm, 1095 mm²): its floor was never seen"
 
 
 def part_processor(scan_folder, out_folder, options, stop=None):
