@@ -119,11 +119,7 @@ def camera_view(camera):
     """The camera's pose for the fit (surface/perspective.py), if the calibration has one."""
     from .surface.perspective import Perspective
 
-    return (
-        Perspective(camera.centre_xy(), camera.height_mm)
-        if camera.height_mm and camera.K is not None
-        else None
-    )
+    return Perspective.of(camera)
 
 
 def meniscus_model(scan, meniscus):

@@ -57,12 +57,11 @@ def with_held_pools(scan, waterlines):
     from .surface.perspective import Perspective
     from .surface.pools import held_pools, pools_suspected
 
-    camera = scan.camera
-    foot = camera.centre_xy() if camera.height_mm else None
-    if foot is None or not pools_suspected(_frames(waterlines), camera.height_mm):
+    camera = Perspective.of(scan.camera)
+    if not pools_suspected(_frames(waterlines), camera):
         return waterlines
     again = TopDownReader(scan, raised_shores=True).read(waterline_frames(scan), final=True)
-    return again if held_pools(_frames(again), Perspective(foot, camera.height_mm)) else waterlines
+    return again if held_pools(_frames(again), camera) else waterlines
 
 
 def _frames(waterlines):

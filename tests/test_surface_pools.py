@@ -56,7 +56,7 @@ def test_a_hole_whose_shore_stands_above_the_ink_is_a_held_pool():
     assert pool.bracket == (20.0, 21.0)
     r = np.hypot(*(pool.shore - CENTRE).T)
     assert abs(r.mean() - 15.0) < 0.2  # put back from where the lowest frame saw it
-    assert pools_suspected(frames, CAMERA.height_mm)  # a hole growing as the ink drops
+    assert pools_suspected(frames, CAMERA)  # a hole growing as the ink drops
 
 
 def test_a_crescent_shaped_pool_is_found_too():
@@ -79,7 +79,7 @@ def test_holes_the_tanks_ink_reaches_are_no_pools():
     wall = _frames(lambda L: (15.0, 0.0))  # a wall's foot: stays put
     funnel = _frames(lambda L: (5.0 + 0.5 * L, 0.0))  # a slope: closes in as the ink drops
     assert held_pools(wall, CAMERA) == [] and held_pools(funnel, CAMERA) == []
-    assert not pools_suspected(wall, CAMERA.height_mm) and not pools_suspected(funnel, CAMERA.height_mm)
+    assert not pools_suspected(wall, CAMERA) and not pools_suspected(funnel, CAMERA)
     assert held_pools(_frames(lambda L: (15.0, 20.5 - L)), None) == []  # no camera: no telling
 
 
@@ -88,7 +88,7 @@ def test_a_pool_a_read_lost_above_the_lowest_frames_is_suspected():
     # the hole is gone a frame above the lowest, where the part still shows
     frames = _frames(lambda L: (15.0, 20.5 - L))
     frames[-2] = (frames[-2][0], [_circle(40, False)])
-    assert pools_suspected(frames, CAMERA.height_mm)
+    assert pools_suspected(frames, CAMERA)
 
 
 def test_a_held_pool_is_covered_at_the_highest_its_ink_can_have_stood():

@@ -40,16 +40,28 @@ class Lattice:
         return (pts[:, 0] - self.x[0]) / self.hx, (pts[:, 1] - self.y[0]) / self.hy
 
 
+def _polygons(lat: Lattice, loops) -> list:
+    out = []
+    for lp in loops:
+        fi, fj = lat.to_index(lp)
+        out.append(np.round(np.column_stack([fi, fj]) * (1 << _SHIFT)).astype(np.int32))
+    return out
+
+
+def inside_loops(lat: Lattice, loops) -> np.ndarray:
+    """Nodes inside closed loops (mm), even-odd: a loop inside another cuts it out."""
+    m = np.zeros(lat.shape, np.uint8)
+    if len(loops):
+        cv2.fillPoly(m, _polygons(lat, loops), 1, lineType=cv2.LINE_8, shift=_SHIFT)
+    return m.astype(bool)
+
+
 def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarray:
     """Nodes inside the slice's waterline (even-odd over its loops: holes stay out)."""
-    m = np.zeros(lat.shape, np.uint8)
     if sl.empty:
-        return m.astype(bool)
-    polys = []
-    for lp in sl.loops:
-        fi, fj = lat.to_index(lp)
-        polys.append(np.round(np.column_stack([fi, fj]) * (1 << _SHIFT)).astype(np.int32))
-    cv2.fillPoly(m, polys, 1, lineType=cv2.LINE_8, shift=_SHIFT)
+        return np.zeros(lat.shape, bool)
+    polys = _polygons(lat, sl.loops)
+    m = inside_loops(lat, sl.loops).astype(np.uint8)
     # fillPoly also paints the pixels the outline passes through: within a node or two of
     # the waterline the exact side of the nearest segment decides instead
     near = np.zeros(lat.shape, np.uint8)

@@ -30,6 +30,14 @@ class Perspective:
     xy: tuple
     height_mm: float
 
+    @classmethod
+    def of(cls, camera) -> Perspective | None:
+        """A scan's camera (vision.camera.CameraModel) as the fit needs it; None when its
+        calibration has no pose (no K or no height)."""
+        if not camera.height_mm or camera.K is None:
+            return None
+        return cls(camera.centre_xy(), camera.height_mm)
+
     def true_xy(self, P, h):
         """Plane positions of points seen at P that stand h above the ink."""
         C = np.asarray(self.xy, float)

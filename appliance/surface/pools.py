@@ -31,12 +31,12 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from ..vision.types import signed_area
 from .heightmap import HeightMap
+from .lattice import Lattice, inside_loops
 from .perspective import Perspective
-from .uncertainty import HELD
+from .uncertainty import HELD, regions
 
 GROWTH_SHARE = 0.5  # of the growth a shore standing above the ink would show, the least that counts
 MIN_DROP_MM = 2.0  # a hole followed over less than this drop of the ink says nothing either way
@@ -69,32 +69,27 @@ def held_pools(frames: list, camera: Perspective | None) -> list[HeldPool]:
     return out
 
 
-def pools_suspected(frames: list, camera_height_mm) -> bool:
+def pools_suspected(frames: list, camera: Perspective | None) -> bool:
     """Whether a pocket may have held ink, as a read that confirms part by the lower frames
     alone shows it: a hole of the lowest frame that a frame less than MIN_DROP_MM above has
     not got round the same point (that read cuts a receding shore away, and a pool's hole
     goes with it), or has smaller. Such a scan is read again with raised shores kept
     (waterlines.py); a hole the tank's ink reaches is never smaller above."""
-    if not camera_height_mm:
+    if camera is None:
         return False
-    return any(_shrinks_above(frames, low, inside, camera_height_mm) for low, _, inside in _low_holes(frames))
+    return any(_shrinks_above(frames, low, inside, camera.height_mm) for low, _, inside in _low_holes(frames))
 
 
 def _shrinks_above(frames, low, inside, camera_height_mm) -> bool:
-    level_low, area_low = frames[low][0], None
-    for k in range(low, -1, -1):
-        level, loops = frames[k]
-        if level - level_low > MIN_DROP_MM or not len(loops):
+    track = _follow_up(frames, low, inside)
+    _, level_low, area_low = track[0]
+    for _, level, area in track[1:]:
+        if level - level_low > MIN_DROP_MM:
             return False
-        hole = _hole_round(loops, inside)
-        if hole is None:
-            return True  # gone above, where the part still shows
-        area = -signed_area(hole)
-        if area_low is None:
-            area_low = area
-        elif area < area_low * (1.0 - GROWTH_SHARE * 2.0 * (level - level_low) / camera_height_mm):
+        if area < area_low * (1.0 - GROWTH_SHARE * 2.0 * (level - level_low) / camera_height_mm):
             return True
-    return False
+    above = track[-1][0] - 1  # the hole is gone here: suspect if the part still shows, near by
+    return above >= 0 and len(frames[above][1]) > 0 and frames[above][0] - level_low <= MIN_DROP_MM
 
 
 def _low_holes(frames):
@@ -194,15 +189,13 @@ def cover_held_pools(
     wall (a bowl's came out 2-3 mm low there, and a pool held at them 1 mm into its side)."""
     if not pools:
         return hm, []
-    X, Y = hm.grid()
+    grid = Lattice(hm.x, hm.y)
     z = hm.z.copy()
     sigma = None if hm.sigma is None else hm.sigma.copy()
     source = None if hm.source is None else hm.source.copy()
     notes = []
     for pool in pools:
-        inside = _cells_inside(pool.shore, X, Y)
-        for island in pool.islands:
-            inside &= ~_cells_inside(island, X, Y)
+        inside = inside_loops(grid, [pool.shore, *pool.islands])  # even-odd: islands stay out
         if not inside.any():
             continue
         surface = pool.bracket[1] + rise_mm
@@ -221,27 +214,12 @@ def cover_held_pools(
     return HeightMap(hm.x, hm.y, z, sigma, source), notes
 
 
-def _cells_inside(shore, X, Y):
-    """Cells whose centres lie inside the polygon `shore` (mm), on the map's regular grid."""
-    x0, y0 = X[0, 0], Y[0, 0]
-    dx, dy = X[0, 1] - x0, Y[1, 0] - y0
-    px = np.round(np.column_stack([(shore[:, 0] - x0) / dx, (shore[:, 1] - y0) / dy]) * 16).astype(np.int32)
-    mask = np.zeros(X.shape, np.uint8)
-    cv2.fillPoly(mask, [px.reshape(-1, 1, 2)], 1, lineType=cv2.LINE_8, shift=4)
-    return mask.astype(bool)
-
-
 def held_notes(hm):
     """A G-code header line per pocket that held ink: where, and the height it is left at."""
-    if hm.source is None or not (hm.source == HELD).any():
+    if hm.source is None:
         return []
-    lab, _ = ndimage.label(hm.source == HELD, structure=np.ones((3, 3)))
-    out = []
-    for k, sl in enumerate(ndimage.find_objects(lab), start=1):
-        m = lab[sl] == k
-        out.append(
-            f"pocket that held ink: X {hm.x[sl[1].start]:.1f}..{hm.x[sl[1].stop - 1]:.1f} "
-            f"Y {hm.y[sl[0].start]:.1f}..{hm.y[sl[0].stop - 1]:.1f} mm left uncut at "
-            f"Z{float(np.median(hm.z[sl][m])):.2f}; its floor was not seen"
-        )
-    return out
+    return [
+        f"pocket that held ink: X {r.xmin:.1f}..{r.xmax:.1f} Y {r.ymin:.1f}..{r.ymax:.1f} mm left uncut "
+        f"at Z{r.z_mm:.2f}; its floor was not seen"
+        for r in regions(hm, hm.source == HELD)
+    ]

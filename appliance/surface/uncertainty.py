@@ -353,6 +353,7 @@ class Region:
     share: float  # of the part's cells
     worst_mm: float
     source: str  # the commonest source in it
+    z_mm: float  # its median height
 
     def describe(self):
         return (
@@ -367,12 +368,15 @@ def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
     map carries no uncertainty."""
     if hm.sigma is None:
         return []
-    on = hm.on_part
-    low = on & np.isfinite(hm.sigma) & (hm.sigma > threshold_mm)
-    total = int(on.sum())
-    if not low.any() or total == 0:
+    return regions(hm, hm.on_part & np.isfinite(hm.sigma) & (hm.sigma > threshold_mm))
+
+
+def regions(hm, mask):
+    """The connected regions of `mask` on hm's cells (8-connected), largest first."""
+    total = int(hm.on_part.sum())
+    if not mask.any() or total == 0:
         return []
-    lab, n = ndimage.label(low, structure=np.ones((3, 3)))
+    lab, _ = ndimage.label(mask, structure=np.ones((3, 3)))
     dx, dy = hm.spacing
     dx = dx if np.isfinite(dx) else 0.0
     dy = dy if np.isfinite(dy) else 0.0
@@ -391,8 +395,9 @@ def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
                 float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
                 int(m.sum()),
                 float(m.sum()) / total,
-                float(np.max(hm.sigma[sl][m])),
+                float(np.max(hm.sigma[sl][m])) if hm.sigma is not None else float("nan"),
                 common,
+                float(np.median(hm.z[sl][m])),
             )
         )
     out.sort(key=lambda r: -r.cells)
