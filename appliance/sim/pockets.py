@@ -57,7 +57,7 @@ def spill_heights(top, drains):
     fill[start] = -np.inf
     seen[start] = True
     heap = []
-    for j, i in zip(*np.nonzero(start & _next_to(~start))):
+    for j, i in zip(*np.nonzero(start & ndimage.binary_dilation(~start))):
         heap.append((-np.inf, int(j), int(i)))
     heapq.heapify(heap)
     steps = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -70,15 +70,6 @@ def spill_heights(top, drains):
                 fill[a, b] = max(w, top[a, b])
                 heapq.heappush(heap, (fill[a, b], a, b))
     return fill
-
-
-def _next_to(mask):
-    out = np.zeros_like(mask)
-    out[1:, :] |= mask[:-1, :]
-    out[:-1, :] |= mask[1:, :]
-    out[:, 1:] |= mask[:, :-1]
-    out[:, :-1] |= mask[:, 1:]
-    return out
 
 
 def pool_level(surface, x, y):

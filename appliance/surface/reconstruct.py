@@ -291,8 +291,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
     hm = HeightMap(xo, yo, zo, so, srco)
     # a pocket that held ink: its floor never showed (pools.py)
-    true = [t.level for t in slices] if len(slices) == len(seen) else [s.level for s in seen]
-    pools = held_pools([(level, s.loops) for s, level in zip(seen, true)], camera)
+    pools = held_pools([(t.level, s.loops) for s, t in zip(seen, corrected)], camera)
     if pools:
         hm, said = cover_held_pools(hm, pools, rise_max)
         diag["held_notes"] = said

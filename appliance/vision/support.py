@@ -73,16 +73,16 @@ class LowerFrames:
     def __init__(self, roi, shape, raised: Raised | None = None):
         self.roi, self.shape = roi, shape
         self.raised = raised  # None: no camera geometry known, lower frames as they are
-        self.level: float | None = None  # of the frame being read
+        self.level = 0.0  # of the frame being read
         self.frames: list = []  # (level_mm, frame), nearest first
         self.masks: dict = {}  # level -> support_mask of that frame, made once
         self.cut: tuple | None = None  # (box, mask): where this frame's part was cut back by them
 
-    def use(self, below, level=None) -> None:
+    def use(self, below, level) -> None:
         """The lower frames of the next frame (at `level`); masks of frames no longer among
         them go."""
         self.frames = [(float(lv), f) for lv, f in below]
-        self.level = None if level is None else float(level)
+        self.level = float(level)
         self.cut = None
         levels = {lv for lv, _ in self.frames}
         for lv in list(self.masks):
@@ -107,7 +107,7 @@ class LowerFrames:
         before = inside.copy()
         for level, frame in self.frames:
             m = self.mask(level, frame, channel, threshold, hue)
-            if self.raised is not None and self.level is not None and self.level > level:
+            if self.raised is not None and self.level > level:
                 m = cv2.bitwise_or(m, self.raised.put_back(m, self.level - level))
             cv2.bitwise_and(inside, m[y0:y1, x0:x1], inside)
         cut = cv2.subtract(before, inside)
