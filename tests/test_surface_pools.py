@@ -183,3 +183,40 @@ def test_the_vision_keeps_a_receding_shore_only_when_asked():
     kept, cut = hole_area(raised_shores=True), hole_area()
     assert abs(kept - pool) < 0.05 * pool
     assert cut < kept - 5.0
+
+
+def test_a_suspect_scan_is_read_again_and_that_read_kept_only_when_it_shows_a_pool(monkeypatch):
+    """waterlines.with_held_pools: the read keeping raised shores replaces the first one only
+    for a held pool (the harsh ring's wetted wall makes such shores too, read worse)."""
+    from types import SimpleNamespace
+
+    from appliance import waterlines as W
+    from appliance.vision.types import Waterline
+
+    def as_read(frames):
+        return [Waterline(level, loops) for level, loops in frames]
+
+    lost = _pool_frames()
+    lost[-2] = (lost[-2][0], [_circle(40, False)])  # the first read lost the hole above the lowest
+    camera = SimpleNamespace(height_mm=CAMERA.height_mm, K=np.eye(3), centre_xy=lambda: CAMERA.xy)
+    scan = SimpleNamespace(camera=camera, frames=[])
+    reads, second = [], {}
+
+    class Reader:  # the second read, as TopDownReader would give it
+        def __init__(self, scan, raised_shores=False):
+            reads.append(raised_shores)
+
+        def read(self, frames, final=False):
+            return as_read(second["frames"])
+
+    monkeypatch.setattr(W, "TopDownReader", Reader)
+    for frames, kept in ((_pool_frames(), "again"), (_frames(lambda L: (15.0, 0.0)), "first")):
+        reads.clear()
+        second["frames"] = frames
+        first = as_read(lost)
+        out = W.with_held_pools(scan, first)
+        assert reads == [True]  # read again, keeping raised shores
+        assert (out is first) == (kept == "first")
+    reads.clear()
+    wall = as_read(_frames(lambda L: (15.0, 0.0)))
+    assert W.with_held_pools(scan, wall) is wall and not reads  # nothing suspect: no second read
