@@ -49,13 +49,11 @@ def spill_heights(top, drains):
     """Priority flood: for every node the lowest height at which ink there reaches a drain
     (`drains`: nodes open to the tank, and the lattice's border), over 8-neighbour paths."""
     ny, nx = top.shape
-    fill = np.full(top.shape, np.inf)
-    seen = np.zeros(top.shape, bool)
+    fill = np.full(top.shape, np.inf)  # inf: not reached yet
     border = np.zeros(top.shape, bool)
     border[0, :] = border[-1, :] = border[:, 0] = border[:, -1] = True
     start = drains | border
     fill[start] = -np.inf
-    seen[start] = True
     heap = []
     for j, i in zip(*np.nonzero(start & ndimage.binary_dilation(~start))):
         heap.append((-np.inf, int(j), int(i)))
@@ -65,8 +63,7 @@ def spill_heights(top, drains):
         w, j, i = heapq.heappop(heap)
         for dj, di in steps:
             a, b = j + dj, i + di
-            if 0 <= a < ny and 0 <= b < nx and not seen[a, b]:
-                seen[a, b] = True
+            if 0 <= a < ny and 0 <= b < nx and fill[a, b] == np.inf:
                 fill[a, b] = max(w, top[a, b])
                 heapq.heappush(heap, (fill[a, b], a, b))
     return fill
