@@ -25,6 +25,9 @@
     meniscus: "How the ink climbs a part, from a scan of a precision ball of known diameter.",
   };
   let cm = null, focus = null, busy = false, frameSeq = 0, poller = null, refused = "";
+  // counts cancels and skips: an action's answer that arrives after one (the stopped
+  // measurement's error, say) is about a step already left, and must not undo what it showed
+  let leaves = 0;
 
   const num = (v, d) => (typeof v === "number" ? v.toFixed(d) : String(v));
   function summary(step) {
@@ -187,19 +190,24 @@
   }
   async function refresh() { if (!busy) { try { render(await api("GET", "/api/commissioning")); } catch (e) { /* next poll */ } } }
   async function act(step, action, body) {
+    const since = leaves;
     busy = true; clearNote();
     text("#cm-busy", "Working: " + (ACTION[action] || action) + "… (Cancel stops it)"); show($("#cm-busy"), true);
     renderStep(); renderResults();
     try {
       const answer = await api("POST", "/api/commissioning/" + step + "/" + action, body || {});
       busy = false;
-      if (action === "accept" || action === "enter") note(title(step) + " stored.");
-      render(answer);
+      if (since === leaves) {
+        if (action === "accept" || action === "enter") note(title(step) + " stored.");
+        render(answer);
+      }
     } catch (e) {
       busy = false;
-      note("");
-      refused = e.message;
-      try { render(await api("GET", "/api/commissioning")); } catch (e2) { /* keep the old view */ }
+      if (since === leaves) {
+        note("");
+        refused = e.message;
+        try { render(await api("GET", "/api/commissioning")); } catch (e2) { /* keep the old view */ }
+      }
     }
     show($("#cm-busy"), false);
     renderStep(); renderResults();
@@ -207,6 +215,7 @@
   async function leave(action) {
     const id = (cm.active && cm.active.step) || focus;
     if (!id) return;
+    leaves += 1;
     refused = "";
     try {
       const answer = await api("POST", "/api/commissioning/" + id + "/" + action, {});
