@@ -11,7 +11,8 @@ from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
 from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
-from appliance.surface.slices import check_waterlines
+from appliance.surface.exposure import _came_out_at
+from appliance.surface.slices import check_waterlines, make_slice
 from appliance.surface.stl import heightmap_to_stl
 from appliance.vision.types import Waterline
 
@@ -59,6 +60,21 @@ def test_first_exposure_exact_on_a_paraboloid(dome_lines):
     # off the part stays NaN; sigma is given on the part
     assert np.isnan(rec.heightmap.z[0, 0])
     assert np.all(np.isfinite(rec.heightmap.sigma[interior]))
+
+
+def test_a_refinement_frame_beside_its_step_does_not_swing_a_node_a_whole_step():
+    # a top that flattens out towards its rim: level curves 1 mm apart at the top, 4 mm apart
+    # below 8 mm, and a refinement frame 0.08 mm under 7 mm whose waterline runs 0.04 mm
+    # outside the 7 mm one (as beside a wall foot). The cubic through those two near-equal
+    # distances put the nodes at the bracket's ceiling (8 mm)
+    t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    circle = np.column_stack([np.cos(t), np.sin(t)])
+    steps = [(11.0, 4.0), (10.0, 5.0), (9.0, 6.0), (8.0, 7.0), (7.0, 11.0), (6.92, 11.04)]
+    slices = [make_slice(z, [r * circle]) for z, r in steps]
+    nodes = np.array([[10.0, 0.0], [0.0, -10.0]])  # came out at 7 mm: 3 mm out of 8's, 1 mm in 7's
+    z = _came_out_at(slices, 4, 0, nodes, np.zeros(len(nodes), bool), hmax=0.5, order=4)
+    # the straight line between the two bracketing curves gives 7.25
+    assert np.all((z >= 7.0) & (z < 7.5)), z
 
 
 def test_islands_that_merge_and_a_hole():
