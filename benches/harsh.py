@@ -282,7 +282,13 @@ interior p99 / max mm, honest share of (cells):
   full steps 0.25 mm apart) Ea 0.0135 -> 0.0370 and the occlusion bench's stepped block (clean)
   0.2905 -> 0.4549; only those steeper than three times the bracket: the sphere as bad; the
   straight line wherever the cubic leaves its bracket: ring 0.0635 (the 28 deg sector's nodes,
-  whose 7.31 level curve is 3.4 mm off past a pinned rim, went from the floor to the middle).
+  whose 7.31 level curve is 3.4 mm off past a pinned rim, went from the floor to the middle);
+  beside the finer steps, also a neighbour within half a cell and over ten times steeper than
+  the bracket (the mesa's shoulder, curves 0.07 mm apart over a shelf 3.6 mm wide): plateau
+  0.0288 0.110 0.235, but the occlusion bench's stepped block (clean) 0.2905 -> 0.4619: its 85
+  deg walls over its tier are the same pattern, and there the cubic did better.
+  The plateau's p99 is at its target's edge: the waterlines moved a further 0.005 mm a frame
+  (draws 1-4) give 0.202 0.202 0.209 0.200 (0.196 on the render as it is).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
