@@ -306,6 +306,20 @@ lines are concentric), and the convex corner's shallower depression (the rendere
 against the straight 1.38), whose bend the renderer takes from the part's formula continued past
 the outline.
 
+Session 24 (5 December 2026). First exposure leaves a refinement frame out of a node's cubic
+where its waterline runs within half a lattice cell of its neighbour's (surface/exposure.py
+_apart; found on the harsh ring, benches/harsh.py (q)). The session-20 renders and meniscus
+file, main 1388d48 -> this, Ea / interior p99 / max mm: sample1 0.0100 0.137 0.553 -> 0.0097
+0.136 0.416; sample2 0.0473 0.238 1.383 -> 0.0472 0.230 1.383; sample3 0.0375 0.260 0.536 ->
+0.0379 0.261 0.535; steep-front 0.0372 0.347 0.539 -> 0.0429 0.329 0.443 (its waterlines moved a
+further 0.005 mm a frame, draws 0-4: 0.0368 -> 0.0380 on average); sample4, crater, twin-peaks
+and sphere unchanged. Sample 4's single figure is not a measurement to 0.005 mm: the same draws
+(0-5) give 0.0527 0.0583 0.1277 0.0628 0.0649 0.0549 (mean 0.0702, worst max 1.257) before and
+after. The 0.128 is the corner strip along y = 45 (x 46-49.5): its apparent surface is the same
+in both (22.99-23.44, the bracket's floor), but the solved top there is 1.0 mm under it in one
+and at it in the other (the depression gone: the untrusted rim's continuation climbs, and the
+top takes the rise of a 35 deg slope across the strip).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
