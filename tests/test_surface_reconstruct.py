@@ -9,9 +9,9 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
+from appliance.surface.exposure import _came_out_at
 from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
-from appliance.surface.exposure import _came_out_at
 from appliance.surface.slices import check_waterlines, make_slice
 from appliance.surface.stl import heightmap_to_stl
 from appliance.vision.types import Waterline

@@ -68,9 +68,7 @@ def _apart(S, ok, c_in, levels, tol):
             c = np.clip(col, 0, n - 1)
             use = inside & (col >= 0) & (col < n) & ok[rows, c]
             close = (
-                use
-                & (np.abs(S[rows, c] - S[rows, last]) < tol)
-                & (np.abs(levels[c] - levels[last]) < fine)
+                use & (np.abs(S[rows, c] - S[rows, last]) < tol) & (np.abs(levels[c] - levels[last]) < fine)
             )
             ok[rows[close], c[close]] = False
             last = np.where(use & ~close, c, last)
