@@ -319,6 +319,16 @@ after. The 0.128 is the corner strip along y = 45 (x 46-49.5): its apparent surf
 in both (22.99-23.44, the bracket's floor), but the solved top there is 1.0 mm under it in one
 and at it in the other (the depression gone: the untrusted rim's continuation climbs, and the
 top takes the rise of a 35 deg slope across the strip).
+Why the rim climbed: the lattice row 0.06 mm outside sample 4's vertical walls came into the
+footprint at wall-foot levels (6-14 mm) in draw 2 and not in draw 0 (33 of 99 nodes): the raster
+counts a node in when the outline crosses its cell, and one frame is enough. First exposure now
+takes out the edge nodes that no frame has inside by the exact distance (7fd5656). Same renders,
+Ea / interior p99 / max mm, before -> after: sample1 0.0097 (unchanged), sample2 0.0472 0.230
+1.383 -> 0.0446 0.233 1.393, sample3 0.0379 0.261 0.535 -> 0.0384 0.260 0.535, sample4 0.0527
+0.047 0.696 -> 0.0493 0.028 0.762, crater 0.0200 0.164 0.385 -> 0.0233 0.166 0.424, twin-peaks
+0.0242 -> 0.0241, steep-front 0.0429 0.329 0.443 -> 0.0355 0.319 0.589, sphere 0.0252 -> 0.0256.
+Every part is within 0.05 mm on these renders, but sample 4 is not under noise: draws 0-5 give
+0.0493 0.0541 0.0550 0.0511 0.0572 0.0534 (mean 0.0702 -> 0.0534, worst max 1.257 -> 1.031).
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
