@@ -322,7 +322,9 @@ top takes the rise of a 35 deg slope across the strip).
 Why the rim climbed: the lattice row 0.06 mm outside sample 4's vertical walls came into the
 footprint at wall-foot levels (6-14 mm) in draw 2 and not in draw 0 (33 of 99 nodes): the raster
 counts a node in when the outline crosses its cell, and one frame is enough. First exposure now
-takes out the edge nodes that no frame has inside by the exact distance (7fd5656). Same renders,
+took out the edge nodes that no frame has inside by the exact distance (7fd5656; reverted in
+3049aa7: the ideal second-ink dome of tests/test_surface_physics.py came out 0.038 mm off for
+< 0.015, its nodes just outside the lowest frame's level curve being part of the dome). Same renders,
 Ea / interior p99 / max mm, before -> after: sample1 0.0097 (unchanged), sample2 0.0472 0.230
 1.383 -> 0.0446 0.233 1.393, sample3 0.0379 0.261 0.535 -> 0.0384 0.260 0.535, sample4 0.0527
 0.047 0.696 -> 0.0493 0.028 0.762, crater 0.0200 0.164 0.385 -> 0.0233 0.166 0.424, twin-peaks

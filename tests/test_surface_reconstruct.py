@@ -9,8 +9,7 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
-from appliance.surface.exposure import _came_out_at, first_exposure
-from appliance.surface.lattice import Lattice
+from appliance.surface.exposure import _came_out_at
 from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 from appliance.surface.slices import check_waterlines, make_slice
@@ -76,19 +75,6 @@ def test_a_refinement_frame_beside_its_step_does_not_swing_a_node_a_whole_step()
     z = _came_out_at(slices, 4, 0, nodes, np.zeros(len(nodes), bool), hmax=0.5, order=4)
     # the straight line between the two bracketing curves gives 7.25
     assert np.all((z >= 7.0) & (z < 7.5)), z
-
-
-def test_a_node_just_outside_a_wall_is_not_counted_in_by_the_raster():
-    # a block with vertical walls: every frame's waterline is its outline. The raster counts a
-    # node 0.04 mm outside it in (the outline passes through its cell), and one frame that does
-    # is enough to make it part of the part at that frame's level: beside a rim that put a
-    # wall-foot height (6-14 mm beside 23 on sample 4), and the top solved next to it 1 mm off
-    square = np.array([[45.0, 45.0], [55.0, 45.0], [55.0, 55.0], [45.0, 55.0]])
-    slices = [make_slice(z, [square]) for z in np.arange(10.0, 0.0, -1.0)]
-    lat = Lattice(np.arange(44.96, 55.0, 0.1), np.arange(44.96, 55.0, 0.1))
-    _, first, footprint = first_exposure(lat, slices, footprint_tol_mm=0.025)
-    assert not footprint[0].any() and not footprint[:, 0].any()  # 0.04 mm outside
-    assert footprint[1:-1, 1:-1].all() and np.all(first[1:-1, 1:-1] == 0)  # inside: the top frame
 
 
 def test_islands_that_merge_and_a_hole():

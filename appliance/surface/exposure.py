@@ -75,31 +75,6 @@ def _apart(S, ok, c_in, levels, tol):
     return ok
 
 
-def _never_inside(first, X, Y, slices, tol):
-    """Where the exposed region ends, the nodes that no frame's waterline has inside (or less
-    than `tol` outside) by the exact signed distance, taken out of it in place.
-
-    The raster counts a node in when the outline passes through its cell, a few hundredths
-    of a millimetre either way by how the frame's polygon falls on the lattice, and one
-    frame that counts it in is enough to make it part of the part at that frame's level:
-    sample 4's row 0.06 mm outside its vertical walls came in at wall-foot levels (6-14 mm
-    beside a rim at 23) once its waterlines were moved by 5 um, and the top solved beside it
-    was 1 mm off (Ea 0.053 -> 0.128). A node that some frame has inside keeps the raster's
-    first frame: a leaning wall's foot is part of the part."""
-    K = len(slices)
-    seen = first < K
-    edge = seen & ~ndimage.binary_erosion(seen, border_value=0)
-    idx = np.flatnonzero(edge.ravel())
-    if idx.size == 0:
-        return
-    q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
-    inside = np.zeros(len(q), bool)
-    for s in slices:
-        if not s.empty:
-            inside |= polyline_distance(s, q, signed=True)[0] >= -tol
-    first.ravel()[idx[~inside]] = K
-
-
 def _passed_near(slices, q, start, stop, tol):
     """Per point: the first level k in [start, stop) whose waterline passes within `tol`,
     else `start`."""
@@ -132,7 +107,6 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
         m = exposed_mask(lat, slices[k])
         first[m] = k
     X, Y = np.meshgrid(lat.x, lat.y)
-    _never_inside(first, X, Y, slices, footprint_tol_mm)
     footprint = first < K
     lowest = next(s for s in reversed(slices) if not s.empty)
     # nodes on the part's outline (the grid's edge on a block) sit on the wall itself:
