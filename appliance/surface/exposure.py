@@ -61,12 +61,12 @@ def _apart(S, ok, c_in, levels, tol):
     lo, hi = np.clip(c_in, 0, n - 1), np.clip(c_in - 1, 0, n - 1)
     fine = 0.5 * np.abs(levels[hi] - levels[lo])  # half the bracket's step, per row
     for start, step in ((c_in, 1), (c_in - 1, -1)):
-        inside = (start >= 0) & (start < n)
+        valid = (start >= 0) & (start < n)  # the bracket has a column on this side
         last = np.clip(start, 0, n - 1)
         for off in range(1, n):
             col = start + step * off
             c = np.clip(col, 0, n - 1)
-            use = inside & (col >= 0) & (col < n) & ok[rows, c]
+            use = valid & (col >= 0) & (col < n) & ok[rows, c]
             close = (
                 use & (np.abs(S[rows, c] - S[rows, last]) < tol) & (np.abs(levels[c] - levels[last]) < fine)
             )

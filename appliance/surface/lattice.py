@@ -50,9 +50,13 @@ def _polygons(lat: Lattice, loops) -> list:
 
 def inside_loops(lat: Lattice, loops) -> np.ndarray:
     """Nodes inside closed loops (mm), even-odd: a loop inside another cuts it out."""
+    return _filled(lat, _polygons(lat, loops))
+
+
+def _filled(lat: Lattice, polys) -> np.ndarray:
     m = np.zeros(lat.shape, np.uint8)
-    if len(loops):
-        cv2.fillPoly(m, _polygons(lat, loops), 1, lineType=cv2.LINE_8, shift=_SHIFT)
+    if len(polys):
+        cv2.fillPoly(m, polys, 1, lineType=cv2.LINE_8, shift=_SHIFT)
     return m.astype(bool)
 
 
@@ -61,16 +65,17 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarr
     if sl.empty:
         return np.zeros(lat.shape, bool)
     polys = _polygons(lat, sl.loops)
-    m = inside_loops(lat, sl.loops).astype(np.uint8)
-    # fillPoly also paints the pixels the outline passes through: within a node or two of
-    # the waterline the exact side of the nearest segment decides instead
-    near = np.zeros(lat.shape, np.uint8)
-    cv2.polylines(near, polys, True, 1, thickness=3, lineType=cv2.LINE_8, shift=_SHIFT)
-    jj, ii = np.nonzero(near)
-    if jj.size and exact_edges:
-        sd, _ = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
-        m[jj, ii] = sd > 0
-    return m.astype(bool)
+    m = _filled(lat, polys)
+    if exact_edges:
+        # fillPoly also paints the pixels the outline passes through: within a node or two
+        # of the waterline the exact side of the nearest segment decides instead
+        near = np.zeros(lat.shape, np.uint8)
+        cv2.polylines(near, polys, True, 1, thickness=3, lineType=cv2.LINE_8, shift=_SHIFT)
+        jj, ii = np.nonzero(near)
+        if jj.size:
+            sd, _ = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
+            m[jj, ii] = sd > 0
+    return m
 
 
 def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
