@@ -332,6 +332,45 @@ Ea / interior p99 / max mm, before -> after: sample1 0.0097 (unchanged), sample2
 Every part is within 0.05 mm on these renders, but sample 4 is not under noise: draws 0-5 give
 0.0493 0.0541 0.0550 0.0511 0.0572 0.0534 (mean 0.0702 -> 0.0534, worst max 1.257 -> 1.031).
 
+Session 25 (5 December 2026): the held-out parts (HELD_OUT, printed with a * and scanned from the
+first level above the top as the daemon scans, refined to 0.1 mm as the runner does), never looked
+at with a meniscus before; main b586e19, this bench's calibration and meniscus files, Ea / interior
+p99 / max mm:
+    first ink (physics):  steps 0.7822 14.558 18.665   plateau 0.0476 0.211 0.291
+                          stepped-block 0.8203 6.504 12.507   ring 0.0687 0.378 0.665
+    second ink (physics2): steps 0.7234 13.857 16.816   plateau 0.3845 2.740 3.043
+                          stepped-block 5.1877 38.434 40.357   ring 0.0798 0.244 1.678
+    no effects (clean):   steps 0.3229 14.720 16.954
+Three different faults, none seen on the tuned parts:
+ - steps (a boss and a disc on a tilted block): the grid row 0.6 mm outside the boss's y = 15
+   wall, which faces away from the camera, comes out at the boss's top (+13..15 mm over x 24-54,
+   clean and both inks alike). Its rim hides a strip about 1.1 mm wide of the block beside it in
+   every frame below 22 mm; that strip is read as part of the boss, where the block's plane, seen
+   all round it, continues under it. Elsewhere on the clean render: one node 13.9 mm high beside
+   the disc's wall, +1..2.4 mm in a wedge inside the boss's corner (x 54-60, y 16-26), +1.1..2.3
+   at the block's corner (x 95, y 75), and within 0.01 mm everywhere else.
+ - the second ink's flat faces: the plateau's flat top comes out 1.5-3 mm high in a ring where it
+   meets its shoulder (r 15-22 mm), its middle -0.4; the stepped block's plateau +20..50 mm. The
+   same stepped block scanned without refinement frames (four empty frames above the top, seed 1)
+   gives 1.12 / 4.38 / 11.4, and dissertation sample 4 refined as if its 3 mm corner face were a
+   face (FACE_MIN_WIDTH_MM 2.5) gives 0.143 against 0.0527: refinement frames beside a face that
+   came out at once and a wall make it worse, not better. With refinement the corner's nodes get
+   first-exposure heights from the refinement frames' waterlines (which hug the rim) instead of the
+   dewetted placement, and the fit runs up to the bracket's top plus the climb (+1.38 there).
+ - scanned the dissertation's way (from the first frame showing the top), a face that comes out in
+   the first frame has nothing above it: the plateau with the first ink 1.4122 / 9.708 / 10.160, the
+   stepped block with the second 6.8783 / 50.079 / 52.264. The daemon always has a frame above, so
+   this is the bench's practice, not the product's; a bound from the empty frame above the top
+   (nothing of the part above that level plus the largest rise) was tried and changed nothing on
+   the scans from above (the errors above are under it).
+Sample 4's 0.0527 (the one part of the tuned set over 0.05) is the corner face's depression: its
+nodes within 1 mm of the x = 45 and y = 45 walls are 0.06-0.41 mm low, 67 % of the error sum within
+1 mm of the outline. The frames bracket its apparent height in (23, 24]; the renderer's depression
+there is 1.15 mm (the bend it takes from the top's formula continued past the outline), the solve's
+1.38. Leaving out the edge nodes no frame has inside only where they came in more than two steps
+below their neighbours (so that the ideal bowl's rim keeps them) leaves sample 4 at 0.0522: the
+nodes that gave session 24's 0.0493 came in level with their neighbours, as the bowl's do.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
@@ -366,6 +405,9 @@ from appliance.sim.scanrender import refine_scan, render_scan
 from appliance.vision.refine import RESOLUTION_MM
 
 PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
+# never tuned on: flat faces beside vertical walls, hidden walls, a hole down to the base;
+# scanned as the daemon scans (from an empty frame above the top)
+HELD_OUT = "steps,plateau,stepped-block,ring"
 
 
 def commission(tmp: Path, model: str, camera) -> tuple[Path, dict]:
@@ -397,7 +439,7 @@ def scan_part(
     `refine_mm` > 0: the steps in which a face came out at once are bisected to that, as the
     daemon's runner does (sim/scanrender.py refine_scan; refinement_frames counts them)."""
     surface = surfaces.get(name)
-    folder = tmp / (f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else ""))
+    folder = part_folder(tmp, name, model, seed, from_above)
     e = effects_preset(model)
     below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
     if not (folder / "scan.json").is_file():
@@ -418,8 +460,14 @@ def scan_part(
     return errors(surface, job.heightmap)
 
 
-def refinement_frames(tmp, name, model, seed=1) -> int:
-    folder = tmp / (f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else ""))
+def part_folder(tmp, name, model, seed=1, from_above=False) -> Path:
+    return tmp / (
+        f"{name}-{model}" + (f"-seed{seed}" if seed != 1 else "") + ("-above" if from_above else "")
+    )
+
+
+def refinement_frames(tmp, name, model, seed=1, from_above=False) -> int:
+    folder = part_folder(tmp, name, model, seed, from_above)
     return sum(1 for f in json.loads((folder / "scan.json").read_text())["frames"] if "refines" in f)
 
 
@@ -442,6 +490,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", default="physics,physics2")
     ap.add_argument("--parts", default=PARTS)
+    ap.add_argument(
+        "--held-out",
+        default=HELD_OUT,
+        metavar="PARTS",
+        help="parts never tuned on, scanned from above the top as the daemon does ('' for none)",
+    )
     ap.add_argument(
         "--keep",
         default=None,
@@ -466,21 +520,25 @@ def main():
                 + described(doc),
                 flush=True,
             )
-            for name in args.parts.split(","):
+            parts = [(n, False) for n in args.parts.split(",") if n]
+            parts += [(n, True) for n in args.held_out.split(",") if n]
+            for name, held in parts:
                 t0 = time.perf_counter()
-                ea, p99, mx = scan_part(name, model, tmp, camera, meniscus, refine_mm=args.refine_mm)
-                extra = refinement_frames(tmp, name, model)
-                rows.append((model, name, ea, p99, mx, extra))
+                ea, p99, mx = scan_part(
+                    name, model, tmp, camera, meniscus, from_above=held, refine_mm=args.refine_mm
+                )
+                extra = refinement_frames(tmp, name, model, from_above=held)
+                rows.append((model, name + (" *" if held else ""), ea, p99, mx, extra))
                 print(
                     f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
                     f"{extra} refinement frames ({time.perf_counter() - t0:.0f} s)",
                     flush=True,
                 )
-    print("\nsummary (mm)")
-    print(f"  {'model':<9} {'part':<12} {'Ea':>7} {'p99 in':>7} {'max':>7} {'refined':>7}")
+    print("\nsummary (mm; * held out, scanned from the first level above the top, as the daemon does)")
+    print(f"  {'model':<9} {'part':<15} {'Ea':>7} {'p99 in':>7} {'max':>7} {'refined':>7}")
     for model, name, ea, p99, mx, extra in rows:
         flag = "" if ea <= 0.05 else "  > 0.05"
-        print(f"  {model:<9} {name:<12} {ea:7.4f} {p99:7.3f} {mx:7.3f} {extra:7d}{flag}")
+        print(f"  {model:<9} {name:<15} {ea:7.4f} {p99:7.3f} {mx:7.3f} {extra:7d}{flag}")
 
 
 if __name__ == "__main__":
