@@ -289,7 +289,7 @@ interior p99 / max mm, honest share of (cells):
   deg walls over its tier are the same pattern, and there the cubic did better.
   The plateau's p99 is at its target's edge: the waterlines moved a further 0.005 mm a frame
   (draws 1-4) give 0.202 0.202 0.209 0.200 (0.196 on the render as it is).
-(r) Then (7fd5656, reverted in 3049aa7: see benches/meniscus.py) first exposure took out the edge
+(r) Then (7fd5656, reverted in 68a4057: see benches/meniscus.py) first exposure took out the edge
 nodes no frame has inside, same renders, (q) -> that: sample1 0.0154 -> 0.0155, sample2 0.0186 0.049 0.214 ->
 0.0186 0.048 0.208, sample3 0.0428 0.107 0.378 -> 0.0433 0.108 0.387, sample4 0.2096 0.337 2.106
 -> 0.1984 0.334 1.995, twin-peaks and plateau unchanged, ring 0.0396 0.198 0.437 -> 0.0444 0.201

@@ -323,8 +323,8 @@ Why the rim climbed: the lattice row 0.06 mm outside sample 4's vertical walls c
 footprint at wall-foot levels (6-14 mm) in draw 2 and not in draw 0 (33 of 99 nodes): the raster
 counts a node in when the outline crosses its cell, and one frame is enough. First exposure now
 took out the edge nodes that no frame has inside by the exact distance (7fd5656; reverted in
-3049aa7: the ideal second-ink dome of tests/test_surface_physics.py came out 0.038 mm off for
-< 0.015, its nodes just outside the lowest frame's level curve being part of the dome). Same renders,
+68a4057: the ideal second-ink bowl of tests/test_surface_physics.py came out 0.038 mm off for
+< 0.015, its edge nodes outside the lowest frame's level curve being its rim on its wall). Same renders,
 Ea / interior p99 / max mm, before -> after: sample1 0.0097 (unchanged), sample2 0.0472 0.230
 1.383 -> 0.0446 0.233 1.393, sample3 0.0379 0.261 0.535 -> 0.0384 0.260 0.535, sample4 0.0527
 0.047 0.696 -> 0.0493 0.028 0.762, crater 0.0200 0.164 0.385 -> 0.0233 0.166 0.424, twin-peaks
@@ -406,7 +406,7 @@ from appliance.vision.refine import RESOLUTION_MM
 
 PARTS = "sample1,sample2,sample3,sample4,crater,twin-peaks,steep-front"
 # never tuned on: flat faces beside vertical walls, hidden walls, a hole down to the base;
-# scanned as the daemon scans (from an empty frame above the top)
+# scanned as the daemon scans (from the first level above the top)
 HELD_OUT = "steps,plateau,stepped-block,ring"
 
 
