@@ -9,7 +9,7 @@ from appliance.errors import InkSliceError, SettingError
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
-from appliance.surface.exposure import _came_out_at
+from appliance.surface.exposure import _apart, _came_out_at
 from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 from appliance.surface.slices import check_waterlines, make_slice
@@ -75,6 +75,17 @@ def test_a_refinement_frame_beside_its_step_does_not_swing_a_node_a_whole_step()
     z = _came_out_at(slices, 4, 0, nodes, np.zeros(len(nodes), bool), hmax=0.5, order=4)
     # the straight line between the two bracketing curves gives 7.25
     assert np.all((z >= 7.0) & (z < 7.5)), z
+
+
+def test_a_bracket_level_with_no_level_curve_does_not_drop_the_frame_beside_it():
+    # columns: the step above (9 mm), the bracket's own frame (8 mm, all wall: no level curve,
+    # so no distance), a refinement frame 0.1 mm under it and the next step. With nothing to
+    # compare against, the refinement frame stays in; the one after it, 0.01 mm from it, goes
+    levels = np.array([9.0, 8.0, 7.9, 7.89])
+    S = np.array([[-1.0, 0.0, 0.01, 0.02]])
+    ok = np.array([[True, False, True, True]])
+    kept = _apart(S, ok, np.array([1]), levels, tol=0.05)
+    assert kept.tolist() == [[True, False, True, False]]
 
 
 def test_islands_that_merge_and_a_hole():

@@ -61,17 +61,23 @@ def _apart(S, ok, c_in, levels, tol):
     lo, hi = np.clip(c_in, 0, n - 1), np.clip(c_in - 1, 0, n - 1)
     fine = 0.5 * np.abs(levels[hi] - levels[lo])  # half the bracket's step, per row
     for start, step in ((c_in, 1), (c_in - 1, -1)):
-        valid = (start >= 0) & (start < n)  # the bracket has a column on this side
+        # `last`: the usable waterline next nearer the bracket (`have`: there is one yet; a
+        # column with no level curve holds no distance to compare with)
         last = np.clip(start, 0, n - 1)
+        have = (start >= 0) & (start < n) & ok[rows, last]
         for off in range(1, n):
             col = start + step * off
             c = np.clip(col, 0, n - 1)
-            use = valid & (col >= 0) & (col < n) & ok[rows, c]
+            use = (col >= 0) & (col < n) & ok[rows, c]
             close = (
-                use & (np.abs(S[rows, c] - S[rows, last]) < tol) & (np.abs(levels[c] - levels[last]) < fine)
+                use
+                & have
+                & (np.abs(S[rows, c] - S[rows, last]) < tol)
+                & (np.abs(levels[c] - levels[last]) < fine)
             )
             ok[rows[close], c[close]] = False
             last = np.where(use & ~close, c, last)
+            have |= use
     return ok
 
 
