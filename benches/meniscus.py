@@ -510,6 +510,8 @@ def main():
         "(0: only the plan's levels; a kept folder keeps the frames it has)",
     )
     args = ap.parse_args()
+    for name in filter(None, args.parts.split(",") + args.held_out.split(",")):
+        surfaces.get(name)  # an unknown part fails now, naming the known ones, not after renders
     rows = []
     with bench_folder(args.keep, "meniscus-bench-") as (tmp, camera):
         for model in args.models.split(","):
