@@ -88,6 +88,19 @@ def test_a_bracket_level_with_no_level_curve_does_not_drop_the_frame_beside_it()
     assert kept.tolist() == [[True, False, True, False]]
 
 
+def test_a_frame_above_that_is_all_wall_does_not_lift_a_node_s_bracket():
+    # a cone's rings at 9, 8 and 7 mm under a frame (10 mm) whose waterline is all wall: it
+    # has no level curve, so no distance. Read as a distance of 0, the node "inside" it put
+    # the floor of its bracket at 10 mm; the node came out at 8 and stands at 8.5
+    t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    circle = np.column_stack([np.cos(t), np.sin(t)])
+    slices = [make_slice(z, [r * circle]) for z, r in [(10.0, 3.0), (9.0, 5.0), (8.0, 7.0), (7.0, 9.0)]]
+    slices[0].wall = np.ones(len(slices[0].P), bool)
+    nodes = np.array([[6.0, 0.0], [0.0, -6.0]])
+    z = _came_out_at(slices, 2, 0, nodes, np.zeros(len(nodes), bool), hmax=0.5, order=4)
+    assert np.all(np.abs(z - 8.5) < 0.05), z
+
+
 def test_islands_that_merge_and_a_hole():
     tp = surfaces.get("twin-peaks")
     rec = reconstruct(ideal_waterlines(tp, np.arange(31.0, 0.0, -1.0), 0.2), GridSpec(tp.bounds, n=(46, 41)))

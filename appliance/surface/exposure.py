@@ -179,6 +179,7 @@ def _came_out_at(slices, k, top, q, rim, hmax, order):
     S = np.zeros((len(q), len(js)))
     Z = np.zeros_like(S)
     ok = np.zeros(S.shape, bool)
+    within = np.zeros(S.shape, bool)  # the node inside the waterline, walls and all
     for c, j in enumerate(js):
         sl = slices[j]
         sd, i = polyline_distance(sl, q, signed=True)
@@ -187,6 +188,7 @@ def _came_out_at(slices, k, top, q, rim, hmax, order):
         in_mask = k <= j  # every node here came out at k
         far_node = np.abs(sd) > 1.5 * hmax
         side = np.where(far_node | rim, in_mask, sd >= 0)
+        within[:, c] = side
         # the distance that places the node is the one to the level curve: a wall
         # beside the node says nothing about where the top crosses the level
         cv = sl.level_curve()
@@ -220,7 +222,10 @@ def _came_out_at(slices, k, top, q, rim, hmax, order):
     # the node came out between the two bracketing levels (told by the exact signs,
     # the raster mask can be a node off): the answer must lie between them
     levels = np.array([slices[j].level for j in js])
-    inside = S >= 0
+    # inside by the whole waterline: a frame whose waterline is all wall has no level curve
+    # and no distance, and read as a distance of 0 it put the bracket's floor at its level,
+    # far above (steps' boss top at 22.6 mm came out at the 25 mm frame's level)
+    inside = within
     c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
     zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
     zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
