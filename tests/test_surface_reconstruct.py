@@ -101,6 +101,33 @@ def test_a_frame_above_that_is_all_wall_does_not_lift_a_node_s_bracket():
     assert np.all(np.abs(z - 8.5) < 0.05), z
 
 
+# a tilted block with a boss on it, its walls 0.25-0.3 mm off the fit lattice's nodes
+BOSSED = Surface(
+    "bossed",
+    "a boss on a tilted block",
+    (0.0, 40.0, 0.0, 30.0),
+    (
+        Tier(rect_sdf(0, 40, 0, 30), lambda x, y: 4 + 0.031 * x + 0.023 * y),
+        Tier(rect_sdf(10.3, 29.75, 8.3, 21.75), lambda x, y: 16 + 0.04 * x),
+    ),
+)
+
+
+def test_nodes_beside_a_tall_wall_keep_the_face_at_its_foot():
+    # the lattice has a node 0.25-0.3 mm outside each of the boss's walls. The raster mask
+    # took it in with the boss's top (a 12 mm wall's worth of slack), and the thin plate,
+    # which cannot turn the wall's foot, carried it up even where its own height was right
+    lines = ideal_waterlines(BOSSED, np.arange(18.0, 3.0, -0.5), 0.1)
+    rec = reconstruct(lines, GridSpec(BOSSED.bounds, n=(41, 31)))
+    e, inside = _errors(BOSSED, rec)
+    X, Y = rec.heightmap.grid()
+    off_boss = np.maximum(np.maximum(10.3 - X, X - 29.75), np.maximum(8.3 - Y, Y - 21.75))
+    ring = inside & (off_boss > 0) & (off_boss < 1.5)
+    assert ring.sum() > 100
+    # before: 3.5 mm on average, 10.9 at worst (the boss's top)
+    assert np.nanmean(e[ring]) < 0.1 and np.nanmax(e[ring]) < 1.0, (np.nanmean(e[ring]), np.nanmax(e[ring]))
+
+
 def test_islands_that_merge_and_a_hole():
     tp = surfaces.get("twin-peaks")
     rec = reconstruct(ideal_waterlines(tp, np.arange(31.0, 0.0, -1.0), 0.2), GridSpec(tp.bounds, n=(46, 41)))

@@ -60,12 +60,18 @@ def _filled(lat: Lattice, polys) -> np.ndarray:
     return m.astype(bool)
 
 
-def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarray:
-    """Nodes inside the slice's waterline (even-odd over its loops: holes stay out)."""
+def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool | str = False) -> np.ndarray:
+    """Nodes inside the slice's waterline (even-odd over its loops: holes stay out).
+    exact_edges: True decides the nodes within a node or two of the waterline by the exact
+    side; "feet" only those whose nearest waterline point is the foot of a wall (a wall
+    point not put back from a raised edge)."""
     if sl.empty:
         return np.zeros(lat.shape, bool)
     polys = _polygons(lat, sl.loops)
     m = _filled(lat, polys)
+    feet = exact_edges == "feet"
+    if feet and not _feet(sl).any():
+        return m
     if exact_edges:
         # fillPoly also paints the pixels the outline passes through: within a node or two
         # of the waterline the exact side of the nearest segment decides instead
@@ -73,9 +79,19 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool = False) -> np.ndarr
         cv2.polylines(near, polys, True, 1, thickness=3, lineType=cv2.LINE_8, shift=_SHIFT)
         jj, ii = np.nonzero(near)
         if jj.size:
-            sd, _ = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
+            sd, i = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
+            if feet:
+                on = _feet(sl)[i]
+                jj, ii, sd = jj[on], ii[on], sd[on]
             m[jj, ii] = sd > 0
     return m
+
+
+def _feet(sl: Slice) -> np.ndarray:
+    """The slice's points on the foot of a wall: walls, less the edges put back from a rim."""
+    if sl.wall is None:
+        return np.zeros(len(sl.P), bool)
+    return sl.wall & ~sl.edge if sl.edge is not None and len(sl.edge) == len(sl.P) else sl.wall
 
 
 def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
