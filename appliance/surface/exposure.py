@@ -230,8 +230,7 @@ def _came_out_at(slices, k, top, q, rim, hmax, order):
     # inside by the whole waterline: a frame whose waterline is all wall has no level curve
     # and no distance, and read as a distance of 0 it put the bracket's floor at its level,
     # far above (steps' boss top at 22.6 mm came out at the 25 mm frame's level)
-    inside = within
-    c_in = np.where(inside.any(axis=1), np.argmax(inside, axis=1), len(js))
+    c_in = np.where(within.any(axis=1), np.argmax(within, axis=1), len(js))
     zmin = np.where(c_in < len(js), levels[np.minimum(c_in, len(js) - 1)], -np.inf)
     zmax = np.where(c_in > 0, levels[np.maximum(c_in - 1, 0)], np.inf)
     rise = np.where(ok, Z - levels, 0.0)  # meniscus-corrected heights widen it

@@ -69,8 +69,8 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool | str = False) -> np
         return np.zeros(lat.shape, bool)
     polys = _polygons(lat, sl.loops)
     m = _filled(lat, polys)
-    feet = exact_edges == "feet"
-    if feet and not _feet(sl).any():
+    feet = _feet(sl) if exact_edges == "feet" else None
+    if feet is not None and not feet.any():
         return m
     if exact_edges:
         # fillPoly also paints the pixels the outline passes through: within a node or two
@@ -80,8 +80,8 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool | str = False) -> np
         jj, ii = np.nonzero(near)
         if jj.size:
             sd, i = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
-            if feet:
-                on = _feet(sl)[i]
+            if feet is not None:
+                on = feet[i]
                 jj, ii, sd = jj[on], ii[on], sd[on]
             m[jj, ii] = sd > 0
     return m
@@ -91,7 +91,7 @@ def _feet(sl: Slice) -> np.ndarray:
     """The slice's points on the foot of a wall: walls, less the edges put back from a rim."""
     if sl.wall is None:
         return np.zeros(len(sl.P), bool)
-    return sl.wall & ~sl.edge if sl.edge is not None and len(sl.edge) == len(sl.P) else sl.wall
+    return sl.wall if sl.edge is None else sl.wall & ~sl.edge
 
 
 def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
