@@ -442,11 +442,16 @@ def scan_part(
     folder = part_folder(tmp, name, model, seed, from_above)
     e = effects_preset(model)
     below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
+    # an ink that does not wet flat faces stands over a flat top it has left, a pit's
+    # contact line up to sqrt(2) times more (physics.curvature_factor)
+    above = -math.sqrt(2) * float(
+        meniscus_rise(0.0, e.capillary_length_mm, math.radians(e.contact_angle_deg))
+    )
     if not (folder / "scan.json").is_file():
         render_scan(
             surface,
             folder,
-            levels=sculpture_levels(surface, step, max(below, 0.0), from_above),
+            levels=sculpture_levels(surface, step, max(below, 0.0), from_above, max(above, 0.0)),
             effects=model,
             seed=seed,
             workers=2,

@@ -30,6 +30,9 @@ def test_a_bench_scan_from_above_starts_with_a_frame_that_shows_no_part():
     daemon_like = sculpture_levels(plateau, 1.0, from_above=True)
     assert dissertation[0] < plateau.z_max == 25.0  # the top is above the first frame
     assert daemon_like[:2] == [26.0, 25.0] and daemon_like[2:] == dissertation
+    # an ink that leaves a flat top while it stands up to 1.9 mm over it: the first frame
+    # that shows no part is 27 mm
+    assert sculpture_levels(plateau, 1.0, from_above=True, above_mm=1.9)[:3] == [27.0, 26.0, 25.0]
 
 
 def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 
-def sculpture_levels(surface, step, below_mm=0.0, from_above=False):
+def sculpture_levels(surface, step, below_mm=0.0, from_above=False, above_mm=0.0):
     """The dissertation's practice: one picture per step from the first in which the top
     shows, down to the first in which the whole sculptured top stands above the ink.
 
@@ -15,10 +15,13 @@ def sculpture_levels(surface, step, below_mm=0.0, from_above=False):
 
     `from_above` starts as the daemon does instead: from the first level above the top,
     a frame that shows no part (the daemon descends from the first level that shows none).
-    A top that lies on a level then has a frame above it that bounds it.
+    A top that lies on a level then has a frame above it that bounds it. An ink that does
+    not wet flat faces leaves a top while it still stands up to `above_mm` over it: the
+    daemon's first empty frame is that much higher.
     """
     from .scanrender import scan_levels
 
     lowest = surface.z_min_top - step - below_mm
     highest = float("inf") if from_above else surface.z_max
-    return [lv for lv in scan_levels(surface, step) if lowest <= lv < highest]
+    levels = scan_levels(surface, step, above_mm if from_above else 0.0)
+    return [lv for lv in levels if lowest <= lv < highest]

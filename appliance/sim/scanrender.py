@@ -29,15 +29,17 @@ from .rig import Rig, pixel_map
 from .truth import truth_path
 
 
-def scan_levels(surface, step_mm: float) -> list[float]:
+def scan_levels(surface, step_mm: float, above_mm: float = 0.0) -> list[float]:
     """Nominal levels from just above the part's top down to ~0.5 mm above the base.
 
     Levels sit on multiples of the step (as a stage stepping from a fixed home
-    would), the first one the smallest multiple above the top.
+    would), the first one the smallest multiple above the top, or above the top and
+    `above_mm` (how far an ink that does not wet flat faces stands over a top it has
+    left: that frame still shows the part).
     """
     if not (step_mm > 0 and math.isfinite(step_mm)):
         raise SettingError("step", f"the level step must be a positive number of mm, got {step_mm!r}")
-    top = surface.z_max
+    top = surface.z_max + max(above_mm, 0.0)
     first = math.floor(top / step_mm + 1e-9) * step_mm + step_mm
     n = int(math.floor((first - 0.5) / step_mm + 1e-9)) + 1
     levels = [round(first - i * step_mm, 6) for i in range(n)]
