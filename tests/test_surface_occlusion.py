@@ -13,7 +13,7 @@ from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.surface.exposure import first_exposure
 from appliance.surface.flatfaces import flat_faces, tilt_crossed_faces
-from appliance.surface.inkbounds import node_bounds
+from appliance.surface.inkbounds import behind_faces, node_bounds
 from appliance.surface.lattice import Lattice
 from appliance.surface.perspective import Perspective, mark_walls, unproject_rims
 from appliance.surface.silhouettes import mark_silhouettes, silhouettes
@@ -114,6 +114,30 @@ def test_the_frames_bound_each_node_and_a_silhouette_bounds_it_by_its_ray():
         s.hidden = None  # no silhouettes known: the ceiling is the level that first showed ink
     levels_only = node_bounds(lat, seen, corrected, never, np.ones(lat.shape, bool))
     assert (levels_only.ceiling - ray)[behind].mean() > 0.4
+
+
+def test_the_nodes_behind_a_face_s_edge_get_no_height_of_their_own():
+    """Behind the frustum's far rim the camera sees the rim's silhouette over the ink, never
+    the waterline: a node there comes out (by the slices with the rims put back) with
+    whatever the frames show beyond, not with its own crossing of the ink. Those nodes, and
+    only those, are left to the fit."""
+    seen = _frustum_slices()
+    mark_walls(seen, 0.03, CAMERA)
+    mark_silhouettes(seen, CAMERA)
+    corrected = unproject_rims(seen, CAMERA, 0.03)
+    lat = Lattice(np.arange(36.0, 66.01, 0.25), np.arange(-14.0, 14.01, 0.25))
+    X, Y = np.meshgrid(lat.x, lat.y)
+    _, first, _ = first_exposure(lat, corrected, 0.05)
+    behind = behind_faces(lat, seen, corrected, first)
+    # not the plateau, nor beyond the wall that faces the camera (x = 40); the walls that
+    # face away from it (x = 60, y = +-10) hide what lies beyond their rims
+    assert not behind[(np.abs(X - 50) < 9.9) & (np.abs(Y) < 9.9)].any()
+    assert not behind[(X < 40) & (np.abs(Y) < 9.5)].any()
+    # out of the ink at the lower frames (15.6 down to 8.6 mm), every one hidden by the rim
+    assert behind[(X > 60.1) & (X < 61.0) & (np.abs(Y) < 8)].all()
+    for s in corrected:
+        s.hidden = None  # no silhouette known: nothing is behind a face
+    assert not behind_faces(lat, seen, corrected, first).any()
 
 
 def test_a_face_the_camera_sees_has_no_silhouette():

@@ -10,6 +10,7 @@ from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf, rect_sdf
 from appliance.surface.exposure import _apart, _came_out_at
+from appliance.surface.lattice import Lattice, exposed_mask
 from appliance.surface.perspective import Perspective, mark_walls
 from appliance.surface.reconstruct import GridSpec, ReconstructOptions, reconstruct
 from appliance.surface.slices import check_waterlines, make_slice
@@ -86,6 +87,21 @@ def test_a_bracket_level_with_no_level_curve_does_not_drop_the_frame_beside_it()
     ok = np.array([[True, False, True, True]])
     kept = _apart(S, ok, np.array([1]), levels, tol=0.05)
     assert kept.tolist() == [[True, False, True, False]]
+
+
+def test_beside_a_wall_the_exact_side_decides_not_the_raster():
+    # a 10 mm square waterline on a 1 mm lattice whose nodes sit 0.3 mm off its sides: the
+    # raster paints the nodes the outline passes through, 0.3 mm outside it included. Where
+    # the waterline is a wall (its foot, or a top edge put back), a node outside stays out:
+    # beside steps' boss the raster's node came out with the boss's top, 15 mm high
+    sq = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    t = np.linspace(0, 1, 40, endpoint=False)[:, None]
+    sl = make_slice(5.0, [np.concatenate([a + (b - a) * t for a, b in zip(sq, np.roll(sq, -1, 0))])])
+    lat = Lattice(np.arange(-2.7, 13, 1.0), np.arange(-2.7, 13, 1.0))
+    assert exposed_mask(lat, sl, exact_edges="walls").sum() == 121  # no walls: the raster's
+    sl.wall = np.ones(len(sl.P), bool)
+    sl.edge = sl.wall.copy()
+    assert exposed_mask(lat, sl, exact_edges="walls").sum() == 100  # 0.3 .. 9.3 each way
 
 
 def test_a_frame_above_that_is_all_wall_does_not_lift_a_node_s_bracket():

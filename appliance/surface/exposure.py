@@ -111,11 +111,11 @@ def first_exposure(lat: Lattice, slices: list[Slice], footprint_tol_mm: float, o
     first = np.full(lat.shape, K, np.int32)
     for k in range(K - 1, -1, -1):
         # the raster takes in a node the waterline passes near: on a slope that is a level
-        # early, at a wall's foot the wall's whole height (a boss's 12 mm: the nodes beside
-        # it came out with its top). There the exact side decides. Not beside a rim put back:
-        # beyond a rim the face may go on down steeply (a blade's 84 deg flank, its nodes
-        # within a raster node of the crest 1-3 mm under it), so a node there comes out with it
-        m = exposed_mask(lat, slices[k], exact_edges="feet")
+        # early, beside a wall the wall's whole height (a boss's 12 mm: the nodes beside it
+        # came out with its top). There the exact side decides, at a wall's foot and at a top
+        # edge put back from a silhouette alike (behind such an edge the node's height is
+        # not the frames' to give: inkbounds.behind_faces)
+        m = exposed_mask(lat, slices[k], exact_edges="walls")
         first[m] = k
     X, Y = np.meshgrid(lat.x, lat.y)
     footprint = first < K

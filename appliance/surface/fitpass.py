@@ -21,6 +21,7 @@ from .dewetted import bracket_dewetted_faces, dewetted_nodes, pinned_rims_as_wal
 from .exposure import first_exposure
 from .flatfaces import flat_faces, flat_prior, tilt_crossed_faces
 from .gridfit import FitProblem, point_data
+from .inkbounds import behind_faces
 from .summit import summit_ceiling
 
 BRACKET_SLACK_LEVELS = 2  # one held sample 4's rim nodes 1.4 mm low (clean Ea 0.0220 -> 0.0174 with two)
@@ -161,10 +162,11 @@ class PassResult(NamedTuple):
     flat: tuple  # (lo, hi) bracket per node of the faces that came out at once
 
 
-def fit_pass(lat, slices, opt, ftol, length, rise):
+def fit_pass(lat, slices, opt, ftol, length, rise, seen=None):
     """First exposure and the fit (smoothing cross-validated on the first pass). With a
     meniscus the fit is of the contact lines - where the last pass's rise field says they
-    really are - and the top is solved from it (contact_lines.top_from_apparent)
+    really are - and the top is solved from it (contact_lines.top_from_apparent). `seen`:
+    the slices as the camera saw them, silhouettes and all (none: no face hid anything)
     -> PassResult."""
     if opt.meniscus is not None:
         slices = pinned_rims_as_walls(slices, opt.meniscus, opt.wall_tol_mm)
@@ -175,6 +177,10 @@ def fit_pass(lat, slices, opt, ftol, length, rise):
     placed = z_fe
     if opt.meniscus is not None:
         placed = place_dewetted_faces(lat, z_fe, first, footprint, slices, opt.meniscus)
+    if seen is not None:
+        # a node a face hid has no height of its own: the fit places it, between the level it
+        # was out at and the ray over the face's edge (reconstruct's node bounds)
+        placed = np.where(behind_faces(lat, seen, slices, first), np.nan, placed)
     h = max(lat.hx, lat.hy)
     z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, flat_far_mm(lat), max(2 * h, FLAT_EDGE_MM))
     tilted = tilt_crossed_faces(lat, slices, z_mid, mid, first, flat_far_mm(lat))

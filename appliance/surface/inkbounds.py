@@ -65,6 +65,25 @@ def node_bounds(
     return _without_clashes(NodeBounds(*out))
 
 
+def behind_faces(lat: Lattice, seen: list[Slice], corrected: list[Slice], first: np.ndarray) -> np.ndarray:
+    """Nodes the camera saw out of the ink, in a frame before the one they came out in by
+    the corrected slices, where the nearest corrected waterline is a top edge put back from
+    a silhouette: what it saw there was the face over the node, not the node. The level
+    they came out at is where the part beyond the face's foot crossed the ink (the blade's
+    flank, 20 mm high behind its crest, came out with its 3 mm plate). A cheap cut of
+    node_bounds' `hidden`, for the fit."""
+    X, Y = np.meshgrid(lat.x, lat.y)
+    behind = np.zeros(lat.shape, bool)
+    for k, (s, c) in enumerate(zip(seen, corrected)):
+        if s.empty or c.empty or c.hidden is None or not c.hidden.any():
+            continue
+        ask = exposed_mask(lat, s, exact_edges=True) & (first > k) & ~behind
+        if ask.any():
+            _, i = polyline_distance(c, np.column_stack([X[ask], Y[ask]]))
+            behind[ask] = c.hidden[i]
+    return behind
+
+
 def _joined_columns(parts):
     return [np.concatenate(column) for column in zip(*parts)]
 

@@ -63,15 +63,17 @@ def _filled(lat: Lattice, polys) -> np.ndarray:
 def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool | str = False) -> np.ndarray:
     """Nodes inside the slice's waterline (even-odd over its loops: holes stay out).
     exact_edges: True decides the nodes within a node or two of the waterline by the exact
-    side; "feet" only those whose nearest waterline point is the foot of a wall (a wall
-    point not put back from a raised edge)."""
+    side; "walls" only those whose nearest waterline point is on a wall (its foot, or its
+    top edge put back from a silhouette)."""
     if sl.empty:
         return np.zeros(lat.shape, bool)
     polys = _polygons(lat, sl.loops)
     m = _filled(lat, polys)
-    feet = _feet(sl) if exact_edges == "feet" else None
-    if feet is not None and not feet.any():
-        return m
+    walls = None
+    if exact_edges == "walls":
+        walls = sl.wall if sl.wall is not None else np.zeros(len(sl.P), bool)
+        if not walls.any():
+            return m
     if exact_edges:
         # fillPoly also paints the pixels the outline passes through: within a node or two
         # of the waterline the exact side of the nearest segment decides instead
@@ -80,18 +82,11 @@ def exposed_mask(lat: Lattice, sl: Slice, exact_edges: bool | str = False) -> np
         jj, ii = np.nonzero(near)
         if jj.size:
             sd, i = polyline_distance(sl, np.column_stack([lat.x[ii], lat.y[jj]]), signed=True)
-            if feet is not None:
-                on = feet[i]
+            if walls is not None:
+                on = walls[i]
                 jj, ii, sd = jj[on], ii[on], sd[on]
             m[jj, ii] = sd > 0
     return m
-
-
-def _feet(sl: Slice) -> np.ndarray:
-    """The slice's points on the foot of a wall: walls, less the edges put back from a rim."""
-    if sl.wall is None:
-        return np.zeros(len(sl.P), bool)
-    return sl.wall if sl.edge is None else sl.wall & ~sl.edge
 
 
 def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:

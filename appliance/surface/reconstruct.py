@@ -202,7 +202,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     walls = camera is not None and any(s.wall.any() for s in slices if not s.empty)
     passes = PASSES if walls or opt.tank_area_mm2 or opt.meniscus is not None else 1
     corrected = slices
-    fit = fit_pass(lat, slices, opt, ftol, opt.smoothing_mm, None)
+    fit = fit_pass(lat, slices, opt, ftol, opt.smoothing_mm, None, seen)
     curve = fit.curve if fit.curve is not None else []
     for _ in range(passes - 1):
         # each later pass: each wall edge's height and the emerged volume from the fit before
@@ -216,7 +216,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             diag["bounds"] = grid.bounds
             old, (lat, r) = lat, _lattice_for(xo, yo, opt.lattice_max)
             rise = None if rise is None else _resample(old, rise, lat)
-        fit = fit_pass(lat, slices, opt, ftol, fit.length, rise)
+        fit = fit_pass(lat, slices, opt, ftol, fit.length, rise, seen)
         curve = fit.curve if fit.curve is not None else curve
     z, z_fe, first, footprint, slices, length, _, rise, flat = fit
     diag["lattice"] = {"nx": lat.x.size, "ny": lat.y.size, "hx_mm": lat.hx, "hy_mm": lat.hy}
