@@ -296,6 +296,13 @@ nodes no frame has inside, same renders, (q) -> that: sample1 0.0154 -> 0.0155, 
 0.434 (p99 over by 0.001 again); crater 0.0359 0.199 0.237 -> 0.0375 0.197 0.301, steep-front
 unchanged. Honest share: tuned 97.4 % of 2011, held out 92.4 % of 118. Over the targets: sample4
 (all three), ring (p99, 0.201).
+(s) Session 27 (5 December 2026): the exact side at a rim put back as at a wall's foot, and a
+node seen under a face's silhouette before it came out left to the fit (9b7036c), (m)'s
+renders, 6f27519 -> 9b7036c, Ea / interior p99 / max mm: sample2 0.0203 0.059 0.214 -> 0.0170
+0.052 0.163, sample3 0.0430 0.107 0.439 -> 0.0429 0.105 0.481, sample4 0.2089 0.336 2.002 ->
+0.1930 0.335 1.606, ring 0.0399 0.199 0.498 -> 0.0355 0.183 0.309, crater (held out) 0.0364
+0.200 0.244 -> 0.0366 0.203 0.232; sample1, twin-peaks, plateau, steep-front unchanged. Over
+the targets: sample4 (all three), crater's p99 by 0.003.
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

@@ -371,6 +371,28 @@ there is 1.15 mm (the bend it takes from the top's formula continued past the ou
 below their neighbours (so that the ideal bowl's rim keeps them) leaves sample 4 at 0.0522: the
 nodes that gave session 24's 0.0493 came in level with their neighbours, as the bowl's do.
 
+5 December 2026 (session 27). The held-out scans "from above" were not: with the second ink a
+flat top is bare while the ink still stands up to 1.4 mm over it (1.9 in a pit), so the first
+frame of the plateau's scan, at 26 mm, already showed its 25 mm top, and the daemon would have
+gone higher first. scan_part now starts over the most the model lets the ink stand over a face
+(sim/levels.py above_mm). Then (9b7036c) first exposure takes the exact side at a rim put back
+as at a wall's foot, and a node the camera saw under a face's silhouette before it came out
+has no height of its own (surface/inkbounds.py behind_faces). Ea / interior p99 / max mm:
+  tuned set, (m)'s renders, 6f27519 -> 9b7036c (sample 4 over five draws of 5 um jitter:
+  mean 0.0547 -> 0.0496, each draw 0.047-0.053 after):
+    sample1 0.0097 -> 0.0100   sample2 0.0489 -> 0.0317   sample3 0.0376 -> 0.0394
+    sample4 0.0523 -> 0.0451   crater  0.0200 -> 0.0233   twin-peaks 0.0249 -> 0.0239
+    steep-front 0.0350 -> 0.0355
+  held out, rendered afresh from above (6f27519 -> 9b7036c):
+    plateau 0.0831 -> 0.0829 / 0.582 / 0.803 (0.3844 on the old render)
+    ring 0.0840 -> 0.0846 / 0.244 / 1.630     stepped-block 0.9823 -> 1.0387 / 5.262 / 14.313
+    steps 0.5974 -> 0.7063 / 12.355 / 15.056
+Steps and the stepped block lose by design: behind a rim that faces away from the camera the
+frames cannot tell a vertical wall from a flank along the ray, and a node there now stands
+under the ray (material left: steps' 1.6 mm strip behind its boss comes out at the boss's
+height less the ray's drop) where the frames' floor had held it. Steps' block also comes out
++1.0..1.2 mm on whole rows of its 3 deg top, the faces it came out at once in the second ink.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

@@ -46,6 +46,15 @@ above its ceiling keeps neither (on harsh sample 4 a 38.6 mm edge node stood at 
 ceiling, 21 mm off: a waterline at a wall's edge moves as far as the stage plays): clean,
 same renders, stepped block 0.2905 (p99 2.682, max 6.620), blade 0.0989 (p99 1.376, max
 2.400): both targets (0.3, 0.1) still met, by less.
+5 December 2026 (session 27, 9b7036c): the exact side decides at a rim put back as at a wall's
+foot, and a node seen under a face's silhouette before it came out has no height of its own
+(surface/inkbounds.py behind_faces); the same renders, clean, Ea / interior p99 / max mm:
+    stepped-block 0.2952 / 3.856 / 7.667 -> 0.2972 / 4.160 / 9.529
+    blade         0.0993 / 1.571 / 2.400 -> 0.0983 / 1.446 / 2.400
+and tests/test_surface_occlusion.py's small-camera blade 0.1166 -> 0.1202 (0.1348 with the
+exact sides alone: its flank, 20 mm high behind the crest, came out with the 3 mm plate).
+Behind a rim the frames cannot tell a vertical wall (the strip beyond lies at its floor) from
+a flank along the ray (at its ceiling); the fit's side of that, under the ray, leaves material.
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
