@@ -51,6 +51,16 @@ def _behind_far_wall(s):
     return s.P[:, 0] > 60.0 + (RIM_MM - s.level) * RUN + 0.1
 
 
+def _frustum_seen_and_corrected():
+    """The frustum's slices as seen, walls and silhouettes marked; the same with the rims put
+    back; and a quarter-millimetre lattice over it."""
+    seen = _frustum_slices()
+    mark_walls(seen, 0.03, CAMERA)
+    mark_silhouettes(seen, CAMERA)
+    corrected = unproject_rims(seen, CAMERA, 0.03)
+    return seen, corrected, Lattice(np.arange(36.0, 66.01, 0.25), np.arange(-14.0, 14.01, 0.25))
+
+
 def _frustum_slices():
     # frames alternately a third of a pixel out and in, as a real scan's are
     lines = [_frustum_seen(L, 0.03 * (-1) ** i) for i, L in enumerate(LEVELS)]
@@ -90,11 +100,7 @@ def test_the_frames_bound_each_node_and_a_silhouette_bounds_it_by_its_ray():
     it). Behind the far wall the camera never saw the ink's edge, only the rim's silhouette
     creeping out frame by frame: there the ceiling is the ray from the camera over the rim,
     not the level of the frame that first showed ink (0.7 mm higher on average)."""
-    seen = _frustum_slices()
-    mark_walls(seen, 0.03, CAMERA)
-    mark_silhouettes(seen, CAMERA)
-    corrected = unproject_rims(seen, CAMERA, 0.03)
-    lat = Lattice(np.arange(36.0, 66.01, 0.25), np.arange(-14.0, 14.01, 0.25))
+    seen, corrected, lat = _frustum_seen_and_corrected()
     X, Y = np.meshgrid(lat.x, lat.y)
     outside = np.maximum(np.maximum(np.abs(X - 50) - 10, np.abs(Y) - 10), 0.0)
     truth = RIM_MM - outside / RUN
@@ -121,11 +127,7 @@ def test_the_nodes_behind_a_face_s_edge_get_no_height_of_their_own():
     the waterline: a node there comes out (by the slices with the rims put back) with
     whatever the frames show beyond, not with its own crossing of the ink. Those nodes, and
     only those, are left to the fit."""
-    seen = _frustum_slices()
-    mark_walls(seen, 0.03, CAMERA)
-    mark_silhouettes(seen, CAMERA)
-    corrected = unproject_rims(seen, CAMERA, 0.03)
-    lat = Lattice(np.arange(36.0, 66.01, 0.25), np.arange(-14.0, 14.01, 0.25))
+    seen, corrected, lat = _frustum_seen_and_corrected()
     X, Y = np.meshgrid(lat.x, lat.y)
     _, first, _ = first_exposure(lat, corrected, 0.05)
     behind = behind_faces(lat, seen, corrected, first)
