@@ -40,6 +40,7 @@ import scipy.sparse as sp
 from scipy import ndimage
 from scipy.sparse.linalg import splu
 
+from .dewetted import depression_depth
 from .gridfit import FitProblem
 from .lattice import Lattice, bilinear, fill_nearest
 from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
@@ -50,6 +51,7 @@ RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve i
 LEVEL_SLOPE = 0.15  # slopes (rise over run) round which the rise's V is the top's, not phi's
 RUNAWAY_BAND = 3  # nodes inside the trusted outline where the level solve may run away
 RUNAWAY_MM = 0.2  # how far above the plain solve it must stand there to count as running away
+BEND_SLOPE = 2 * LEVEL_SLOPE  # flatter, the top's level curves' bend is held to the seen one
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
@@ -255,13 +257,18 @@ def _solve_top(
 
     keep = 1.0 if straight is None else (~straight[act]).astype(float)
 
+    seen_bend = kappa[act] * keep if curved else None
+    held = depression_depth(model) > 0  # only a depression feeds a bump's bend back (believed_bend)
+
     def curvature_of(t):
-        """The contact lines' curvature where the top is t: that of its level curves."""
+        """The contact lines' curvature where the top is t: that of its level curves, as far
+        as the contact lines seen show it where the top is nearly level (believed_bend)."""
         full = np.full(lat.shape, np.nan)
         full[act] = t
-        return contact_line_curvature(lat, fill_nearest(full), footprint)[act] * keep
+        own = contact_line_curvature(lat, fill_nearest(full), footprint)[act] * keep
+        return believed_bend(own, seen_bend, np.hypot(Dx @ t, Dy @ t)) if held else own
 
-    kap = kappa[act] * keep if curved else None
+    kap = seen_bend
 
     def objective(t, m):
         r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
@@ -300,6 +307,23 @@ def _solve_top(
     return out
 
 
+def believed_bend(own, seen, slope):
+    """The bend (1/mm) the solve gives a contact line: `own`, that of the top's level curves,
+    except where the top is flatter than BEND_SLOPE. A level curve's bend is a second
+    derivative over the first, so where the top is nearly level a ripple of the solve reads as
+    a bend, and the bend feeds back: a bump of the top bends its level curves round it, which
+    lowers the depression there, which raises the bump. Only an ink that dewets has a
+    depression on level faces (dewetted.depression_depth): for one that wets, h(0) = 0 and the
+    bend changes nothing there. On the held-out plateau (second ink)
+    the top 3-8 mm inside its 25 mm rim rose into a lip 0.4-0.8 mm high, its level curves
+    bent by 0.42-0.44/mm where the renderer's top has 0-0.1. There the bend is believed only
+    as far as the contact lines as seen show it (`seen`: the apparent surface's level curves,
+    which are the contact lines): the smaller of the two, none where they disagree in sign."""
+    same = np.sign(own) == np.sign(seen)
+    limited = np.where(same, np.sign(own) * np.minimum(np.abs(own), np.abs(seen)), 0.0)
+    return np.where(slope < BEND_SLOPE, limited, own)
+
+
 class LevelRows:
     """Which smoothness rows smooth the top itself rather than the rise phi = top - A.
 
@@ -313,7 +337,13 @@ class LevelRows:
     the flat depression, with no V (a 6 mm face under the second ink came out 0.10 mm high
     with the top smoothed there), and nodes a summit's ceiling holds (summit.py): level
     because they are held, not a crest the contact lines went round (a mesa's shoulder
-    came out 1.3 mm off with the top smoothed there)."""
+    came out 1.3 mm off with the top smoothed there).
+    It has a price on the first ink's seed-table scans (benches/seed_table.py --effects
+    physics, same renders, without -> with): sample 3 0.0236 -> 0.0258 mm (it loses along its
+    left rim, x < 6 mm, where the top stands 44-46 mm beside the block's wall, more than it
+    gains on the rest) and sample 4 0.0281 -> 0.0300 (its near-flat strip and the 0.5 mm
+    inside its outline). Neither a sharper switch (the slope's
+    fourth or eighth power) nor keeping phi within 1.5-4 mm of the outline wins both back."""
 
     def __init__(self, rows, trusted, faces=None):
         self.crossed = 1.0 if faces is None else (~faces).astype(float)
