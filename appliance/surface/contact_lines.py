@@ -314,11 +314,11 @@ def believed_bend(own, seen, slope):
     a bend, and the bend feeds back: a bump of the top bends its level curves round it, which
     lowers the depression there, which raises the bump. Only an ink that dewets has a
     depression on level faces (dewetted.depression_depth): for one that wets, h(0) = 0 and the
-    bend changes nothing there. On the held-out plateau (second ink)
-    the top 3-8 mm inside its 25 mm rim rose into a lip 0.4-0.8 mm high, its level curves
-    bent by 0.42-0.44/mm where the renderer's top has 0-0.1. There the bend is believed only
-    as far as the contact lines as seen show it (`seen`: the apparent surface's level curves,
-    which are the contact lines): the smaller of the two, none where they disagree in sign."""
+    bend changes nothing there. On the held-out plateau (second ink) the top 3-8 mm inside its
+    25 mm rim rose into a lip 0.4-0.8 mm high, its level curves bent by 0.42-0.44/mm where the
+    renderer's top has 0-0.1. There the bend is believed only as far as the contact lines as
+    seen show it (`seen`: the apparent surface's level curves, which are the contact lines):
+    the smaller of the two, none where they disagree in sign."""
     same = np.sign(own) == np.sign(seen)
     limited = np.where(same, np.sign(own) * np.minimum(np.abs(own), np.abs(seen)), 0.0)
     return np.where(slope < BEND_SLOPE, limited, own)
@@ -342,8 +342,8 @@ class LevelRows:
     physics, same renders, without -> with): sample 3 0.0236 -> 0.0258 mm (it loses along its
     left rim, x < 6 mm, where the top stands 44-46 mm beside the block's wall, more than it
     gains on the rest) and sample 4 0.0281 -> 0.0300 (its near-flat strip and the 0.5 mm
-    inside its outline). Neither a sharper switch (the slope's
-    fourth or eighth power) nor keeping phi within 1.5-4 mm of the outline wins both back."""
+    inside its outline). Neither a sharper switch (the slope's fourth or eighth power) nor
+    keeping phi within 1.5-4 mm of the outline wins both back."""
 
     def __init__(self, rows, trusted, faces=None):
         self.crossed = 1.0 if faces is None else (~faces).astype(float)
