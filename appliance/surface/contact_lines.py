@@ -260,13 +260,13 @@ def _solve_top(
     seen_bend = kappa[act] * keep if curved else None
     held = depression_depth(model) > 0  # only a depression feeds a bump's bend back (believed_bend)
 
-    def curvature_of(t):
-        """The contact lines' curvature where the top is t: that of its level curves, as far
-        as the contact lines seen show it where the top is nearly level (believed_bend)."""
+    def curvature_of(t, g):
+        """The contact lines' curvature where the top is t (slope g): that of its level curves,
+        as far as the contact lines seen show it where the top is nearly level (believed_bend)."""
         full = np.full(lat.shape, np.nan)
         full[act] = t
         own = contact_line_curvature(lat, fill_nearest(full), footprint)[act] * keep
-        return believed_bend(own, seen_bend, np.hypot(Dx @ t, Dy @ t)) if held else own
+        return believed_bend(own, seen_bend, g) if held else own
 
     kap = seen_bend
 
@@ -280,10 +280,10 @@ def _solve_top(
     for f in steps:
         m = model.scaled(f)
         for _ in range(iterations):
-            if curved:
-                kap = curvature_of(t)
             gx, gy = Dx @ t, Dy @ t
             g = np.hypot(gx, gy)
+            if curved:
+                kap = curvature_of(t, g)
             if level is not None:
                 target = level.target(of_a, g, t < ceiling)
             r = on * (t - m.rise_on_slope(g, kap) - a)
