@@ -123,7 +123,7 @@ def _top_from_apparent(
         return apparent
     h = max(sub.hx, sub.hy)
     straight = None if faces is None else faces[::k, ::k]
-    kappa = contact_line_curvature(sub, A, fp) if model.curvature else None
+    kappa = contact_line_curvature(sub, A, fp, _holds_bends(model)) if model.curvature else None
     if anchor is not None:
         anchor = (np.asarray(anchor[0], float)[::k, ::k], np.nan_to_num(anchor[1])[::k, ::k])
     if min(sub.shape) >= 20:
@@ -181,7 +181,7 @@ def _top_from_apparent(
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
 
 
-def contact_line_curvature(lat, top, footprint=None):
+def contact_line_curvature(lat, top, footprint=None, along_on_flats=False):
     """The contact lines' own curvature (1/mm) at every node: that of the top's level curves,
     taken on a CURVATURE_STEP_MM grid (bicubic from the lattice) so that a crest's clipped
     spike is as narrow as it really is, whatever the lattice's spacing.
@@ -191,7 +191,9 @@ def contact_line_curvature(lat, top, footprint=None):
     (RIM_UNTRUSTED), whose heights are the smoothness' continuation, not data. Averaged
     over both, a plane came out 0.16 mm off (its straight contact lines read as bent), and
     sample 4 (10 mm, all within a millimetre or two of its outline) 0.13 mm off on the
-    solve's lattice from the renderer's exact apparent surface."""
+    solve's lattice from the renderer's exact apparent surface.
+    `along_on_flats`: on nearly level nodes, the bend along the level curves alone
+    (meniscus.level_curve_curvature)."""
     ky = max(1, int(np.ceil(lat.hy / CURVATURE_STEP_MM)))
     kx = max(1, int(np.ceil(lat.hx / CURVATURE_STEP_MM)))
     fj = np.arange((top.shape[0] - 1) * ky + 1) / ky
@@ -202,7 +204,8 @@ def contact_line_curvature(lat, top, footprint=None):
     if footprint is not None:
         inner = ndimage.binary_erosion(footprint, iterations=RIM_UNTRUSTED, border_value=0)
         known = ndimage.map_coordinates(inner.astype(float), [FJ, FI], order=0, mode="nearest") > 0.5
-    return level_curve_curvature(fine, lat.hy / ky, lat.hx / kx, known=known)[::ky, ::kx]
+    bend = level_curve_curvature(fine, lat.hy / ky, lat.hx / kx, known=known, along_on_flats=along_on_flats)
+    return bend[::ky, ::kx]
 
 
 def _resample_rise(phi, src, dst):
@@ -258,14 +261,14 @@ def _solve_top(
     keep = 1.0 if straight is None else (~straight[act]).astype(float)
 
     seen_bend = kappa[act] * keep if curved else None
-    held = depression_depth(model) > 0  # only a depression feeds a bump's bend back (believed_bend)
+    held = _holds_bends(model)  # only a depression feeds a bump's bend back (believed_bend)
 
     def curvature_of(t, g):
         """The contact lines' curvature where the top is t (slope g): that of its level curves,
         as far as the contact lines seen show it where the top is nearly level (believed_bend)."""
         full = np.full(lat.shape, np.nan)
         full[act] = t
-        own = contact_line_curvature(lat, fill_nearest(full), footprint)[act] * keep
+        own = contact_line_curvature(lat, fill_nearest(full), footprint, held)[act] * keep
         return believed_bend(own, seen_bend, g) if held else own
 
     kap = seen_bend
@@ -305,6 +308,13 @@ def _solve_top(
     out = np.full(lat.shape, np.nan)
     out[act] = t
     return out
+
+
+def _holds_bends(model) -> bool:
+    """Whether the solve's bends are held (believed_bend) and taken along the level curves
+    alone where the top is level (level_curve_curvature's `along_on_flats`): for an ink that
+    dewets. For one that wets, h(0) = 0, so a level face's bend changes nothing there."""
+    return depression_depth(model) > 0
 
 
 def believed_bend(own, seen, slope):
