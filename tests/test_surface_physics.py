@@ -165,9 +165,7 @@ def _apparent(top, model, x, y, bend=None):
     return T - model.rise_on_slope(np.hypot(gx, gy), bend), T
 
 
-def _mesa(x, y):  # the bench's plateau: flat at 25 mm out to r = 22, a smooth shoulder to 10 mm
-    s = np.clip((np.hypot(x - 50, y - 45) - 22) / 16, 0, 1)
-    return 25 - 15 * (3 * s**2 - 2 * s**3)
+_mesa = surfaces.get("plateau").tiers[0].top  # flat at 25 mm out to r = 22, a shoulder to 10 mm
 
 
 def _saddle4(x, y):  # sample 4's top: a steep saddle with a flat corner
@@ -469,8 +467,9 @@ def test_a_dewetting_inks_level_faces_are_not_taken_for_a_runaway(monkeypatch):
 
 
 def _mesa_as_rendered(model):
-    """-> (lattice, apparent surface, top) of the held-out plateau under `model`, the rise bent
-    as the renderer bends it: by the top's own level curves, taken on a 0.1 mm grid."""
+    """-> (lattice, apparent surface, top, its lip: the nodes at r = 16-20 mm) of the held-out
+    plateau under `model`, the rise bent as the renderer bends it: by the top's own level
+    curves, taken on a 0.1 mm grid."""
     from appliance.surface.lattice import Lattice
     from appliance.surface.meniscus import level_curve_curvature
 
@@ -481,7 +480,8 @@ def _mesa_as_rendered(model):
     fine = level_curve_curvature(_mesa(*np.meshgrid(fx, fy)), step, step)
     bend = ndimage.map_coordinates(fine, [(Y - fy[0]) / step, (X - fx[0]) / step], order=1)
     A, T = _apparent(_mesa, model, lat.x, lat.y, bend)
-    return lat, A, T
+    r = np.hypot(X - 50, Y - 45)
+    return lat, A, T, (r >= 16) & (r < 20)
 
 
 def test_a_level_tops_contact_lines_bend_no_more_than_they_are_seen_to():
@@ -495,10 +495,8 @@ def test_a_level_tops_contact_lines_bend_no_more_than_they_are_seen_to():
     from appliance.surface.contact_lines import top_from_apparent
 
     model = MeniscusModel(2.3, np.radians(35.0), curvature=1.0)
-    lat, A, T = _mesa_as_rendered(model)
-    X, Y = np.meshgrid(lat.x, lat.y)
+    lat, A, T, lip = _mesa_as_rendered(model)
     err = top_from_apparent(lat, A, np.ones(A.shape, bool), model) - T
-    lip = (np.hypot(X - 50, Y - 45) >= 16) & (np.hypot(X - 50, Y - 45) < 20)
     assert err[lip].mean() < 0.4
     assert np.abs(err).mean() < 0.08
 
@@ -513,9 +511,7 @@ def test_a_rounded_rim_round_a_level_top_bends_no_contact_line():
     from appliance.surface.contact_lines import top_from_apparent
 
     model = MeniscusModel(2.3, np.radians(35.0), curvature=1.0)
-    lat, A, T = _mesa_as_rendered(model)
-    X, Y = np.meshgrid(lat.x, lat.y)
+    lat, A, T, lip = _mesa_as_rendered(model)
     rounded = ndimage.gaussian_filter(A, 1.5, mode="nearest")
     err = top_from_apparent(lat, rounded, np.ones(A.shape, bool), model) - T
-    lip = (np.hypot(X - 50, Y - 45) >= 16) & (np.hypot(X - 50, Y - 45) < 20)
     assert err[lip].mean() < 0.25
