@@ -515,3 +515,25 @@ def test_a_rounded_rim_round_a_level_top_bends_no_contact_line():
     rounded = ndimage.gaussian_filter(A, 1.5, mode="nearest")
     err = top_from_apparent(lat, rounded, np.ones(A.shape, bool), model) - T
     assert err[lip].mean() < 0.25
+
+
+@pytest.mark.parametrize("angle_deg,along", [(0.0, False), (35.0, True)])
+def test_only_an_ink_that_dewets_takes_the_bend_along_level_curves_on_flats(monkeypatch, angle_deg, along):
+    """For an ink that wets, h(0) = 0: a level face's bend changes nothing, and the solve
+    keeps the renderer's formula (the harsh bench's crater, contact angle 0: 0.0366 mm with
+    it, 0.0371 with the bend along level curves). Only an ink that dewets takes it."""
+    from appliance.surface import contact_lines
+
+    asked = []
+    curvature = contact_lines.level_curve_curvature
+
+    def spy(*a, **k):
+        asked.append(k.get("along_on_flats", False))
+        return curvature(*a, **k)
+
+    monkeypatch.setattr(contact_lines, "level_curve_curvature", spy)
+    model = MeniscusModel(2.3, np.radians(angle_deg), curvature=1.0)
+    x = np.linspace(30.0, 70.0, 41)
+    A, _ = _apparent(lambda X, Y: 20 - 0.01 * ((X - 50) ** 2 + (Y - 50) ** 2), model, x, x)
+    contact_lines.top_from_apparent(contact_lines.Lattice(x, x), A, np.ones(A.shape, bool), model)
+    assert asked and set(asked) == {along}
