@@ -476,6 +476,35 @@ small (seed table 0.0231 / 0.0317, second-ink crater 0.0571). The ring's feet (a
 ink leaves at once, 3.5 mm wide, under the runner's 8 mm) refined as faces from 3 mm wide: ring
 0.0613 -> 0.0758 (8 frames; its crest came out 0.2 mm low from its narrow bracket).
 
+6 December 2026 (session 30). The ring's largest errors were its outermost cells (r 44-45 mm:
+a third of its 0.061), up to 1.6 mm low. Its 3 mm feet are faces the second ink leaves at
+once, and in the frame that uncovered them (8.64 mm) the waterline along the 45 mm edge was
+seen at r 44.65, 0.4 mm inside the edge; the nodes in that band came out a frame later
+(7.33 mm) and their bracket's fit put them at its floor. That stretch is already taken for
+the pinned edge (dewetted.pinned_rims_as_walls); now, where the frame below runs on the
+outline (an upright wall under the edge), the stretch is moved onto the edge. Same renders,
+Ea / interior p99 / max mm, main 611ba53 -> this:
+    sample1        0.0069 / 0.038 / 0.421    0.0067 / 0.038 / 0.419
+    sample2        0.0205 / 0.044 / 1.496    0.0207 / 0.044 / 1.496
+    sample3        0.0276 / 0.221 / 1.117    0.0278 / 0.221 / 1.116
+    sample4        0.0454 / 0.037 / 0.753    0.0414 / 0.024 / 0.709
+      (seeds 2-4: 0.0443 / 0.0453 / 0.0488 -> 0.0440 / 0.0457 / 0.0489)
+    crater, twin-peaks, steep-front, plateau (both seeds): the same to 0.0001
+    ring *         0.0612 / 0.159 / 1.618    0.0487 / 0.159 / 0.326  (seed 2: 0.0610 -> 0.0485)
+    steps *        0.6621 / 12.5 / 15.0     0.6698 / 12.6 / 14.9   (seed 5: 0.6782 -> 0.6925)
+    stepped-block *  1.039 / 5.333 / 14.31    1.046 / 5.385 / 14.31
+    blade *        0.1976 / 2.977 / 13.66    0.1976 / 2.977 / 13.66
+Steps loses along its lowest tier's left edge (x = 2 mm, cells +0.7..0.9 that were within 0.1):
+its tilted tier's edge nodes now come out with the face, and the fit places them high in the
+bracket. Tried, not kept: every pinned stretch moved onto the outline, whatever the wall below
+(sample 3 0.0289, max 1.675, its walls' stretches 0.4-0.9 mm inside the foot; steps 0.6872),
+and the nearest outline vertex rather than the nearest point (sample 2 0.272: its far edge is
+one long chord across the image's border). Also tried for the ring's feet, not kept: a face
+node no contact line placed left anywhere in its bracket in the top's solve, with the top
+itself smoothed over it: ring 0.0594, plateau 0.0480, steps 0.7069; only for brackets wider than
+half the depression, ring 0.0594 with the smooth parts unchanged, but steps 0.6965 and the
+stepped block 1.0736.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

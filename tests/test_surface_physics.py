@@ -308,6 +308,49 @@ def test_a_face_the_ink_dewetted_is_not_clamped_up_to_the_level_that_uncovered_i
 SECOND = dict(capillary_length_mm=2.3, contact_angle_rad=np.radians(35.0))
 
 
+def _rings(radii_by_level):
+    """Slices of circles round (50, 50): {level: radius}, highest level first."""
+    from appliance.surface.slices import check_waterlines
+    from appliance.vision.types import Waterline
+
+    t = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    ring = lambda a: np.c_[50 + a * np.cos(t), 50 + a * np.sin(t)]
+    slices, _ = check_waterlines([Waterline(L, [ring(a)]) for L, a in radii_by_level.items()])
+    return slices
+
+
+def test_the_ink_hanging_on_a_faces_edge_leaves_the_whole_face_out():
+    """A face that came out at once leaves the ink pinned at its edge, standing up to its
+    depression above it. The waterline there can show a few tenths inside the edge (the
+    second ink's ring: its 8.6 mm frame's 0.4 mm inside the 45 mm outline), but no ink stands
+    on a face flatter than the contact angle without a contact line crossing it: the edge is
+    the frame's outline there, and the face's nodes out to the edge came out with it (else
+    they came out a frame later, and the fit of their bracket put the ring's outermost cells
+    1.6 mm low)."""
+    from appliance.surface.dewetted import pinned_rims_as_walls
+    from appliance.surface.lattice import Lattice, exposed_mask
+
+    # a cap (12, 11), a face out at once at 10 (no contact line of 11 within l_c), a wall below
+    slices = _rings({12.0: 5.0, 11.0: 6.0, 10.0: 29.6, 9.0: 30.0, 8.0: 30.0})
+    model = MeniscusModel(camera_xy_mm=(50.0, 50.0), camera_height_mm=300.0, **SECOND)
+    out = pinned_rims_as_walls(slices, model, wall_tol_mm=0.03)
+    r = np.hypot(*(out[2].P - 50.0).T)
+    assert out[2].wall.all() and np.abs(r - 30.0).max() < 0.01
+    lat = Lattice(np.linspace(20, 80, 301), np.linspace(20, 80, 301))
+    X, Y = np.meshgrid(lat.x, lat.y)
+    band = np.abs(np.hypot(X - 50, Y - 50) - 29.8) < 0.05
+    assert not exposed_mask(lat, slices[2])[band].any()  # as seen: under the ink
+    assert exposed_mask(lat, out[2])[band].all()  # as it is: out with the face
+    # the cap's contact lines and the wall's frames are as they were
+    for k in (0, 1, 3):
+        assert np.array_equal(out[k].P, slices[k].P)
+    # beside a wall that leans in (its waterlines 0.2 mm further out a level down) the
+    # outline is the wall's foot, not the face's edge: the stretch stays where it was seen
+    leaning = _rings({12.0: 5.0, 11.0: 6.0, 10.0: 29.6, 9.0: 29.8, 8.0: 30.0})
+    kept = pinned_rims_as_walls(leaning, model, wall_tol_mm=0.03)
+    assert kept[2].wall.all() and np.array_equal(kept[2].P, leaning[2].P)
+
+
 @pytest.mark.parametrize("curved,lc,theta,weight", [(True, 2.3, 35.0, 1.0), (False, 2.7, 0.0, 0.0)])
 def test_meniscus_calibration_measures_how_much_the_contact_lines_bend_counts(curved, lc, theta, weight):
     """On the reference ball the contact lines are circles (kappa = 1/r): the second ink's

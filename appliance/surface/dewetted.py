@@ -11,7 +11,11 @@ outer band 0.26-0.67, the steep front's apron likewise). Now:
  - in the frame that uncovered a face, its rim is a wall (pinned_rims_as_walls). The ink
    stands up to d above the rim then, pinned at the sharp edge: the waterline along the
    outline is that edge, seen up to d below the ink, not a level curve of A at L_k; nor
-   does it stay put in perspective like an edge above the ink, so the wall test misses it;
+   does it stay put in perspective like an edge above the ink, so the wall test misses it.
+   Such a stretch can show a few tenths inside the outline (the rendered second ink's
+   ring: 0.4 mm inside its 45 mm edge), but no ink stands on a face flatter than the
+   contact angle without a contact line crossing it: the stretch is moved onto the
+   outline, and the face came out to its edge;
  - nodes well inside such a face (no contact line of frame k within l_c, the meniscus'
    reach, and the one above further than its own spacing says) go to the middle of their
    bracket, never more than half a step out (place_dewetted_faces); the rest of the face's
@@ -25,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .meniscus import MeniscusModel
-from .slices import polyline_distance
+from .slices import polyline_distance, polyline_nearest
 
 DEPRESSION_MIN_MM = 0.05  # shallower, a flat face comes out within that of its height
 
@@ -68,9 +72,23 @@ def pinned_rims_as_walls(slices, model: MeniscusModel, wall_tol_mm):
             pinned[i] = _distance_to_contact_line(slices, k - 1, s.P[i]) > model.capillary_length_mm
         if not pinned.any():
             continue
-        t = s.moved(s.P, s.z)
+        t = s.moved(_onto_edge(s.P, pinned, slices[visible[visible.index(k) + 1]], lowest, wall_tol_mm), s.z)
         t.wall = wall | pinned
         out[k] = t
+    return out
+
+
+def _onto_edge(P, pinned, below, lowest, wall_tol_mm):
+    """P with the pinned points seen inside an edge moved onto it: the ink is held at the
+    edge, not inside it (seen 0.4 mm inside, the ring's outermost nodes came out a frame late
+    and stood 1.6 mm low). Only where the frame below runs on the outline there (a vertical
+    wall under the edge): beside a wall that leans in, the outline is not the edge."""
+    edge = polyline_nearest(below, P[pinned])
+    upright = polyline_distance(lowest, edge)[0] < wall_tol_mm + 0.02
+    if not upright.any():
+        return P
+    out = P.copy()
+    out[np.flatnonzero(pinned)[upright]] = edge[upright]
     return out
 
 

@@ -248,6 +248,23 @@ def polyline_distance(sl: Slice, q: np.ndarray, signed: bool = False):
     return np.where(side >= 0, best, -best), i
 
 
+def polyline_nearest(sl: Slice, q: np.ndarray) -> np.ndarray:
+    """The nearest point of the slice's polylines to each query point (on a segment, not
+    only at a vertex: a straight stretch of an outline can be one long segment)."""
+    _, i = sl.tree.query(q)
+    best, out = np.full(len(q), np.inf), sl.P[i].astype(float)
+    for a_idx, b_idx in ((i, sl.nxt[i]), (sl.prv[i], i)):
+        a, b = sl.P[a_idx], sl.P[b_idx]
+        ab = b - a
+        L2 = np.einsum("ij,ij->i", ab, ab)
+        t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        foot = a + t[:, None] * ab
+        d = np.hypot(*(q - foot).T)
+        closer = d < best
+        best, out[closer] = np.where(closer, d, best), foot[closer]
+    return out
+
+
 def outline_bounds(slices: list[Slice]):
     """(xmin, xmax, ymin, ymax) of the part's outline: the lowest frame's waterline and
     every frame's wall points.
