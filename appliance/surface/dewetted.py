@@ -14,8 +14,9 @@ outer band 0.26-0.67, the steep front's apron likewise). Now:
    does it stay put in perspective like an edge above the ink, so the wall test misses it.
    Such a stretch can show a few tenths inside the outline (the rendered second ink's
    ring: 0.4 mm inside its 45 mm edge), but no ink stands on a face flatter than the
-   contact angle without a contact line crossing it: the stretch is moved onto the
-   outline, and the face came out to its edge;
+   contact angle without a contact line crossing it: where the wall under the edge is
+   upright (the frame below runs on the outline), the stretch is moved onto the edge,
+   and the face came out to it;
  - nodes well inside such a face (no contact line of frame k within l_c, the meniscus'
    reach, and the one above further than its own spacing says) go to the middle of their
    bracket, never more than half a step out (place_dewetted_faces); the rest of the face's
@@ -48,6 +49,7 @@ def pinned_rims_as_walls(slices, model: MeniscusModel, wall_tol_mm):
     was under ink there a frame ago and came out at once). Along the outline means within
     what a rim seen up to 3 d off its height moves in perspective (d for the pinned edge
     itself, the rest for the lowest frame's edges, put back with the fit's rim heights).
+    Over an upright wall the stretch is moved onto the edge (_onto_edge).
     Only with a depression (d > 0): otherwise the slices as they are."""
     d = depression_depth(model)
     visible = [k for k, s in enumerate(slices) if not s.empty]
