@@ -491,7 +491,7 @@ Ea / interior p99 / max mm, main 611ba53 -> this:
       (seeds 2-4: 0.0443 / 0.0453 / 0.0488 -> 0.0440 / 0.0457 / 0.0489)
     crater, twin-peaks, steep-front, plateau (both seeds): the same to 0.0001
     ring *         0.0612 / 0.159 / 1.618    0.0487 / 0.159 / 0.326  (seed 2: 0.0610 -> 0.0485)
-    steps *        0.6621 / 12.5 / 15.0     0.6698 / 12.6 / 14.9   (seed 5: 0.6782 -> 0.6925)
+    steps *        0.6621 / 12.51 / 14.78    0.6698 / 12.62 / 14.85  (seed 5: 0.6782 -> 0.6925)
     stepped-block *  1.039 / 5.333 / 14.31    1.046 / 5.385 / 14.31
     blade *        0.1976 / 2.977 / 13.66    0.1976 / 2.977 / 13.66
 Steps loses along its lowest tier's left edge (x = 2 mm, cells +0.7..0.9 that were within 0.1):
