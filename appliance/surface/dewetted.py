@@ -57,7 +57,7 @@ def pinned_rims_as_walls(slices, model: MeniscusModel, wall_tol_mm):
         return slices
     lowest = slices[visible[-1]]
     out = list(slices)
-    for k in visible[1:-1]:
+    for k, below in zip(visible[1:-1], visible[2:]):
         s = slices[k]
         wall = np.zeros(len(s.P), bool) if s.wall is None else s.wall
         if wall.all():
@@ -74,7 +74,7 @@ def pinned_rims_as_walls(slices, model: MeniscusModel, wall_tol_mm):
             pinned[i] = _distance_to_contact_line(slices, k - 1, s.P[i]) > model.capillary_length_mm
         if not pinned.any():
             continue
-        t = s.moved(_onto_edge(s.P, pinned, slices[visible[visible.index(k) + 1]], lowest, wall_tol_mm), s.z)
+        t = s.moved(_onto_edge(s.P, pinned, slices[below], lowest, wall_tol_mm), s.z)
         t.wall = wall | pinned
         out[k] = t
     return out

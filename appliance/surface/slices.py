@@ -226,15 +226,7 @@ def polyline_distance(sl: Slice, q: np.ndarray, signed: bool = False):
     if signed:
         side = np.zeros(len(q))
         n_sum = np.zeros_like(q)
-    qx, qy = q[:, 0], q[:, 1]
-    for a_idx, b_idx in ((i, sl.nxt[i]), (sl.prv[i], i)):
-        a, b = sl.P[a_idx], sl.P[b_idx]
-        ax, ay = a[:, 0], a[:, 1]
-        abx, aby = b[:, 0] - ax, b[:, 1] - ay
-        aqx, aqy = qx - ax, qy - ay
-        L2 = abx * abx + aby * aby
-        t = np.clip((aqx * abx + aqy * aby) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-        dd = np.hypot(qx - (ax + t * abx), qy - (ay + t * aby))
+    for abx, aby, aqx, aqy, L2, t, _, dd in _segments_at(sl, q, i):
         if signed:
             inner = (t > 0) & (t < 1) & (dd <= best + 1e-12)
             side = np.where(inner, np.sign(abx * aqy - aby * aqx), side)
@@ -251,18 +243,28 @@ def polyline_distance(sl: Slice, q: np.ndarray, signed: bool = False):
 def polyline_nearest(sl: Slice, q: np.ndarray) -> np.ndarray:
     """The nearest point of the slice's polylines to each query point (on a segment, not
     only at a vertex: a straight stretch of an outline can be one long segment)."""
-    _, i = sl.tree.query(q)
-    best, out = np.full(len(q), np.inf), sl.P[i].astype(float)
+    best, i = sl.tree.query(q)
+    out = sl.P[i].astype(float)
+    for *_, foot, dd in _segments_at(sl, q, i):
+        closer = dd < best
+        best, out[closer] = np.minimum(best, dd), foot[closer]
+    return out
+
+
+def _segments_at(sl: Slice, q: np.ndarray, i: np.ndarray):
+    """For the two segments at each query point's nearest vertex i (to the next vertex and
+    from the previous): (ab x, ab y, aq x, aq y, |ab|^2, t, foot, distance), a the segment's
+    start, foot = a + t ab the nearest point of it to q."""
+    qx, qy = q[:, 0], q[:, 1]
     for a_idx, b_idx in ((i, sl.nxt[i]), (sl.prv[i], i)):
         a, b = sl.P[a_idx], sl.P[b_idx]
-        ab = b - a
-        L2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-        foot = a + t[:, None] * ab
-        d = np.hypot(*(q - foot).T)
-        closer = d < best
-        best, out[closer] = np.where(closer, d, best), foot[closer]
-    return out
+        ax, ay = a[:, 0], a[:, 1]
+        abx, aby = b[:, 0] - ax, b[:, 1] - ay
+        aqx, aqy = qx - ax, qy - ay
+        L2 = abx * abx + aby * aby
+        t = np.clip((aqx * abx + aqy * aby) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        fx, fy = ax + t * abx, ay + t * aby
+        yield abx, aby, aqx, aqy, L2, t, np.column_stack([fx, fy]), np.hypot(qx - fx, qy - fy)
 
 
 def outline_bounds(slices: list[Slice]):
