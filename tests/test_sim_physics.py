@@ -152,6 +152,24 @@ def test_second_model_keeps_a_flat_top_dry_under_the_ink():
     assert (second > ink + 40).sum() > 150_000
 
 
+def test_second_model_sheds_a_lower_tiers_face_whatever_the_wall_beside_it():
+    """The stepped block's 12 mm tier (a face tilted 0.6 deg) with the ink at 12.9 mm: the
+    face is dry wherever it stands less than the depression (1.36 mm) under the ink, as a
+    single-tier top would be. The upper tier's wall, 0-35 mm away, lifts the ink on
+    itself only: the face used to come out only where the ink was 0.2 mm deep."""
+    part, rig, L = S.get("stepped-block"), Rig(), 12.9
+    img = _gray(render_frame(part, L, rig, SECOND_INK))
+    seen_mm2 = (img > float(np.median(img)) + 40).sum() * 0.079**2
+    x, y = np.meshgrid(np.arange(8, 92, 0.1), np.arange(10, 86, 0.1))
+    upper = (x > 44) & (x < 87) & (y > 20) & (y < 64)  # 30 mm up: always out
+    depression = physics.meniscus_rise(np.radians(0.6), 2.3, np.radians(35))
+    face_out = ~upper & (part.height(x, y) > L + depression)
+    want_mm2 = (upper.sum() + face_out.sum()) * 0.01
+    print(f"seen {seen_mm2:.0f} mm^2, upper tier and dry face {want_mm2:.0f} mm^2")
+    assert face_out.sum() * 0.01 > 4000  # most of the 4 500 mm^2 face is dry
+    assert abs(seen_mm2 - want_mm2) < 0.05 * want_mm2  # was 1 730 mm^2 against 5 980
+
+
 def test_rendered_second_model_is_the_contact_line_with_its_own_curvature():
     """The crater at 15 mm: contact lines on the ridge's outer flank (bending round the
     part) and in the crater (bending round the ink). Every edge point is the contact line

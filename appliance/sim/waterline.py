@@ -77,21 +77,27 @@ def approx_level_sdf(grid, x, y, level):
     fgy = np.zeros(x.size, np.float32)
     gx, gy = grid.coords(x, y)
     for ti, tg in enumerate(grid.tiers):
-        ft = lookup(tg.FT, gx, gy, (-grid.margin, 0.0, 0.0, 0.0))
-        d = lookup(tg.N, gx, gy)
-        g = np.hypot(d[:, 0], d[:, 1])
-        F, T = ft[:, 0], ft[:, 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dtop = np.where(g > 1e-6, (T - level) / g, np.where(T >= level, 1e3, -1e3)).astype(np.float32)
-        v = np.minimum(F, dtop)
+        v, w, g, fx, fy = _tier_level_sdf(grid, tg, gx, gy, level)
         better = v > best
         best[better] = v[better]
         tier[better] = ti
-        wall[better] = (F < dtop)[better]
+        wall[better] = w[better]
         slope[better] = g[better]
-        fgx[better] = d[better, 2]
-        fgy[better] = d[better, 3]
+        fgx[better] = fx[better]
+        fgy[better] = fy[better]
     return best, tier, wall, slope, fgx, fgy
+
+
+def _tier_level_sdf(grid, tg, gx, gy, level):
+    """One tier's share of approx_level_sdf: its distance, whether its wall (not its top)
+    is the edge, its top's slope and its footprint's gradient."""
+    ft = lookup(tg.FT, gx, gy, (-grid.margin, 0.0, 0.0, 0.0))
+    d = lookup(tg.N, gx, gy)
+    g = np.hypot(d[:, 0], d[:, 1])
+    F, T = ft[:, 0], ft[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dtop = np.where(g > 1e-6, (T - level) / g, np.where(T >= level, 1e3, -1e3)).astype(np.float32)
+    return np.minimum(F, dtop), F < dtop, g, d[:, 2], d[:, 3]
 
 
 def top_height(grid, x, y, tier):
@@ -124,7 +130,7 @@ def waterline_layer(surface, grid, effects, x0, y0, kx, ky, pix, lvl) -> Waterli
     approx, wtier, wwall, wslope, fgx, fgy = approx_level_sdf(grid, x0, y0, lvl)
     xc, yc, lc = x0, y0, lvl
     if effects.meniscus:
-        xc, yc, lc = _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope, wtier)
+        xc, yc, lc = _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope)
         approx, wtier, wwall, wslope, fgx, fgy = approx_level_sdf(grid, xc, yc, lc)
     band = np.abs(approx) < 4 * pix + 0.02
     sdf = approx.copy()
@@ -134,7 +140,7 @@ def waterline_layer(surface, grid, effects, x0, y0, kx, ky, pix, lvl) -> Waterli
     return Waterline(a_wl, lc, wtier, wwall, fgx, fgy, band)
 
 
-def _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope, wtier):
+def _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope):
     """Where the pixels' rays see the contact line: plane points xc, yc and its height lc.
 
     The contact line on the top sits h(beta) above the free surface, beta the top's
@@ -144,27 +150,58 @@ def _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope, wtier):
     slope's rise, and on the wall itself the ink climbs h(90 deg) - which only moves
     where a wall facing the camera shows its waterline.
     With the second model the rise also depends on the contact line's own curvature
-    there (the top's level curve through the contact point)."""
+    there (the top's level curve through the contact point).
+
+    On a part of several tiers each tier has its own contact line: the ink that climbs
+    one tier's wall does not stand on a lower tier's face twenty millimetres away, and a
+    face flatter than the contact angle sheds its ink however high a wall beside it is.
+    A pixel sees the tier that is furthest out of the ink at its own contact line."""
+    if len(grid.tiers) == 1:
+        return _tier_contact_line(surface, grid, effects, 0, x0, y0, kx, ky, lvl, wslope)
+    best = None
+    for ti in range(len(grid.tiers)):
+        _, _, _, slope, _, _ = _one_tier(grid, ti, x0, y0, lvl)
+        xc, yc, lc = _tier_contact_line(surface, grid, effects, ti, x0, y0, kx, ky, lvl, slope)
+        v = _one_tier(grid, ti, xc, yc, lc)[0]
+        if best is None:
+            best = [v, xc, yc, lc]
+            continue
+        better = v > best[0]
+        for i, a in enumerate((v, xc, yc, lc)):
+            best[i] = np.where(better, a, best[i])
+    return best[1], best[2], best[3]
+
+
+def _one_tier(grid, ti, x, y, level):
+    """_tier_level_sdf of tier ti, in approx_level_sdf's order (the tier index second)."""
+    gx, gy = grid.coords(x, y)
+    v, w, g, fx, fy = _tier_level_sdf(grid, grid.tiers[ti], gx, gy, level)
+    return v, np.full(x.size, ti, np.int16), w, g, fx, fy
+
+
+def _tier_contact_line(surface, grid, effects, ti, x0, y0, kx, ky, lvl, wslope):
+    """_contact_line on tier ti alone."""
     theta = math.radians(effects.contact_angle_deg)
     l_c = effects.capillary_length_mm
+    tier = np.full(x0.size, ti, np.int16)
 
-    def rise(b, x=None, y=None, tier=None):
+    def rise(b, x=None, y=None):
         if x is None or not effects.contact_line_curvature:
             return physics.meniscus_rise(b, l_c, theta).astype(np.float32)
         kappa = contact_curvature(surface, grid, x, y, tier)
         return physics.meniscus_rise_curved(b, kappa, l_c, theta).astype(np.float32)
 
-    h = rise(np.arctan(wslope), x0, y0, wtier)
+    h = rise(np.arctan(wslope), x0, y0)
     for _ in range(2):
         lc = lvl + h
         xs, ys = x0 + kx * h, y0 + ky * h
-        _, wtier, wwall, wslope, _, _ = approx_level_sdf(grid, xs, ys, lc)
-        h = rise(np.arctan(wslope), xs, ys, wtier)
+        _, _, wwall, wslope, _, _ = _one_tier(grid, ti, xs, ys, lc)
+        h = rise(np.arctan(wslope), xs, ys)
     lc = lvl + h
     # on a wall the ink climbs h(90 deg), but never past the wall's top edge
     seen_h = h.copy()
     if wwall.any():
-        rim = top_height(grid, x0[wwall], y0[wwall], wtier[wwall]) - lvl[wwall]
+        rim = top_height(grid, x0[wwall], y0[wwall], tier[wwall]) - lvl[wwall]
         seen_h[wwall] = np.clip(rim, 0.0, rise(np.pi / 2))
     # the contact line is seen_h above the free surface: seen in perspective from there
     return x0 + kx * seen_h, y0 + ky * seen_h, lc
