@@ -486,6 +486,30 @@ def test_a_level_shelf_at_the_outline_does_not_run_away():
     assert got.mean() < 0.7 * plain.mean()  # and the level rows' gain is kept
 
 
+def test_a_face_keeps_its_own_rise_up_to_a_sharp_edge():
+    """The stepped block's 12 mm tier (tilted 0.6 deg, 85 deg walls) on the base, under the
+    second ink: its exact apparent surface stands 1.36 mm over the face and drops over the
+    rim, where the wall's rise is +1.95. The face's last nodes took the wall's slope into
+    their rise and the top climbed 1-2.2 mm along every rim, falling off over 5 mm; with the
+    slope there the face's own, as the contact lines show it, the face comes out exact to the
+    node past the rim (measured 0.016 mm at most, 1-7 mm past it)."""
+    from appliance.surface.contact_lines import top_from_apparent
+    from appliance.surface.lattice import Lattice
+
+    tier = surfaces.get("stepped-block").tiers[0].top
+    model = MeniscusModel(**SECOND)
+    lat = Lattice(np.linspace(0.0, 100.0, 99), np.linspace(0.0, 96.0, 95))
+    A, T = _apparent(lambda x, y: np.maximum(tier(x, y), 0.0), model, lat.x, lat.y)
+    got = top_from_apparent(lat, A, np.ones(A.shape, bool), model)
+    X, Y = np.meshgrid(lat.x, lat.y)
+    inside = np.minimum.reduce([X - 8, 92 - X, Y - 10, 86 - Y])  # the rim is 1.03 mm in
+    near_rim = (inside >= 2) & (inside < 8)
+    err = np.abs(got - T)
+    print(f"face 1-7 mm past the rim: worst {err[near_rim].max():.3f} mm")
+    assert near_rim.sum() > 500 and err[near_rim].max() < 0.05  # was 2.25
+    assert err[inside >= 8].max() < 0.01
+
+
 def test_a_dewetting_inks_level_faces_are_not_taken_for_a_runaway(monkeypatch):
     """An ink that dewets has a negative rise on level faces; the runaway's mark (a rise the
     apparent surface's slope cannot explain) once took 1.5 h there, below h itself, so every

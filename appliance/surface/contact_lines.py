@@ -44,6 +44,7 @@ from .dewetted import depression_depth
 from .gridfit import FitProblem
 from .lattice import Lattice, bilinear, fill_nearest
 from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
+from .sharp_edges import rows_not_over, slopes_held_at_edges
 
 SOLVE_MAX_SIDE = 101  # the rise is smooth: solved on at most this many nodes a side
 FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
@@ -51,7 +52,8 @@ RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve i
 LEVEL_SLOPE = 0.15  # slopes (rise over run) round which the rise's V is the top's, not phi's
 RUNAWAY_BAND = 3  # nodes inside the trusted outline where the level solve may run away
 RUNAWAY_MM = 0.2  # how far above the plain solve it must stand there to count as running away
-BEND_SLOPE = 2 * LEVEL_SLOPE  # flatter, the top's level curves' bend is held to the seen one
+BEND_SLOPE = 2 * LEVEL_SLOPE
+EDGE_SLOPE = 1.0  # steeper on one side of a level node than this, that side is over an edge  # flatter, the top's level curves' bend is held to the seen one
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
@@ -236,16 +238,16 @@ def _solve_top(
     the capillary length turned on in `steps` (fractions of it)."""
     problem = FitProblem(lat, footprint)
     act = problem.active
-    Dx, Dy = problem.gradient()
-    rows = problem.third_order_rows()
-    R = (rows.T @ rows).tocsc()
-    lam = length_mm**6 / (lat.hx * lat.hy)
     # the apparent surface's outline nodes are the fit's least sure (their first exposure
     # comes from the wall's waterline, a level step wide): where the top rises to a rim the
     # equation carries their error inwards, so there the top is the smoothness' continuation
     trusted = ndimage.binary_erosion(footprint, iterations=RIM_UNTRUSTED, border_value=0)
     if trusted.sum() < 9:
         trusted = footprint
+    Dx, Dy, (ox, oy), edges = slopes_held_at_edges(problem, A, trusted, LEVEL_SLOPE)
+    rows = rows_not_over(problem.third_order_rows(), edges)
+    R = (rows.T @ rows).tocsc()
+    lam = length_mm**6 / (lat.hx * lat.hy)
     a, on = A[act], trusted[act].astype(float)
     level = LevelRows(rows, on, straight if straight is None else straight[act]) if level_rows else None
     if anchor is not None:
@@ -274,7 +276,7 @@ def _solve_top(
     kap = seen_bend
 
     def objective(t, m):
-        r = on * (t - m.rise_on_slope(np.hypot(Dx @ t, Dy @ t), kap) - a)
+        r = on * (t - m.rise_on_slope(np.hypot(Dx @ t + ox, Dy @ t + oy), kap) - a)
         p = rows @ t - target
         q = np.sqrt(w_anchor) * (t - top_anchor)
         return float(r @ r + lam * (p @ p) + q @ q)
@@ -283,7 +285,7 @@ def _solve_top(
     for f in steps:
         m = model.scaled(f)
         for _ in range(iterations):
-            gx, gy = Dx @ t, Dy @ t
+            gx, gy = Dx @ t + ox, Dy @ t + oy
             g = np.hypot(gx, gy)
             if curved:
                 kap = curvature_of(t, g)
