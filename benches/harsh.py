@@ -303,6 +303,11 @@ renders, 6f27519 -> 9b7036c, Ea / interior p99 / max mm: sample2 0.0203 0.059 0.
 0.1930 0.335 1.606, ring 0.0399 0.199 0.498 -> 0.0355 0.183 0.309, crater (held out) 0.0364
 0.200 0.244 -> 0.0366 0.203 0.232; sample1, twin-peaks, plateau, steep-front unchanged. Over
 the targets: sample4 (all three), crater's p99 by 0.003.
+(t) Session 31 (6 December 2026, ab9b9cf: at a sharp edge a face keeps its own rise; see
+benches/meniscus.py), (m)'s renders, 045a73c -> ab9b9cf: crater 0.0366 0.2026 0.232 -> 0.0367
+0.1979 0.232, sample3 0.0429 0.1052 0.481 -> 0.0429 0.1053 0.481, sample4 0.1930 0.3351 1.606 ->
+0.1923 0.3339 1.603; sample1, sample2, twin-peaks, plateau, ring, steep-front the same to the
+digit. Over the targets: sample4 (all three).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

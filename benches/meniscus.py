@@ -505,6 +505,38 @@ itself smoothed over it: ring 0.0594, plateau 0.0480, steps 0.7069; only for bra
 half the depression, ring 0.0594 with the smooth parts unchanged, but steps 0.6965 and the
 stepped block 1.0736.
 
+6 December 2026 (session 31). Two changes for the walled parts.
+(1) The renderer gave a pixel one contact line, from whichever tier's edge was nearest at the
+free surface's level: on the stepped block the upper tier's wall, up to 35 mm off, lifted the
+ink over the lower tier's face by its own 1.95 mm climb, so that face (0.6 deg, depressed
+1.36 mm) came out only when the ink was 0.2 mm deep over it. Each tier now has its own contact
+line (sim/waterline.py); single-tier parts render bit for bit as before. Steps and the stepped
+block rendered again (seed 1; the old renders processed by the same code for comparison),
+main 045a73c, Ea / interior p99 / max mm: steps 0.6698 / 12.62 / 14.85 -> 0.6455 / 12.54 /
+15.27, stepped block 1.046 / 5.385 / 14.31 -> 0.7766 / 4.824 / 14.31.
+(2) At a sharp edge the contact line pins and the rise jumps; the solve read the face's last
+node's slope over the edge and smoothed over it, and the stepped block's 12 mm tier stood
+1.2-3.6 mm high along its rims. Now such a node takes the apparent surface's slope on its
+level side and no smoothness row reaches over the edge (surface/sharp_edges.py). Same
+renders, 045a73c -> this:
+    sample1        0.0067 / 0.038 / 0.419    0.0067 / 0.037 / 0.419
+    sample2        0.0207 / 0.044 / 1.496    0.0194 / 0.044 / 1.359
+    sample3        0.0278 / 0.221 / 1.116    0.0275 / 0.222 / 1.108
+    sample4        0.0414 / 0.024 / 0.709    unchanged
+      (seeds 2-4: 0.0440 / 0.0457 / 0.0489 -> 0.0443 / 0.0457 / 0.0493)
+    crater, twin-peaks, steep-front, plateau (both seeds), ring (both): unchanged
+    steps *        0.6455 / 12.54 / 15.27    0.5800 / 12.81 / 15.23   (new render)
+    stepped-block *  0.7766 / 4.824 / 14.31    0.5700 / 4.893 / 14.31   (new render)
+    blade *        0.1976 / 2.977 / 13.66    0.1810 / 3.068 / 14.61
+Processing the stepped block: wall time 0.874 of 045a73c's (3 paired runs, range 0.85-0.91),
+peak 210.7 MiB against 211.6. What is left on the stepped block is its walls: cells within
+2.5 mm of a wall hold 69 % of its error (the lower tier's y = 10 wall +3.4 mm on average: the
+output grid put a row of cells on its foot, where the fit stands up to 8 mm over the truth).
+Tried, not kept: the top's own one-sided slope at the edge (a bump with its contact line at
+its foot solves the equation as well: the tier's exact apparent surface came out +2.3 mm at
+the edge); edges over untrusted rim nodes too (ring 0.0487 -> 0.0576); a steep side from
+45 deg (the summit test's mesa 0.31 -> 0.35 mm: a smooth shoulder, not an edge).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

@@ -56,6 +56,14 @@ exact sides alone: its flank, 20 mm high behind the crest, came out with the 3 m
 Behind a rim the frames cannot tell a vertical wall (the strip beyond lies at its floor) from
 a flank along the ray (at its ceiling); the fit's side of that, under the ray, leaves material.
 
+6 December 2026 (session 31). The renderer gives each tier its own contact line (the upper
+tier's wall no longer lifts the ink over the lower tier's face; single-tier parts render as
+before), and at a sharp edge the meniscus solve keeps a face's own rise (surface/sharp_edges.py).
+Physics preset, Ea / interior p99 / max mm: the stepped block rendered again, 045a73c 0.8110 /
+5.533 / 11.39 on the old render, 0.8217 / 5.530 / 11.82 on the new, ab9b9cf 0.8182 / 5.514 /
+8.423; the blade (the same render) 0.3553 / 4.492 / 7.200 -> 0.3327 / 5.169 / 7.202 (its p99
+worse: the hidden flank's cells). Clean: no meniscus, so unchanged.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
