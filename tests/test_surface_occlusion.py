@@ -116,10 +116,13 @@ def test_the_frames_bound_each_node_and_a_silhouette_bounds_it_by_its_ray():
     # (a frame a third of a pixel out or in moves its silhouette a tenth of a level; where a
     # frame's silhouette went unmarked, the level that first showed ink is left)
     assert np.median(np.abs(off)) < 0.1 and np.percentile(off, 90) < 0.2 and off.min() > -0.1
+    # which ceilings are such a ray: behind the far wall, never in front of the near one
+    # (x < 40, where the camera saw the waterline itself)
+    assert known.ray[behind].mean() > 0.9 and not known.ray[X < 38].any()
     for s in corrected:
         s.hidden = None  # no silhouettes known: the ceiling is the level that first showed ink
     levels_only = node_bounds(lat, seen, corrected, never, np.ones(lat.shape, bool))
-    assert (levels_only.ceiling - ray)[behind].mean() > 0.4
+    assert (levels_only.ceiling - ray)[behind].mean() > 0.4 and not levels_only.ray.any()
 
 
 def test_the_nodes_behind_a_face_s_edge_get_no_height_of_their_own():

@@ -28,6 +28,7 @@ class NodeBounds(NamedTuple):
     hidden: np.ndarray  # nodes whose crossing of the ink a face above it hid
     floor: np.ndarray  # the highest level at which the node was out of the ink (-inf: none)
     ceiling: np.ndarray  # the lowest level at which the camera saw ink there (inf: none)
+    ray: np.ndarray  # nodes whose ceiling is the ray over a rim
 
 
 def node_bounds(
@@ -51,17 +52,18 @@ def node_bounds(
     levels = np.array([s.level for s in corrected])
 
     def bounds(a, b):  # of nodes a..b: each node's sweep down the frames is its own
-        first_seen, ceiling = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
-        return first_seen, ceiling, _floor(lat, corrected, levels, q[a:b], idx[a:b])
+        first_seen, ceiling, ray = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
+        return first_seen, ceiling, ray, _floor(lat, corrected, levels, q[a:b], idx[a:b])
 
     # in halves of the nodes on the cores where forking is allowed (0.55 s of the demo
     # scan's 2.3 s fit in one)
-    first_seen, ceiling, floor = in_parts(bounds, np.ones(len(q)), _joined_columns)
+    first_seen, ceiling, ray, floor = in_parts(bounds, np.ones(len(q)), _joined_columns)
     floor = floor - sink
-    out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf)]
+    out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf, False)]
     out[0].ravel()[idx] = first_seen < first.ravel()[idx]
     out[1].ravel()[idx] = floor
     out[2].ravel()[idx] = ceiling + rise_max
+    out[3].ravel()[idx] = ray
     return _without_clashes(NodeBounds(*out))
 
 
@@ -98,7 +100,10 @@ def _without_clashes(b: NodeBounds) -> NodeBounds:
     if not clash.any():
         return b
     return NodeBounds(
-        b.hidden & ~clash, np.where(clash, -np.inf, b.floor), np.where(clash, np.inf, b.ceiling)
+        b.hidden & ~clash,
+        np.where(clash, -np.inf, b.floor),
+        np.where(clash, np.inf, b.ceiling),
+        b.ray & ~clash,
     )
 
 
@@ -109,6 +114,7 @@ def _ceiling(lat, seen, corrected, levels, q, idx):
     K = len(seen)
     first_seen = np.full(len(q), K, np.int32)
     ceiling = np.full(len(q), np.inf)
+    by_ray = np.zeros(len(q), bool)
     d_below = np.zeros(len(q))  # distance to the waterline of the frame below
     ray_below = np.zeros(len(q), bool)  # and whether a silhouette is the nearest of it
     todo = np.arange(len(q))
@@ -123,6 +129,7 @@ def _ceiling(lat, seen, corrected, levels, q, idx):
         ink[ink] = _outside(lat, corrected[k], q[todo[ink]], idx[todo[ink]])
         at = todo[ink]
         ceiling[at] = levels[k]
+        by_ray[at] = False
         if below is not None:
             # the node between a silhouette that passed outside it and one inside: the ray
             # over the rim crosses it in between, the silhouette creeping along that ray
@@ -130,11 +137,12 @@ def _ceiling(lat, seen, corrected, levels, q, idx):
             ray = _silhouette(corrected[k], near[ink]) & ray_below[at] & (d_below[at] > 0)
             t = d_below[at] / np.maximum(d_below[at] + d[ink], 1e-9)
             ceiling[at[ray]] = (levels[below] + t * (levels[k] - levels[below]))[ray]
+            by_ray[at[ray]] = True
         d_below[todo] = d
         ray_below[todo] = _silhouette(corrected[k], near)
         todo = todo[~ink]
         below = k
-    return first_seen, ceiling
+    return first_seen, ceiling, by_ray
 
 
 def _outside(lat, s: Slice, q, flat_index) -> np.ndarray:

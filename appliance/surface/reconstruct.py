@@ -239,9 +239,12 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     # and every node stands where the frames saw it: out of the ink, or (a node a face hid)
     # the ink over it. Not every node under its ceiling: at the edge of a wall a frame's
     # waterline is as far out as the stage plays, and harsh sample 4's 20 mm corner stood
-    # 3.8 mm low under the ink one frame saw there
+    # 3.8 mm low under the ink one frame saw there. A ceiling that is the ray over a rim
+    # holds every node: it is the camera's geometry, not one frame's waterline (under the
+    # second ink a node on the stepped block's hidden wall foot, not marked hidden, stood
+    # 2.5 mm over it)
     z = np.maximum(z, known.floor)
-    z = np.where(known.hidden, np.minimum(z, known.ceiling), z)
+    z = np.where(known.hidden | known.ray, np.minimum(z, known.ceiling), z)
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
