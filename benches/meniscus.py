@@ -536,6 +536,10 @@ Tried, not kept: the top's own one-sided slope at the edge (a bump with its cont
 its foot solves the equation as well: the tier's exact apparent surface came out +2.3 mm at
 the edge); edges over untrusted rim nodes too (ring 0.0487 -> 0.0576); a steep side from
 45 deg (the summit test's mesa 0.31 -> 0.35 mm: a smooth shoulder, not an edge).
+(3) Then (44e46e9) a ceiling that is the ray over a rim holds every node (a node on that wall
+foot, not marked hidden, stood 2.5 mm over its ray): stepped block 0.5700 / 4.893 / 14.31 ->
+0.5427 / 4.893 / 13.15; every other part above, both inks and the harsh bench, the same to
+the digit.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3

@@ -63,6 +63,10 @@ Physics preset, Ea / interior p99 / max mm: the stepped block rendered again, 04
 5.533 / 11.39 on the old render, 0.8217 / 5.530 / 11.82 on the new, ab9b9cf 0.8182 / 5.514 /
 8.423; the blade (the same render) 0.3553 / 4.492 / 7.200 -> 0.3327 / 5.169 / 7.202 (its p99
 worse: the hidden flank's cells). Clean: no meniscus, so unchanged.
+Then (44e46e9) a ceiling that is the ray over a rim holds every node, not only those marked
+hidden; the same renders, a3ee1e3 -> 44e46e9: clean stepped block 0.2972 / 4.160 / 9.529 ->
+0.2882 / 4.119 / 5.667, blade 0.0983 / 1.446 / 2.400 -> 0.0968 / 1.402 / 2.400; physics
+stepped block 0.8182 -> 0.8178, blade 0.3327 / 5.169 -> 0.3309 / 4.381.
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
