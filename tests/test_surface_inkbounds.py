@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from appliance.surface.inkbounds import NodeBounds, _without_clashes
+from appliance.surface.inkbounds import NodeBounds, _without_clashes, held
 
 
 def test_a_node_out_of_the_ink_above_where_ink_was_seen_over_it_keeps_neither_bound():
@@ -14,6 +14,19 @@ def test_a_node_out_of_the_ink_above_where_ink_was_seen_over_it_keeps_neither_bo
     assert out.floor[0] == 5.0 and out.ceiling[0] == 8.0 and out.hidden[0] and out.ray[0]
     assert out.floor[1] == -np.inf and out.ceiling[1] == np.inf and not out.hidden[1]
     assert not out.ray[1]
+
+
+def test_a_ray_over_a_rim_holds_every_node_a_frames_ink_only_the_hidden():
+    # nodes: hidden under a level ceiling; seen, under a ray over a rim; seen, under a
+    # level ceiling (a waterline's noise at a wall's edge may have put it there); and a
+    # node below its floor
+    b = NodeBounds(
+        np.array([True, False, False, False]),
+        np.array([0.0, 0.0, 0.0, 6.0]),
+        np.array([5.0, 5.0, 5.0, np.inf]),
+        np.array([False, True, False, False]),
+    )
+    assert held(np.array([7.0, 7.0, 7.0, 4.0]), b).tolist() == [5.0, 5.0, 7.0, 6.0]
 
 
 def test_in_polygon_agrees_with_opencvs_point_polygon_test_on_and_off_the_loop():

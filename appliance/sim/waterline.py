@@ -160,23 +160,21 @@ def _contact_line(surface, grid, effects, x0, y0, kx, ky, lvl, wslope):
         return _tier_contact_line(surface, grid, effects, 0, x0, y0, kx, ky, lvl, wslope)
     best = None
     for ti in range(len(grid.tiers)):
-        _, _, _, slope, _, _ = _one_tier(grid, ti, x0, y0, lvl)
+        slope = _one_tier(grid, ti, x0, y0, lvl)[2]
         xc, yc, lc = _tier_contact_line(surface, grid, effects, ti, x0, y0, kx, ky, lvl, slope)
         v = _one_tier(grid, ti, xc, yc, lc)[0]
         if best is None:
             best = [v, xc, yc, lc]
             continue
         better = v > best[0]
-        for i, a in enumerate((v, xc, yc, lc)):
-            best[i] = np.where(better, a, best[i])
+        best = [np.where(better, a, b) for a, b in zip((v, xc, yc, lc), best)]
     return best[1], best[2], best[3]
 
 
 def _one_tier(grid, ti, x, y, level):
-    """_tier_level_sdf of tier ti, in approx_level_sdf's order (the tier index second)."""
+    """_tier_level_sdf of tier ti at plane points x, y."""
     gx, gy = grid.coords(x, y)
-    v, w, g, fx, fy = _tier_level_sdf(grid, grid.tiers[ti], gx, gy, level)
-    return v, np.full(x.size, ti, np.int16), w, g, fx, fy
+    return _tier_level_sdf(grid, grid.tiers[ti], gx, gy, level)
 
 
 def _tier_contact_line(surface, grid, effects, ti, x0, y0, kx, ky, lvl, wslope):
@@ -195,7 +193,7 @@ def _tier_contact_line(surface, grid, effects, ti, x0, y0, kx, ky, lvl, wslope):
     for _ in range(2):
         lc = lvl + h
         xs, ys = x0 + kx * h, y0 + ky * h
-        _, _, wwall, wslope, _, _ = _one_tier(grid, ti, xs, ys, lc)
+        _, wwall, wslope, _, _ = _one_tier(grid, ti, xs, ys, lc)
         h = rise(np.arctan(wslope), xs, ys)
     lc = lvl + h
     # on a wall the ink climbs h(90 deg), but never past the wall's top edge

@@ -52,8 +52,7 @@ RIM_UNTRUSTED = 2  # nodes next to the outline whose apparent height the solve i
 LEVEL_SLOPE = 0.15  # slopes (rise over run) round which the rise's V is the top's, not phi's
 RUNAWAY_BAND = 3  # nodes inside the trusted outline where the level solve may run away
 RUNAWAY_MM = 0.2  # how far above the plain solve it must stand there to count as running away
-BEND_SLOPE = 2 * LEVEL_SLOPE
-EDGE_SLOPE = 1.0  # steeper on one side of a level node than this, that side is over an edge  # flatter, the top's level curves' bend is held to the seen one
+BEND_SLOPE = 2 * LEVEL_SLOPE  # flatter, the top's level curves' bend is held to the seen one
 
 
 def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):

@@ -43,7 +43,7 @@ from .dewetted import depression_depth
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
-from .inkbounds import node_bounds
+from .inkbounds import held, node_bounds
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls
@@ -236,15 +236,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     sure = np.isfinite(flat[0])
     climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
     z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
-    # and every node stands where the frames saw it: out of the ink, or (a node a face hid)
-    # the ink over it. Not every node under its ceiling: at the edge of a wall a frame's
-    # waterline is as far out as the stage plays, and harsh sample 4's 20 mm corner stood
-    # 3.8 mm low under the ink one frame saw there. A ceiling that is the ray over a rim
-    # holds every node: it is the camera's geometry, not one frame's waterline (under the
-    # second ink a node on the stepped block's hidden wall foot, not marked hidden, stood
-    # 2.5 mm over it)
-    z = np.maximum(z, known.floor)
-    z = np.where(known.hidden | known.ray, np.minimum(z, known.ceiling), z)
+    z = held(z, known)
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top

@@ -38,7 +38,7 @@ def slopes_held_at_edges(problem, A, trusted, level_slope):
     other (over one of two: the fit rounds the edge), the node's slope along that axis is A's
     on the level side: the face as the contact lines crossing it show it."""
     A = fill_nearest(A)
-    act, index = problem.active, problem.index
+    index = problem.index
     ops, offsets, pairs = [], [], []
     gradient = problem.gradient()
     for D, axis, h in ((gradient[0], 1, problem.lat.hx), (gradient[1], 0, problem.lat.hy)):
@@ -54,7 +54,7 @@ def slopes_held_at_edges(problem, A, trusted, level_slope):
             (ahead, ahead2, back, back2, -1),
         ):
             with np.errstate(invalid="ignore"):
-                edge = trusted & act & (np.abs(level) < level_slope) & (np.abs(level2) < level_slope)
+                edge = trusted & (np.abs(level) < level_slope) & (np.abs(level2) < level_slope)
                 edge &= np.fmax(np.abs(steep), np.abs(steep2)) > EDGE_SLOPE
             J, I = np.nonzero(edge)
             me = index[J, I]
