@@ -510,6 +510,32 @@ def test_a_face_keeps_its_own_rise_up_to_a_sharp_edge():
     assert err[inside >= 8].max() < 0.01
 
 
+def test_a_face_whose_fit_rings_at_its_rim_keeps_its_rise_by_its_first_exposure():
+    """The same tier, its apparent surface ringing over the face's last two nodes as a thin
+    plate fit does beside a wall (-0.3 then +0.2 mm: the steps' boss top, under the second
+    ink). A is then level on no side of the rim and no edge is found; the first-exposure
+    heights still show the face level up to it. Past the ringing the top was up to 2.5 mm
+    off without them, 0.14 mm with them."""
+    from appliance.surface.contact_lines import top_from_apparent
+    from appliance.surface.lattice import Lattice
+
+    tier = surfaces.get("stepped-block").tiers[0].top
+    model = MeniscusModel(**SECOND)
+    lat = Lattice(np.linspace(0.0, 100.0, 99), np.linspace(0.0, 96.0, 95))
+    A, T = _apparent(lambda x, y: np.maximum(tier(x, y), 0.0), model, lat.x, lat.y)
+    X, Y = np.meshgrid(lat.x, lat.y)
+    inside = np.minimum.reduce([X - 8, 92 - X, Y - 10, 86 - Y])  # the rim is 1.03 mm in
+    ringing = np.where((inside >= 1.03) & (inside < 2.1), -0.3, 0.0)
+    ringing += np.where((inside >= 2.1) & (inside < 3.1), 0.2, 0.0)
+    past = (inside >= 3.1) & (inside < 8)
+    fp = np.ones(A.shape, bool)
+    blind = np.abs(top_from_apparent(lat, A + ringing, fp, model) - T)[past]
+    seen = np.abs(top_from_apparent(lat, A + ringing, fp, model, exposed=A) - T)[past]
+    print(f"past the ringing: worst {blind.max():.3f} mm without first exposure, {seen.max():.3f} with")
+    assert blind.max() > 1.0  # the ringing hides the edge
+    assert seen.max() < 0.2 and seen.mean() < 0.06
+
+
 def test_a_dewetting_inks_level_faces_are_not_taken_for_a_runaway(monkeypatch):
     """An ink that dewets has a negative rise on level faces; the runaway's mark (a rise the
     apparent surface's slope cannot explain) once took 1.5 h there, below h itself, so every

@@ -55,7 +55,9 @@ RUNAWAY_MM = 0.2  # how far above the plain solve it must stand there to count a
 BEND_SLOPE = 2 * LEVEL_SLOPE  # flatter, the top's level curves' bend is held to the seen one
 
 
-def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf):
+def top_from_apparent(
+    lat, apparent, footprint, model: MeniscusModel, faces=None, ceiling=np.inf, exposed=None
+):
     """-> the top (NaN where `apparent` is) whose contact lines are the level curves of
     `apparent` (the fit of the contact lines as they were seen, on lattice `lat`).
     `faces`: nodes of faces that came out at once (dewetted_nodes). No contact line crossed
@@ -65,6 +67,8 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     `ceiling`: the highest the top can stand (summit.summit_ceiling), held at every step, so
     that the rise on the flanks follows a crest held under it (the harsh ring: interior p99
     0.326 mm with the top clamped after the solve, 0.207 held during it).
+    `exposed`: the first-exposure heights the fit was given (NaN where none): where the fit
+    rings beside a wall they still show a face level up to its edge (sharp_edges.py).
 
     Where the top is level the solve smooths the top, not the rise (LevelRows). That leaves
     free a mode of top - h(|grad top|) = A that grows as exp(d / (l_c cos(theta / 2))) towards
@@ -75,7 +79,7 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     of the trusted outline, the level solve stands more than RUNAWAY_MM above a level plain
     one, the top is solved again held to the plain one there (a data-weight tie): the mode needs
     the rim to grow into, and tied there it cannot start. Elsewhere the level solve stands."""
-    top = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling)
+    top = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, exposed=exposed)
     k = _solve_stride(lat)
     rim = footprint & ~ndimage.binary_erosion(
         footprint, iterations=k * (RIM_UNTRUSTED + RUNAWAY_BAND), border_value=0
@@ -90,7 +94,9 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     unexplained = np.nan_to_num(top - apparent) - (h_a + 0.5 * np.abs(h_a))
     if not (rim & (g_a < 2 * LEVEL_SLOPE) & (unexplained > RUNAWAY_MM)).any():
         return top
-    plain = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, level_rows=False)
+    plain = _top_from_apparent(
+        lat, apparent, footprint, model, faces, ceiling, level_rows=False, exposed=exposed
+    )
     # the mode grows out of a level top: where the plain solve is level (on a wall the two
     # solves' rises differ for other reasons: sample 4's walls, all within its rim band)
     g_plain = _slope(lat, plain)
@@ -98,7 +104,9 @@ def top_from_apparent(lat, apparent, footprint, model: MeniscusModel, faces=None
     ran = rim & ndimage.binary_dilation(high, iterations=k)
     if not ran.any():
         return top
-    return _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain))
+    return _top_from_apparent(
+        lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain), exposed=exposed
+    )
 
 
 def _solve_stride(lat) -> int:
@@ -112,13 +120,14 @@ def _slope(lat, z):
 
 
 def _top_from_apparent(
-    lat, apparent, footprint, model, faces=None, ceiling=np.inf, level_rows=True, anchor=None
+    lat, apparent, footprint, model, faces=None, ceiling=np.inf, level_rows=True, anchor=None, exposed=None
 ):
     """top_from_apparent's solve: coarse, then fine. `level_rows`: smooth the top where it is
     level (LevelRows), else the rise everywhere. `anchor`: (nodes, top) to hold the solve to."""
     k = _solve_stride(lat)
     sub = Lattice(lat.x[::k], lat.y[::k])
     A = fill_nearest(apparent)[::k, ::k]
+    exposed = None if exposed is None else exposed[::k, ::k]
     fp = footprint[::k, ::k]
     if fp.sum() < 9:
         return apparent
@@ -145,6 +154,7 @@ def _top_from_apparent(
             ceiling=ceiling,
             level_rows=level_rows,
             anchor=None if anchor is None else (anchor[0][::2, ::2], anchor[1][::2, ::2]),
+            exposed=None if exposed is None else exposed[::2, ::2],
         )
         start = A + _resample_rise(tc - Ac, coarse, sub)
         top = _solve_top(
@@ -161,6 +171,7 @@ def _top_from_apparent(
             ceiling=ceiling,
             level_rows=level_rows,
             anchor=anchor,
+            exposed=exposed,
         )
     else:
         top = _solve_top(
@@ -177,6 +188,7 @@ def _top_from_apparent(
             ceiling=ceiling,
             level_rows=level_rows,
             anchor=anchor,
+            exposed=exposed,
         )
     rise = top - A if k == 1 else _resample_rise(top - A, sub, lat)
     return np.where(np.isfinite(apparent), apparent + rise, np.nan)
@@ -232,6 +244,7 @@ def _solve_top(
     ceiling=np.inf,
     level_rows=True,
     anchor=None,
+    exposed=None,
 ):
     """Levenberg-Marquardt on |top - h(|grad top|) - A|^2 (footprint nodes) + lam |phi|^2_R3,
     the capillary length turned on in `steps` (fractions of it)."""
@@ -243,7 +256,7 @@ def _solve_top(
     trusted = ndimage.binary_erosion(footprint, iterations=RIM_UNTRUSTED, border_value=0)
     if trusted.sum() < 9:
         trusted = footprint
-    Dx, Dy, (ox, oy), edges = slopes_held_at_edges(problem, A, trusted, LEVEL_SLOPE)
+    Dx, Dy, (ox, oy), edges = slopes_held_at_edges(problem, A, trusted, LEVEL_SLOPE, exposed)
     rows = rows_not_over(problem.third_order_rows(), edges)
     R = (rows.T @ rows).tocsc()
     lam = length_mm**6 / (lat.hx * lat.hy)

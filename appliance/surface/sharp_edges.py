@@ -21,7 +21,7 @@ from .lattice import fill_nearest
 EDGE_SLOPE = 2.0
 
 
-def slopes_held_at_edges(problem, A, trusted, level_slope):
+def slopes_held_at_edges(problem, A, trusted, level_slope, exposed=None):
     """-> (Dx, Dy, offsets, pairs): the slope operators with the slope of a level node beside a
     sharp edge held at the one A shows on its own side (|grad top| = |D t + offset|), and the
     (node, neighbour over the edge) pairs.
@@ -36,13 +36,20 @@ def slopes_held_at_edges(problem, A, trusted, level_slope):
     at the edge). So where A (the fit of the contact lines as seen: fixed) is level on one
     side of a node (under level_slope over two spacings) and steeper than EDGE_SLOPE on the
     other (over one of two: the fit rounds the edge), the node's slope along that axis is A's
-    on the level side: the face as the contact lines crossing it show it."""
+    on the level side: the face as the contact lines crossing it show it.
+
+    `exposed`: the first-exposure heights the fit was given (NaN where none, and where a face
+    hid the node). A thin-plate fit rings beside a 14 mm wall: the steps' boss top, level in
+    its first-exposure heights to 0.02 mm, stood 0.2-0.5 mm uneven in A over its last two
+    nodes, no edge was found along most of its rim, and the wall's rise carried 1-1.7 mm onto
+    it. So a side counts as level where either A or the first-exposure heights are (the
+    flatter of the two differences)."""
     A = fill_nearest(A)
     index = problem.index
     ops, offsets, pairs = [], [], []
     gradient = problem.gradient()
     for D, axis, h in ((gradient[0], 1, problem.lat.hx), (gradient[1], 0, problem.lat.hy)):
-        back = np.diff(A, axis=axis, prepend=np.nan) / h  # A[i] - A[i - 1]
+        back = _flatter(np.diff(A, axis=axis, prepend=np.nan), exposed, axis) / h  # A[i] - A[i - 1]
         ahead = _shifted(back, -1, axis)  # A[i + 1] - A[i]
         back2, ahead2 = _shifted(back, 1, axis), _shifted(ahead, -1, axis)
         offset = np.zeros(problem.n)
@@ -68,6 +75,16 @@ def slopes_held_at_edges(problem, A, trusted, level_slope):
         ops.append(sp.diags((~held).astype(float)) @ D if held.any() else D)
         offsets.append(offset)
     return ops[0], ops[1], offsets, pairs
+
+
+def _flatter(diff, exposed, axis):
+    """Each backward difference of A, or of the first-exposure heights where they have one
+    and it is smaller."""
+    if exposed is None:
+        return diff
+    seen = np.diff(exposed, axis=axis, prepend=np.nan)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(seen) < np.abs(diff), seen, diff)
 
 
 def _shifted(a, k, axis):
