@@ -308,6 +308,9 @@ benches/meniscus.py), (m)'s renders, 045a73c -> ab9b9cf: crater 0.0366 0.2026 0.
 0.1979 0.232, sample3 0.0429 0.1052 0.481 -> 0.0429 0.1053 0.481, sample4 0.1930 0.3351 1.606 ->
 0.1923 0.3339 1.603; sample1, sample2, twin-peaks, plateau, ring, steep-front the same to the
 digit. Over the targets: sample4 (all three).
+(u) Session 32 (6 December 2026, 098e655: at a sharp edge a side is level where the fit or the
+first-exposure heights are), (m)'s renders, 926816a -> 098e655: sample4 0.1923 0.3339 1.603 ->
+0.1922 0.3337 1.602; the other eight the same to the digit. Over the targets: sample4 (all three).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

@@ -541,6 +541,35 @@ foot, not marked hidden, stood 2.5 mm over its ray): stepped block 0.5700 / 4.89
 0.5427 / 4.893 / 13.15; every other part above, both inks and the harsh bench, the same to
 the digit.
 
+6 December 2026 (session 32). At a sharp edge a side is level where A or the first-exposure
+heights are (surface/sharp_edges.py): beside a 14 mm wall the fit A rings 0.2-0.5 mm over a
+face's last two nodes, and on the steps' boss top no edge was found along most of its rim (the
+top there +1-1.7 mm, falling off over 5 mm). Same renders, 926816a -> this, Ea / interior p99
+/ max mm:
+    sample2        0.0194 / 0.044 / 1.359    0.0183 / 0.046 / 1.475
+    sample3        0.0275 / 0.222 / 1.108    0.0272 / 0.223 / 1.108
+    sample4 seeds 2-4 (Ea)  0.0443 / 0.0457 / 0.0493 -> 0.0445 / 0.0458 / 0.0495
+    sample1, sample4, crater, twin-peaks, steep-front, plateau, ring (both seeds each where
+    kept): the same to 0.0001
+    steps *        0.5800 / 12.81 / 15.23    0.3566 / 13.29 / 15.36
+    stepped-block *  0.5427 / 4.893 / 13.15    0.4535 / 4.938 / 12.39
+    blade *        0.1810 / 3.068 / 14.61    0.1714 / 3.016 / 14.17
+Processing the steps: wall time 0.973 of 926816a's (3 paired runs, 0.962-0.977), peak 230.5
+MiB against 242.2. On the steps 68 % of what is left is the base's cells within 2.5 mm of a
+wall (+2.8 mm on average): the strips the boss's and the disc's rims hide from the camera,
+placed under the ray (material left), and the 1.6 mm cells on their edges. The map's own
+wall and occluded cells (8.2 % of the cells) hold 70 % of the error; over the cells it does
+not mark uncertain Ea is 0.082.
+Tried, not kept: the fit A held between the levels that saw each node out and under, before
+the solve (inkbounds.node_bounds without the meniscus' widening). With this change, floors
+everywhere and ceilings where the frames bracket a node or a face or a rim's ray covers it:
+steps 0.3373, harsh plateau 0.0369 / 0.196 -> 0.0261 / 0.111, the seed table's samples 2 and 3 0.0233 ->
+0.0195 and 0.0258 -> 0.0247; but sample 4 0.0414 -> 0.0458, crater max 0.449 -> 1.208 (an
+outline node held to a ceiling one frame's wall waterline gave) and harsh sample 4 max 1.60 ->
+5.76. Ceilings only two nodes inside the outline: crater 0.0202 / 0.444, but sample 4 0.0497,
+harsh sample 2 0.0170 -> 0.0201, harsh ring max 0.309 -> 0.628. Floors and the hidden nodes'
+ceilings only: harsh plateau p99 0.196 -> 0.212, sample 4 0.0459.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

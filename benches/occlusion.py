@@ -67,6 +67,10 @@ Then (44e46e9) a ceiling that is the ray over a rim holds every node, not only t
 hidden; the same renders, a3ee1e3 -> 44e46e9: clean stepped block 0.2972 / 4.160 / 9.529 ->
 0.2882 / 4.119 / 5.667, blade 0.0983 / 1.446 / 2.400 -> 0.0968 / 1.402 / 2.400; physics
 stepped block 0.8182 -> 0.8178, blade 0.3327 / 5.169 -> 0.3309 / 4.381.
+6 December 2026 (session 32): at a sharp edge a side is level where the fit or the
+first-exposure heights are (surface/sharp_edges.py); the same renders, 926816a -> this, physics:
+stepped block 0.8178 / 5.514 / 8.423 -> 0.7194 / 5.386 / 8.561, blade 0.3309 / 4.381 / 7.202 ->
+0.3333 / 4.872 / 7.203. Clean: no meniscus, so unchanged (0.2882, 0.0968).
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
