@@ -67,8 +67,9 @@ def top_from_apparent(
     `ceiling`: the highest the top can stand (summit.summit_ceiling), held at every step, so
     that the rise on the flanks follows a crest held under it (the harsh ring: interior p99
     0.326 mm with the top clamped after the solve, 0.207 held during it).
-    `exposed`: the first-exposure heights the fit was given (NaN where none): where the fit
-    rings beside a wall they still show a face level up to its edge (sharp_edges.py).
+    `exposed`: the first-exposure heights the fit was given (NaN where none, and where a face
+    hid the node): where the fit rings beside a wall they still show a face level up to its
+    edge (sharp_edges.py).
 
     Where the top is level the solve smooths the top, not the rise (LevelRows). That leaves
     free a mode of top - h(|grad top|) = A that grows as exp(d / (l_c cos(theta / 2))) towards
