@@ -486,6 +486,36 @@ def test_a_level_shelf_at_the_outline_does_not_run_away():
     assert got.mean() < 0.7 * plain.mean()  # and the level rows' gain is kept
 
 
+def test_a_tie_against_the_runaway_does_not_set_it_off_elsewhere_in_the_band(monkeypatch):
+    """Tying the top to the plain solve where it ran away solves the whole top again, and the
+    mode can then start where the level solve had none: the blade's 4 mm strip of slab between
+    its end's taper and the outline, second ink, came out 0.2 mm high from the level solve and
+    0.4-1.2 mm high, rising to the edge, from the tied one. The mode only lifts the top, so in
+    the rim band, where the plain solve is level, the top is the lower of the two; elsewhere
+    the tied solve. Here the three solves are stand-ins: a level solve run away along the left
+    rim, a flat plain one, and a tie that lifted the right rim and moved the interior a little."""
+    from appliance.surface import contact_lines
+    from appliance.surface.lattice import Lattice
+
+    x = np.linspace(0.0, 60.0, 61)
+    A = np.full((61, 61), 10.0)
+    X = np.meshgrid(x, x)[0]
+    level = A + np.where(X < 5, 1.0, 0.0)
+    tied = A + np.where(X > 55, 0.8, 0.05)
+
+    def solve(*args, level_rows=True, anchor=None, **kwargs):
+        if anchor is not None:
+            return tied
+        return level if level_rows else A
+
+    monkeypatch.setattr(contact_lines, "_top_from_apparent", solve)
+    got = contact_lines.top_from_apparent(Lattice(x, x), A, np.ones(A.shape, bool), MeniscusModel(2.5, 0.0))
+    band = contact_lines.RIM_UNTRUSTED + contact_lines.RUNAWAY_BAND
+    assert np.array_equal(got[:, :band], tied[:, :band])  # tied where it ran
+    assert np.array_equal(got[band:-band, -band:], level[band:-band, -band:])  # the level solve's far rim
+    assert np.array_equal(got[band:-band, band:-band], tied[band:-band, band:-band])  # the tie's interior
+
+
 def test_a_face_keeps_its_own_rise_up_to_a_sharp_edge():
     """The stepped block's 12 mm tier (tilted 0.6 deg, 85 deg walls) on the base, under the
     second ink: its exact apparent surface stands 1.36 mm over the face and drops over the

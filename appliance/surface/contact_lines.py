@@ -79,7 +79,9 @@ def top_from_apparent(
     rise smoothed everywhere (`plain`) has no such mode. So where, within RUNAWAY_BAND nodes
     of the trusted outline, the level solve stands more than RUNAWAY_MM above a level plain
     one, the top is solved again held to the plain one there (a data-weight tie): the mode needs
-    the rim to grow into, and tied there it cannot start. Elsewhere the level solve stands."""
+    the rim to grow into, and tied there it cannot start. The tied solve is the top, but in the
+    band, where the plain solve is level, the lower of it and the level solve: the tie moves the
+    whole top and can set the mode off where the level solve had none."""
     top = _top_from_apparent(lat, apparent, footprint, model, faces, ceiling, exposed=exposed)
     k = _solve_stride(lat)
     rim = footprint & ~ndimage.binary_erosion(
@@ -105,9 +107,15 @@ def top_from_apparent(
     ran = rim & ndimage.binary_dilation(high, iterations=k)
     if not ran.any():
         return top
-    return _top_from_apparent(
+    tied = _top_from_apparent(
         lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain), exposed=exposed
     )
+    # the tie moves the whole top, and the mode can then start in the band where the level solve
+    # had none (the blade's 4 mm strip of slab between its end's taper and the outline, second
+    # ink: 0.2 mm high from the level solve, 0.4-1.2 mm from the tied one, rising to the edge).
+    # The mode only lifts the top: in the band, where the plain solve is level, the lower of the two
+    band = rim & (g_plain < 2 * LEVEL_SLOPE)
+    return np.where(band, np.fmin(tied, top), tied)
 
 
 def _solve_stride(lat) -> int:
