@@ -311,6 +311,13 @@ digit. Over the targets: sample4 (all three).
 (u) Session 32 (6 December 2026, 098e655: at a sharp edge a side is level where the fit or the
 first-exposure heights are), (m)'s renders, 926816a -> 098e655: sample4 0.1923 0.3339 1.603 ->
 0.1922 0.3337 1.602; the other eight the same to the digit. Over the targets: sample4 (all three).
+(v) Session 33 (6 December 2026: in the rim band the lower of the level and the tied meniscus
+solves; see benches/meniscus.py), renders made again this session (the same seeds), e986be5 ->
+this, Ea / interior p99 / max mm: sample1 0.0153 0.042 0.551, sample2 0.0170 0.052 0.165, sample3
+0.0429 0.105 0.480, sample4 0.1921 0.334 1.602, twin-peaks 0.0226 0.085 0.275, plateau 0.0370
+0.196 0.447, ring 0.0354 0.183 0.309, steep-front 0.0144 0.085 0.151 (all eight unchanged); crater
+0.0367 0.199 0.240 -> 0.0365 0.198 0.241. Honest share: tuned 97.5 % of 1942 (unchanged), held
+out 92.6 % of 108 -> 92.2 % of 102. Over the targets: sample4 (all three).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
