@@ -634,8 +634,7 @@ from seed_table import calibrated_camera, use_camera
 from appliance import process as proc
 from appliance.cli import main as cli
 from appliance.sim import surfaces
-from appliance.sim.levels import sculpture_levels
-from appliance.sim.physics import meniscus_rise
+from appliance.sim.levels import ink_margins, sculpture_levels
 from appliance.sim.render import effects_preset
 from appliance.sim.scanrender import refine_scan, render_scan
 from appliance.vision.refine import RESOLUTION_MM
@@ -676,18 +675,12 @@ def scan_part(
     daemon's runner does (sim/scanrender.py refine_scan; refinement_frames counts them)."""
     surface = surfaces.get(name)
     folder = part_folder(tmp, name, model, seed, from_above)
-    e = effects_preset(model)
-    below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, math.radians(e.contact_angle_deg)))
-    # an ink that does not wet flat faces stands over a flat top it has left, a pit's
-    # contact line up to sqrt(2) times more (physics.curvature_factor)
-    above = -math.sqrt(2) * float(
-        meniscus_rise(0.0, e.capillary_length_mm, math.radians(e.contact_angle_deg))
-    )
+    below, above = ink_margins(effects_preset(model))
     if not (folder / "scan.json").is_file():
         render_scan(
             surface,
             folder,
-            levels=sculpture_levels(surface, step, max(below, 0.0), from_above, max(above, 0.0)),
+            levels=sculpture_levels(surface, step, below, from_above, above),
             effects=model,
             seed=seed,
             workers=2,

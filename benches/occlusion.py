@@ -100,7 +100,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
@@ -113,8 +112,7 @@ from scipy import ndimage
 
 from appliance import process as proc
 from appliance.sim import surfaces
-from appliance.sim.levels import sculpture_levels
-from appliance.sim.physics import meniscus_rise
+from appliance.sim.levels import ink_margins, sculpture_levels
 from appliance.sim.render import effects_preset
 from appliance.sim.scanrender import refine_scan, render_scan
 from appliance.vision.refine import RESOLUTION_MM
@@ -154,13 +152,8 @@ def calibration(keep: Path, effects):
 def daemon_levels(surface, effects, step):
     """The plan the daemon's runner follows: from the first empty frame above the top (higher by
     the ink's stand over a flat top it has left) down until the top is out by the rise on a wall."""
-    e = effects_preset(effects)
-    if not e.meniscus:
-        return sculpture_levels(surface, step, from_above=True)
-    angle = math.radians(e.contact_angle_deg)
-    below = float(meniscus_rise(math.pi / 2, e.capillary_length_mm, angle))
-    above = -math.sqrt(2) * float(meniscus_rise(0.0, e.capillary_length_mm, angle))
-    return sculpture_levels(surface, step, max(below, 0.0), True, max(above, 0.0))
+    below, above = ink_margins(effects_preset(effects))
+    return sculpture_levels(surface, step, below, True, above)
 
 
 def run(part, effects, keep: Path, grid_n, step, refine_mm):

@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from appliance.cli import main
 from appliance.hw.base import Camera
@@ -10,7 +11,7 @@ from appliance.scanfile import load_scan, read_frame
 from appliance.sim import physics
 from appliance.sim import surfaces as S
 from appliance.sim.camera import VirtualCamera
-from appliance.sim.levels import sculpture_levels
+from appliance.sim.levels import ink_margins, sculpture_levels
 from appliance.sim.render import Effects, render_frame
 from appliance.sim.rig import Rig
 from appliance.sim.scanrender import render_scan, scan_levels, truth_path
@@ -33,6 +34,17 @@ def test_a_bench_scan_from_above_starts_with_a_frame_that_shows_no_part():
     # an ink that leaves a flat top while it stands up to 1.9 mm over it: the first frame
     # that shows no part is 27 mm
     assert sculpture_levels(plateau, 1.0, from_above=True, above_mm=1.9)[:3] == [27.0, 26.0, 25.0]
+
+
+def test_the_inks_margins_widen_the_scan_by_its_rise_and_its_depression():
+    """The second ink (l_c 2.3 mm, 35 deg) climbs a wall 2.12 mm and stands 1.38 mm over a flat
+    top it has left, a pit's contact line up to sqrt(2) times that: the scan runs on 2.12 mm
+    below the top's lowest point and starts 1.96 mm higher. No meniscus, no margins."""
+    below, above = ink_margins(Effects(meniscus=True, capillary_length_mm=2.3, contact_angle_deg=35.0))
+    assert below == pytest.approx(2 * 2.3 * np.sin(np.radians(55.0) / 2))
+    assert above == pytest.approx(np.sqrt(2) * 2 * 2.3 * np.sin(np.radians(35.0) / 2))
+    assert ink_margins(Effects(meniscus=True, capillary_length_mm=2.7, contact_angle_deg=0.0))[1] == 0.0
+    assert ink_margins(Effects(meniscus=False)) == (0.0, 0.0)
 
 
 def test_render_scan_writes_a_scan_and_its_truth_outside(tmp_path):

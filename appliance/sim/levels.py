@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 
 def sculpture_levels(surface, step, below_mm=0.0, from_above=False, above_mm=0.0):
     """The dissertation's practice: one picture per step from the first in which the top
@@ -25,3 +27,19 @@ def sculpture_levels(surface, step, below_mm=0.0, from_above=False, above_mm=0.0
     highest = float("inf") if from_above else surface.z_max
     levels = scan_levels(surface, step, above_mm if from_above else 0.0)
     return [lv for lv in levels if lowest <= lv < highest]
+
+
+def ink_margins(effects) -> tuple[float, float]:
+    """-> (below_mm, above_mm) for sculpture_levels under `effects` (an Effects): how far below
+    the top's lowest point the ink still clings to it (the rise on a wall), and how far over a
+    flat top it has left an ink that does not wet flat faces still stands (the depression, a
+    pit's contact line up to sqrt(2) times more: physics.curvature_factor). Both 0 with no
+    meniscus."""
+    from .physics import meniscus_rise
+
+    if not effects.meniscus:
+        return 0.0, 0.0
+    l_c, theta = effects.capillary_length_mm, math.radians(effects.contact_angle_deg)
+    below = float(meniscus_rise(math.pi / 2, l_c, theta))
+    above = -math.sqrt(2) * float(meniscus_rise(0.0, l_c, theta))
+    return max(below, 0.0), max(above, 0.0)
