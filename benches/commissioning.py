@@ -32,7 +32,7 @@ from appliance.daemon.service import BenchService
 from appliance.outputs import read_heightmap_csv
 from appliance.sim import surfaces
 from appliance.sim.fakes import SimulatedBenchFactory
-from appliance.sim.physics import meniscus_rise
+from appliance.sim.levels import ink_margins
 from appliance.sim.render import effects_preset
 from appliance.sim.rig import Rig
 from appliance.surface.stats import seed_statistics
@@ -58,7 +58,7 @@ def scan_params(sample, step, effects):
     """The dissertation's levels (benches/seed_table.py): from just below the top down past the
     top's lowest point, by the wall's meniscus rise more with a meniscus."""
     part = surfaces.get(sample)
-    below = float(meniscus_rise(math.pi / 2)) if effects_preset(effects).meniscus else 0.0
+    below, _ = ink_margins(effects_preset(effects))
     top = math.floor(part.z_max / step) * step
     bottom = math.floor((part.z_min_top - step - below) / step) * step
     return {

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
@@ -34,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from appliance import process as proc
 from appliance.cli import main as cli
 from appliance.sim import surfaces
-from appliance.sim.levels import sculpture_levels
-from appliance.sim.physics import meniscus_rise
+from appliance.sim.levels import ink_margins, sculpture_levels
+from appliance.sim.render import effects_preset
 from appliance.sim.scanrender import render_scan
 from appliance.surface.seedtables import TABLES, best_ea
 
@@ -111,7 +110,7 @@ def run_sample(sample, step, effects, tmp, camera=None, meniscus=None):
     folder = tmp / f"{sample}-{effects}-{step:g}"
     t0 = time.perf_counter()
     # with a meniscus the scan goes on until the ink is the wall rise below the top's lowest point
-    below = float(meniscus_rise(math.pi / 2)) if effects == "physics" else 0.0
+    below, _ = ink_margins(effects_preset(effects))
     render_scan(
         surface, folder, levels=sculpture_levels(surface, step, below), effects=effects, seed=1, workers=2
     )

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from .physics import meniscus_rise
+
 
 def sculpture_levels(surface, step, below_mm=0.0, from_above=False, above_mm=0.0):
     """The dissertation's practice: one picture per step from the first in which the top
@@ -35,8 +37,6 @@ def ink_margins(effects) -> tuple[float, float]:
     flat top it has left an ink that does not wet flat faces still stands (the depression, a
     pit's contact line up to sqrt(2) times more: physics.curvature_factor). Both 0 with no
     meniscus."""
-    from .physics import meniscus_rise
-
     if not effects.meniscus:
         return 0.0, 0.0
     l_c, theta = effects.capillary_length_mm, math.radians(effects.contact_angle_deg)

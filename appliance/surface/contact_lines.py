@@ -102,20 +102,17 @@ def top_from_apparent(
     )
     # the mode grows out of a level top: where the plain solve is level (on a wall the two
     # solves' rises differ for other reasons: sample 4's walls, all within its rim band)
-    g_plain = _slope(lat, plain)
-    high = (np.nan_to_num(top - plain) > RUNAWAY_MM) & (g_plain < 2 * LEVEL_SLOPE)
+    level_plain = _slope(lat, plain) < 2 * LEVEL_SLOPE
+    high = (np.nan_to_num(top - plain) > RUNAWAY_MM) & level_plain
     ran = rim & ndimage.binary_dilation(high, iterations=k)
     if not ran.any():
         return top
     tied = _top_from_apparent(
         lat, apparent, footprint, model, faces, ceiling, anchor=(ran, plain), exposed=exposed
     )
-    # the tie moves the whole top, and the mode can then start in the band where the level solve
-    # had none (the blade's 4 mm strip of slab between its end's taper and the outline, second
-    # ink: 0.2 mm high from the level solve, 0.4-1.2 mm from the tied one, rising to the edge).
-    # The mode only lifts the top: in the band, where the plain solve is level, the lower of the two
-    band = rim & (g_plain < 2 * LEVEL_SLOPE)
-    return np.where(band, np.fmin(tied, top), tied)
+    # the mode only lifts the top (the blade's 4 mm strip of slab between its end's taper and
+    # the outline, second ink: 0.2 mm high from the level solve, 0.4-1.2 mm from the tied one)
+    return np.where(rim & level_plain, np.fmin(tied, top), tied)
 
 
 def _solve_stride(lat) -> int:
