@@ -44,7 +44,7 @@ from .dewetted import depression_depth
 from .gridfit import FitProblem
 from .lattice import Lattice, bilinear, fill_nearest
 from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
-from .sharp_edges import rows_not_over, slopes_held_at_edges
+from .sharp_edges import rows_not_over, slope_range_near_walls, slopes_held_at_edges
 
 SOLVE_MAX_SIDE = 101  # the rise is smooth: solved on at most this many nodes a side
 FINE_ITERATIONS = 3  # Levenberg-Marquardt steps on the full solve lattice
@@ -293,8 +293,11 @@ def _solve_top(
 
     kap = seen_bend
 
+    lo, hi = slope_range_near_walls(lat, A, footprint, act, np.hypot(Dx @ a + ox, Dy @ a + oy))
+
     def objective(t, m):
-        r = on * (t - m.rise_on_slope(np.hypot(Dx @ t + ox, Dy @ t + oy), kap) - a)
+        g = np.clip(np.hypot(Dx @ t + ox, Dy @ t + oy), lo, hi)
+        r = on * (t - m.rise_on_slope(g, kap) - a)
         p = rows @ t - target
         q = np.sqrt(w_anchor) * (t - top_anchor)
         return float(r @ r + lam * (p @ p) + q @ q)
@@ -309,8 +312,10 @@ def _solve_top(
                 kap = curvature_of(t, g)
             if level is not None:
                 target = level.target(of_a, g, t < ceiling)
-            r = on * (t - m.rise_on_slope(g, kap) - a)
-            c = m.rise_on_slope_derivative(g, kap) / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
+            read = np.clip(g, lo, hi)  # slope_range_near_walls: no h' where the slope is held
+            r = on * (t - m.rise_on_slope(read, kap) - a)
+            dh = np.where(read == g, m.rise_on_slope_derivative(read, kap), 0.0)
+            c = dh / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
             M = (J.T @ J + lam * R + sp.diags(w_anchor)).tocsc()
             rhs = -(J.T @ r) - lam * (rows.T @ (rows @ t - target)) - w_anchor * (t - top_anchor)
