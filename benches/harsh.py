@@ -318,6 +318,11 @@ this, Ea / interior p99 / max mm: sample1 0.0153 0.042 0.551, sample2 0.0170 0.0
 0.196 0.447, ring 0.0354 0.183 0.309, steep-front 0.0144 0.085 0.151 (all eight unchanged); crater
 0.0367 0.199 0.240 -> 0.0365 0.198 0.241. Honest share: tuned 97.5 % of 1942 (unchanged), held
 out 92.6 % of 108 -> 92.2 % of 102. Over the targets: sample4 (all three).
+(w) Session 34 (6 December 2026: near a wall inside the part the meniscus solve reads the top's
+slope near the fit's; see benches/meniscus.py), (v)'s renders, ef2af92 -> this: sample4 0.1921
+0.334 1.602 -> 0.1906 0.334 1.627; the other eight the same to the digit. Honest share: tuned
+97.5 % of 1942 -> 97.5 % of 1960 (sample4's cells over 0.1 mm 1508 -> 1526, all marked), held
+out 92.2 % of 102 (unchanged). Over the targets: sample4 (all three).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

@@ -607,6 +607,37 @@ flank against its 84 deg one at the crest, +0.3..1 mm on its last nodes): the bl
 0.1790 (first ink, occlusion render) but 0.1640 -> 0.1782 (second), the stepped block and
 sample 4 worse.
 
+6 December 2026 (session 34). Near a wall inside the part the meniscus solve reads the top's slope
+within 30 % + 0.1 of the fit's (surface/sharp_edges.slope_range_near_walls). The equation has a
+mode along a face's slope (lifted by d, the top's rise grows by h'(g) d', so d = h' d' and d grows
+as exp(s / h'), h' 2.2 mm on the blade's 24 deg face under the first ink), and the fit's rounded
+crests and feet start it: the blade's gentle face came out +0.45 mm 3 mm below its crest and +1.3
+at it (first ink), the slab beyond its flank's foot +0.94 falling to +0.13 over 5 mm (second).
+Session 33's renders, ef2af92 -> this, Ea / interior p99 / max mm:
+    physics   blade *          0.1901 / 3.696 / 4.566  ->  0.1783 / 3.774 / 4.636
+              stepped-block *  0.4678 / 5.543 / 8.831  ->  0.4322 / 5.113 / 8.642
+              steps *          0.3770 / 13.67 / 17.23  ->  0.3737 / 13.67 / 17.08
+              sample4          0.0287 / 0.036 / 0.946  ->  0.0290 / 0.036 / 1.266
+    physics2  blade *          0.1640 / 2.648 / 12.17  ->  0.1484 / 2.651 / 14.07
+              stepped-block *  0.4463 / 4.937 / 11.84  ->  0.4323 / 4.874 / 12.28
+              steps *          0.3566 / 13.30 / 15.36  ->  0.3555 / 13.32 / 15.88
+              sample4          0.0442 / 0.024 / 0.741  ->  0.0433 / 0.024 / 0.810
+    the other 16 the same to the digit.
+The seed table (physics, benches/seed_table.py): sample 4 0.0298 / sigma 0.0689 / max 1.024 ->
+0.0289 / 0.0667 / 0.988, samples 1-3 the same (0.0052, 0.0233, 0.0258).
+Tried, not kept (same renders; the blade (first ink, occlusion render) / blade (second) / sample 4
+(first) / stepped block (first, occlusion render) / harsh sample 4, from 0.1871 / 0.1640 / 0.0287 /
+0.4644 / 0.1921): the slope held near the fit's everywhere 0.1730 / 0.1557 / 0.0792 / 0.4375 /
+0.2357; with 60 % + 0.2 of play 0.1777 / 0.1668 / 0.0406 / 0.4467 / 0.2072; with 15 % + 0.05
+0.1830 / 0.1473 / 0.0392 / 0.4493 / 0.2108; 10 nodes from a wall, not 6, 0.1766 / 0.1617 / 0.0341 /
+0.4466 / 0.2011; only where the fit is nearly plane (second derivatives under 0.1/mm) 0.1859 /
+0.1588 / 0.0307 / 0.4610 / 0.1921; round the slope of A + h(|grad A|) 0.1809 / 0.1632 / 0.1511 /
+0.4933 / 0.3889. A crest held like a level edge (the face rising steadily into the node, the wall
+falling beyond it) 0.1835 / 0.1686 / 0.0287 / 0.4707 / 0.1921: where it holds, the mode comes back
+as a bump 4 mm down the face. The slope held at the fit's on level runs (four spacings level along
+an axis): the blade (second) 0.1766 everywhere, 0.1641 within 5 nodes of a wall. Steep nodes no
+contact line placed left out of the equation: the blade (second) 0.1621-0.1630.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

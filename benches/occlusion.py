@@ -90,6 +90,11 @@ Then, in the rim band where the plain solve is level, the lower of the level and
 solves (surface/contact_lines.py; the tie had set the runaway off elsewhere in the band), the
 same renders, physics: stepped block 0.4781 / 5.518 / 6.851 -> 0.4644 / 5.505 / 6.857 (64 holes),
 blade 0.1934 / 3.668 / 4.565 -> 0.1871 / 3.666 / 4.565. Clean: no meniscus, so unchanged.
+6 December 2026 (session 34): near a wall inside the part the meniscus solve reads the top's slope
+within 30 % + 0.1 of the fit's (surface/sharp_edges.slope_range_near_walls; benches/meniscus.py
+says why), the same renders, physics: stepped block 0.4644 / 5.505 / 6.857 (64 holes) -> 0.4436 /
+5.278 / 8.643 (62 holes), blade 0.1871 / 3.666 / 4.565 -> 0.1805 / 3.719 / 4.634. Clean: no
+meniscus, so unchanged. With the meniscus both targets (0.3, 0.1) are still missed.
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
