@@ -293,7 +293,8 @@ def _solve_top(
 
     kap = seen_bend
 
-    lo, hi = slope_range_near_walls(lat, A, footprint, act, np.hypot(Dx @ a + ox, Dy @ a + oy))
+    g_a = np.hypot(Dx @ a + ox, Dy @ a + oy)
+    lo, hi = slope_range_near_walls(lat, A, footprint, act, g_a, RIM_UNTRUSTED + RUNAWAY_BAND)
 
     def objective(t, m):
         g = np.clip(np.hypot(Dx @ t + ox, Dy @ t + oy), lo, hi)
@@ -312,9 +313,10 @@ def _solve_top(
                 kap = curvature_of(t, g)
             if level is not None:
                 target = level.target(of_a, g, t < ceiling)
-            read = np.clip(g, lo, hi)  # slope_range_near_walls: no h' where the slope is held
+            read = np.clip(g, lo, hi)  # slope_range_near_walls
             r = on * (t - m.rise_on_slope(read, kap) - a)
-            dh = np.where(read == g, m.rise_on_slope_derivative(read, kap), 0.0)
+            clipped = (g < lo) | (g > hi)  # the rise does not follow the slope there
+            dh = np.where(clipped, 0.0, m.rise_on_slope_derivative(read, kap))
             c = dh / np.sqrt(g * g + 1e-6)  # dh/d(grad) = h' grad / |grad|
             J = sp.diags(on) @ (I - sp.diags(c * gx) @ Dx - sp.diags(c * gy) @ Dy)
             M = (J.T @ J + lam * R + sp.diags(w_anchor)).tocsc()

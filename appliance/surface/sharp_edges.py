@@ -21,10 +21,9 @@ from .lattice import fill_nearest
 # tests/test_surface_summit.py's mesa went from 0.31 to 0.35 mm off on average
 EDGE_SLOPE = 2.0
 # near a wall inside the part the top's slope is read within this of A's (a fraction of it, plus
-# a slope), that many solve-lattice nodes from the wall's, a wall that many inside the outline
+# a slope), that many solve-lattice nodes from the wall's
 SLOPE_PLAY = (0.3, 0.1)
 WALL_REACH = 6
-WALL_INSET = 5
 
 
 def slopes_held_at_edges(problem, A, trusted, level_slope, exposed=None):
@@ -116,9 +115,11 @@ def rows_not_over(rows, edges):
     return sp.diags((~over).astype(float)) @ rows
 
 
-def slope_range_near_walls(lat, A, footprint, active, slope_of_a):
+def slope_range_near_walls(lat, A, footprint, active, slope_of_a, inset):
     """-> (lo, hi) per active node: the range the solve reads the top's slope in when it works
-    out the rise h(|grad top|); `slope_of_a`: A's slope by the solve's own operators.
+    out the rise h(|grad top|); `slope_of_a`: A's slope by the solve's own operators; `inset`:
+    how many nodes inside the outline a wall is the part's own, not its outline's (there the
+    solve's rim band and its tie hold the top: contact_lines.top_from_apparent).
 
     top - h(|grad top|) = A has a mode along a face's slope: lift the top by d and its slope
     changes by d', its rise by h'(g) d', so d = h' d' solves it to first order and grows as
@@ -131,7 +132,7 @@ def slope_range_near_walls(lat, A, footprint, active, slope_of_a):
     Only near walls inside the part: held everywhere, sample 4 (its walls its outline, its
     top curved, so that its top's slope leaves A's by more) went from 0.029 to 0.079 mm."""
     gy, gx = np.gradient(A, lat.y, lat.x)
-    inner = ndimage.binary_erosion(footprint, iterations=WALL_INSET, border_value=0)
+    inner = ndimage.binary_erosion(footprint, iterations=inset, border_value=0)
     walls = (np.hypot(gx, gy) > EDGE_SLOPE) & inner
     near = ndimage.binary_dilation(walls, iterations=WALL_REACH)[active]
     part, plus = SLOPE_PLAY
