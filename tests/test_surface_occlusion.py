@@ -11,11 +11,15 @@ from scipy.spatial import ConvexHull
 
 from appliance.sim import surfaces
 from appliance.sim.ideal import ideal_waterlines
+from appliance.surface.dewetted import depression_depth
 from appliance.surface.exposure import first_exposure
+from appliance.surface.fitpass import fit_pass
 from appliance.surface.flatfaces import flat_faces, tilt_crossed_faces
 from appliance.surface.inkbounds import behind_faces, node_bounds
 from appliance.surface.lattice import Lattice
+from appliance.surface.meniscus import MeniscusModel
 from appliance.surface.perspective import Perspective, mark_walls, unproject_rims
+from appliance.surface.reconstruct import ReconstructOptions
 from appliance.surface.silhouettes import mark_silhouettes, silhouettes
 from appliance.surface.slices import check_waterlines, make_slice
 from appliance.vision.types import Waterline
@@ -143,6 +147,41 @@ def test_the_nodes_behind_a_face_s_edge_get_no_height_of_their_own():
     for s in corrected:
         s.hidden = None  # no silhouette known: nothing is behind a face
     assert not behind_faces(lat, seen, corrected, first).any()
+
+
+def test_a_node_behind_a_face_is_not_held_on_the_plate_that_came_out_after_it():
+    """The frustum on a 40 x 30 mm plate 3 mm high, under an ink that stands its depression
+    over a flat face: the plate comes out at once, between the frames at 4.0 and 2.5 mm, and
+    the far wall's nodes behind the rim come out with it. They have no height of their own
+    (the camera saw the rim over them), so the fit places them from the wall around them,
+    not in the plate's bracket: held there, the blade's flank behind its crest stood at 4.7
+    mm where it is 20.7."""
+    plate = np.array([[30.0, -15.0], [70.0, -15.0], [70.0, 15.0], [30.0, 15.0]])
+    outline = np.vstack(
+        [
+            a + (b - a) * np.linspace(0, 1, 300, endpoint=False)[:, None]
+            for a, b in zip(plate, np.roll(plate, -1, 0))
+        ]
+    )
+    levels = np.arange(19.0, 3.5, -1.0)
+    lines = [Waterline(20.6, [])] + [_frustum_seen(L, 0.03 * (-1) ** i) for i, L in enumerate(levels)]
+    lines += [Waterline(L, [outline]) for L in (2.5, 1.5)]
+    seen, _ = check_waterlines(lines)
+    mark_walls(seen, 0.03, CAMERA)
+    mark_silhouettes(seen, CAMERA)
+    corrected = unproject_rims(seen, CAMERA, 0.03)
+    lat = Lattice(np.arange(29.0, 71.01, 0.5), np.arange(-16.0, 16.01, 0.5))
+    model = MeniscusModel(2.3, np.radians(35.0), CAMERA.xy, CAMERA.height_mm)
+    assert depression_depth(model) > 1.0  # the plate comes out at once
+    fit = fit_pass(
+        lat, corrected, ReconstructOptions(meniscus=model, perspective=CAMERA), 0.1, 1.0, None, seen
+    )
+    X, Y = np.meshgrid(lat.x, lat.y)
+    hidden = (X > 60.1) & (X < 61.0) & (np.abs(Y) < 8)
+    assert behind_faces(lat, seen, corrected, fit.first)[hidden].all()
+    truth = RIM_MM - (X - 60.0) / RUN
+    assert np.all(fit.z[hidden] > 4.0 + 1.0)  # above the plate's bracket, (2.5, 4.0]
+    assert np.abs(fit.z - truth)[hidden].max() < 1.5
 
 
 def test_a_face_the_camera_sees_has_no_silhouette():
