@@ -129,6 +129,30 @@ def test_the_frames_bound_each_node_and_a_silhouette_bounds_it_by_its_ray():
     assert (levels_only.ceiling - ray)[behind].mean() > 0.4 and not levels_only.ray.any()
 
 
+def test_the_ink_s_climb_raises_the_level_ceilings_but_not_the_ray_over_a_hidden_node():
+    """With an ink that climbs walls (up to rise_max), a node a frame saw ink over may stand
+    that much above the frame's level: the ink covered it. The ray over a rim, for a node
+    the frames saw hidden behind it, is where the camera looked past the rim, and the climb
+    does not move it. A ray over a node they did not see hidden keeps the climb: a glitch of
+    one frame's waterline (glare) can make one."""
+    seen, corrected, lat = _frustum_seen_and_corrected()
+    never = np.full(lat.shape, len(seen))
+    everywhere = np.ones(lat.shape, bool)
+    dry = node_bounds(lat, seen, corrected, never, everywhere)
+    wet = node_bounds(lat, seen, corrected, never, everywhere, rise_max=2.0)
+    ray = dry.ray & dry.hidden
+    assert ray.sum() > 100 and np.array_equal(wet.ray, dry.ray)
+    level = np.isfinite(dry.ceiling) & ~dry.ray
+    assert level.sum() > 100
+    assert np.allclose(wet.ceiling[level], dry.ceiling[level] + 2.0)
+    assert np.array_equal(wet.ceiling[ray], dry.ceiling[ray])
+    # the same frames, every node out at the top frame by the corrected slices: none hidden
+    at_top = np.zeros(lat.shape, int)
+    unseen = node_bounds(lat, seen, corrected, at_top, everywhere, rise_max=2.0)
+    assert not unseen.hidden.any()
+    assert np.allclose(unseen.ceiling[ray], dry.ceiling[ray] + 2.0)
+
+
 def test_the_nodes_behind_a_face_s_edge_get_no_height_of_their_own():
     """Behind the frustum's far rim the camera sees the rim's silhouette over the ink, never
     the waterline: a node there comes out (by the slices with the rims put back) with
