@@ -638,6 +638,31 @@ as a bump 4 mm down the face. The slope held at the fit's on level runs (four sp
 an axis): the blade (second) 0.1766 everywhere, 0.1641 within 5 nodes of a wall. Steep nodes no
 contact line placed left out of the equation: the blade (second) 0.1621-0.1630.
 
+6 December 2026 (session 35). Two bounds on the nodes a face hid (benches/occlusion.py has the
+occlusion bench's figures). (1) Under the second ink the plate beyond the blade's flank comes out
+at once, and the flank's nodes behind the crest come out with it: surface/dewetted.py held them
+in the plate's bracket, one at 4.70 mm where the flank stands at 20.75 (its 14.07 mm maximum).
+Hidden nodes are no longer a dewetted face's (surface/fitpass.py). (2) The ray over a rim was a
+ceiling raised by the ink's largest climb (3.8 mm for the first ink); for a node the frames saw
+hidden it is the camera's geometry, and now stands as it is (surface/inkbounds.py). Session 33's
+renders, b68e5a7 -> this, Ea / interior p99 / max mm:
+    physics   steps *          0.3737 / 13.67 / 17.08  ->  0.3438 / 12.37 / 17.08
+              stepped-block *  0.4322 / 5.113 / 8.642  ->  0.3990 / 3.113 / 8.642
+              blade *          0.1783 / 3.774 / 4.636  ->  0.1530 / 2.688 / 4.636
+    physics2  sample2          0.0183 / 0.046 / 1.475  ->  0.0197 / 0.041 / 0.254
+              steps *          0.3555 / 13.32 / 15.88  ->  0.3381 / 12.44 / 15.86
+              stepped-block *  0.4323 / 4.874 / 12.28  ->  0.3824 / 4.181 / 8.475
+              blade *          0.1484 / 2.651 / 14.07  ->  0.1256 / 2.292 / 5.540
+    the other 17 the same to the digit.
+Sample 2 (second ink) moves by (1): the band along its y = 98 edge, +0.2..0.9 mm, is gone (48
+cells better by over 0.05 mm, 5 worse), but the displacement solve then lowers the whole top
+0.03 mm (signed mean +0.014 -> -0.016). By (1) alone the blade (second ink) is 0.1376 / 2.518 /
+5.540 and the stepped block 0.4210 / 5.471 / 8.475: its hidden nodes on the 85 deg walls' foot
+were right in the plate's bracket, and placed by the fit they stand higher (on the side that
+leaves material). Tried, not kept: (2) for every ray, hidden or not: blade 0.1535 (first ink),
+stepped block 0.3695 (second), but harsh sample 1 0.0153 / 0.551 -> 0.0163 / 1.179 and sample 3
+max 0.480 -> 0.619 (a ray from glare over a dome node not seen hidden cut it 1.1-1.3 mm).
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later

@@ -95,6 +95,16 @@ within 30 % + 0.1 of the fit's (surface/sharp_edges.slope_range_near_walls; benc
 says why), the same renders, physics: stepped block 0.4644 / 5.505 / 6.857 (64 holes) -> 0.4436 /
 5.278 / 8.643 (62 holes), blade 0.1871 / 3.666 / 4.565 -> 0.1805 / 3.719 / 4.634. Clean: no
 meniscus, so unchanged. With the meniscus both targets (0.3, 0.1) are still missed.
+6 December 2026 (session 35): the ray over a rim bounds a node the frames saw hidden behind it
+without the ink's largest climb added (3.8 mm for this ink; surface/inkbounds.py, benches/
+meniscus.py says why), the same renders, physics: stepped block 0.4436 / 5.278 / 8.643 (62 holes)
+-> 0.4030 / 2.880 / 8.643 (62 holes), blade 0.1805 / 3.719 / 4.634 -> 0.1552 / 3.277 / 4.634.
+The blade's occluded cells went +2.79 -> +0.69 mm on average (mean |error| 2.83 -> 1.53); what
+is left is its gentle faces (interpolated cells +0.09 mm, 58 % of the error). The stepped block's
+grid is 0.7-0.8 mm narrower a side than the clean scan's (its lowest frame at -5.0 mm, true
+level), and its outermost ring of cells falls on the 85 deg walls, 3.4-5.0 mm high there, which
+we place 1.5-3.7 mm higher: about half its Ea. Clean: no meniscus, so unchanged. With the
+meniscus both targets (0.3, 0.1) are still missed.
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
