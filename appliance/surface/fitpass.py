@@ -203,11 +203,11 @@ def fit_pass(lat, slices, opt, ftol, length, rise, seen=None):
         z = np.minimum(z, ceiling)
     else:
         # nor is a hidden node on a face that came out at once: the level it came out at is
-        # the part's beyond the face's foot (the blade's flank behind its crest, 21 mm high,
+        # the part's beyond the face's foot (the blade's flank behind its crest, 20.7 mm high,
         # was held at 4.7 in the plate's bracket)
-        seen_fp = footprint & ~hidden
-        z = bracket_dewetted_faces(lat, z, z_fe, first, seen_fp, slices, opt.meniscus)
-        faces = dewetted_nodes(lat, z_fe, first, seen_fp, slices, opt.meniscus)
+        in_sight = footprint & ~hidden
+        z = bracket_dewetted_faces(lat, z, z_fe, first, in_sight, slices, opt.meniscus)
+        faces = dewetted_nodes(lat, z_fe, first, in_sight, slices, opt.meniscus)
         # `placed`, not z_fe: a node a face hid came out with the part beyond the face's foot, so
         # z_fe shows the face below level right up to the wall, and the edge is sought there (the
         # steps' base 1-3 mm short of the hidden strip stood 0.6-1.4 mm high)

@@ -44,9 +44,8 @@ def node_bounds(
     `corrected`: the same with the rims put back and at their true levels; `first`: the
     frame each node came out in by the corrected slices; rise_max: the most the ink
     climbs the part (a node the ink covered stands up to that above its level, a hidden
-    one not above the ray over a rim); sink: the
-    most an ink that dewets stands above a face it has left (a node out of it stands up
-    to that below its level)."""
+    one not above the ray over a rim); sink: the most an ink that dewets stands above a
+    face it has left (a node out of it stands up to that below its level)."""
     idx = np.flatnonzero(footprint.ravel())
     X, Y = np.meshgrid(lat.x, lat.y)
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
