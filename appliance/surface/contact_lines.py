@@ -42,7 +42,7 @@ from scipy.sparse.linalg import splu
 
 from .dewetted import depression_depth
 from .gridfit import FitProblem
-from .lattice import Lattice, bilinear, fill_nearest
+from .lattice import Lattice, bilinear, fill_nearest, steepness
 from .meniscus import CURVATURE_STEP_MM, MeniscusModel, level_curve_curvature
 from .sharp_edges import rows_not_over, slope_range_near_walls, slopes_held_at_edges
 
@@ -92,7 +92,7 @@ def top_from_apparent(
     # rise): only then are the plain solve and the tied one worth their time (processing the
     # harsh plateau: 20 -> 34 s). Half of |h|: an ink that dewets has h < 0 on level faces,
     # where 1.5 h stood below h itself and every one of its scans was solved three times
-    g_a = _slope(lat, apparent)
+    g_a = steepness(lat, apparent)
     h_a = model.rise_on_slope(g_a)
     unexplained = np.nan_to_num(top - apparent) - (h_a + 0.5 * np.abs(h_a))
     if not (rim & (g_a < 2 * LEVEL_SLOPE) & (unexplained > RUNAWAY_MM)).any():
@@ -102,7 +102,7 @@ def top_from_apparent(
     )
     # the mode grows out of a level top: where the plain solve is level (on a wall the two
     # solves' rises differ for other reasons: sample 4's walls, all within its rim band)
-    level_plain = _slope(lat, plain) < 2 * LEVEL_SLOPE
+    level_plain = steepness(lat, plain) < 2 * LEVEL_SLOPE
     high = (np.nan_to_num(top - plain) > RUNAWAY_MM) & level_plain
     ran = rim & ndimage.binary_dilation(high, iterations=k)
     if not ran.any():
@@ -118,11 +118,6 @@ def top_from_apparent(
 def _solve_stride(lat) -> int:
     """Every how many of `lat`'s nodes the solve takes one (at most SOLVE_MAX_SIDE a side)."""
     return max(1, int(np.ceil(max(lat.shape) / SOLVE_MAX_SIDE)))
-
-
-def _slope(lat, z):
-    """|grad z| on `lat`, gaps filled by the nearest value."""
-    return np.hypot(*np.gradient(fill_nearest(z), lat.y, lat.x))
 
 
 def _top_from_apparent(

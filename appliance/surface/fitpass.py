@@ -174,12 +174,16 @@ def fit_pass(lat, slices, opt, ftol, length, rise, seen=None):
     if opt.meniscus is not None and rise is not None:
         slices, _ = contact_points(observed, lat, rise, opt.meniscus)
     z_fe, first, footprint = first_exposure(lat, slices, ftol)
+    # a node a face hid has no height of its own: the fit places it, between the level it
+    # was out at and the ray over the face's edge (reconstruct's node bounds). Nor is it on a
+    # face that came out at once: the level it came out at is the part's beyond the face's
+    # foot (the blade's flank behind its crest, 20.7 mm high, was held at 4.7 in the plate's
+    # bracket), so the dewetted faces are sought among the nodes in sight
+    hidden = behind_faces(lat, seen, slices, first) if seen is not None else np.zeros(lat.shape, bool)
+    in_sight = footprint & ~hidden
     placed = z_fe
     if opt.meniscus is not None:
-        placed = place_dewetted_faces(lat, z_fe, first, footprint, slices, opt.meniscus)
-    # a node a face hid has no height of its own: the fit places it, between the level it
-    # was out at and the ray over the face's edge (reconstruct's node bounds)
-    hidden = behind_faces(lat, seen, slices, first) if seen is not None else np.zeros(lat.shape, bool)
+        placed = place_dewetted_faces(lat, z_fe, first, in_sight, slices, opt.meniscus)
     placed = np.where(hidden, np.nan, placed)
     h = max(lat.hx, lat.hy)
     z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, flat_far_mm(lat), max(2 * h, FLAT_EDGE_MM))
@@ -202,10 +206,6 @@ def fit_pass(lat, slices, opt, ftol, length, rise, seen=None):
     if opt.meniscus is None:
         z = np.minimum(z, ceiling)
     else:
-        # nor is a hidden node on a face that came out at once: the level it came out at is
-        # the part's beyond the face's foot (the blade's flank behind its crest, 20.7 mm high,
-        # was held at 4.7 in the plate's bracket)
-        in_sight = footprint & ~hidden
         z = bracket_dewetted_faces(lat, z, z_fe, first, in_sight, slices, opt.meniscus)
         faces = dewetted_nodes(lat, z_fe, first, in_sight, slices, opt.meniscus)
         # `placed`, not z_fe: a node a face hid came out with the part beyond the face's foot, so

@@ -119,6 +119,11 @@ def fill_nearest(z):
     return z[jj, ii]
 
 
+def steepness(lat: Lattice, z) -> np.ndarray:
+    """|grad z| on `lat`, gaps filled by the nearest value."""
+    return np.hypot(*np.gradient(fill_nearest(z), lat.y, lat.x))
+
+
 def bilinear(lat: Lattice, zgrid, pts):
     """Bilinear interpolation of a lattice field at points (NaN outside)."""
     fi, fj = lat.to_index(pts)

@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy import ndimage
 
-from .lattice import fill_nearest
+from .lattice import fill_nearest, steepness
 
 # steeper (63 deg) on one side of a level node than this, that side is over an edge. A smooth
 # shoulder that reaches 45 deg one lattice node off its flat top is none: taken for one at 1.0,
@@ -131,9 +131,8 @@ def slope_range_near_walls(lat, A, footprint, active, slope_of_a, inset):
     wall it is read within SLOPE_PLAY of A's, which holds the mode to h' times the play.
     Only near walls inside the part: held everywhere, sample 4 (its walls its outline, its
     top curved, so that its top's slope leaves A's by more) went from 0.029 to 0.079 mm."""
-    gy, gx = np.gradient(A, lat.y, lat.x)
     inner = ndimage.binary_erosion(footprint, iterations=inset, border_value=0)
-    walls = (np.hypot(gx, gy) > EDGE_SLOPE) & inner
+    walls = (steepness(lat, A) > EDGE_SLOPE) & inner
     near = ndimage.binary_dilation(walls, iterations=WALL_REACH)[active]
     part, plus = SLOPE_PLAY
     lo = np.where(near, np.maximum(slope_of_a * (1 - part) - plus, 0.0), 0.0)
