@@ -110,6 +110,31 @@ def test_meniscus_correction_removes_the_rise():
     assert e_fix < 0.01
 
 
+def test_a_frame_whose_ink_fell_below_the_base_top_is_not_read_as_a_waterline():
+    """The cylinder displaces 1.7 mm of a 150 mm tank's ink: at nominal level 1 mm the ink is
+    below the base top, and what the camera sees there is the base's outline (a 120 mm square
+    on a box), not a level curve. Read at its true level it drew the map's outline out to
+    the base's edge."""
+    from appliance.sim import physics
+    from appliance.vision.types import Waterline
+
+    At = 22500.0
+    nominal = np.array([31.0, 29.0, 25.0, 20.0, 10.0, 5.0, 2.0, 1.0])
+    true = np.array([physics.true_level(CYL, lv, At) for lv in nominal])
+    assert true[-2] > 0.0 > true[-1]  # nominal 1 mm is the one frame below the base top
+    lines = ideal_waterlines(CYL, true[:-1], 0.4)
+    base = np.array([[-10.0, -10.0], [110.0, -10.0], [110.0, 110.0], [-10.0, 110.0]])
+    lines.append(Waterline(1.0, [base]))
+    for w, lv in zip(lines, nominal):
+        w.level_mm = float(lv)  # the scan only knows the nominal levels
+    rec = reconstruct(lines, GridSpec(None, n=(26, 26)), ReconstructOptions(tank_area_mm2=At))
+    xmin, xmax, ymin, ymax = rec.diagnostics["bounds"]
+    assert 29.0 < xmin < 30.5 and 69.5 < xmax < 71.0 and 29.0 < ymin < 30.5 and 69.5 < ymax < 71.0
+    assert any("below the base top" in n for n in rec.diagnostics["notes"])
+    est = np.array(rec.diagnostics["displacement"]["true_mm"])
+    assert est.size == nominal.size - 1 and np.max(np.abs(est - true[:-1])) < 0.03
+
+
 def test_displacement_from_the_fitted_surface_matches_the_bench():
     """The emerged volume integrated over a height map (trapezoid rule) gives the true
     levels the bench simulates; the contact lines' areas would not (a meniscus shrinks them)."""

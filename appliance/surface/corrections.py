@@ -14,6 +14,7 @@ from scipy import ndimage
 from .lattice import area_weights, bilinear, fill_nearest
 from .perspective import mark_walls, unproject_rims
 from .silhouettes import mark_silhouettes
+from .slices import shows_waterline
 
 
 def corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
@@ -53,6 +54,30 @@ def corrected_levels(seen, opt, diag, lat=None, z=None, levels=None):
         disp["from"] = "fitted surface" if z is not None else "waterline areas"
         diag["displacement"] = disp
     return slices
+
+
+def above_base(seen, slices, diag):
+    """(seen, slices) without the frames whose true level is at or below the base top.
+
+    A frame's nominal level does not tell: a part that displaces much ink takes the ink
+    below the base top before the stage reaches level 0 (sample 2's last six frames,
+    nominal 9..4 mm, were at -1.7..-10.7 mm). Such a frame shows the part's foot or, on a
+    box, the base's outline: not a level curve at its level. Read as one, it put off the
+    levels solved from the fit's volume (sample 2 under the first ink: its frames at 25 mm
+    came out 0.012 mm low, and 0.000 without them)."""
+    keep = [i for i, s in enumerate(slices) if shows_waterline(s.level)]
+    if len(keep) == len(slices) or len(keep) < 2:
+        return seen, slices
+    disp = diag.get("displacement")
+    if disp is not None:
+        for key in ("nominal_mm", "true_mm"):
+            disp[key] = [disp[key][i] for i in keep]
+    below = [slices[i].level for i in range(len(slices)) if i not in keep]
+    diag.setdefault("notes", []).append(
+        f"{len(below)} frame(s) whose ink had dropped to or below the base top "
+        f"({max(below):.2f} mm and lower) not used: they show the part's foot, not a waterline"
+    )
+    return [seen[i] for i in keep], [slices[i] for i in keep]
 
 
 def _relaxed_levels(previous, update, slices, tank_area_mm2):

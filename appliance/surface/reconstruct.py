@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from ..errors import SettingError
 from . import seed as seed_methods
-from .corrections import corrected_levels
+from .corrections import above_base, corrected_levels
 from .dewetted import depression_depth
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
@@ -184,7 +184,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     if camera is None:
         diag["wall_points"] = mark_walls(slices, opt.wall_tol_mm)
     seen = slices
-    slices = corrected_levels(seen, opt, diag)
+    seen, slices = above_base(seen, corrected_levels(seen, opt, diag), diag)
     if auto_bounds:
         grid = GridSpec(outline_bounds(slices), grid.n, grid.spacing_mm)
         diag["bounds"] = grid.bounds
@@ -208,6 +208,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         # each later pass: each wall edge's height and the emerged volume from the fit before
         true = diag["displacement"]["true_mm"] if "displacement" in diag else None
         slices = corrected_levels(seen, opt, diag, lat, np.where(fit.footprint, fit.z, np.nan), true)
+        seen, slices = above_base(seen, slices, diag)
         corrected = slices
         rise = fit.rise
         if auto_bounds:  # the outline is surer now: the grid follows it
