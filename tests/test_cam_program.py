@@ -412,3 +412,17 @@ def test_words_written_in_one_pass_read_as_each_written_alone():
     for dec in (0, 1, 3, 4):
         assert _numbers(v, dec) == [gcode_number(x, dec) for x in v]
     assert _numbers(np.array([-0.0004]), 3) == ["0.000"]
+
+
+def test_a_program_asked_for_without_a_scallop_gets_the_same_one_everywhere():
+    """`inkslice toolpath`, `inkslice process` and the daemon's setting finish to one default
+    scallop: the toolpath command's own 0.01 mm took 13 min and 590 MB on the blade's map."""
+    from appliance.cli import build_parser
+    from appliance.daemon.settings_schema import SCHEMA
+
+    parser = build_parser()
+    toolpath = parser.parse_args(["toolpath", "heightmap.csv"])
+    process = parser.parse_args(["process", "scan", "-o", "out"])
+    verify = parser.parse_args(["verify", "toolpath.gcode", "--against", "heightmap.csv"])
+    daemon = next(s.default for s in SCHEMA if s.key == "scallop_mm")
+    assert toolpath.scallop == process.scallop == verify.scallop == daemon == 0.05

@@ -38,7 +38,9 @@ def add_arguments(p):
         "program's header, else 0",
     )
     p.add_argument("--resolution", type=float, default=0.1, help="stock lattice spacing, mm (default 0.1)")
-    p.add_argument("--scallop", type=float, default=0.01, help="requested scallop (scale of the PNG), mm")
+    p.add_argument(
+        "--scallop", type=float, default=0.05, help="requested scallop (scale of the PNG), mm (default 0.05)"
+    )
     p.add_argument(
         "--edge-band",
         type=float,
