@@ -663,6 +663,29 @@ leaves material). Tried, not kept: (2) for every ray, hidden or not: blade 0.153
 stepped block 0.3695 (second), but harsh sample 1 0.0153 / 0.551 -> 0.0163 / 1.179 and sample 3
 max 0.480 -> 0.619 (a ray from glare over a dome node not seen hidden cut it 1.1-1.3 mm).
 
+6 December 2026 (session 36). A frame whose ink the displacement took below the base top is no
+waterline (surface/corrections.above_base): 18 of these 24 scans had one to six (sample 2's last
+six, nominal 9..4 mm, at -1.7..-10.7), dropped only by their nominal level before. Session 33's
+renders, 77e6da4 -> this, Ea / interior p99 / max mm:
+    physics   sample2          0.0202 / 0.058 / 0.115  ->  0.0069 / 0.031 / 0.105
+              stepped-block *  0.3990 / 3.113 / 8.642  ->  0.3365 / 3.472 / 7.943
+              steps *          0.3438 / 12.37 / 17.08  ->  0.3510 / 12.38 / 17.44
+              blade *          0.1530 / 2.688 / 4.636  ->  0.1524 / 2.463 / 4.442
+              crater           0.0290 / 0.161 / 0.189  ->  0.0294 / 0.164 / 0.189
+    physics2  sample2          0.0197 / 0.041 / 0.254  ->  0.0114 / 0.036 / 1.154
+              stepped-block *  0.3824 / 4.181 / 8.475  ->  0.3173 / 2.839 / 7.097
+              steps *          0.3381 / 12.44 / 15.86  ->  0.3360 / 12.48 / 15.76
+              blade *          0.1256 / 2.292 / 5.540  ->  0.1227 / 2.252 / 5.538
+              twin-peaks       0.0195 / 0.123 / 0.335  ->  0.0211 / 0.128 / 0.341
+              crater           0.0207 / 0.112 / 0.449  ->  0.0212 / 0.121 / 0.442
+    samples 1 and 3-4, sphere, steep-front, plateau, ring: within 0.0004 or the same.
+Sample 2's levels: its frames at 25 mm came out 0.012 mm low (first ink), 0.000 now. Its second
+ink max is one cell on the y = 98 edge (32.6, 98.1), +1.15 mm. Tried, not kept: the grid's box
+reaching out to where the ray over a hidden rim meets the ink (the part's foot is inside it): the
+occlusion bench's stepped block 0.3356 -> 0.2832 with none of its part beyond the grid (157.6 mm²
+before), but that ray is 6 mm out on sample 3's 30 mm walls and the coarser grid cost harsh sample 3 0.0429 / 0.105 / 0.480
+-> 0.0699 / 0.148 / 1.174 and harsh sample 1 0.0153 -> 0.0234.
+
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
     nice -n 10 .venv/bin/python benches/meniscus.py --keep /tmp/scans     # render once, re-process later
