@@ -131,8 +131,10 @@ def test_a_frame_whose_ink_fell_below_the_base_top_is_not_read_as_a_waterline():
     xmin, xmax, ymin, ymax = rec.diagnostics["bounds"]
     assert 29.0 < xmin < 30.5 and 69.5 < xmax < 71.0 and 29.0 < ymin < 30.5 and 69.5 < ymax < 71.0
     assert any("below the base top" in n for n in rec.diagnostics["notes"])
-    est = np.array(rec.diagnostics["displacement"]["true_mm"])
+    disp = rec.diagnostics["displacement"]
+    est = np.array(disp["true_mm"])
     assert est.size == nominal.size - 1 and np.max(np.abs(est - true[:-1])) < 0.03
+    assert disp["max_drop_mm"] == pytest.approx(np.max(nominal[:-1] - est))  # of the frames used
 
 
 def test_displacement_from_the_fitted_surface_matches_the_bench():

@@ -72,6 +72,7 @@ def above_base(seen, slices, diag):
     if disp is not None:
         for key in ("nominal_mm", "true_mm"):
             disp[key] = [disp[key][i] for i in keep]
+        disp["max_drop_mm"] = max(n - t for n, t in zip(disp["nominal_mm"], disp["true_mm"]))
     below = [slices[i].level for i in range(len(slices)) if i not in keep]
     diag.setdefault("notes", []).append(
         f"{len(below)} frame(s) whose ink had dropped to or below the base top "
