@@ -161,6 +161,7 @@ def run_inkslice(
     # the grid spans the part's outline once the walls' raised edges are put back
     grid = GridSpec(None, spacing_mm=spacing_mm) if spacing_mm else GridSpec(None, n=grid_n)
     tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
+    falls = bool((scan.extra.get("tank") or {}).get("surface_falls", False)) and tank is not None
     model = meniscus_model(scan, meniscus)
     view = camera_view(scan.camera)
     out, diag = {}, {}
@@ -172,6 +173,7 @@ def run_inkslice(
             ReconstructOptions(
                 method=m,
                 tank_area_mm2=tank,
+                ink_falls=falls,
                 meniscus=model,
                 perspective=view,
                 pixel_mm=scan.camera.pixel_mm(),

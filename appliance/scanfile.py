@@ -135,6 +135,10 @@ def _check_extras(where, doc):
             MAX_TANK_AREA_MM2,
             f"a tank's inner area must be > 0 and at most {MAX_TANK_AREA_MM2:g} mm²",
         )
+        if not isinstance(tank.get("surface_falls", False), bool):
+            raise ScanError(
+                where, f"tank.surface_falls must be true or false, got {short(tank['surface_falls'])}"
+            )
     if doc.get("meniscus"):
         men = _object(where, doc["meniscus"], "meniscus")
         for key in ("capillary_length_mm", "contact_angle_deg"):

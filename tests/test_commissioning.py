@@ -105,7 +105,8 @@ def test_the_scan_carries_the_calibration_in_force(commissioned):
     stored = svc.store.calibrations()
     camera_row = next(r for r in stored if r.get("kind") == "camera")
     assert doc["camera"]["homography"] == camera_row["camera"]["homography"]
-    assert doc["tank"] == {"inner_area_mm2": 22500.0}
+    # no overflow said: the ink falls under the camera, and processing moves each frame to it
+    assert doc["tank"] == {"inner_area_mm2": 22500.0, "surface_falls": True}
     men = step(c, "meniscus")["result"]
     assert doc["meniscus"]["capillary_length_mm"] == men["capillary_length_mm"]
     # and how much the contact line's own bend counts (surface/meniscus.py), measured with them
@@ -321,3 +322,16 @@ def test_a_step_that_cannot_start_leaves_nothing_held(tmp_path):
             assert step(c, sid)["status"] == "missing"
     finally:
         svc.close()
+
+
+def test_the_tank_step_says_whether_the_ink_falls_under_the_camera():
+    """Unless an overflow or a reservoir holds the ink where the camera was calibrated on it, the
+    ink falls as the part comes out, and processing must move each frame's points to it."""
+    from appliance.daemon.measurements import tank_result
+    from appliance.errors import SettingError
+
+    assert tank_result({"area_mm2": 22500})["surface_falls"] is True
+    held = tank_result({"width_mm": 150, "depth_mm": 150, "level_held": True})
+    assert held["surface_falls"] is False and held["area_mm2"] == 22500.0
+    with pytest.raises(SettingError, match="level_held"):
+        tank_result({"area_mm2": 22500, "level_held": "yes"})

@@ -284,6 +284,13 @@ CASES = [
         "tank.inner_area_mm2 is 0: a tank's inner area must be > 0",
     ),
     Case(
+        "a tank whose ink falls 'yes'",
+        scan_json(lambda d: d.update(tank={"inner_area_mm2": 22500, "surface_falls": "yes"})),
+        P,
+        2,
+        "tank.surface_falls must be true or false",
+    ),
+    Case(
         "toolpath: two rows with the same x,y and different z",
         heightmap("0,0,1\n1,0,1\n0,1,1\n1,1,1\n0,0,3\n"),
         T,

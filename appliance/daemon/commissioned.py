@@ -74,7 +74,8 @@ def scan_extra(store, settings: dict) -> dict:
         used["camera"] = {"date": force["camera"]["date"], "method": force["camera"]["method"]}
     if "tank" in force:
         area = float(force["tank"]["result"]["area_mm2"])
-        extra["tank"] = {"inner_area_mm2": area}
+        falls = bool(force["tank"]["result"].get("surface_falls", True))  # no overflow said: it falls
+        extra["tank"] = {"inner_area_mm2": area, "surface_falls": falls}
         used["tank"] = {"date": force["tank"]["date"], "area_mm2": area, "method": force["tank"]["method"]}
     if "meniscus" in force:
         r = force["meniscus"]["result"]

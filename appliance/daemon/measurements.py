@@ -175,6 +175,12 @@ def tank_result(values: dict) -> dict:
         }
     if not TANK_MM2[0] <= area <= TANK_MM2[1]:
         raise SettingError("tank", f"{area:.0f} mm² is not a tank's inner area (100 .. 1 000 000 mm²)")
+    # the ink falls under the camera as the part comes out, unless an overflow or a reservoir
+    # holds its surface where the camera was calibrated on it (processing needs to know which)
+    held = values.get("level_held", False)
+    if not isinstance(held, bool):
+        raise SettingError("level_held", f"must be true or false, got {held!r}")
+    result["surface_falls"] = not held
     return result
 
 

@@ -26,6 +26,8 @@ function of (surface, level, rig, effects, rng state).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
@@ -322,6 +324,11 @@ def render_frame(
     rng = rng if rng is not None else np.random.default_rng(0)
     level = liquid_level(surface, level_mm, rig, effects)
     pm = wobbled(pixel_map(rig, effects.lens_distortion), effects, rng)
+    if level != level_mm:
+        # the camera is fixed to the tank: ink that has fallen d is seen from H + d, each
+        # pixel's ray meeting it d further down (x0 - kx d: further from the camera's foot)
+        d = np.float32(level_mm - level)
+        pm = replace(pm, x0=pm.x0 - pm.kx * d, y0=pm.y0 - pm.ky * d)
     res = part_layer_roi(surface, level, rig, effects, pm)
     if effects.glare_spots > 0 or effects.dust_specks > 0:
         img = liquid_layer(rig, effects, float(level_mm), rng)

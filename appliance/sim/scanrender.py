@@ -132,7 +132,7 @@ def render_scan(
         # A real bench always displaces ink, so the daemon always writes the tank;
         # a simulated bench only when it simulates the effect, else processing
         # would "correct" levels that never dropped.
-        extra["tank"] = {"inner_area_mm2": float(rig.tank_area_mm2)}
+        extra["tank"] = {"inner_area_mm2": float(rig.tank_area_mm2), "surface_falls": True}
     scan = Scan(folder, rig.camera_model(distorted=effects.lens_distortion), frames, extra=extra)
     write_scan_json(scan)
     truth = {
