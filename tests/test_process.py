@@ -159,3 +159,23 @@ def test_unknown_keys_are_kept(scan):
     assert s.extra["note"] == "unknown keys are kept"
     write_scan_json(s)
     assert json.loads((scan / "scan.json").read_text())["note"] == "unknown keys are kept"
+
+
+@pytest.mark.parametrize("falls", [True, False, None])
+def test_a_scan_saying_its_ink_falls_under_the_camera_is_processed_so(tmp_path, monkeypatch, falls):
+    """scan.json's tank.surface_falls reaches the surface fit (absent: the ink is held)."""
+    from appliance.scanfile import load_scan, write_scan_json
+    from appliance.surface import reconstruct as rc
+
+    scan = write_cone_scan(tmp_path / "scan")
+    tank = {"inner_area_mm2": 22500.0}
+    if falls is not None:
+        tank["surface_falls"] = falls
+    scan.extra["tank"] = tank
+    write_scan_json(scan)
+    asked = []
+    real = rc.reconstruct
+    monkeypatch.setattr(rc, "reconstruct", lambda w, g, o=None: asked.append(o) or real(w, g, o))
+    assert main(["process", str(tmp_path / "scan"), "-o", str(tmp_path / "out")]) == 0
+    assert load_scan(tmp_path / "scan").extra["tank"] == tank
+    assert asked and all(o.ink_falls is bool(falls) for o in asked)

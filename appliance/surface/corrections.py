@@ -73,7 +73,7 @@ def above_base(seen, slices, diag):
         for key in ("nominal_mm", "true_mm"):
             disp[key] = [disp[key][i] for i in keep]
         disp["max_drop_mm"] = max(n - t for n, t in zip(disp["nominal_mm"], disp["true_mm"]))
-    below = [slices[i].level for i in range(len(slices)) if i not in keep]
+    below = [s.level for s in slices if not shows_waterline(s.level)]
     diag.setdefault("notes", []).append(
         f"{len(below)} frame(s) whose ink had dropped to or below the base top "
         f"({max(below):.2f} mm and lower) not used: they show the part's foot, not a waterline"

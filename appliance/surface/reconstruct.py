@@ -164,12 +164,11 @@ def _on_fallen_ink(as_seen, disp, camera):
     plane at rest, (H + d) / H too near the camera's foot (sample 1: Ea 0.17 mm, max 2.25).
     First order: the heights the perspective reads stay above the ink. `as_seen`: the frames
     as read, by their nominal level (one frame a level)."""
-    C, H = np.asarray(camera.xy, float), float(camera.height_mm)
-    out = []
-    for n, t in zip(disp["nominal_mm"], disp["true_mm"]):
-        s = as_seen[n]
-        out.append(s.moved(C + (s.P - C) * ((H + n - t) / H), s.z))
-    return out
+    # a point on ink that fell d is seen as one standing -d above the plane at rest
+    return [
+        as_seen[n].moved(camera.true_xy(as_seen[n].P, t - n), as_seen[n].z)
+        for n, t in zip(disp["nominal_mm"], disp["true_mm"])
+    ]
 
 
 def _resample(old: Lattice, z, new: Lattice):
