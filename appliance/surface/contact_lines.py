@@ -412,7 +412,7 @@ def contact_points(slices, lat, rise, model: MeniscusModel):
             ),
         )
         h = np.where(s.wall | ~np.isfinite(h), 0.0, h)
-        P = model.unproject(s.P, h)
+        P = model.unproject(s.P, h, s.sight_mm)
         flat.append(s.moved(P, s.z))
         raised.append(s.moved(P, s.z + h))
     return flat, raised

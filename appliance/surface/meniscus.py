@@ -193,12 +193,13 @@ class MeniscusModel:
             self.curvature,
         )
 
-    def unproject(self, P, h):
-        """Plane positions of contact points standing h above the ink."""
+    def unproject(self, P, h, sight_mm=None):
+        """Plane positions of contact points standing h above the ink; `sight_mm`: the
+        camera's height above that ink where the ink fell under it (Slice.sight_mm)."""
         if self.camera_xy_mm is None or not self.camera_height_mm:
             return P
         C = np.asarray(self.camera_xy_mm, float)
-        return P + (C - P) * (h / self.camera_height_mm)[:, None]
+        return P + (C - P) * (h / (sight_mm or self.camera_height_mm))[:, None]
 
 
 def _outline_distance(slices, P):
@@ -217,7 +218,7 @@ def _corrected(observed, slopes, model):
         h = model.rise(beta)
         # a wall is seen by its top edge, not by the contact line climbing it: only the
         # level-curve points are moved back by the perspective of their raised contact line
-        t = s.moved(model.unproject(s.P, np.where(s.wall, 0.0, h)), s.level + h)
+        t = s.moved(model.unproject(s.P, np.where(s.wall, 0.0, h), s.sight_mm), s.level + h)
         out.append(t)
     return out
 

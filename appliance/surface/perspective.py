@@ -38,6 +38,10 @@ class Perspective:
             return None
         return cls(camera.centre_xy(), camera.height_mm)
 
+    def over(self, s: Slice) -> Perspective:
+        """The camera as one frame sees it: from higher up where that frame's ink fell."""
+        return self if s.sight_mm is None else Perspective(self.xy, s.sight_mm)
+
     def true_xy(self, P, h):
         """Plane positions of points seen at P that stand h above the ink."""
         C = np.asarray(self.xy, float)
@@ -94,7 +98,7 @@ def _wall_marks(slices, k, top, wall_tol_mm, camera, step_range):
             # middle and widen the tolerance by what the rest of the range moves it
             h_max = max(top - s.level, 0.0) + abs(dl)
             raised |= _ray_match(
-                camera,
+                camera.over(s),
                 s.P,
                 slices[j],
                 dl,
@@ -127,11 +131,13 @@ def _close_gaps(s: Slice, wall, n):
     return wall | (left & right)
 
 
-def _edge_moved(camera: Perspective, P, dl, h):
-    """Where an edge seen at P, standing h above the ink, appears when the ink is dl lower."""
+def _edge_moved(camera: Perspective, P, dl, h, other_mm=None):
+    """Where an edge seen at P, standing h above the ink, appears when the ink is dl lower
+    and the camera `other_mm` above that ink (None: as high as above this one)."""
     C = np.asarray(camera.xy, float)
     H = camera.height_mm
-    f = np.asarray((H - h) / (H - h - dl), float)
+    Hb = H if other_mm is None else other_mm
+    f = np.asarray((H - h) / H * Hb / (Hb - h - dl), float)
     return C + (P - C) * (f[:, None] if f.ndim else f)
 
 
@@ -141,7 +147,7 @@ def _along_ray(camera: Perspective, P, other: Slice, dl, h, step_range):
     lo, hi = step_range
     d, i = np.full(len(P), np.inf), np.zeros(len(P), int)
     for f in np.linspace(lo, hi, 1 if hi <= lo else 8):
-        df, i_f = polyline_distance(other, _edge_moved(camera, P, f * dl, h))
+        df, i_f = polyline_distance(other, _edge_moved(camera, P, f * dl, h, other.sight_mm))
         better = df < d
         d, i = np.where(better, df, d), np.where(better, i_f, i)
     return d, i
@@ -186,14 +192,15 @@ def unproject_rims(
         w = np.flatnonzero(edge)
         z0 = span.mean(axis=1)
         h = np.where(np.isfinite(z0), np.maximum(z0 - s.level, 0.0), 0.0)
-        P = camera.true_xy(s.P, h)
+        cam = camera.over(s)
+        P = cam.true_xy(s.P, h)
         if rim_height is not None and w.size:
             # a surer edge height: the fitted surface at the edge, within the bracket
             zr = rim_height(P[w])
             ok = np.isfinite(zr)
             zr = np.clip(zr, span[w, 0], span[w, 1])
             h[w[ok]] = np.maximum(zr[ok] - s.level, 0.0)
-            P = camera.true_xy(s.P, h)
+            P = cam.true_xy(s.P, h)
         t = s.moved(P, s.z)
         t.edge = edge
         out.append(t)
@@ -232,7 +239,7 @@ def _edge_brackets(slices, camera, wall_tol_mm, rise_max, step_range):
             # "new" edge) would otherwise carry the glitch's bracket all the way down
             dl = s.level - frame.level
             i, near = _ray_match(
-                camera,
+                camera.over(s),
                 s.P[w],
                 frame,
                 dl,

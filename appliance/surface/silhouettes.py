@@ -43,7 +43,6 @@ def silhouettes(
     part behind as it rises. Pure: the slices are as observed, before any wall
     edge is put back."""
     C = np.asarray(camera.xy, float)
-    H = camera.height_mm
 
     def seen_hidden(k):
         s = slices[k]
@@ -51,7 +50,7 @@ def silhouettes(
         above = [j for j in range(k - 1, -1, -1) if not slices[j].empty][:frames]
         for j in above:
             if not hidden.all() and not s.empty:
-                Q = s.P + (C - s.P) * ((slices[j].level - s.level) / H)
+                Q = s.P + (C - s.P) * ((slices[j].level - s.level) / camera.over(s).height_mm)
                 sd, _ = polyline_distance(slices[j], Q, signed=True)
                 hidden |= sd >= -tol_mm
         return hidden
@@ -73,7 +72,7 @@ def silhouettes(
         # points next to its rim in the frame above, which would be taken along)
         src = out[k] & ~(s.edge if s.edge is not None else False)
         P = s.P[src]
-        Q = P + (C - P) * ((slices[up].level - s.level) / H)
+        Q = P + (C - P) * ((slices[up].level - s.level) / camera.over(s).height_mm)
         d, i = polyline_distance(slices[up], Q)
         out[up][i[d <= BACK_TOL_FACTOR * tol_mm]] = True  # two outlines' noise, not one ray's
     return out
@@ -92,7 +91,6 @@ def rim_brackets(
     neighbour frame by frame (a chain that one noisy frame breaks); a frame or two
     where the ray misses by more than tol_mm (a silhouette a pixel off) do not end it."""
     C = np.asarray(camera.xy, float)
-    H = camera.height_mm
 
     def bracket(k):
         s = slices[k]
@@ -107,7 +105,7 @@ def rim_brackets(
         for n, j in enumerate(above):
             if going.size == 0 or slices[j].empty:
                 break
-            Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / H)
+            Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / camera.over(s).height_mm)
             sd, _ = polyline_distance(slices[j], Q, signed=True)
             on = sd >= -tol_mm
             span[going[on], 0] = slices[j].level

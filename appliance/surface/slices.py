@@ -35,6 +35,9 @@ class Slice:
         None  # (M,) bool: a silhouette - a face above the ink hides the waterline there
     )
     rim: np.ndarray | None = None  # (M, 2): height bracket of the rim a silhouette point shows (NaN: none)
+    # the camera's height above this frame's ink where it is not the calibrated one: the ink
+    # fell under a camera fixed to the tank (reconstruct._on_fallen_ink); None: calibrated
+    sight_mm: float | None = None
     _tree: cKDTree | None = field(default=None, repr=False)
     _curve: Slice | None = field(default=None, repr=False)
 
@@ -61,6 +64,7 @@ class Slice:
             self._curve = Slice(
                 self.level, [], self.P[keep], nxt, prv, self.z[keep], np.zeros(keep.size, bool)
             )
+            self._curve.sight_mm = self.sight_mm
         return self._curve
 
     def walls_changed(self) -> None:
@@ -81,6 +85,7 @@ class Slice:
             self.wall.copy(),
             None if self.edge is None else self.edge.copy(),
             None if self.hidden is None else self.hidden.copy(),
+            sight_mm=self.sight_mm,
         )
 
     def at_level(self, level) -> Slice:
