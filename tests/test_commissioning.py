@@ -333,5 +333,6 @@ def test_the_tank_step_says_whether_the_ink_falls_under_the_camera():
     assert tank_result({"area_mm2": 22500})["surface_falls"] is True
     held = tank_result({"width_mm": 150, "depth_mm": 150, "level_held": True})
     assert held["surface_falls"] is False and held["area_mm2"] == 22500.0
+    assert held["figure"] == "150 x 150 mm = 22500 mm², the ink's level held by an overflow"
     with pytest.raises(SettingError, match="level_held"):
         tank_result({"area_mm2": 22500, "level_held": "yes"})

@@ -65,13 +65,15 @@ def phone(box):
 
 def readable_on_a_phone(d, what):
     """No sideways scrolling, and every visible button, link-button and field is a thumb target
-    (>= 44 CSS px high) with a label a screen reader can say."""
+    (>= 44 CSS px high; a checkbox by its label, which toggles it) with a label a screen reader
+    can say."""
     sw, iw = d.execute_script("return [document.documentElement.scrollWidth, window.innerWidth]")
     assert sw <= iw, (what, sw, iw)
     small = d.execute_script("""
         const out = [];
         document.querySelectorAll('main button, main a.button, main input, main select').forEach((e) => {
-          const r = e.getBoundingClientRect();
+          const tap = e.type === 'checkbox' && e.labels && e.labels.length ? e.labels[0] : e;
+          const r = tap.getBoundingClientRect();
           if (!r.width || e.type === 'hidden') return;
           const named = e.labels && e.labels.length || e.getAttribute('aria-label') || e.textContent.trim();
           if (r.height < 44 || !named) out.push((e.id || e.name || e.tagName) + ' ' + Math.round(r.height) + 'px');
@@ -251,9 +253,14 @@ def test_commissioning_goes_through_every_step_on_a_phone(box, phone, tmp_path):
     readable_on_a_phone(d, "tank step")
     d.execute_script("document.getElementById('cm-step').scrollIntoView()")
     shot(d, "phone", "commission-2-tank")
+    held = d.find_element(By.ID, "cm-in-level_held")
+    assert held.get_attribute("type") == "checkbox" and not held.is_selected()  # by default the ink falls
+    held.click()  # this tank has an overflow
     press(d, "Save the tank area")
     wait(d, lambda: note(d) == "Tank area stored.", what="tank stored")
-    assert "150 x 150 mm = 22500 mm²" in d.find_element(By.ID, "cm-results").text
+    shown = d.find_element(By.ID, "cm-results").text
+    assert "150 x 150 mm = 22500 mm², the ink's level held by an overflow" in shown, shown
+    assert box["svc"].commissioning()["steps"][2]["result"]["surface_falls"] is False
 
     # meniscus: a scan of the 25.4 mm ball, processed with the fitted model and measured
     ball = d.find_element(By.ID, "cm-in-diameter_mm")

@@ -181,6 +181,8 @@ def tank_result(values: dict) -> dict:
     if not isinstance(held, bool):
         raise SettingError("level_held", f"must be true or false, got {held!r}")
     result["surface_falls"] = not held
+    if held:
+        result["figure"] += ", the ink's level held by an overflow"
     return result
 
 

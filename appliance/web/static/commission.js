@@ -15,7 +15,8 @@
   const FORMS = {
     level_zero: [{ name: "level_at_home_mm", label: "Or enter it: stage position where the base top meets the ink (mm)", action: "enter", button: "Save this level zero" }],
     tank: [{ name: "width_mm", label: "Tank inside width (mm)", value: 150 },
-           { name: "depth_mm", label: "Tank inside depth (mm)", value: 150, action: "enter", button: "Save the tank area" }],
+           { name: "depth_mm", label: "Tank inside depth (mm)", value: 150, action: "enter", button: "Save the tank area" },
+           { name: "level_held", label: "An overflow holds the ink's level (it does not fall as a part comes out)", type: "checkbox" }],
     meniscus: [{ name: "diameter_mm", label: "Reference ball diameter (mm)", value: 25.4, action: "start", button: "Start: the ball goes on the base" }],
   };
   const HELP = {
@@ -95,16 +96,26 @@
   function field(f) {
     const l = document.createElement("label"); l.textContent = f.label;
     const inp = document.createElement("input");
-    inp.type = "number"; inp.step = "any"; inp.min = "0"; inp.inputMode = "decimal"; inp.name = f.name; inp.id = "cm-in-" + f.name;
-    if (f.value !== undefined) inp.value = f.value;
+    inp.name = f.name; inp.id = "cm-in-" + f.name;
     const s = stepOf(focus);
+    if (f.type === "checkbox") {   // a yes / no the step's result remembers (level_held: the ink does not fall)
+      inp.type = "checkbox"; l.className = "check";
+      inp.checked = !!(s && s.result && s.result.surface_falls === false);
+      l.prepend(inp);
+      return l;
+    }
+    inp.type = "number"; inp.step = "any"; inp.min = "0"; inp.inputMode = "decimal";
+    if (f.value !== undefined) inp.value = f.value;
     if (s && s.result && typeof s.result[f.name] === "number") inp.value = s.result[f.name];
     l.appendChild(inp);
     return l;
   }
   function values() {
     const out = {};
-    document.querySelectorAll("#cm-inputs input").forEach((i) => { if (i.value !== "") out[i.name] = Number(i.value); });
+    document.querySelectorAll("#cm-inputs input").forEach((i) => {
+      if (i.type === "checkbox") out[i.name] = i.checked;
+      else if (i.value !== "") out[i.name] = Number(i.value);
+    });
     return out;
   }
 
