@@ -89,6 +89,33 @@ def test_meniscus_calibration_through_the_cameras_perspective():
     assert abs(m.contact_angle_rad - 0.2) < 0.002
 
 
+def test_meniscus_calibration_on_ink_that_falls_under_the_camera():
+    """The reference's ink falls as it comes out, away from a camera fixed to the tank: its
+    contact lines are seen from H + d. Read as if at rest, the bench's sphere in its 150 mm
+    tank commissioned 2.954 mm, 2.49 deg and a bend weight 0.03 for 2.704, 0.04 and 0."""
+    from appliance.sim import physics
+    from appliance.vision.types import Waterline
+
+    sphere = surfaces.get("sphere")
+    C, H, At = np.array([20.0, 30.0]), 300.0, 12000.0
+    nominal = np.arange(29.0, 2.0, -3.0)
+    true = np.array([physics.true_level(sphere, n, At) for n in nominal])
+    assert np.max(nominal - true) > 3.0
+    seen = []
+    lines = meniscus_waterlines(sphere, true, 2.2, 0.2, resolution_mm=0.3)
+    for w, n, t in zip(lines, nominal, true):
+        h = [np.maximum(sphere.height(*lp.T) - t, 0.0) for lp in w.loops]
+        # a point h above ink that fell n - t stands h - (n - t) above the plane at rest
+        seen.append(
+            Waterline(n, [C + (lp - C) * (H / (H - hk + n - t))[:, None] for lp, hk in zip(w.loops, h)])
+        )
+    cam = dict(tank_area_mm2=At, camera_xy_mm=tuple(C), camera_height_mm=H)
+    m = calibrate_meniscus(seen, sphere, ink_falls=True, **cam)
+    assert abs(m.capillary_length_mm - 2.2) < 0.005 and abs(m.contact_angle_rad - 0.2) < 0.002
+    at_rest = calibrate_meniscus(seen, sphere, **cam)  # measured 2.510 mm, 10.2 deg, weight 1.9
+    assert abs(at_rest.capillary_length_mm - 2.2) > 0.1
+
+
 def test_meniscus_correction_removes_the_rise():
     dome = Surface(
         "dome",
@@ -752,8 +779,7 @@ def test_a_rim_seen_over_ink_that_fell_is_put_back_onto_its_wall():
     not h / H. Taken as h / H the rim here came back up to 0.074 mm off its wall (r h d / H^2:
     40 mm out, 20 mm up, 6 mm fallen); a contact line's rise likewise (sample 3 of the seed
     table, its ink falling 12 mm: Ea 0.031 -> 0.024 mm)."""
-    from appliance.surface.perspective import unproject_rims
-    from appliance.surface.reconstruct import _on_fallen_ink
+    from appliance.surface.perspective import on_fallen_ink, unproject_rims
     from appliance.surface.slices import make_slice
 
     C, H, Z = np.array([50.0, 50.0]), 300.0, 30.0
@@ -768,7 +794,7 @@ def test_a_rim_seen_over_ink_that_fell_is_put_back_onto_its_wall():
         s.wall[:] = True
         s.edge = np.ones(len(s.P), bool)
         seen[n] = s
-    fallen = _on_fallen_ink(seen, {"nominal_mm": list(nominal), "true_mm": list(true)}, cam)
+    fallen = on_fallen_ink(seen, {"nominal_mm": list(nominal), "true_mm": list(true)}, cam)
     fallen = [s.at_level(t) for s, t in zip(fallen, true)]
     for s in fallen:
         s.edge = np.ones(len(s.P), bool)
@@ -779,6 +805,6 @@ def test_a_rim_seen_over_ink_that_fell_is_put_back_onto_its_wall():
     h = np.full(len(wall), 2.0)
     n, t = nominal[-1], true[-1]
     low = make_slice(n, [C + (wall - C) * (H / (H - (t + 2.0 - n)))])
-    low = _on_fallen_ink({n: low}, {"nominal_mm": [n], "true_mm": [t]}, cam)[0]
+    low = on_fallen_ink({n: low}, {"nominal_mm": [n], "true_mm": [t]}, cam)[0]
     model = MeniscusModel(2.7, 0.0, tuple(C), H)
     assert np.abs(model.unproject(low.P, h, low.sight_mm) - wall).max() < 1e-9

@@ -52,7 +52,7 @@ from scipy import ndimage
 from scipy.optimize import least_squares
 
 from ..errors import InkSliceError
-from .perspective import mark_walls
+from .perspective import Perspective, mark_walls, on_fallen_ink
 from .slices import check_waterlines, polyline_distance
 
 CURVATURE_FLAT = 0.05  # slopes under ~3 deg: no level curve to take a curvature of
@@ -199,7 +199,8 @@ class MeniscusModel:
         if self.camera_xy_mm is None or not self.camera_height_mm:
             return P
         C = np.asarray(self.camera_xy_mm, float)
-        return P + (C - P) * (h / (sight_mm or self.camera_height_mm))[:, None]
+        H = self.camera_height_mm if sight_mm is None else np.asarray(sight_mm, float)
+        return P + (C - P) * (h / H)[:, None]
 
 
 def _outline_distance(slices, P):
@@ -272,11 +273,14 @@ def calibrate_meniscus(
     camera_xy_mm=None,
     camera_height_mm=None,
     wall_tol_mm=0.03,
+    ink_falls=False,
 ) -> MeniscusModel:
     """(l_c, theta) from a scan of a reference part whose `height(x, y)` is known.
 
     Only points on the sculptured top, well away from the part's outline,
     enter: there the contact line's height is the top's height at the point.
+    `ink_falls`: the ink falls under a camera fixed to the tank (scan.json's
+    tank.surface_falls); each frame is then seen from the camera's height over its ink.
     """
     slices, _ = check_waterlines(waterlines)
     if tank_area_mm2:
@@ -288,23 +292,31 @@ def calibrate_meniscus(
         step = max(x1 - x0, y1 - y0) / 500.0
         X, Y = np.meshgrid(np.arange(x0, x1 + step / 2, step), np.arange(y0, y1 + step / 2, step))
         z = np.where(reference_surface.inside(X, Y), reference_surface.height(X, Y), np.nan)
-        true = levels_from_surface([s.level for s in slices], z, step * step, tank_area_mm2)
+        nominal = [s.level for s in slices]
+        true = levels_from_surface(nominal, z, step * step, tank_area_mm2)
+        if ink_falls and camera_xy_mm is not None and camera_height_mm:
+            # the fallen ink is further from the camera: its waterlines are further out
+            disp = {"nominal_mm": nominal, "true_mm": list(true)}
+            slices = on_fallen_ink(
+                dict(zip(nominal, slices)), disp, Perspective(camera_xy_mm, camera_height_mm)
+            )
         slices, _ = correct_slices(slices, tank_area_mm2, true)
     mark_walls(slices, wall_tol_mm)
-    on_top, levels = [], []
+    on_top, levels, sights = [], [], []
     for s in slices:
         if s.empty:
             continue
         keep = ~s.wall & (_outline_distance(slices, s.P) > 3.0)
         on_top.append(s.P[keep])
         levels.append(np.full(int(keep.sum()), s.level))
+        sights.append(np.full(int(keep.sum()), s.sight_mm or camera_height_mm or np.inf))
     if not on_top or sum(len(p) for p in on_top) < 20:
         raise InkSliceError(
             "calibration", "too few waterline points on the reference's top to calibrate the meniscus"
         )
-    P, L = np.vstack(on_top), np.concatenate(levels)
+    P, L, S = np.vstack(on_top), np.concatenate(levels), np.concatenate(sights)
     if len(P) > 20000:
-        P, L = P[:: len(P) // 20000], L[:: len(P) // 20000]
+        P, L, S = P[:: len(P) // 20000], L[:: len(P) // 20000], S[:: len(P) // 20000]
     beta = np.arctan(_reference_slopes(reference_surface, P))
     curvature = _reference_curvature(reference_surface)
     kappa = curvature(P)
@@ -314,9 +326,9 @@ def calibrate_meniscus(
         m = MeniscusModel(params[0], params[1], curvature=params[2], **cam)
         h = m.rise(beta, kappa)
         for _ in range(2):  # the slope and curvature where the contact point really is
-            Q = m.unproject(P, h)
+            Q = m.unproject(P, h, S)
             h = m.rise(np.arctan(_reference_slopes(reference_surface, Q)), curvature(Q))
-        return reference_surface.height(*m.unproject(P, h).T) - (L + h)
+        return reference_surface.height(*m.unproject(P, h, S).T) - (L + h)
 
     # the weight is no less than 0: a line bending round the part never raises its meniscus
     sol = least_squares(

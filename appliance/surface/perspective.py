@@ -48,6 +48,21 @@ class Perspective:
         return C + (P - C) * ((self.height_mm - np.asarray(h, float)) / self.height_mm)[..., None]
 
 
+def on_fallen_ink(as_seen, disp, camera):
+    """Each frame's points where they are on its fallen ink: the homography put them on the
+    plane at rest, (H + d) / H too near the camera's foot (sample 1: Ea 0.17 mm, max 2.25).
+    From there on the camera is H + d above that frame's ink (Slice.sight_mm): a rim or a
+    contact line standing h above it is put back by h / (H + d). `as_seen`: the frames as
+    read, by their nominal level (one frame a level)."""
+    out = []
+    for n, t in zip(disp["nominal_mm"], disp["true_mm"]):
+        # a point on ink that fell d is seen as one standing -d above the plane at rest
+        s = as_seen[n].moved(camera.true_xy(as_seen[n].P, t - n), as_seen[n].z)
+        s.sight_mm = camera.height_mm + (n - t)
+        out.append(s)
+    return out
+
+
 def mark_walls(
     slices: list[Slice], wall_tol_mm: float, camera: Perspective | None = None, step_range=(1.0, 1.0)
 ) -> int:

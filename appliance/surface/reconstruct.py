@@ -46,7 +46,7 @@ from .heightmap import HeightMap
 from .inkbounds import held, node_bounds
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
-from .perspective import Perspective, mark_walls
+from .perspective import Perspective, mark_walls, on_fallen_ink
 from .pools import cover_held_pools, held_pools
 from .registration import registered
 from .silhouettes import occluded_nodes
@@ -159,21 +159,6 @@ def _seed_method(name, slices, xo, yo):
     return seed_methods.run_method(name, xo, yo, pts, levels, exposed)
 
 
-def _on_fallen_ink(as_seen, disp, camera):
-    """Each frame's points where they are on its fallen ink: the homography put them on the
-    plane at rest, (H + d) / H too near the camera's foot (sample 1: Ea 0.17 mm, max 2.25).
-    From there on the camera is H + d above that frame's ink (Slice.sight_mm): a rim or a
-    contact line standing h above it is put back by h / (H + d). `as_seen`: the frames as
-    read, by their nominal level (one frame a level)."""
-    out = []
-    for n, t in zip(disp["nominal_mm"], disp["true_mm"]):
-        # a point on ink that fell d is seen as one standing -d above the plane at rest
-        s = as_seen[n].moved(camera.true_xy(as_seen[n].P, t - n), as_seen[n].z)
-        s.sight_mm = camera.height_mm + (n - t)
-        out.append(s)
-    return out
-
-
 def _resample(old: Lattice, z, new: Lattice):
     """A field (NaN off the part) read on another lattice: the next pass's rise must sit
     where the surface is, not where the old lattice's indices fall."""
@@ -227,7 +212,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         # each later pass: each wall edge's height and the emerged volume from the fit before
         true = diag["displacement"]["true_mm"] if "displacement" in diag else None
         if opt.ink_falls and camera is not None and true is not None:
-            seen = _on_fallen_ink(as_seen, diag["displacement"], camera)
+            seen = on_fallen_ink(as_seen, diag["displacement"], camera)
         slices = corrected_levels(seen, opt, diag, lat, np.where(fit.footprint, fit.z, np.nan), true)
         seen, slices = above_base(seen, slices, diag)
         corrected = slices

@@ -10,8 +10,9 @@ puts it down by hand.
 
 fit_meniscus(scan, part, waterlines) is the whole calibration from a scan and its
 waterlines (the caller extracts them, process.extract_waterlines: this room reads no
-frames): the tank's displacement when scan.json has the tank, the camera's
-perspective, and surface.meniscus.calibrate_meniscus. reference_error compares a height map of the
+frames): the tank's displacement when scan.json has the tank (and the ink's fall under the
+camera, when it says the ink falls), the camera's perspective, and
+surface.meniscus.calibrate_meniscus. reference_error compares a height map of the
 part with its true shape.
 """
 
@@ -97,6 +98,11 @@ def _tank(scan):
     return (scan.extra.get("tank") or {}).get("inner_area_mm2")
 
 
+def _ink_falls(scan) -> bool:
+    """The ink falls under the camera as the part comes out (no overflow holds it)."""
+    return bool((scan.extra.get("tank") or {}).get("surface_falls", False))
+
+
 def fit_meniscus(scan, part, waterlines):
     """(MeniscusModel, the part where it was found) from a scan of a reference part and
     its waterlines.
@@ -112,6 +118,7 @@ def fit_meniscus(scan, part, waterlines):
         tank_area_mm2=_tank(scan),
         camera_xy_mm=cam.centre_xy(),
         camera_height_mm=cam.height_mm,
+        ink_falls=_ink_falls(scan),
     )
     return model, part
 

@@ -36,7 +36,7 @@ class Slice:
     )
     rim: np.ndarray | None = None  # (M, 2): height bracket of the rim a silhouette point shows (NaN: none)
     # the camera's height above this frame's ink where it is not the calibrated one: the ink
-    # fell under a camera fixed to the tank (reconstruct._on_fallen_ink); None: calibrated
+    # fell under a camera fixed to the tank (perspective.on_fallen_ink); None: calibrated
     sight_mm: float | None = None
     _tree: cKDTree | None = field(default=None, repr=False)
     _curve: Slice | None = field(default=None, repr=False)
