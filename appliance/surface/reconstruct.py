@@ -43,7 +43,7 @@ from .dewetted import depression_depth
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
-from .inkbounds import held, node_bounds
+from .inkbounds import held, node_bounds, under_flat_ink
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls, on_fallen_ink
@@ -233,6 +233,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     )  # h grows with the slope
     sink = depression_depth(opt.meniscus) if opt.meniscus is not None else 0.0
     lo, hi = bracket_bounds(first, slices, rise_max, sink)
+    if opt.meniscus is not None:
+        hi = np.minimum(hi, under_flat_ink(lat, first, slices, rise_max, opt.meniscus.capillary_length_mm))
     # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
     known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink)
     hi = np.where(known.hidden, known.ceiling, hi)
