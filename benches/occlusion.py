@@ -113,6 +113,17 @@ Clean: no displacement, so unchanged. The bench now says how much of the part li
 map's grid, where no cell is and no error is counted: the stepped block's (physics) 137.5 mm², a
 strip 0.2-0.55 mm wide along its 85 deg walls' foot, outside the rims put back; 0 for the rest.
 
+6 December 2026 (session 37): the renderer now lets the ink fall away from a camera fixed to the
+tank. New renders, physics, Ea / p99 / max:
+    before (76a8477; the sphere commissioned 2.954 mm / 2.49 deg, the fall read as if at rest)
+        stepped block 0.3713 / 3.399 / 7.748 (45 holes), blade 0.1726 / 3.040 / 4.571 (13 holes)
+    frames seen from H + d once the fall is known (9040ab7), the same model
+        stepped block 0.3827 / 3.545 / 7.740 (54 holes), blade 0.1598 / 1.843 / 4.480 (0 holes)
+    the sphere commissioned from H + d too (8a2b68c): 2.704 mm / 0.04 deg
+        stepped block 0.3037 / 2.422 / 6.706 (50 holes), blade 0.1688 / 3.944 / 4.339
+    nodes under a frame's ink held below its flat surface (98630f8)
+        stepped block 0.3023 / 2.422 / 6.706 (50 holes), blade 0.1291 / 1.672 / 4.339 (0 holes)
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
