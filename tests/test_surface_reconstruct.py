@@ -265,6 +265,21 @@ def test_a_rim_seen_a_pixel_off_in_one_frame_does_not_move_the_frames_below():
     assert max(below) == pytest.approx(40.0, abs=0.2), below
 
 
+def test_the_lowest_frames_rim_is_found_when_the_frame_above_saw_it_a_pixel_off():
+    """The lowest frame has no frame below to tell its walls by. Against the frame above
+    alone, a rim that frame saw a pixel off was a level curve and stayed where the camera
+    saw it, outside the wall (sample 4 under the second ink: five cells 0.7 mm beyond its
+    top wall, 15-33 mm high). The frame two up is its second look."""
+
+    def glitch(seen):
+        for lp in seen[-2].loops:  # the 6 mm frame, above the lowest
+            lp[lp[:, 0] > 40.0, 0] -= 0.055
+
+    lowest = _wedge_put_back(glitch)[-1]
+    # measured: 40.10 mm (the bracket's middle); 41.86 against the frame above alone
+    assert lowest.P[:, 0].max() == pytest.approx(40.0, abs=0.2)
+
+
 def test_a_few_rim_points_a_pixel_off_take_their_neighbours_edge():
     """Three points of one frame's far-wall edge 0.055 mm out (sample 4's summit rim had
     such runs, in clean renders too) start afresh as new edges, a level step high, and
