@@ -36,7 +36,7 @@ def describe(scan, displacement=True, meniscus=None) -> dict:
         warnings.append("the camera was not commissioned: the bench's own camera model was used")
     else:
         used["camera"] = "scan.json's camera block"
-    tank = (scan.extra.get("tank") or {}).get("inner_area_mm2")
+    tank = scan.tank_area_mm2
     if not displacement:
         used["tank"] = "displacement correction switched off"
     elif tank:

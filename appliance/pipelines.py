@@ -160,8 +160,8 @@ def run_inkslice(
     bounds = _waterline_bounds(waterlines)
     # the grid spans the part's outline once the walls' raised edges are put back
     grid = GridSpec(None, spacing_mm=spacing_mm) if spacing_mm else GridSpec(None, n=grid_n)
-    tank = (scan.extra.get("tank") or {}).get("inner_area_mm2") if displacement else None
-    falls = bool((scan.extra.get("tank") or {}).get("surface_falls", False)) and tank is not None
+    tank = scan.tank_area_mm2 if displacement else None
+    falls = scan.ink_falls and tank is not None
     model = meniscus_model(scan, meniscus)
     view = camera_view(scan.camera)
     out, diag = {}, {}

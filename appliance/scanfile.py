@@ -76,6 +76,17 @@ class Scan:
         )
         return out
 
+    @property
+    def tank_area_mm2(self) -> float | None:
+        """The tank's inner area, for the ink a part displaces (None: not commissioned)."""
+        return (self.extra.get("tank") or {}).get("inner_area_mm2")
+
+    @property
+    def ink_falls(self) -> bool:
+        """The ink falls away from a camera fixed to the tank as the part comes out (no
+        overflow holds its level)."""
+        return bool((self.extra.get("tank") or {}).get("surface_falls", False))
+
     def frame_path(self, ref: FrameRef) -> Path:
         return self.folder / ref.file
 

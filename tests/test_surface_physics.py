@@ -788,13 +788,13 @@ def test_a_rim_seen_over_ink_that_fell_is_put_back_onto_its_wall():
     wall = np.column_stack([70.0 + 20.0 * np.cos(a), 50.0 + 20.0 * np.sin(a)])
     nominal = np.array([29.5, 28.5, 27.5, 26.0, 24.0, 21.0, 17.0, 13.0, 10.0])
     true = nominal - 0.3 * (30.0 - nominal)  # the ink falls faster as the part comes out
-    seen = {}
+    seen = []
     for n in nominal:
         s = make_slice(n, [C + (wall - C) * (H / (H - (Z - n)))])
         s.wall[:] = True
         s.edge = np.ones(len(s.P), bool)
-        seen[n] = s
-    fallen = on_fallen_ink(seen, {"nominal_mm": list(nominal), "true_mm": list(true)}, cam)
+        seen.append(s)
+    fallen = on_fallen_ink(seen, true, cam)
     fallen = [s.at_level(t) for s, t in zip(fallen, true)]
     for s in fallen:
         s.edge = np.ones(len(s.P), bool)
@@ -805,6 +805,6 @@ def test_a_rim_seen_over_ink_that_fell_is_put_back_onto_its_wall():
     h = np.full(len(wall), 2.0)
     n, t = nominal[-1], true[-1]
     low = make_slice(n, [C + (wall - C) * (H / (H - (t + 2.0 - n)))])
-    low = on_fallen_ink({n: low}, {"nominal_mm": [n], "true_mm": [t]}, cam)[0]
+    low = on_fallen_ink([low], [t], cam)[0]
     model = MeniscusModel(2.7, 0.0, tuple(C), H)
     assert np.abs(model.unproject(low.P, h, low.sight_mm) - wall).max() < 1e-9

@@ -234,7 +234,7 @@ def reference_processor(reference: dict):
             "contact_line_curvature": round(model.curvature, 3),
             "reference": {**ball.to_json(), **err},
             "reference_job": scan.extra.get("job"),
-            "tank_area_mm2": (scan.extra.get("tank") or {}).get("inner_area_mm2"),
+            "tank_area_mm2": scan.tank_area_mm2,
         }
         atomicio.write_json(out / "reference.json", result)
         atomicio.write_json(out / "meniscus.json", meniscus_json(model))

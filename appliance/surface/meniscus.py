@@ -292,14 +292,10 @@ def calibrate_meniscus(
         step = max(x1 - x0, y1 - y0) / 500.0
         X, Y = np.meshgrid(np.arange(x0, x1 + step / 2, step), np.arange(y0, y1 + step / 2, step))
         z = np.where(reference_surface.inside(X, Y), reference_surface.height(X, Y), np.nan)
-        nominal = [s.level for s in slices]
-        true = levels_from_surface(nominal, z, step * step, tank_area_mm2)
+        true = levels_from_surface([s.level for s in slices], z, step * step, tank_area_mm2)
         if ink_falls and camera_xy_mm is not None and camera_height_mm:
             # the fallen ink is further from the camera: its waterlines are further out
-            disp = {"nominal_mm": nominal, "true_mm": list(true)}
-            slices = on_fallen_ink(
-                dict(zip(nominal, slices)), disp, Perspective(camera_xy_mm, camera_height_mm)
-            )
+            slices = on_fallen_ink(slices, true, Perspective(camera_xy_mm, camera_height_mm))
         slices, _ = correct_slices(slices, tank_area_mm2, true)
     mark_walls(slices, wall_tol_mm)
     on_top, levels, sights = [], [], []

@@ -48,18 +48,18 @@ class Perspective:
         return C + (P - C) * ((self.height_mm - np.asarray(h, float)) / self.height_mm)[..., None]
 
 
-def on_fallen_ink(as_seen, disp, camera):
+def on_fallen_ink(seen: list[Slice], true_levels, camera: Perspective) -> list[Slice]:
     """Each frame's points where they are on its fallen ink: the homography put them on the
     plane at rest, (H + d) / H too near the camera's foot (sample 1: Ea 0.17 mm, max 2.25).
     From there on the camera is H + d above that frame's ink (Slice.sight_mm): a rim or a
-    contact line standing h above it is put back by h / (H + d). `as_seen`: the frames as
-    read, by their nominal level (one frame a level)."""
+    contact line standing h above it is put back by h / (H + d). `seen`: the frames as
+    read, at their nominal levels; `true_levels`: where their ink really was."""
     out = []
-    for n, t in zip(disp["nominal_mm"], disp["true_mm"]):
+    for s, t in zip(seen, true_levels):
         # a point on ink that fell d is seen as one standing -d above the plane at rest
-        s = as_seen[n].moved(camera.true_xy(as_seen[n].P, t - n), as_seen[n].z)
-        s.sight_mm = camera.height_mm + (n - t)
-        out.append(s)
+        fallen = s.moved(camera.true_xy(s.P, t - s.level), s.z)
+        fallen.sight_mm = camera.height_mm + (s.level - t)
+        out.append(fallen)
     return out
 
 
@@ -82,9 +82,10 @@ def mark_walls(
     the part comes out): the neighbour is looked for along that stretch of ray.
     """
     top = next((s.level for s in slices if not s.empty), 0.0)
+    bottom = max((k for k, s in enumerate(slices) if not s.empty), default=-1)
     # each frame against its neighbours as seen, none needing another's marks: on the cores
     marks = each_in_parts(
-        lambda k: _wall_marks(slices, k, top, wall_tol_mm, camera, step_range),
+        lambda k: _wall_marks(slices, k, top, bottom, wall_tol_mm, camera, step_range),
         [len(s.P) + ITEM_POINTS for s in slices],
     )
     total = 0
@@ -96,8 +97,9 @@ def mark_walls(
     return total
 
 
-def _wall_marks(slices, k, top, wall_tol_mm, camera, step_range):
-    """(wall, raised edge) per point of frame k (mark_walls), None for an empty frame."""
+def _wall_marks(slices, k, top, bottom, wall_tol_mm, camera, step_range):
+    """(wall, raised edge) per point of frame k (mark_walls), None for an empty frame;
+    `top` the highest frame's level, `bottom` the lowest frame's index."""
     s = slices[k]
     if s.empty:
         return None
@@ -107,8 +109,7 @@ def _wall_marks(slices, k, top, wall_tol_mm, camera, step_range):
     # look (a rim the frame above saw a pixel off stayed a level curve, outside the rims put
     # back: five cells 0.7 mm beyond sample 4's wall). Not its static walls: two levels
     # apart, the harsh ring's crater flank passed for one (Ea 0.0354 -> 0.0461).
-    lowest = all(t.empty for t in slices[k + 1 :])
-    for j in (k - 1, k - 2) if lowest else (k - 1, k + 1):
+    for j in (k - 1, k - 2) if k == bottom else (k - 1, k + 1):
         if not (0 <= j < len(slices)) or slices[j].empty:
             continue
         if j != k - 2:

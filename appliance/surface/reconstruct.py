@@ -212,7 +212,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         # each later pass: each wall edge's height and the emerged volume from the fit before
         true = diag["displacement"]["true_mm"] if "displacement" in diag else None
         if opt.ink_falls and camera is not None and true is not None:
-            seen = on_fallen_ink(as_seen, diag["displacement"], camera)
+            disp = diag["displacement"]
+            seen = on_fallen_ink([as_seen[n] for n in disp["nominal_mm"]], disp["true_mm"], camera)
         slices = corrected_levels(seen, opt, diag, lat, np.where(fit.footprint, fit.z, np.nan), true)
         seen, slices = above_base(seen, slices, diag)
         corrected = slices

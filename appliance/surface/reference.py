@@ -94,15 +94,6 @@ def locate_ball(waterlines, ball: Ball) -> Ball:
     return ball.at(c[0], c[1])
 
 
-def _tank(scan):
-    return (scan.extra.get("tank") or {}).get("inner_area_mm2")
-
-
-def _ink_falls(scan) -> bool:
-    """The ink falls under the camera as the part comes out (no overflow holds it)."""
-    return bool((scan.extra.get("tank") or {}).get("surface_falls", False))
-
-
 def fit_meniscus(scan, part, waterlines):
     """(MeniscusModel, the part where it was found) from a scan of a reference part and
     its waterlines.
@@ -115,10 +106,10 @@ def fit_meniscus(scan, part, waterlines):
     model = calibrate_meniscus(
         waterlines,
         part,
-        tank_area_mm2=_tank(scan),
+        tank_area_mm2=scan.tank_area_mm2,
         camera_xy_mm=cam.centre_xy(),
         camera_height_mm=cam.height_mm,
-        ink_falls=_ink_falls(scan),
+        ink_falls=scan.ink_falls,
     )
     return model, part
 

@@ -48,9 +48,10 @@ def silhouettes(
         s = slices[k]
         hidden = np.zeros(len(s.P), bool)
         above = [j for j in range(k - 1, -1, -1) if not slices[j].empty][:frames]
+        H = camera.over(s).height_mm
         for j in above:
             if not hidden.all() and not s.empty:
-                Q = s.P + (C - s.P) * ((slices[j].level - s.level) / camera.over(s).height_mm)
+                Q = s.P + (C - s.P) * ((slices[j].level - s.level) / H)
                 sd, _ = polyline_distance(slices[j], Q, signed=True)
                 hidden |= sd >= -tol_mm
         return hidden
@@ -102,10 +103,11 @@ def rim_brackets(
         span[h, 0] = s.level
         span[h, 1] = slices[above[0]].level if above else np.inf
         going, misses = h, np.zeros(h.size, int)
+        H = camera.over(s).height_mm
         for n, j in enumerate(above):
             if going.size == 0 or slices[j].empty:
                 break
-            Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / camera.over(s).height_mm)
+            Q = s.P[going] + (C - s.P[going]) * ((slices[j].level - s.level) / H)
             sd, _ = polyline_distance(slices[j], Q, signed=True)
             on = sd >= -tol_mm
             span[going[on], 0] = slices[j].level
