@@ -8,7 +8,8 @@ from rendered chessboards and commissions the meniscus from a harsh scan of the 
 ball (benches/meniscus.py's commission), then scans each part and processes it.
 
 Per part it prints Ea, the interior's 99th percentile (nodes more than 3 mm inside the
-outline) and the largest error, in mm, against the part's truth. Targets (issue 18):
+outline) and the largest error, in mm, against the part's truth, and the map's area beyond
+the part (benches/outline.py: material a program would leave standing where there is none). Targets (issue 18):
 Ea <= 0.05 mm, interior p99 <= 0.2 mm, max <= 1 mm. And the uncertainty map's honesty: of
 the cells off by more than 0.1 mm, the share it marks uncertain (uncertainty_mm > 0.1; target
 >= 80 %), beside the share of all cells it marks (benches/uncertainty.py).
@@ -353,6 +354,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from meniscus import bench_folder, commission, described, scan_part
+from outline import spurious
 from uncertainty import honesty
 
 from appliance.sim import surfaces
@@ -371,9 +373,11 @@ def measure(name, seed, tmp, camera, meniscus, refine_mm):
         name, "harsh", tmp, camera, meniscus, maps=maps, from_above=True, seed=seed, refine_mm=refine_mm
     )
     share, big, marked = honesty(surfaces.get(name), maps[0])
+    area, tallest = spurious(surfaces.get(name), maps[0])
     label = name if seed == 1 else f"{name}:{seed}"
     print(
         f"  {label:<14} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
+        f"beyond the part {area:.1f} mm² (up to {tallest:.2f} mm), "
         f"{100 * share:.0f} % of {big} cells over 0.1 mm marked uncertain "
         f"({100 * marked:.1f} % of all marked) ({time.perf_counter() - t0:.0f} s)",
         flush=True,

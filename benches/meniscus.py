@@ -10,7 +10,8 @@ calibrate --reference sphere`, then scans each part with displacement and that m
 processes it with the commissioned file. Nothing is read from the renderer's settings.
 
 Per part it prints Ea, the interior's 99th percentile (nodes more than 3 mm inside the
-outline) and the largest error, in mm, against the part's truth.
+outline) and the largest error, in mm, against the part's truth, and the map's area beyond
+the part (benches/outline.py: material a program would leave standing where there is none).
 
 Measured (2 December 2026, 2048 x 1536, 1 mm steps; a loaded machine: 3-13 min a part).
 Second ink, Ea mm, commissioned 2.304 mm / 34.98 deg / curvature weight 1.001; the same
@@ -708,6 +709,7 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from outline import spurious
 from seed_table import calibrated_camera, use_camera
 
 from appliance import process as proc
@@ -847,13 +849,16 @@ def main():
             for name, held in parts:
                 t0 = time.perf_counter()
                 above = held or not args.first_top
+                maps = []
                 ea, p99, mx = scan_part(
-                    name, model, tmp, camera, meniscus, from_above=above, refine_mm=args.refine_mm
+                    name, model, tmp, camera, meniscus, maps=maps, from_above=above, refine_mm=args.refine_mm
                 )
                 extra = refinement_frames(tmp, name, model, from_above=above)
-                rows.append((model, name + (" *" if held else ""), ea, p99, mx, extra))
+                area, tallest = spurious(surfaces.get(name), maps[0])
+                rows.append((model, name + (" *" if held else ""), ea, p99, mx, area, extra))
                 print(
                     f"  {name:<12} Ea {ea:.4f} mm, interior p99 {p99:.3f} mm, max {mx:.3f} mm, "
+                    f"beyond the part {area:.1f} mm² (up to {tallest:.2f} mm), "
                     f"{extra} refinement frames ({time.perf_counter() - t0:.0f} s)",
                     flush=True,
                 )
@@ -864,10 +869,10 @@ def main():
         else "every part scanned from the first level above the top, as the daemon does"
     )
     print(f"\nsummary (mm; * held out; {start})")
-    print(f"  {'model':<9} {'part':<15} {'Ea':>7} {'p99 in':>7} {'max':>7} {'refined':>7}")
-    for model, name, ea, p99, mx, extra in rows:
+    print(f"  {'model':<9} {'part':<15} {'Ea':>7} {'p99 in':>7} {'max':>7} {'beyond':>7} {'refined':>7}")
+    for model, name, ea, p99, mx, area, extra in rows:
         flag = "" if ea <= 0.05 else "  > 0.05"
-        print(f"  {model:<9} {name:<15} {ea:7.4f} {p99:7.3f} {mx:7.3f} {extra:7d}{flag}")
+        print(f"  {model:<9} {name:<15} {ea:7.4f} {p99:7.3f} {mx:7.3f} {area:7.1f} {extra:7d}{flag}")
 
 
 if __name__ == "__main__":

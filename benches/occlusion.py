@@ -151,20 +151,10 @@ from appliance.sim.scanrender import refine_scan, render_scan
 from appliance.vision.refine import RESOLUTION_MM
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from outline import outside_map, spurious
 from seed_table import calibrated_camera, calibrated_meniscus, use_camera
 
 PARTS = ("stepped-block", "blade")
-
-
-def outside_map(surface, hm, cell_mm=0.05):
-    """mm² of the part beyond the map's grid: no cell there, so no error counted either, and a
-    program milled from the map takes it away."""
-    xmin, xmax, ymin, ymax = surface.bounds
-    x = np.arange(xmin - 1.0, xmax + 1.0, cell_mm)
-    y = np.arange(ymin - 1.0, ymax + 1.0, cell_mm)
-    X, Y = np.meshgrid(x, y)
-    beyond = (X < hm.x[0]) | (X > hm.x[-1]) | (Y < hm.y[0]) | (Y > hm.y[-1])
-    return float((surface.inside(X, Y) & beyond).sum() * cell_mm**2)
 
 
 def tail(surface, hm):
@@ -220,11 +210,13 @@ def run(part, effects, keep: Path, grid_n, step, refine_mm):
     t2 = time.perf_counter()
     ea, p99, mx, holes = tail(surface, job.heightmap)
     beyond = outside_map(surface, job.heightmap)
+    extra, tallest = spurious(surface, job.heightmap)
     occ = job.diagnostics.get("fit", {}).get("occluded_nodes", 0)
     frames = len(json.loads((folder / "scan.json").read_text())["frames"])
     print(
         f"  {part:<14} {effects:<8} Ea {ea:7.4f}  p99 {p99:7.3f}  max {mx:7.3f} mm  holes {holes:3d}  "
-        f"beyond the map {beyond:5.1f} mm²  occluded nodes {occ:5d}  frames {frames:3d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)",
+        f"beyond the map {beyond:5.1f} mm²  "
+        f"beyond the part {extra:5.1f} mm² (up to {tallest:.2f} mm)  occluded nodes {occ:5d}  frames {frames:3d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)",
         flush=True,
     )
     return ea
