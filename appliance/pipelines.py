@@ -197,6 +197,7 @@ def run_inkslice(
                     "displacement",
                     "silhouette_points",
                     "occluded_nodes",
+                    "edge_cells",
                     "held_pools",
                     "held_notes",
                 )

@@ -123,6 +123,18 @@ tank. New renders, physics, Ea / p99 / max:
         stepped block 0.3037 / 2.422 / 6.706 (50 holes), blade 0.1688 / 3.944 / 4.339
     nodes under a frame's ink held below its flat surface (98630f8)
         stepped block 0.3023 / 2.422 / 6.706 (50 holes), blade 0.1291 / 1.672 / 4.339 (0 holes)
+    the lowest frame's second look (553ada4): stepped block 0.2990 / 2.518 / 6.700 (50 holes)
+
+7 December 2026 (session 38), the same renders. The 50 holes were nodes inside the true outline
+on the grid's edge rows (the rims put back reach to mid-wall on the hidden 85 deg walls), and a
+cell with a NaN corner is the base to the CAM: `--mill` (the finishing program milled against
+the true part, benches/uncertainty.py) found a 7.593 mm gouge at (77.0, 11.2), p99 3.346 mm.
+Nodes within half a cell beyond the lowest frame's outline now hold the part's edge
+(surface/edges.py): stepped block 0.3842 / 2.518 / 6.700 (1 hole; 165 mm² beyond the map), the
+gouge p99 2.821 mm, the deepest 6.592 mm at (46.6, 61.4), where one cell spans the 18 mm tier's
+corner. The edge rows now count in Ea, 0.176 mm of it: on the three hidden walls they stand
+2.5-3.7 mm over mid-wall, on the side that leaves material (marked wall, uncertain by at least 1.5-2.8 mm). Blade
+unchanged, 0.1291 (gouge 3.880 mm on its hidden flank, p99 0.713).
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
@@ -190,7 +202,7 @@ def daemon_levels(surface, effects, step):
     return sculpture_levels(surface, step, below, True, above)
 
 
-def run(part, effects, keep: Path, grid_n, step, refine_mm):
+def run(part, effects, keep: Path, grid_n, step, refine_mm, milled=False):
     surface = surfaces.get(part)
     folder = keep / (f"{part}-{effects}-{step:g}" + ("-refined" if refine_mm > 0 else "-plan"))
     t0 = time.perf_counter()
@@ -219,6 +231,15 @@ def run(part, effects, keep: Path, grid_n, step, refine_mm):
         f"beyond the part {extra:5.1f} mm² (up to {tallest:.2f} mm)  occluded nodes {occ:5d}  frames {frames:3d}  (render {t1 - t0:.0f} s, process {t2 - t1:.0f} s)",
         flush=True,
     )
+    if milled:
+        from uncertainty import mill
+
+        rep, gouge_p99, _, _, said, _ = mill(surface, job, 0.2)
+        print(
+            f"  {'':<14} {'':<8} milled against the true part: gouge {rep.gouge:.3f} mm at "
+            f"({rep.gouge_at[0]:.1f}, {rep.gouge_at[1]:.1f}) [{said}], p99 {gouge_p99:.3f} mm",
+            flush=True,
+        )
     return ea
 
 
@@ -235,6 +256,11 @@ def main():
         help="bisect the steps in which a face came out at once to this, as the runner does (0: the plan's levels only)",
     )
     ap.add_argument("--keep", help="folder to keep rendered scans and calibrations in (and reuse)")
+    ap.add_argument(
+        "--mill",
+        action="store_true",
+        help="mill the finishing program against the true part (benches/uncertainty.py; minutes a part)",
+    )
     a = ap.parse_args()
     print(
         f"occluded walls, scanned as the daemon does ({a.step:g} mm steps from an empty frame above the top, "
@@ -245,7 +271,7 @@ def main():
         keep.mkdir(parents=True, exist_ok=True)
         for effects in a.effects.split(","):
             for part in a.parts.split(","):
-                run(part, effects, keep, a.grid, a.step, a.refine_mm)
+                run(part, effects, keep, a.grid, a.step, a.refine_mm, a.mill)
 
 
 if __name__ == "__main__":

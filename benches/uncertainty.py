@@ -111,10 +111,13 @@ def honesty(surface, hm):
     return float((big & marked).sum()) / max(int(big.sum()), 1), int(big.sum()), float(np.mean(marked))
 
 
-def true_heightmap(surface, hm, spacing=0.25):
-    """The part as it is, on a fine lattice over the reconstructed map's extent."""
-    x = np.arange(hm.x[0], hm.x[-1] + 1e-9, spacing)
-    y = np.arange(hm.y[0], hm.y[-1] + 1e-9, spacing)
+def true_heightmap(surface, hm, spacing=0.25, margin=2.0):
+    """The part as it is, on a fine lattice over the reconstructed map's extent and the part's
+    own, with a margin: a part that reaches beyond the map is milled too (the stepped block's
+    foot lay up to 0.7 mm beyond it, and nothing measured what the program did there)."""
+    xmin, xmax, ymin, ymax = surface.bounds
+    x = np.arange(min(hm.x[0], xmin) - margin, max(hm.x[-1], xmax) + margin + 1e-9, spacing)
+    y = np.arange(min(hm.y[0], ymin) - margin, max(hm.y[-1], ymax) + margin + 1e-9, spacing)
     X, Y = np.meshgrid(x, y)
     return HeightMap(x, y, np.where(surface.inside(X, Y), surface.height(X, Y), np.nan))
 

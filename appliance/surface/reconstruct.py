@@ -40,6 +40,7 @@ from ..errors import SettingError
 from . import seed as seed_methods
 from .corrections import above_base, corrected_levels
 from .dewetted import depression_depth
+from .edges import beyond_outline, with_edge_nodes
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
@@ -51,7 +52,7 @@ from .pools import cover_held_pools, held_pools
 from .registration import registered
 from .silhouettes import occluded_nodes
 from .slices import check_waterlines, outline_bounds
-from .uncertainty import OCCLUDED, CellEvidence, node_uncertainty
+from .uncertainty import OCCLUDED, WALL, CellEvidence, node_uncertainty
 from .uncertainty import to_output as uncertainty_to_output
 
 METHODS = ("fit",) + seed_methods.METHODS
@@ -247,6 +248,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
     z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
     z = held(z, known)
+    reach = z  # the fit beyond the footprint too: where the part's edge nodes come from
     z = np.where(footprint, z, np.nan)
     exposed = np.stack([exposed_mask(lat, s) for s in slices])
     # the first-exposure heights are of the contact lines; with a meniscus the fit is of the top
@@ -294,6 +296,9 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
         }
     )
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
+    edge = beyond_outline([s for s in slices if not s.empty], xo, yo, fo)
+    zo, so, srco = with_edge_nodes(zo, so, srco, edge, WALL, _to_output(lat, reach, r, xo, yo))
+    diag["edge_cells"] = int(edge.sum())
     hm = HeightMap(xo, yo, zo, so, srco)
     # a pocket that held ink: its floor never showed (pools.py)
     pools = held_pools([(t.level, s.loops) for s, t in zip(seen, corrected)], camera)

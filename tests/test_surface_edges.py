@@ -1,0 +1,49 @@
+"""The part's edge on the output grid: a finishing program keeps the cells its outline crosses."""
+
+import numpy as np
+
+from appliance.cam.sampling import Sampler
+from appliance.sim.ideal import ideal_waterlines
+from appliance.sim.surfaces import Surface, Tier, rect_sdf
+from appliance.surface.reconstruct import GridSpec, reconstruct
+from appliance.surface.uncertainty import WALL
+
+# a 10.5 mm block (between two levels: the mid-bracket is exact) whose walls fall 0.3 mm past a node of the 2 mm grid below (x = 20, y = 20)
+# and 0.3 mm past the last node inside it on the far sides (x = 60, y = 50)
+BLOCK = Surface(
+    "block",
+    "flat block",
+    (20.3, 60.3, 20.3, 50.3),
+    (Tier(rect_sdf(20.3, 60.3, 20.3, 50.3), lambda x, y: 10.5 + 0 * x),),
+)
+
+
+def _block_map():
+    lines = ideal_waterlines(BLOCK, np.arange(11.0, 0.0, -1.0), 0.1)
+    return reconstruct(lines, GridSpec((0.0, 80.0, 0.0, 70.0), n=(41, 36))).heightmap
+
+
+def test_a_node_within_half_a_cell_past_the_outline_holds_the_edge():
+    hm = _block_map()
+    X, Y = hm.grid()
+    col = {x: int(np.argmin(abs(hm.x - x))) for x in (18.0, 20.0, 60.0, 62.0)}
+    row = int(np.argmin(abs(hm.y - 36.0)))
+    # x = 20 lies 0.3 mm outside the wall: it holds the top, on the wall, marked uncertain
+    assert abs(hm.z[row, col[20.0]] - 10.5) < 0.2, hm.z[row, col[20.0]]
+    assert hm.source[row, col[20.0]] == WALL and hm.sigma[row, col[20.0]] > 1.0
+    # 2.3 mm and 1.7 mm outside (more than half a cell): off the part, as before
+    assert np.isnan(hm.z[row, col[18.0]]) and np.isnan(hm.z[row, col[62.0]])
+    assert abs(hm.z[row, col[60.0]] - 10.5) < 0.2
+    # nothing more than half a cell from the block has a height
+    far = (np.maximum(np.maximum(20.3 - X, X - 60.3), np.maximum(20.3 - Y, Y - 50.3))) > 1.0
+    assert not np.isfinite(hm.z[far]).any()
+
+
+def test_the_program_s_surface_keeps_the_part_out_to_its_outline():
+    # the CAM mills a cell as part only when all its corners have a height: without the edge
+    # nodes, the strip from x = 20.3 to 22 of the block was the base, a 10 mm gouge
+    s = Sampler(_block_map())
+    inside_edge = s.z(np.array([20.5, 21.5, 40.0]), np.array([36.0, 36.0, 20.6]))
+    assert np.all(np.abs(inside_edge - 10.5) < 0.2), inside_edge
+    # and past the outline by more than a cell the cutter goes down to the base
+    assert s.z(np.array([17.0]), np.array([36.0]))[0] == 0.0
