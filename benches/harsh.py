@@ -338,6 +338,18 @@ all over: its upper levels solved a little lower), twin-peaks 0.0226 0.085 0.275
 0.282; held out crater 0.0365 0.198 0.241 -> 0.0365 0.198 0.231; sample3, sample4, plateau, ring
 and steep-front the same to the digit. Honest share: tuned 97.5 % of 1960 -> 97.5 % of 1964, held
 out 92.2 % of 102 -> 96.0 % of 99. Over the targets: sample4 (all three).
+(z) Session 38 (7 December 2026): the whole bench on fresh renders, the ink now falling away from
+a camera fixed to the tank (main ed9a700; meniscus commissioned 2.506 mm / 0.17 deg / 0.98),
+Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
+    sample1    0.0116 0.041 0.187  83% of 6       sample2    0.0114 0.024 0.057   -  of 0
+    sample3    0.0162 0.037 0.478 100% of 49      sample4    0.1842 0.319 1.754 100% of 1457
+    twin-peaks 0.0202 0.085 0.272  42% of 19      plateau    0.0356 0.201 0.278  86% of 105
+    ring       0.0370 0.182 0.449 100% of 157
+  held out: crater 0.0370 0.202 0.223 100% of 98, steep-front 0.0111 0.067 0.137 0% of 3.
+  Honest share: tuned 98.5 % of 1793, held out 97.0 % of 101. Over the targets: sample4 (all
+  three), plateau's and crater's p99 by 0.001 and 0.002 mm. Session 38's edge nodes
+  (surface/edges.py) leave all nine the same to the digit (no part here had a hole inside its
+  outline).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
