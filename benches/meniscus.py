@@ -686,6 +686,13 @@ reaching out to where the ray over a hidden rim meets the ink (the part's foot i
 occlusion bench's stepped block 0.3356 -> 0.2832 with none of its part beyond the grid (157.6 mm²
 before), but that ray is 6 mm out on sample 3's 30 mm walls and the coarser grid cost harsh sample 3 0.0429 / 0.105 / 0.480
 -> 0.0699 / 0.148 / 1.174 and harsh sample 1 0.0153 -> 0.0234.
+Session 38 (7 December 2026), second ink, renders with the ink falling under the camera (made in
+session 37), Ea / interior p99 / max mm: sample1 0.0064, sample2 0.0129, sample3 0.0282, sample4
+0.0494, crater 0.0204, twin-peaks 0.0208, steep-front 0.0262, plateau 0.0382, ring 0.0481, steps
+0.3287, blade 0.1199, stepped block 0.3225 -> 0.4257 / 3.764 / 5.986: the nodes within half a cell
+beyond the outline now hold the part's edge (surface/edges.py), and its grid's edge rows on the
+hidden walls, holes before, count. The rest the same to the digit; none has material more than a
+node beyond its outline (benches/outline.py).
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
