@@ -18,8 +18,8 @@ BLOCK = Surface(
 )
 
 
-def _block_map():
-    lines = ideal_waterlines(BLOCK, np.arange(11.0, 0.0, -1.0), 0.1)
+def _block_map(lowest=1.0):
+    lines = ideal_waterlines(BLOCK, np.arange(11.0, lowest - 0.5, -1.0), 0.1)
     return reconstruct(lines, GridSpec((0.0, 80.0, 0.0, 70.0), n=(41, 36))).heightmap
 
 
@@ -47,3 +47,12 @@ def test_the_program_s_surface_keeps_the_part_out_to_its_outline():
     assert np.all(np.abs(inside_edge - 10.5) < 0.2), inside_edge
     # and past the outline by more than a cell the cutter goes down to the base
     assert s.z(np.array([17.0]), np.array([36.0]))[0] == 0.0
+
+
+def test_a_scan_stopped_above_the_base_keeps_the_edge_where_its_lowest_frame_ran_along_a_wall():
+    # scanned down to 6 mm only, as the dissertation scanned sample 3's 45 mm sides to 24 mm:
+    # the lowest waterline runs along the walls, which go on straight down
+    hm = _block_map(lowest=6.0)
+    row = int(np.argmin(abs(hm.y - 36.0)))
+    at_20 = int(np.argmin(abs(hm.x - 20.0)))
+    assert abs(hm.z[row, at_20] - 10.5) < 0.2, hm.z[row, at_20]
