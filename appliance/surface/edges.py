@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .lattice import fill_nearest
-from .slices import Slice, polyline_distance
+from .slices import Slice, level_step, polyline_distance
 
 
 def beyond_outline(seen: list[Slice], xo, yo, on: np.ndarray) -> np.ndarray:
@@ -37,9 +37,7 @@ def beyond_outline(seen: list[Slice], xo, yo, on: np.ndarray) -> np.ndarray:
     if not seen or on.all() or xo.size < 2 or yo.size < 2:
         return near
     lowest = seen[-1]
-    levels = np.array([s.level for s in seen])
-    step = float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
-    to_base = lowest.level <= max(step, 0.0) + 1e-9
+    to_base = lowest.level <= max(level_step(seen), 0.0) + 1e-9
     half = 0.5 * max(abs(xo[1] - xo[0]), abs(yo[1] - yo[0]))
     X, Y = np.meshgrid(xo, yo)
     off = ~on
@@ -49,16 +47,15 @@ def beyond_outline(seen: list[Slice], xo, yo, on: np.ndarray) -> np.ndarray:
     return near
 
 
-def with_edge_nodes(z, sigma, source, edge: np.ndarray, wall: int, fit=None):
+def with_edge_nodes(z, sigma, source, edge: np.ndarray, wall: int, fit: np.ndarray):
     """z, sigma and source with the `edge` nodes on the part: `fit` there (the fit continued
     past the footprint, on the output grid; NaN where it did not reach) held between the base
     and the nearest node's height, on the wall, uncertain by that height spread over the cell
     (z / sqrt(12))."""
     if not edge.any() or not np.isfinite(z).any():
         return z, sigma, source
-    level = fill_nearest(z)
-    if fit is not None:
-        level = np.where(np.isfinite(fit), np.clip(fit, 0.0, level), level)
+    nearest = fill_nearest(z)
+    level = np.where(np.isfinite(fit), np.clip(fit, 0.0, nearest), nearest)
     z = np.where(edge, np.maximum(level, 0.0), z)
     sigma = np.where(edge, np.hypot(fill_nearest(sigma), z / math.sqrt(12.0)), sigma)
     source = np.where(edge, wall, source).astype(source.dtype)

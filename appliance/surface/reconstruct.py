@@ -51,7 +51,7 @@ from .perspective import Perspective, mark_walls, on_fallen_ink
 from .pools import cover_held_pools, held_pools
 from .registration import registered
 from .silhouettes import occluded_nodes
-from .slices import check_waterlines, outline_bounds
+from .slices import check_waterlines, level_step, outline_bounds
 from .uncertainty import OCCLUDED, WALL, CellEvidence, node_uncertainty
 from .uncertainty import to_output as uncertainty_to_output
 
@@ -297,7 +297,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     )
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
     edge = beyond_outline([s for s in slices if not s.empty], xo, yo, fo)
-    zo, so, srco = with_edge_nodes(zo, so, srco, edge, WALL, _to_output(lat, reach, r, xo, yo))
+    if edge.any():  # the fit continued out is resampled only for a scan that has them
+        zo, so, srco = with_edge_nodes(zo, so, srco, edge, WALL, _to_output(lat, reach, r, xo, yo))
     diag["edge_cells"] = int(edge.sum())
     hm = HeightMap(xo, yo, zo, so, srco)
     # a pocket that held ink: its floor never showed (pools.py)
@@ -317,8 +318,7 @@ def _occluded_cells(src, sig, occluded, slices):
     seen, so it is known to within a level step (uniform over it: step / sqrt(12))."""
     if not isinstance(occluded, np.ndarray) or occluded.shape != src.shape or not occluded.any():
         return src, sig
-    levels = np.array([s.level for s in slices])
-    step = float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
+    step = level_step(slices)
     on = occluded & (src >= 0)
     src = np.where(on, OCCLUDED, src).astype(np.int8)
     sig = np.where(on, np.maximum(np.nan_to_num(sig), step / math.sqrt(12.0)), sig)

@@ -272,6 +272,12 @@ def _segments_at(sl: Slice, q: np.ndarray, i: np.ndarray):
         yield abx, aby, aqx, aqy, L2, t, np.column_stack([fx, fy]), np.hypot(qx - fx, qy - fy)
 
 
+def level_step(slices: list[Slice]) -> float:
+    """The scan's usual level step: the median drop from one frame to the next (0 for one)."""
+    levels = np.array([s.level for s in slices], float)
+    return float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
+
+
 def outline_bounds(slices: list[Slice]):
     """(xmin, xmax, ymin, ymax) of the part's outline: the lowest frame's waterline and
     every frame's wall points.

@@ -54,7 +54,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .lattice import Lattice, bilinear, fill_nearest
-from .slices import polyline_distance
+from .slices import level_step, polyline_distance
 
 # the sources, in the order of their codes (HeightMap.source holds the codes)
 SOURCES = ("seen", "interpolated", "extrapolated", "occluded", "wall", "clamped", "filled", "held")
@@ -91,9 +91,7 @@ class CellEvidence:
 
 def _levels_and_steps(slices):
     lv = np.array([s.level for s in slices], float)
-    steps = -np.diff(lv)
-    step = float(np.median(steps)) if steps.size else 1.0
-    return lv, step
+    return lv, level_step(slices) if lv.size > 1 else 1.0
 
 
 def _frames_disagree(ev: CellEvidence, lv):
