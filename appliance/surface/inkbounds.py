@@ -19,10 +19,8 @@ import numpy as np
 
 from ..forks import in_parts
 from .lattice import Lattice, exposed_mask
+from .rimrays import SEEN_TOL_MM, under_rim_rays
 from .slices import Slice, polyline_distance
-
-SEEN_TOL_MM = 0.05  # a node counts as in the ink or out of it this far from the waterline (a pixel)
-
 
 FAR_NODES = 2  # lattice spacings from a frame's waterline: a node's side of it is sure
 
@@ -67,6 +65,7 @@ def node_bounds(
     footprint: np.ndarray,
     rise_max: float = 0.0,
     sink: float = 0.0,
+    camera=None,
 ) -> NodeBounds:
     """Floor and ceiling per node of the footprint. `seen`: the slices as observed;
     `corrected`: the same with the rims put back and at their true levels; `first`: the
@@ -79,13 +78,16 @@ def node_bounds(
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
     levels = np.array([s.level for s in corrected])
 
+    reach = FAR_NODES * max(lat.hx, lat.hy)
+
     def bounds(a, b):  # of nodes a..b: each node's sweep down the frames is its own
         first_seen, ceiling, ray = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
-        return first_seen, ceiling, ray, _floor(lat, corrected, levels, q[a:b], idx[a:b])
+        rays = under_rim_rays(q[a:b], seen, corrected, camera, reach)
+        return first_seen, ceiling, ray, _floor(lat, corrected, levels, q[a:b], idx[a:b]), rays
 
     # in halves of the nodes on the cores where forking is allowed (0.55 s of the demo
     # scan's 2.3 s fit in one)
-    first_seen, ceiling, ray, floor = in_parts(bounds, np.ones(len(q)), _joined_columns)
+    first_seen, ceiling, ray, floor, rays = in_parts(bounds, np.ones(len(q)), _joined_columns)
     floor = floor - sink
     out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf, False)]
     out[1].ravel()[idx] = floor
@@ -96,8 +98,12 @@ def node_bounds(
     # on harsh sample 1's dome cut two nodes 1.2 mm): that one keeps the climb
     hidden = first_seen < first.ravel()[idx]
     out[0].ravel()[idx] = hidden
-    out[2].ravel()[idx] = ceiling + np.where(ray & hidden, 0.0, rise_max)
-    out[3].ravel()[idx] = ray
+    ceiling = ceiling + np.where(ray & hidden, 0.0, rise_max)
+    # and a node a face hid stands under every ray over its rim, wherever the ink landed
+    # beyond (the frames' own levels bound it only as far as the ink might climb)
+    under = hidden & (rays < ceiling)
+    out[2].ravel()[idx] = np.where(under, rays, ceiling)
+    out[3].ravel()[idx] = ray | under
     return _without_clashes(NodeBounds(*out))
 
 

@@ -238,7 +238,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     if opt.meniscus is not None:
         hi = np.minimum(hi, under_flat_ink(lat, first, slices, rise_max, opt.meniscus.capillary_length_mm))
     # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
-    known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink)
+    known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink, camera)
     hi = np.where(known.hidden, known.ceiling, hi)
     z = np.where(np.isfinite(z_fe) & ~known.hidden, z, np.clip(z, lo, hi))
     # a face that came out at once lies between its two levels, whatever the fit says
