@@ -136,6 +136,18 @@ corner. The edge rows now count in Ea, 0.176 mm of it: on the three hidden walls
 2.5-3.7 mm over mid-wall, on the side that leaves material (marked wall, uncertain by at least 1.5-2.8 mm). Blade
 unchanged, 0.1291 (gouge 3.880 mm on its hidden flank, p99 0.713).
 
+7 December 2026 (session 39), the same renders: a hidden node is held under every frame's ray
+over its rim, the highest of them (surface/rimrays.py), where it was held between the two frames
+it was first hidden in, or under the level that first showed ink plus the ink's whole climb.
+    stepped block 0.3842 / 2.518 / 6.700 -> 0.3719 / 2.390 / 3.369 (1 hole); milled: gouge 6.592
+        -> 6.619 mm at (46.6, 61.4), p99 2.821 -> 2.821, most material left 7.958 mm
+    blade 0.1291 / 1.672 / 4.339 -> 0.1175 / 1.447 / 4.282; milled: gouge 3.880 -> 3.854 mm at
+        (73.4, 30.0), p99 0.713 -> 0.837, most material left 5.525 -> 4.199 mm
+The blade's cells more than 0.5 mm under the true part: 22 -> 23; its hidden flank stands nearer
+the truth, yet the milled gouge's p99 rises (not taken apart). The lowest of the frames' rays
+instead gave 0.1197, with 40 cells more than 0.5 mm under the part. Both targets (0.3, 0.1) are
+still missed.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
