@@ -36,13 +36,14 @@ def error_map(
 def uncertainty_map(hm, threshold_mm: float, title: str, most: int = 8, size: int = 480) -> bytes:
     """Uncertainty per cell (the colour bar tops at 3 x the threshold, so everything above
     the threshold is in the upper two thirds), low-confidence regions boxed and numbered."""
-    from .surface.uncertainty import low_confidence_regions
+    from .surface.confidence import low_confidence_regions
 
     u = np.where(hm.on_part, hm.sigma, np.nan)
     canvas, to_px, _ = _field_picture(
         u, hm.x, hm.y, title + f" (boxes: over {threshold_mm:g} mm)", 3 * threshold_mm, "1-sigma, mm", size
     )
-    for i, r in enumerate(low_confidence_regions(hm, threshold_mm)[:most], start=1):
+    inside = [r for r in low_confidence_regions(hm, threshold_mm) if not r.edge]  # the edge: all round
+    for i, r in enumerate(inside[:most], start=1):
         p0, p1 = to_px(r.xmin, r.ymax), to_px(r.xmax, r.ymin)
         cv2.rectangle(canvas, p0, p1, (255, 255, 255), 2)
         cv2.rectangle(canvas, p0, p1, (0, 0, 0), 1)

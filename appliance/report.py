@@ -66,7 +66,8 @@ UNCERTAINTY_PNG = "uncertainty.png"
 
 def uncertainty_summary(job: Job, threshold_mm=None) -> dict | None:
     """Where the written height map is sure and where not: sources, low-confidence regions."""
-    from .surface.uncertainty import DEFAULT_UNCERTAIN_MM, low_confidence_regions, source_summary
+    from .surface.confidence import low_confidence_regions, source_summary
+    from .surface.uncertainty import DEFAULT_UNCERTAIN_MM
 
     hm = job.heightmap
     if hm.sigma is None:
@@ -88,6 +89,7 @@ def uncertainty_summary(job: Job, threshold_mm=None) -> dict | None:
                 "share": r.share,
                 "worst_mm": r.worst_mm,
                 "source": r.source,
+                "edge": r.edge,
             }
             for r in regions
         ],
@@ -108,23 +110,31 @@ def uncertainty_markdown(job: Job, most=8) -> list[str]:
     if not u["regions"]:
         out += [f"Every cell is within {u['threshold_mm']:g} mm.", ""]
         return out
+    inside = [r for r in u["regions"] if not r.get("edge")]
+    at_edge = " and at its edge" if len(inside) < len(u["regions"]) else ""
     out += [
         f"Low confidence (uncertainty over {u['threshold_mm']:g} mm): {100 * u['low_confidence_share']:.1f} % "
-        f"of the part in {len(u['regions'])} region(s), largest first (the G-code header lists them too):",
+        f"of the part in {len(inside)} region(s){at_edge}, largest first (the G-code header lists them too):",
         "",
         "| region | x mm | y mm | share % | up to mm | mostly |",
         "|---|---|---|---|---|---|",
     ]
-    for i, r in enumerate(u["regions"][:most], start=1):
+    for i, r in enumerate(inside[:most], start=1):
         out.append(
             f"| {i} | {r['xmin']:.1f} .. {r['xmax']:.1f} | {r['ymin']:.1f} .. {r['ymax']:.1f} "
             f"| {100 * r['share']:.1f} | {r['worst_mm']:.2f} | {r['source']} |"
         )
-    if len(u["regions"]) > most:
+    if len(inside) > most:
         out.append(
-            f"| ... | {len(u['regions']) - most} smaller regions | | "
-            f"{100 * sum(r['share'] for r in u['regions'][most:]):.1f} | | |"
+            f"| ... | {len(inside) - most} smaller regions | | "
+            f"{100 * sum(r['share'] for r in inside[most:]):.1f} | | |"
         )
+    for r in u["regions"]:
+        if r.get("edge"):  # the outermost cells all round: the outline is known to a cell there
+            out.append(
+                f"| edge | all round | | {100 * r['share']:.1f} | {r['worst_mm']:.2f} | "
+                "the part's outline, known to a cell |"
+            )
     return out + [""]
 
 

@@ -4,6 +4,7 @@ and the G-code header; old x,y,z files keep working."""
 import os
 import re
 import subprocess
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,9 +16,11 @@ from appliance.cam.jobs import finishing_gcode
 from appliance.cam.zigzag import FinishSettings
 from appliance.cli import main
 from appliance.outputs import read_heightmap_csv, write_heightmap_csv
+from appliance.report import uncertainty_markdown
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, disc_sdf
 from appliance.surface.base import stand_on_base
+from appliance.surface.confidence import header_notes, low_confidence_regions
 from appliance.surface.heightmap import HeightMap
 from appliance.surface.reconstruct import GridSpec, reconstruct
 from appliance.surface.uncertainty import (
@@ -25,8 +28,6 @@ from appliance.surface.uncertainty import (
     EXTRAPOLATED,
     SOURCES,
     _inradius,
-    header_notes,
-    low_confidence_regions,
     source_code,
 )
 
@@ -189,6 +190,33 @@ def test_the_gcode_header_lists_the_low_confidence_region_and_stays_valid(tmp_pa
             timeout=120,
         )
         assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_the_part_s_edge_is_told_apart_from_the_regions_inside():
+    """Edge nodes stand anywhere from the base to the wall's height (up to several mm
+    uncertain). Joined through them, every unsure patch touching the edge made one region
+    of the whole part; the header names the patch, and the edge on a line of its own."""
+    hm, patch = _unsure_block()
+    X, Y = hm.grid()
+    patch |= (X >= 12) & (X <= 19) & (Y >= 4) & (Y <= 7)  # out to the cells next to the edge
+    rim = (X == X.min()) | (X == X.max()) | (Y == Y.min()) | (Y == Y.max())
+    hm.sigma = np.where(rim, 2.5, np.where(patch, 0.4, 0.02))
+    found = low_confidence_regions(hm, 0.1)
+    assert [r.edge for r in found] == [False, True]
+    inside, edge = found
+    assert (inside.xmin, inside.xmax, inside.ymin, inside.ymax) == (11.5, 19.5, 3.5, 7.5)
+    assert inside.worst_mm == pytest.approx(0.4) and inside.cells == patch.sum()
+    assert edge.cells == rim.sum() and edge.worst_mm == pytest.approx(2.5)
+    head = header_notes(hm, 0.1)
+    assert "in 1 region(s) and at its edge" in head[0]
+    assert head[1].startswith("low confidence 1: X 11.5..19.5 Y 3.5..7.5 mm") and "up to 0.40 mm" in head[1]
+    assert head[2].startswith("low confidence: the part's edge, 72 cells round its outline")
+    assert "up to 2.50 mm" in head[2] and len(head) == 3
+    # the report's table: the patch numbered, the edge as its own last row
+    md = "\n".join(uncertainty_markdown(SimpleNamespace(heightmap=hm, diagnostics={})))
+    assert "in 1 region(s) and at its edge" in md
+    assert "| 1 | 11.5 .. 19.5 | 3.5 .. 7.5 |" in md
+    assert re.search(r"\| edge \| all round \| \| [0-9.]+ \| 2\.50 \|", md)
 
 
 def test_a_sure_map_says_so_and_a_map_without_uncertainty_says_nothing():

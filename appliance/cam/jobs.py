@@ -13,9 +13,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InkSliceError, SettingError, check_mm
+from ..surface.confidence import header_notes
 from ..surface.heightmap import HeightMap
 from ..surface.pools import held_notes
-from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM, header_notes
+from ..surface.uncertainty import DEFAULT_UNCERTAIN_MM
 from .cutters import Cutter, parse_cutter
 from .feeds import DEFAULT_MATERIAL, conditions
 from .gcodeparse import parse_gcode

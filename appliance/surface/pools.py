@@ -33,10 +33,11 @@ import cv2
 import numpy as np
 
 from ..vision.types import signed_area
+from .confidence import regions
 from .heightmap import HeightMap
 from .lattice import Lattice, inside_loops
 from .perspective import Perspective
-from .uncertainty import HELD, regions
+from .uncertainty import HELD
 
 GROWTH_SHARE = 0.5  # of the growth a shore standing above the ink would show, the least that counts
 MIN_DROP_MM = 2.0  # a hole followed over less than this drop of the ink says nothing either way

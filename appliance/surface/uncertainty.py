@@ -40,8 +40,8 @@ from what limits each:
   before the ink can climb the rise the model gives it (a crest, a plateau's rim).
 
 `DEFAULT_UNCERTAIN_MM` is the threshold above which a cell counts as low
-confidence: the G-code header lists such regions (`low_confidence_regions`),
-and the report names them.
+confidence: the G-code header lists such regions and the report names them
+(`confidence.py`).
 """
 
 from __future__ import annotations
@@ -336,103 +336,3 @@ def to_output(lat, src, u, r, xo, yo):
     so = src[jj, ii]
     uo = ndimage.map_coordinates(fill_nearest(u), [FJ, FI], order=1, mode="nearest")
     return so, np.maximum(uo, np.where(np.isfinite(u[jj, ii]), u[jj, ii], 0.0))
-
-
-# -- low-confidence regions --------------------------------------------------------------
-
-
-@dataclass
-class Region:
-    xmin: float
-    xmax: float
-    ymin: float
-    ymax: float
-    cells: int
-    share: float  # of the part's cells
-    worst_mm: float
-    source: str  # the commonest source in it
-    z_mm: float  # its median height
-
-    def describe(self):
-        return (
-            f"X {self.xmin:.1f}..{self.xmax:.1f} Y {self.ymin:.1f}..{self.ymax:.1f} mm, "
-            f"{100 * self.share:.1f} % of the part, up to {self.worst_mm:.2f} mm, mostly {self.source}"
-        )
-
-
-def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
-    """Connected regions of cells whose uncertainty exceeds the threshold, largest first
-    (8-connected; the bounding boxes are of cell centres +- half a cell). [] when the
-    map carries no uncertainty."""
-    if hm.sigma is None:
-        return []
-    return regions(hm, hm.on_part & np.isfinite(hm.sigma) & (hm.sigma > threshold_mm))
-
-
-def regions(hm, mask):
-    """The connected regions of `mask` on hm's cells (8-connected), largest first."""
-    total = int(hm.on_part.sum())
-    if not mask.any() or total == 0:
-        return []
-    lab, _ = ndimage.label(mask, structure=np.ones((3, 3)))
-    dx, dy = hm.spacing
-    dx = dx if np.isfinite(dx) else 0.0
-    dy = dy if np.isfinite(dy) else 0.0
-    out = []
-    for k, sl in enumerate(ndimage.find_objects(lab), start=1):
-        m = lab[sl] == k
-        src = None if hm.source is None else hm.source[sl][m]
-        common = "unknown"
-        if src is not None and (src >= 0).any():
-            common = SOURCES[int(np.bincount(src[src >= 0].astype(int)).argmax())]
-        out.append(
-            Region(
-                float(max(hm.x[sl[1].start] - dx / 2, hm.x[0])),
-                float(min(hm.x[sl[1].stop - 1] + dx / 2, hm.x[-1])),
-                float(max(hm.y[sl[0].start] - dy / 2, hm.y[0])),
-                float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
-                int(m.sum()),
-                float(m.sum()) / total,
-                float(np.max(hm.sigma[sl][m])) if hm.sigma is not None else float("nan"),
-                common,
-                float(np.median(hm.z[sl][m])),
-            )
-        )
-    out.sort(key=lambda r: -r.cells)
-    return out
-
-
-def header_notes(hm, threshold_mm=DEFAULT_UNCERTAIN_MM, most=8):
-    """G-code comment lines naming the low-confidence regions (nothing without an uncertainty)."""
-    if hm.sigma is None:
-        return []
-    regions = low_confidence_regions(hm, threshold_mm)
-    if not regions:
-        return [f"confidence: every cell of the height map within {threshold_mm:g} mm"]
-    share = sum(r.share for r in regions)
-    lines = [
-        f"low confidence: {100 * share:.1f} % of the part in {len(regions)} region(s) "
-        f"with uncertainty over {threshold_mm:g} mm; check these after milling"
-    ]
-    for i, r in enumerate(regions[:most], start=1):
-        lines.append(f"low confidence {i}: {r.describe()}")
-    if len(regions) > most:
-        rest = regions[most:]
-        lines.append(
-            f"low confidence: {len(rest)} smaller region(s), {100 * sum(r.share for r in rest):.1f} % "
-            "of the part"
-        )
-    return lines
-
-
-def source_summary(hm):
-    """{source: share of the part's cells} for the report."""
-    if hm.source is None:
-        return {}
-    on = hm.on_part & (hm.source >= 0)
-    total = int(hm.on_part.sum())
-    return {
-        name: float(np.sum(on & (hm.source == k))) / total
-        for k, name in enumerate(SOURCES)
-        if total and np.any(on & (hm.source == k))
-    }
