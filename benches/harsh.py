@@ -350,6 +350,10 @@ Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
   three), plateau's and crater's p99 by 0.001 and 0.002 mm. Session 38's edge nodes
   (surface/edges.py) leave all nine the same to the digit (no part here had a hole inside its
   outline).
+(za) Session 39 (7 December 2026), (z)'s renders: the rays over hidden rims (surface/rimrays.py)
+  leave all nine the same to the digit (Ea, p99, max). Sample 4's map has 1.8 mm² of material more
+  than a node beyond its outline (1.3 before session 38's edge nodes): a row of nodes 0.34 mm past
+  its y = 55 wall, 13.7-16 mm high; not looked into.
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

@@ -693,6 +693,10 @@ session 37), Ea / interior p99 / max mm: sample1 0.0064, sample2 0.0129, sample3
 beyond the outline now hold the part's edge (surface/edges.py), and its grid's edge rows on the
 hidden walls, holes before, count. The rest the same to the digit; none has material more than a
 node beyond its outline (benches/outline.py).
+Session 39 (7 December 2026), the same renders: a node hidden behind a wall's rim is held under
+the highest of the frames' rays over that rim (surface/rimrays.py): blade 0.1199 / 2.436 / 4.752 ->
+0.1167 / 2.209 / 4.752, steps 0.3287 -> 0.3280, stepped block 0.4257 -> 0.4256; the other nine the
+same to the digit.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
