@@ -78,7 +78,7 @@ def node_bounds(
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
     levels = np.array([s.level for s in corrected])
 
-    reach = FAR_NODES * max(lat.hx, lat.hy)
+    reach = FAR_NODES * max(lat.hx, lat.hy)  # a rim seen this near a node may pass over it
 
     def bounds(a, b):  # of nodes a..b: each node's sweep down the frames is its own
         first_seen, ceiling, ray = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
@@ -99,8 +99,9 @@ def node_bounds(
     hidden = first_seen < first.ravel()[idx]
     out[0].ravel()[idx] = hidden
     ceiling = ceiling + np.where(ray & hidden, 0.0, rise_max)
-    # and a node a face hid stands under every ray over its rim, wherever the ink landed
-    # beyond (the frames' own levels bound it only as far as the ink might climb)
+    # and a node a face hid stands under the ray over its rim, as the frames that saw the
+    # rim's silhouette pass it read that ray (the highest of their readings: rimrays.py),
+    # where the frames' own levels bound it only as far as the ink might climb
     under = hidden & (rays < ceiling)
     out[2].ravel()[idx] = np.where(under, rays, ceiling)
     out[3].ravel()[idx] = ray | under
