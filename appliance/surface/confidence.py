@@ -58,7 +58,8 @@ def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
     inside = regions(hm, unsure & ~rim)
     if not edge.any():
         return inside
-    return inside + [_region(hm, ndimage.find_objects(edge.astype(int))[0], edge, edge=True)]
+    whole = ndimage.find_objects(edge.astype(int))[0]
+    return inside + [_region(hm, whole, edge, int(hm.on_part.sum()), edge=True)]
 
 
 def regions(hm, mask):
@@ -66,13 +67,15 @@ def regions(hm, mask):
     if not mask.any() or not hm.on_part.any():
         return []
     lab, _ = ndimage.label(mask, structure=np.ones((3, 3)))
-    out = [_region(hm, sl, lab == k) for k, sl in enumerate(ndimage.find_objects(lab), start=1)]
+    total = int(hm.on_part.sum())
+    out = [_region(hm, sl, lab == k, total) for k, sl in enumerate(ndimage.find_objects(lab), start=1)]
     out.sort(key=lambda r: -r.cells)
     return out
 
 
-def _region(hm, sl, mask, edge=False) -> Region:
-    """The region of `mask`'s cells within the slices `sl` of hm's grid."""
+def _region(hm, sl, mask, total: int, edge=False) -> Region:
+    """The region of `mask`'s cells within the slices `sl` of hm's grid (`total`: the
+    part's cells)."""
     dx, dy = hm.spacing
     dx = dx if np.isfinite(dx) else 0.0
     dy = dy if np.isfinite(dy) else 0.0
@@ -87,7 +90,7 @@ def _region(hm, sl, mask, edge=False) -> Region:
         float(max(hm.y[sl[0].start] - dy / 2, hm.y[0])),
         float(min(hm.y[sl[0].stop - 1] + dy / 2, hm.y[-1])),
         int(m.sum()),
-        float(m.sum()) / int(hm.on_part.sum()),
+        float(m.sum()) / total,
         float(np.max(hm.sigma[sl][m])) if hm.sigma is not None else float("nan"),
         common,
         float(np.median(hm.z[sl][m])),

@@ -78,16 +78,13 @@ def node_bounds(
     q = np.column_stack([X.ravel()[idx], Y.ravel()[idx]])
     levels = np.array([s.level for s in corrected])
 
-    reach = FAR_NODES * max(lat.hx, lat.hy)  # a rim seen this near a node may pass over it
-
     def bounds(a, b):  # of nodes a..b: each node's sweep down the frames is its own
         first_seen, ceiling, ray = _ceiling(lat, seen, corrected, levels, q[a:b], idx[a:b])
-        rays = under_rim_rays(q[a:b], seen, corrected, camera, reach)
-        return first_seen, ceiling, ray, _floor(lat, corrected, levels, q[a:b], idx[a:b]), rays
+        return first_seen, ceiling, ray, _floor(lat, corrected, levels, q[a:b], idx[a:b])
 
     # in halves of the nodes on the cores where forking is allowed (0.55 s of the demo
     # scan's 2.3 s fit in one)
-    first_seen, ceiling, ray, floor, rays = in_parts(bounds, np.ones(len(q)), _joined_columns)
+    first_seen, ceiling, ray, floor = in_parts(bounds, np.ones(len(q)), _joined_columns)
     floor = floor - sink
     out = [np.full(lat.shape, v) for v in (False, -np.inf, np.inf, False)]
     out[1].ravel()[idx] = floor
@@ -102,7 +99,10 @@ def node_bounds(
     # and a node a face hid stands under the ray over its rim, as the frames that saw the
     # rim's silhouette pass it read that ray (the highest of their readings: rimrays.py),
     # where the frames' own levels bound it only as far as the ink might climb
-    under = hidden & (rays < ceiling)
+    # (a rim seen within FAR_NODES of a node may pass over it; asked of hidden nodes only)
+    rays = np.full(len(q), np.inf)
+    rays[hidden] = under_rim_rays(q[hidden], seen, corrected, camera, FAR_NODES * max(lat.hx, lat.hy))
+    under = rays < ceiling
     out[2].ravel()[idx] = np.where(under, rays, ceiling)
     out[3].ravel()[idx] = ray | under
     return _without_clashes(NodeBounds(*out))

@@ -31,9 +31,8 @@ def under_rim_rays(q: np.ndarray, seen: list[Slice], corrected: list[Slice], cam
     it (inf: none). `seen`: the frames as the camera saw them; `corrected`: the same points
     with the walls' rims put back (Slice.edge marks them); `camera`: the Perspective; a
     frame's rim counts for a point when the camera saw it within `reach` of the point."""
-    out = np.full(len(q), np.inf)
     if camera is None or len(q) == 0:
-        return out
+        return np.full(len(q), np.inf)
     highest = np.full(len(q), -np.inf)
     for s, c in zip(seen, corrected):
         if s.empty or c.edge is None or len(c.edge) != len(s.P) or not c.edge.any():
@@ -49,7 +48,7 @@ def under_rim_rays(q: np.ndarray, seen: list[Slice], corrected: list[Slice], cam
         t = t[ok] + SEEN_TOL_MM
         at = near[ok]
         highest[at] = np.maximum(highest[at], c.level + cam.height_mm * t / (rho[ok] + t))
-    return np.where(np.isfinite(highest), highest, out)
+    return np.where(np.isfinite(highest), highest, np.inf)
 
 
 def _out_along_ray(s: Slice, q: np.ndarray, i: np.ndarray, C: np.ndarray, rim: np.ndarray):

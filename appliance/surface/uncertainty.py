@@ -91,7 +91,7 @@ class CellEvidence:
 
 def _levels_and_steps(slices):
     lv = np.array([s.level for s in slices], float)
-    return lv, level_step(slices) if lv.size > 1 else 1.0
+    return lv, (level_step(slices) if lv.size > 1 else 1.0)
 
 
 def _frames_disagree(ev: CellEvidence, lv):
