@@ -289,6 +289,50 @@ def test_a_flat_face_no_curve_crosses_keeps_its_middle():
     assert z[15, 15] == pytest.approx(12.5)
 
 
+def _dense(corners, step=0.1):
+    return np.vstack(
+        [
+            a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / step), 1), endpoint=False)[:, None]
+            for a, b in zip(corners, np.roll(corners, -1, axis=0))
+        ]
+    )
+
+
+def test_a_flat_face_beyond_a_silhouette_is_bracketed_where_the_camera_saw_ink():
+    """A 30 x 30 mm slab out at once between levels 13 and 12, beside a block (x < 10) whose
+    far wall the camera does not see: at 13 it saw the block's rim there as a silhouette
+    reaching to x = 11, put back on the rim at x = 10. The slab's nodes 1.5-2.5 mm from that
+    rim are within far_mm of it, yet the camera saw ink over them: they get the bracket. A
+    node between the rim and the silhouette (x = 10.5), where the camera saw the face, does
+    not; nor does any node when the frame as seen is not given."""
+    block = np.array([[0, 0], [10, 0], [10, 30], [0, 30]], float)
+    square = np.array([[0, 0], [30, 0], [30, 30], [0, 30]], float)
+    above = make_slice(13.0, [_dense(block)])
+    above.hidden = above.P[:, 0] > 10 - 1e-9
+    above.wall = above.edge = above.hidden.copy()
+    above_seen = make_slice(13.0, [np.where(above.hidden[:, None], above.P + [1.0, 0.0], above.P)])
+    slices = [
+        make_slice(14.0, []),
+        above,
+        make_slice(12.0, [_dense(square)]),
+        make_slice(11.0, [_dense(square)]),
+    ]
+    for s in slices[2:]:
+        s.wall = np.ones(len(s.P), bool)
+    seen = [slices[0], above_seen, *slices[2:]]
+    lat = Lattice(np.linspace(0, 30, 61), np.linspace(0, 30, 61))
+    z_fe, first, _ = first_exposure(lat, slices, 0.25)
+    row, at = 30, {x: int(round(2 * x)) for x in (10.5, 11.5, 12.5, 15.0)}
+    assert all(first[row, i] == 2 for i in at.values())
+    _, _, (lo, hi) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5, seen=seen)
+    for x in (11.5, 12.5, 15.0):
+        assert (lo[row, at[x]], hi[row, at[x]]) == (12.0, 13.0), x
+    assert np.isnan(lo[row, at[10.5]])
+    _, _, (lo_blind, _) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
+    assert np.isnan(lo_blind[row, at[11.5]]) and np.isnan(lo_blind[row, at[12.5]])
+    assert lo_blind[row, at[15.0]] == 12.0
+
+
 # Ea (mm) on this small camera: stepped block 0.37 (4.84 with silhouettes read as waterlines,
 # 0.49 with the nodes behind them bracketed by the rims put back), blade 0.108 (1.05, 0.146);
 # benches/occlusion.py has the full-size figures

@@ -186,7 +186,7 @@ def fit_pass(lat, slices, opt, ftol, length, rise, seen=None):
         placed = place_dewetted_faces(lat, z_fe, first, in_sight, slices, opt.meniscus)
     placed = np.where(hidden, np.nan, placed)
     h = max(lat.hx, lat.hy)
-    z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, flat_far_mm(lat), max(2 * h, FLAT_EDGE_MM))
+    z_mid, mid, flat = flat_faces(lat, slices, z_fe, first, flat_far_mm(lat), max(2 * h, FLAT_EDGE_MM), seen)
     tilted = tilt_crossed_faces(lat, slices, z_mid, mid, first, flat_far_mm(lat))
     if not footprint.any():
         raise SettingError("grid", "the grid does not cover the part: no node is inside any waterline")

@@ -18,8 +18,20 @@ from scipy.spatial import cKDTree
 from .lattice import Lattice
 from .slices import Slice, polyline_distance
 
+# how far beyond a silhouette, as the camera saw it, a node was surely seen under the ink:
+# a few pixels (rimrays.SEEN_TOL_MM is one) and the stage's play
+SILHOUETTE_CLEAR_MM = 0.25
 
-def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, edge_mm: float = 0.0):
+
+def flat_faces(
+    lat: Lattice,
+    slices: list[Slice],
+    z_fe,
+    first,
+    far_mm: float,
+    edge_mm: float = 0.0,
+    seen: list[Slice] | None = None,
+):
     """Heights for the nodes of faces that came out of the ink all at once.
 
     A face flatter than a level step per its width (a plateau, the top of a tier)
@@ -29,7 +41,8 @@ def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, ed
     What is sure is that it lies between the two levels. A node with no height yet
     farther than far_mm from the frame above's waterline (that frame did not show
     it, and not by a hair) and edge_mm inside its own (a node on the outline is on a
-    rim, whose first exposure is not sure) gets that bracket;
+    rim, whose first exposure is not sure) gets that bracket (beside a rim put back, `seen`
+    - the frames as the camera saw them - tells how far: _clear_of_frame_above);
     if it is also farther than far_mm from its own frame's level curve, the middle
     of it as its height. A cap above the highest frame gets neither unless a frame
     above showed nothing (its level then bounds the cap).
@@ -51,9 +64,10 @@ def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, ed
         sel = todo & (first == k)
         q = np.column_stack([X[sel], Y[sel]])
         d_curve, _ = polyline_distance(slices[k].level_curve(), q)
-        d_above, _ = polyline_distance(slices[k - 1], q)
+        above = None if seen is None else seen[k - 1]
+        clear = _clear_of_frame_above(slices[k - 1], above, q, far_mm)
         d_own, _ = polyline_distance(slices[k], q)
-        sure = (d_above > far_mm) & (d_own > edge_mm)
+        sure = clear & (d_own > edge_mm)
         idx = np.flatnonzero(sel.ravel())
         lo.ravel()[idx[sure]] = slices[k].level
         hi.ravel()[idx[sure]] = slices[k - 1].level
@@ -61,6 +75,28 @@ def flat_faces(lat: Lattice, slices: list[Slice], z_fe, first, far_mm: float, ed
         z.ravel()[mid] = 0.5 * (slices[k].level + slices[k - 1].level)
         mask.ravel()[mid] = True
     return z, mask, (lo, hi)
+
+
+def _clear_of_frame_above(above: Slice, above_seen: Slice | None, q, far_mm):
+    """Nodes clear of the frame above's waterline: farther than far_mm from it (flat_faces).
+    Where the nearest point is a silhouette put back on its rim, the waterline was hidden
+    behind the face, between the rim and the silhouette as the camera saw it (`above_seen`,
+    the same points before the rims were put back); a node beyond that silhouette by
+    SILHOUETTE_CLEAR_MM, and far_mm from any waterline point, was seen under ink for sure,
+    however near the rim (the blade's slab 2-3 mm past its hidden flank's crest stood
+    1.5 mm high, unbracketed)."""
+    d, i = polyline_distance(above, q)
+    clear = d > far_mm
+    if above.empty or above_seen is None or above.hidden is None or len(above_seen.P) != len(above.P):
+        return clear
+    sil = above.hidden[i] & ~clear
+    if not sil.any():
+        return clear
+    waterline = above.P[~above.hidden]
+    d_waterline = cKDTree(waterline).query(q[sil])[0] if len(waterline) else np.full(sil.sum(), np.inf)
+    inside_seen, _ = polyline_distance(above_seen, q[sil], signed=True)
+    clear[sil] = (d_waterline > far_mm) & (inside_seen < -SILHOUETTE_CLEAR_MM)
+    return clear
 
 
 def tilt_crossed_faces(lat: Lattice, slices: list[Slice], z, mask, first, far_mm):
