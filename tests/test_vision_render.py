@@ -105,6 +105,28 @@ def test_a_bright_face_that_comes_out_late_is_tracked_like_a_full_read(effects):
     assert tracked.hue is not None
 
 
+def test_blank_frames_from_a_noisy_camera_do_not_choose_the_channel():
+    """A scan starts above the part. With no glare or dust, a noisy camera's blank frame had
+    contrast enough only in blue (vignetting and noise), where the ink is brightest; the
+    channel and colour test learned there lost the dome's top two frames (and every frame of a
+    harsh sample 4 scan without glare: no waterline at all). Noise is no contrast: the bright
+    tail must stand above the ink's own spread, so the tracking extractor finds the part where
+    a fresh one does."""
+    surf = surfaces.get("sample1")
+    cam = RIG.camera_model(distorted=False)
+    noisy = Effects(blur_sigma_px=1.3, noise_sigma=6.0, salt_pepper=3e-4, vignetting=0.4)
+    tracked = WaterlineExtractor(cam, no_part="empty")
+    found = []
+    for k, level in enumerate(np.arange(40.0, 33.0, -1.0)):
+        frame = render_frame(surf, level, RIG, noisy, np.random.default_rng(k))
+        a = tracked.extract(frame, level)
+        b = WaterlineExtractor(cam, no_part="empty").extract(frame, level)
+        assert len(a.loops) == len(b.loops), level
+        found.append(bool(a.loops))
+    assert found == [False, False, False, True, True, True, True]
+    assert tracked.channel == 2  # red, where the dark-blue ink is darkest
+
+
 def test_the_top_of_a_scan_is_ink_and_glare_only_and_says_so():
     """Above the part only ink, highlights and dust show: no island may be made of them."""
     from appliance.vision.pipeline import NoPartError
