@@ -354,6 +354,20 @@ Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
   leave all nine the same to the digit (Ea, p99, max). Sample 4's map has 1.8 mm² of material more
   than a node beyond its outline (1.3 before session 38's edge nodes): a row of nodes 0.34 mm past
   its y = 55 wall, 13.7-16 mm high; not looked into.
+(zb) Session 40 (7 December 2026): fresh renders on another machine (meniscus commissioned 2.506
+  mm / 0.17 deg / 0.97); main 77f42c0 gives each within 0.0003 mm of (z)'s Ea (sample4 0.1843
+  0.319 1.756, plateau 0.0356 0.201 0.277, ring 0.0372 0.182 0.449; crater 0.0367 0.196 0.232
+  100% of 96: its p99 passes on this render). Brackets beside rims put back (surface/flatfaces.py)
+  leave all nine the same. A blank frame's noise no longer chooses the channel (vision/frames.py
+  best_channel): the same channel as before in every one of these scans' frames, so all the same.
+  Held out nuisances, sample 4 rendered with this preset less one thing (Ea / p99 / max mm):
+  without wobble 0.1955 0.451 1.170, without ripple 0.1955 0.345 1.692, without both 0.2142
+  0.483 1.188, the images of the physics preset (ripple, wobble, moving glare, JPEG and flicker
+  off, this meniscus kept) 0.0962 0.274 0.668: its error is this meniscus on a small steep part,
+  then the images, not the stage. Without glare and dust, before that fix, no frame showed a
+  waterline (every frame read in blue, chosen from a blank frame's noise); after it 0.3272 0.362
+  3.965 (not looked into). Sample 3 with 12 glare blobs at 255: 0.0164 0.030 0.517; with 300
+  dust specks: 0.0160 0.037 0.470; with a 0.15 mm ripple: 0.0208 0.041 0.521.
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks

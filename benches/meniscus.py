@@ -697,6 +697,12 @@ Session 39 (7 December 2026), the same renders: a node hidden behind a wall's ri
 the highest of the frames' rays over that rim (surface/rimrays.py): blade 0.1199 / 2.436 / 4.752 ->
 0.1167 / 2.209 / 4.752, steps 0.3287 -> 0.3280, stepped block 0.4257 -> 0.4256; the other nine the
 same to the digit.
+Session 40 (7 December 2026), fresh renders on another machine: main 77f42c0 gives the twelve Ea as
+session 39 to the digit but the blade 0.1161 / 2.175 / 4.765 and the stepped block 0.4251. A face
+that came out at once beside a rim put back is bracketed where the camera saw ink over it
+(surface/flatfaces.py): stepped block 0.4251 -> 0.4214, the other eleven the same. The channel
+test that no longer takes a blank frame's noise for contrast (vision/frames.py) picks the same
+channel as before in all 915 frames of these scans and the harsh and occlusion benches'.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3

@@ -151,6 +151,18 @@ follows that slope into the sharp crest. Only a finer map holds such a crest. Th
 frames' rays instead gave 0.1197, with 40 cells more than 0.5 mm under the part. Both targets
 (0.3, 0.1) are still missed.
 
+7 December 2026 (session 40), fresh renders on another machine: main 77f42c0 gives stepped block
+0.4149 / 2.516 / 3.696 (1 hole), blade 0.1162 / 1.445 / 4.283 (session 39's renders: 0.3719,
+0.1175; the stepped block moves 0.04 mm between renders of the same seed). A face that came out
+at once beside a rim put back is bracketed where the camera saw ink over it, 0.25 mm beyond the
+silhouette as seen (surface/flatfaces.py; it had to lie 3 lattice spacings from the rim put
+back): stepped block 0.4043 / 2.463 / 3.670, blade 0.1136 / 1.343 / 4.296. On the blade the slab
+2-3 mm past the hidden flank's crest, 1.2-1.9 mm high before, now mostly within 0.1; what is left
+of the blade's error: the band within 4 mm of the crest 0.052 of its Ea (the hidden flank and
+the strip beyond its foot held under the ray, 2-4 mm past the crest +0.7 mm on average), the
+tapered ends 0.028 (the slab beyond the far taper 0.6-1.3 mm high: within 1.7 mm of its own
+frame's waterline, where the ink still filled the corner, so no bracket), the rest 0.034. Both targets (0.3, 0.1) are still missed.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
