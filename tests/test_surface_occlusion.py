@@ -289,6 +289,33 @@ def test_a_flat_face_no_curve_crosses_keeps_its_middle():
     assert z[15, 15] == pytest.approx(12.5)
 
 
+def test_a_flat_face_beside_its_own_level_curve_is_bracketed_but_not_beside_its_rim():
+    """The 30 x 30 mm top out at once between 13 and 12, where at 12 the ink still filled an
+    80 mm² corner pool in it (a level curve, not a wall). A node 0.2 mm from that pool came out
+    at 12 as surely as any: it gets the bracket. A node as near the top's outline (its walls,
+    a rim whose first exposure is not sure) does not, nor one as near a 2.6 mm² pool about to
+    close, which the meniscus holds on to below the face's level."""
+    square = np.array([[0, 0], [30, 0], [30, 30], [0, 30]], float)
+    pool = np.array([[10.2, 11], [10.2, 19], [20.2, 19], [20.2, 11]])  # holes run clockwise
+    closing = np.array([[24.2, 4.2], [24.2, 5.8], [25.8, 5.8], [25.8, 4.2]])
+    slices = [
+        make_slice(13.0, []),
+        make_slice(12.0, [_dense(square), _dense(pool), _dense(closing)]),
+        make_slice(11.0, [_dense(square)]),
+    ]
+    for s in slices[1:]:
+        s.wall = np.zeros(len(s.P), bool)
+        s.wall[: len(_dense(square))] = True  # the outline is all wall, the pools' shores none
+    lat = Lattice(np.linspace(0, 30, 61), np.linspace(0, 30, 61))
+    z_fe, first, _ = first_exposure(lat, slices, 0.25)
+    # (row, column): x = 10.0 by the pool, x = 0.5 by the wall, (24.0, 5.0) by the closing pool
+    by_pool, by_rim, by_closing = (30, 20), (30, 1), (10, 48)
+    assert first[by_pool] == first[by_rim] == first[by_closing] == 1
+    _, _, (lo, hi) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.6)
+    assert (lo[by_pool], hi[by_pool]) == (12.0, 13.0)
+    assert np.isnan(lo[by_rim]) and np.isnan(lo[by_closing])
+
+
 def _dense(corners, step=0.1):
     return np.vstack(
         [
