@@ -702,7 +702,12 @@ session 39 to the digit but the blade 0.1161 / 2.175 / 4.765 and the stepped blo
 that came out at once beside a rim put back is bracketed where the camera saw ink over it
 (surface/flatfaces.py): stepped block 0.4251 -> 0.4214, the other eleven the same. The channel
 test that no longer takes a blank frame's noise for contrast (vision/frames.py) picks the same
-channel as before in all 915 frames of these scans and the harsh and occlusion benches'.
+channel as before in all 915 frames of these scans and the harsh and occlusion benches'. (A
+trial run that read frames otherwise made the runner's refinement add frames to three kept
+scans: sample2 16 -> 20, sample3 28 -> 40, blade 4 -> 8; on them 77f42c0 gives sample3 0.0283 /
+0.223 / 0.957, blade 0.1182 / 2.177 / 3.972, sample2 the same.) A flat face's nodes near their
+own frame's level curve bracketed too (24b01c1), on those scans: blade 0.1182 -> 0.1179, stepped
+block 0.4214 -> 0.4207, steps 0.3280 -> 0.3279, plateau 0.0382 -> 0.0384, the other eight the same.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
