@@ -30,6 +30,16 @@ RIM_MM, RUN = 20.0, 1 / np.tan(np.radians(85.0))  # its walls lean in at 85 deg
 LEVELS = np.arange(19.0, 4.0, -1.0)
 
 
+def _dense(corners, step=0.1):
+    """A polygon's outline with a point every `step` mm or so, as the vision gives them."""
+    return np.vstack(
+        [
+            a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / step), 1), endpoint=False)[:, None]
+            for a, b in zip(corners, np.roll(corners, -1, axis=0))
+        ]
+    )
+
+
 def _frustum_seen(level, jitter_mm=0.0):
     """What the camera sees of the 85 deg frustum at `level`: the cross-section at the
     ink and the rim in perspective, one convex outline, a point every ~0.1 mm, pushed out
@@ -40,12 +50,7 @@ def _frustum_seen(level, jitter_mm=0.0):
     rim = CAMERA.xy + (RIM - CAMERA.xy) * (CAMERA.height_mm / (CAMERA.height_mm - (RIM_MM - level)))
     pts = np.vstack([section, rim])
     hull = pts[ConvexHull(pts).vertices]
-    loop = np.vstack(
-        [
-            a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / 0.1), 1), endpoint=False)[:, None]
-            for a, b in zip(hull, np.roll(hull, -1, axis=0))
-        ]
-    )
+    loop = _dense(hull)
     loop = c + (loop - c) * (1 + jitter_mm / np.linalg.norm(loop - c, axis=1))[:, None]
     return Waterline(float(level), [loop])
 
@@ -314,15 +319,6 @@ def test_a_flat_face_beside_its_own_level_curve_is_bracketed_but_not_beside_its_
     _, _, (lo, hi) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.6)
     assert (lo[by_pool], hi[by_pool]) == (12.0, 13.0)
     assert np.isnan(lo[by_rim]) and np.isnan(lo[by_closing])
-
-
-def _dense(corners, step=0.1):
-    return np.vstack(
-        [
-            a + (b - a) * np.linspace(0, 1, max(int(np.hypot(*(b - a)) / step), 1), endpoint=False)[:, None]
-            for a, b in zip(corners, np.roll(corners, -1, axis=0))
-        ]
-    )
 
 
 def test_a_flat_face_beyond_a_silhouette_is_bracketed_where_the_camera_saw_ink():

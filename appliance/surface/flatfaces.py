@@ -40,15 +40,16 @@ def flat_faces(
     it, so first exposure has nothing to interpolate and the fit would extrapolate
     into it from whatever lies around - rims, walls - by millimetres of thin plate.
     What is sure is that it lies between the two levels. A node with no height yet
-    farther than far_mm from the frame above's waterline (that frame did not show
-    it, and not by a hair) and edge_mm from its own frame's walls (a node on the outline
-    is on a rim, whose first exposure is not sure; a level curve of its own is no rim,
-    unless it rings a small island or pool, SMALL_LOOP_MM2: where the ink still filled a
-    corner inside the part, the blade's slab beyond its far taper stood 0.6-1.3 mm high
-    unbracketed) gets that bracket (beside a rim put back, `seen`
-    - the frames as the camera saw them - tells how far: _clear_of_frame_above);
-    if it is also farther than far_mm from its own frame's level curve, the middle
-    of it as its height. A cap above the highest frame gets neither unless a frame
+    gets that bracket when
+    - it is clear of the frame above's waterline (that frame did not show it, and not
+      by a hair): far_mm from it, or beside a rim put back, beyond the silhouette as
+      the camera saw it (`seen`: _clear_of_frame_above);
+    - and it is edge_mm from its own frame's waterline, unless that is a level curve
+      (a corner the ink still filled inside the part) and no small loop
+      (SMALL_LOOP_MM2): on the outline a node is on a rim, whose first exposure is
+      not sure.
+    If it is also farther than far_mm from its own frame's level curve, the middle
+    of the bracket is its height. A cap above the highest frame gets neither unless a frame
     above showed nothing (its level then bounds the cap).
     -> (z_fe with the middle filled in, mask of those nodes, (lo, hi) per node: the
     bracket, NaN where none is sure)."""
