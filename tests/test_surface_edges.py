@@ -1,12 +1,15 @@
 """The part's edge on the output grid: a finishing program keeps the cells its outline crosses."""
 
 import numpy as np
+import pytest
 
 from appliance.cam.sampling import Sampler
 from appliance.sim.ideal import ideal_waterlines
 from appliance.sim.surfaces import Surface, Tier, rect_sdf
+from appliance.surface.edges import with_edge_nodes
+from appliance.surface.heightmap import HeightMap
 from appliance.surface.reconstruct import GridSpec, reconstruct
-from appliance.surface.uncertainty import WALL
+from appliance.surface.uncertainty import INTERPOLATED, WALL
 
 # a 10.5 mm block (between two levels: the mid-bracket is exact) whose walls fall 0.3 mm past a node of the 2 mm grid below (x = 20, y = 20)
 # and 0.3 mm past the last node inside it on the far sides (x = 60, y = 50)
@@ -56,3 +59,41 @@ def test_a_scan_stopped_above_the_base_keeps_the_edge_where_its_lowest_frame_ran
     row = int(np.argmin(abs(hm.y - 36.0)))
     at_20 = int(np.argmin(abs(hm.x - 20.0)))
     assert abs(hm.z[row, at_20] - 10.5) < 0.2, hm.z[row, at_20]
+
+
+def _edge_row_behind_a_wall():
+    # a 12 mm top on x = 0..2, its edge nodes at x = 3; the fit carried the top on past the rim
+    x, y = np.arange(5.0), np.arange(3.0)
+    z = np.full((3, 5), np.nan)
+    z[:, :3] = 12.0
+    sigma = np.where(np.isfinite(z), 0.05, np.nan)
+    source = np.where(np.isfinite(z), INTERPOLATED, -1).astype(np.int8)
+    edge = np.zeros(z.shape, bool)
+    edge[:, 3] = True
+    ray = np.full(z.shape, np.inf)
+    ray[0, 3], ray[1, 3] = 9.8, 20.0  # row 2: no ray over it, a wall the camera saw
+    return x, y, with_edge_nodes(z, sigma, source, edge, WALL, np.full(z.shape, 13.0), ray)
+
+
+def test_an_edge_node_behind_a_hidden_wall_is_the_middle_between_the_base_and_the_ray():
+    _, _, (z, sigma, source) = _edge_row_behind_a_wall()
+    assert z[0, 3] == pytest.approx(4.9) and sigma[0, 3] == pytest.approx(np.hypot(0.05, 9.8 / np.sqrt(12)))
+    # a ray higher than the top it is next to: the middle under the top
+    assert z[1, 3] == pytest.approx(6.0)
+    # no ray: the fit continued out, held at the top
+    assert z[2, 3] == pytest.approx(12.0)
+    assert (source[:, 3] == WALL).all() and np.isnan(z[:, 4]).all()
+
+
+def test_the_program_keeps_the_wall_s_top_edge_where_the_map_says_mid_wall():
+    x, y, (z, sigma, source) = _edge_row_behind_a_wall()
+    hm = HeightMap(x, y, z, sigma, source)
+    s = Sampler(hm)
+    # the wall's top edge lies somewhere in the cell from x = 2 to 3: the cutter stays on top
+    assert s.z(np.array([2.5, 2.99]), np.array([0.5, 0.5])) == pytest.approx([12.0, 12.0])
+    assert hm.z[0, 3] == pytest.approx(4.9)  # the map keeps what the frames say
+    # an outline node not on a wall (a slope run down to the base) is milled as it is
+    source[:, 3] = INTERPOLATED
+    assert Sampler(HeightMap(x, y, z, sigma, source)).z(np.array([2.99]), np.array([0.5]))[
+        0
+    ] == pytest.approx(5.45, abs=0.1)

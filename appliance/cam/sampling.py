@@ -63,10 +63,40 @@ def check_heightmap(hm: HeightMap, where="height map"):
         )
 
 
+def with_edges_kept(hm: HeightMap) -> HeightMap:
+    """The map as the CAM mills it: each cell on the part's outline that is on its outer wall
+    (source WALL) held no lower than its highest neighbour inside.
+
+    Such a cell's height is where the wall passes its centre (surface/edges.py), somewhere
+    between the base and the top; the wall's top edge lies within the cell. Followed down
+    there, the cutter sweeps the slope between the cell and its neighbour inside and cuts
+    that edge off: up to the whole wall's height (the stepped block's 12 mm tier, its hidden
+    walls held at mid-height). Kept at the neighbour's height, it leaves at most that cell's
+    strip of material outside the part instead."""
+    if hm.source is None or not hm.on_part.any():
+        return hm
+    from ..surface.uncertainty import WALL
+
+    on = hm.on_part
+    p = np.pad(on, 1)
+    outline = on & ~(p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:])
+    edge = outline & (hm.source == WALL)
+    if not edge.any():
+        return hm
+    inside = ndimage.maximum_filter(
+        np.where(on & ~edge, hm.z, -np.inf), size=3, mode="constant", cval=-np.inf
+    )
+    z = np.where(edge & np.isfinite(inside), np.maximum(hm.z, inside), hm.z)
+    return HeightMap(hm.x, hm.y, z, hm.sigma, hm.source)
+
+
 class Sampler:
-    """z(x, y) of a height map, piecewise linear on triangles, floor off the part."""
+    """z(x, y) of a height map, piecewise linear on triangles, floor off the part. A map
+    that says where its cells came from is read with its outer walls' cells kept at the
+    edge (with_edges_kept)."""
 
     def __init__(self, hm: HeightMap, floor: float = FLOOR, edge_step: float | None = None):
+        hm = with_edges_kept(hm)
         self.hm = hm
         self.edge_step = edge_step
         self.x0, self.y0 = float(hm.x[0]), float(hm.y[0])

@@ -44,12 +44,13 @@ from .edges import beyond_outline, with_edge_nodes
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
-from .inkbounds import held, node_bounds, under_flat_ink
+from .inkbounds import FAR_NODES, held, node_bounds, under_flat_ink
 from .lattice import Lattice, bilinear, exposed_mask, fill_nearest
 from .meniscus import MeniscusModel, correct_slices_from_spacing
 from .perspective import Perspective, mark_walls, on_fallen_ink
 from .pools import cover_held_pools, held_pools
 from .registration import registered
+from .rimrays import under_rim_rays
 from .silhouettes import occluded_nodes
 from .slices import check_waterlines, level_step, outline_bounds
 from .uncertainty import OCCLUDED, WALL, CellEvidence, node_uncertainty
@@ -298,7 +299,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     srco, so = _occluded_cells(srco, so, diag.get("occluded_cells"), slices)
     edge = beyond_outline([s for s in slices if not s.empty], xo, yo, fo)
     if edge.any():  # the fit continued out is resampled only for a scan that has them
-        zo, so, srco = with_edge_nodes(zo, so, srco, edge, WALL, _to_output(lat, reach, r, xo, yo))
+        ray = _rays_over_edge(edge, xo, yo, seen, corrected, camera, FAR_NODES * max(lat.hx, lat.hy))
+        zo, so, srco = with_edge_nodes(zo, so, srco, edge, WALL, _to_output(lat, reach, r, xo, yo), ray)
     diag["edge_cells"] = int(edge.sum())
     hm = HeightMap(xo, yo, zo, so, srco)
     # a pocket that held ink: its floor never showed (pools.py)
@@ -310,6 +312,15 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
             {"centre_mm": p.centre, "area_mm2": p.area_mm2, "bracket_mm": p.bracket} for p in pools
         ]
     return Reconstruction(hm, length, diag)
+
+
+def _rays_over_edge(edge, xo, yo, seen, corrected, camera, reach):
+    """Per output node, the ray over a rim put back that passes over it, on the edge nodes
+    (inf elsewhere and where none does)."""
+    ray = np.full(edge.shape, np.inf)
+    X, Y = np.meshgrid(xo, yo)
+    ray[edge] = under_rim_rays(np.column_stack([X[edge], Y[edge]]), seen, corrected, camera, reach)
+    return ray
 
 
 def _occluded_cells(src, sig, occluded, slices):
