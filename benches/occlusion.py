@@ -167,6 +167,22 @@ under 50 mm²; 24b01c1): stepped block 0.4024 / 2.463 / 3.670, blade 0.1030 / 1.
 edge_mm one lattice spacing, not two, the blade would be 0.0939 (harsh crater 0.0367 -> 0.0372,
 its p99 as this bench counts it 0.194 -> 0.202). Both targets (0.3, 0.1) are still missed.
 
+7 December 2026 (session 41), the same renders. The stepped block's error was mostly its outer
+walls' edge rows (within 2 mm of the outline: 0.228 of its 0.402), the x = 91.5 column 12.4-13.8 mm
+against a true 6.1: the fit carried the top on past rims put back from silhouettes, where the
+frames saw neither the wall nor its foot. Such an edge node now takes the middle between the base
+and the ray over the rim (surface/edges.py), and the CAM mills every outline node marked wall no
+lower than its highest neighbour inside, so the program still keeps the edge (cam/sampling.py):
+    stepped block 0.4024 / 2.463 / 3.670 -> 0.3307 / 2.463 / 3.670; milled against the true part:
+        gouge 7.049 mm at (91.0, 85.0) -> 6.232 mm at (46.6, 61.4) (the upper tier's corner), p99
+        3.022 -> 2.501, most material left 8.336 -> 8.352 mm
+    blade 0.1030 (no edge node under a ray); milled: gouge 4.286 -> 4.288 mm at (83.6, 74.6), p99
+        0.941 -> 0.757 (its outline's wall nodes kept), most material left 4.208 both
+    second ink stepped block 0.4207 -> 0.3624; the other eleven second-ink parts, all nine harsh
+        parts and the seed table's physics scans the same to the digit
+The stepped block's edge rows now give 0.157 of its Ea; most of it is the y = 86 row (0.060),
+footprint nodes, not edge nodes, that stand 1-6 mm over a true 5.7.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
