@@ -37,7 +37,8 @@ class Region:
         if self.edge:
             return (
                 f"the part's edge, {self.cells} cells round its outline ({100 * self.share:.1f} % of "
-                f"the part), up to {self.worst_mm:.2f} mm: the outline is known to a cell there"
+                f"the part), up to {self.worst_mm:.2f} mm: the outline is known to a cell there, "
+                "and the program keeps the top edge over the cells on a wall"
             )
         return (
             f"X {self.xmin:.1f}..{self.xmax:.1f} Y {self.ymin:.1f}..{self.ymax:.1f} mm, "
