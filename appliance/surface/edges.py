@@ -64,8 +64,10 @@ def with_edge_nodes(z, sigma, source, edge: np.ndarray, wall: int, fit: np.ndarr
     nearest = fill_nearest(z)
     level = np.where(np.isfinite(fit), np.clip(fit, 0.0, nearest), nearest)
     top = np.maximum(level, 0.0)
-    hidden = np.zeros(z.shape, bool) if ray is None else edge & np.isfinite(ray)
-    top = np.where(hidden, np.clip(np.where(hidden, ray, 0.0), 0.0, top), top)
+    hidden = np.zeros(z.shape, bool)
+    if ray is not None:  # behind a hidden wall: no higher than the ray
+        hidden = edge & np.isfinite(ray)
+        top = np.where(hidden, np.clip(ray, 0.0, top), top)
     z = np.where(edge, np.where(hidden, 0.5 * top, top), z)
     sigma = np.where(edge, np.hypot(fill_nearest(sigma), top / math.sqrt(12.0)), sigma)
     source = np.where(edge, wall, source).astype(source.dtype)
