@@ -77,14 +77,11 @@ def with_edges_kept(hm: HeightMap) -> HeightMap:
         return hm
     from ..surface.uncertainty import WALL
 
-    on = hm.on_part
-    p = np.pad(on, 1)
-    outline = on & ~(p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:])
-    edge = outline & (hm.source == WALL)
+    edge = hm.outline & (hm.source == WALL)
     if not edge.any():
         return hm
     inside = ndimage.maximum_filter(
-        np.where(on & ~edge, hm.z, -np.inf), size=3, mode="constant", cval=-np.inf
+        np.where(hm.on_part & ~edge, hm.z, -np.inf), size=3, mode="constant", cval=-np.inf
     )
     z = np.where(edge & np.isfinite(inside), np.maximum(hm.z, inside), hm.z)
     return HeightMap(hm.x, hm.y, z, hm.sigma, hm.source)

@@ -54,7 +54,7 @@ def low_confidence_regions(hm, threshold_mm=DEFAULT_UNCERTAIN_MM):
     if hm.sigma is None:
         return []
     unsure = hm.on_part & np.isfinite(hm.sigma) & (hm.sigma > threshold_mm)
-    rim = hm.on_part & ~ndimage.binary_erosion(hm.on_part, border_value=0)
+    rim = hm.outline  # the cells the CAM keeps at the edge where they are walls (cam/sampling.py)
     edge = unsure & rim
     inside = regions(hm, unsure & ~rim)
     if not edge.any():

@@ -91,11 +91,10 @@ SMALL_LOOP_MM2 = 50.0
 
 
 def _small_loops(s: Slice) -> np.ndarray:
-    """Per point: whether its loop encloses less than SMALL_LOOP_MM2 (either way round)."""
-    sizes = [len(lp) for lp in s.loops]
-    if sum(sizes) != len(s.P):
-        return np.ones(len(s.P), bool)  # loops not known point by point: every shore unsure
-    return np.repeat([abs(signed_area(lp)) < SMALL_LOOP_MM2 for lp in s.loops], sizes).astype(bool)
+    """Per point (s.P stacks s.loops): whether its loop encloses less than SMALL_LOOP_MM2
+    (either way round)."""
+    small = np.array([abs(signed_area(lp)) < SMALL_LOOP_MM2 for lp in s.loops], bool)
+    return np.repeat(small, [len(lp) for lp in s.loops])
 
 
 def _clear_of_frame_above(above: Slice, above_seen: Slice | None, q, far_mm):

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 
 @dataclass
@@ -44,6 +45,12 @@ class HeightMap:
     @property
     def on_part(self):
         return np.isfinite(self.z)
+
+    @property
+    def outline(self):
+        """The part's outermost cells: on it, with a side neighbour off it or off the lattice."""
+        on = self.on_part
+        return on & ~ndimage.binary_erosion(on, border_value=0)
 
     def grid(self):
         """X, Y arrays of the same shape as z."""
