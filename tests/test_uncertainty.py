@@ -212,6 +212,8 @@ def test_the_part_s_edge_is_told_apart_from_the_regions_inside():
     assert head[1].startswith("low confidence 1: X 11.5..19.5 Y 3.5..7.5 mm") and "up to 0.40 mm" in head[1]
     assert head[2].startswith("low confidence: the part's edge, 72 cells round its outline")
     assert "up to 2.50 mm" in head[2] and len(head) == 3
+    # and says the program does not follow those cells down where they are walls (cam/sampling.py)
+    assert head[2].endswith("the program keeps the top edge over the cells on a wall")
     # the report's table: the patch numbered, the edge as its own last row
     md = "\n".join(uncertainty_markdown(SimpleNamespace(heightmap=hm, diagnostics={})))
     assert "in 1 region(s) and at its edge" in md
