@@ -14,7 +14,7 @@ from appliance.sim.ideal import ideal_waterlines
 from appliance.surface.dewetted import depression_depth
 from appliance.surface.exposure import first_exposure
 from appliance.surface.fitpass import fit_pass
-from appliance.surface.flatfaces import flat_faces, tilt_crossed_faces
+from appliance.surface.flatfaces import beside_faces, flat_faces, tilt_crossed_faces
 from appliance.surface.inkbounds import behind_faces, node_bounds
 from appliance.surface.lattice import Lattice
 from appliance.surface.meniscus import MeniscusModel
@@ -355,6 +355,31 @@ def test_a_flat_face_beyond_a_silhouette_is_bracketed_where_the_camera_saw_ink()
     _, _, (lo_blind, _) = flat_faces(lat, slices, z_fe, first, far_mm=3.0, edge_mm=0.5)
     assert np.isnan(lo_blind[row, at[11.5]]) and np.isnan(lo_blind[row, at[12.5]])
     assert lo_blind[row, at[15.0]] == 12.0
+
+
+def test_a_node_the_fit_ran_away_with_beside_a_face_takes_the_face():
+    """A plate out at once at frame 2 (bracketed 3.52-3.60, held at 3.68 with the ink's
+    climb) up to x = 27; its nodes at x = 28-30 are too near its rim for a bracket. The fit
+    carried a slope from beyond into them, 9.5 mm, over their 4.3 mm ceiling: they take the
+    plate's height. A node whose own ceiling is under the plate stops there; one out in
+    another frame, or farther from the plate than the reach, or whose fit stayed under its
+    ceiling, keeps what it had."""
+    lat = Lattice(np.arange(0.0, 31.0), np.arange(0.0, 11.0))
+    first = np.full(lat.shape, 2)
+    sure = lat.x[None, :] <= 27.0 + np.zeros(lat.shape)
+    z = np.where(sure, 3.68, 4.3)  # the plate; the rim nodes as the ceiling clipped them
+    lo, hi = np.full(lat.shape, 3.5), np.full(lat.shape, 4.3)
+    runaway = ~sure.copy()
+    hi[1, 29] = 3.65  # a rim node the frames hold lower than the plate
+    first[2, 30] = 3  # a rim node out a frame later
+    runaway[3, 30] = False  # a rim node whose fit stayed under its ceiling
+    z[3, 30] = 4.1
+    far = beside_faces(lat, z, runaway, first, sure, (lo, hi), reach_mm=3.0)
+    assert far[5, 28] == pytest.approx(3.68) and far[5, 30] == pytest.approx(3.68)
+    assert far[1, 29] == pytest.approx(3.65)
+    assert far[2, 30] == pytest.approx(4.3) and far[3, 30] == pytest.approx(4.1)
+    near = beside_faces(lat, z, runaway, first, sure, (lo, hi), reach_mm=2.0)
+    assert near[5, 29] == pytest.approx(3.68) and near[5, 30] == pytest.approx(4.3)
 
 
 # Ea (mm) on this small camera: stepped block 0.37 (4.84 with silhouettes read as waterlines,

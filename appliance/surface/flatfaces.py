@@ -5,8 +5,8 @@ at one frame and wholly out at the next; no waterline crosses it, so first expos
 nothing to interpolate and the thin plate would extrapolate into it from the rims and walls
 around. These are the fit's priors for such faces: the bracket between the two levels and
 its middle (flat_faces), a plane through the one level curve that crosses a tilted tier
-(tilt_crossed_faces), and the faces whose fit leaves its bracket, held at the middle
-(flat_prior).
+(tilt_crossed_faces), the faces whose fit leaves its bracket, held at the middle
+(flat_prior), and the nodes beside such a face that the fit ran away with (beside_faces).
 """
 
 from __future__ import annotations
@@ -200,3 +200,35 @@ def flat_prior(z, z_mid, mid, flat, tilted=None):
     labels, _ = ndimage.label(mid)
     bad = np.isin(labels, np.unique(labels[out]))
     return np.where(bad, z_mid, np.nan)
+
+
+def beside_faces(lat: Lattice, z, runaway, first, sure, bounds, reach_mm: float):
+    """Nodes with no height of their own beside a face that came out at once, where the
+    fit ran over their ceiling, take the nearest node of that face (one out in the same
+    frame, within reach_mm, with a sure bracket), kept within their own bounds (lo, hi).
+
+    Such a node is too near a rim or the frame above's waterline for a bracket of its own
+    (flat_faces), and no waterline crossed it: the thin plate carries into it whatever
+    slope lies beyond, and a fit over the node's ceiling says it did (the blade's plate,
+    3.6 mm, stood 4.2-4.3 mm at its outline beyond the blade's tip and 5-8 mm beyond its
+    hidden flank's foot: the fit there ran to 9.5 and was clipped). It came out of the ink
+    with the face beside it, in the same frame; the face's height is the better guess.
+    `runaway`: the nodes whose fit went over their ceiling and that have no height of
+    their own. -> z with those nodes moved."""
+    lo, hi = bounds
+    pick = runaway & ~sure
+    if not pick.any() or not sure.any():
+        return z
+    z = z.copy()
+    X, Y = np.meshgrid(lat.x, lat.y)
+    for k in np.unique(first[pick]):
+        face = sure & (first == k)
+        if not face.any():
+            continue
+        nodes = np.flatnonzero((pick & (first == k)).ravel())
+        q = np.column_stack([X.ravel()[nodes], Y.ravel()[nodes]])
+        d, i = cKDTree(np.column_stack([X[face], Y[face]])).query(q)
+        close = d <= reach_mm
+        near = nodes[close]
+        z.ravel()[near] = np.clip(z[face][i[close]], lo.ravel()[near], hi.ravel()[near])
+    return z

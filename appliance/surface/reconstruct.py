@@ -42,6 +42,7 @@ from .corrections import above_base, corrected_levels
 from .dewetted import depression_depth
 from .edges import beyond_outline, with_edge_nodes
 from .fitpass import bracket_bounds, fit_pass, flat_face_rise, flat_far_mm
+from .flatfaces import beside_faces
 from .gridfit import DIRECT_MAX
 from .heightmap import HeightMap
 from .inkbounds import FAR_NODES, held, node_bounds, under_flat_ink
@@ -241,6 +242,7 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     # a node a face hid is bounded by the frames that saw ink there, not by the rim put back
     known = node_bounds(lat, seen, corrected, first, footprint, rise_max, sink, camera)
     hi = np.where(known.hidden, known.ceiling, hi)
+    runaway = ~np.isfinite(z_fe) & ~known.hidden & footprint & (z > hi)
     z = np.where(np.isfinite(z_fe) & ~known.hidden, z, np.clip(z, lo, hi))
     # a face that came out at once lies between its two levels, whatever the fit says
     # (an ink that dewets stands its depression above a flat face it has just left: the
@@ -248,6 +250,8 @@ def reconstruct(waterlines, grid: GridSpec, options: ReconstructOptions | None =
     sure = np.isfinite(flat[0])
     climb = flat_face_rise(opt.meniscus, flat, flat_far_mm(lat))
     z[sure] = np.clip(z[sure], flat[0][sure] - sink, flat[1][sure] + climb[sure])
+    # and a node beside such a face that the fit ran away with (over its ceiling) is the face
+    z = beside_faces(lat, z, runaway, first, sure, (lo, hi), flat_far_mm(lat))
     z = held(z, known)
     reach = z  # the fit beyond the footprint too: where the part's edge nodes come from
     z = np.where(footprint, z, np.nan)
