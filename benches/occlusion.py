@@ -183,6 +183,15 @@ lower than its highest neighbour inside, so the program still keeps the edge (ca
 The stepped block's edge rows now give 0.157 of its Ea; most of it is the y = 86 row (0.060),
 footprint nodes, not edge nodes, that stand 1-6 mm over a true 5.7.
 
+7 December 2026 (session 42), the same renders. The blade's plate beside its tip and beyond its
+hidden flank's foot had no bracket (too near the plate's rim or the frame above's waterline) and
+no waterline across it, and the fit carried the tip and the flank into it (up to 9.5 mm, clipped
+at 4.3-7.9 by the ink's bound over a true 3.6). A node whose fit runs over its ceiling beside a
+face that came out in the same frame now takes the face's height (surface/flatfaces.py
+beside_faces): blade 0.1030 / 1.247 / 4.296 -> 0.0914 / 1.056 / 2.847, within its target; milled
+gouge 4.288 -> 4.280 mm, p99 0.757 -> 0.759. Stepped block 0.3307 -> 0.3306. Clean preset (fresh
+renders): blade 0.0236, stepped block 0.1466 (0.0245, 0.1477 before).
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
