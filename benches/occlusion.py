@@ -192,6 +192,23 @@ beside_faces): blade 0.1030 / 1.247 / 4.296 -> 0.0914 / 1.056 / 2.847, within it
 gouge 4.288 -> 4.280 mm, p99 0.757 -> 0.759. Stepped block 0.3307 -> 0.3306. Clean preset (fresh
 renders): blade 0.0236, stepped block 0.1466 (0.0245, 0.1477 before).
 
+7 December 2026 (session 42), the renderer fixed: where a pixel's ray grazes a wall leaning with
+it (the stepped block's 85 deg walls facing away), Newton's search for where the ray meets the
+tier cycled and ended off the top but inside the footprint, and the pixel was drawn as part. The
+hidden rims' silhouettes came out 2 px (0.157 mm) beyond where the rays graze them, at every level
+(visible waterlines: 0.000 mm off), so the rays over them read 1-2 mm too high. Such a ray is now
+sought by sampling it (sim/render.py). Only the stepped block's frames change (21432 pixels over
+six levels; the blade 15, every other part 0). Fresh stepped-block renders, blade kept:
+    stepped block clean    0.1466 / 4.000 / 4.838 -> 0.1348 / 2.224 / 5.505 (29 holes: the map's
+        outline now stops at the rims, and the 85 deg walls' foot cells, 0.75 mm high, are off it)
+    stepped block physics  0.3306 / 2.463 / 3.670 -> 0.2486 / 3.434 / 4.103, within its target;
+        the part beyond the map 160.5 -> 323.1 mm² (the walls' strip between rim and foot)
+    second ink (benches/meniscus.py), stepped block 0.3621 -> 0.2912
+On these renders the edge nodes' ray rule of session 41 costs the physics scan: with the top
+carried on instead (its rule before) 0.1960, clean 0.1505. The rule stays: the frames cannot tell a
+wall along the ray (truth near the top) from a vertical one (truth at the base), and the middle of
+the two is what they allow.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.

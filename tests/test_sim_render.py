@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from appliance.sim import surfaces as S
-from appliance.sim.render import PRESETS, Effects, render_frame, surface_grid, trace
+from appliance.sim.render import PRESETS, Effects, part_layer_roi, render_frame, surface_grid, trace
 from appliance.sim.rig import Rig, pixel_map
 
 RIG = Rig()
@@ -213,6 +213,28 @@ def test_a_low_rim_near_the_axis_hides_the_waterline():
     )
     assert err.max() < 0.01
     assert np.median(P0[:, 1] - 55) > 1.2 * pix
+
+
+def test_a_battered_wall_facing_away_is_drawn_to_its_rims_silhouette():
+    """The stepped block's 85 deg outer wall at y = 86 leans away from the camera by a hair
+    more than the rays there: the rim hides it. Down a column of pixels across it, at
+    level 7.44, the part is drawn exactly where a pixel's ray meets the part on its way down
+    (it was drawn 2 px further out, where Newton's search for the ray's crossing, grazing
+    the wall, ended off the top but inside the footprint)."""
+    block, level = S.get("stepped-block"), 7.44
+    pm = pixel_map(RIG, False)
+    (r0, r1, c0, c1), alpha, _ = part_layer_roi(block, level, RIG, Effects(), pm)
+    x0, y0, kx, ky = (a.reshape(RIG.height, RIG.width)[r0:r1, c0:c1] for a in (pm.x0, pm.y0, pm.kx, pm.ky))
+    col = int(np.argmin(np.abs(x0[0] - 50.0)))
+    rows = np.flatnonzero((y0[:, col] > 84.5) & (y0[:, col] < 87.0))
+    zs = np.linspace(level, 31.0, 6000)[1:]
+    drawn, met = [], []
+    for r in rows:
+        px, py = x0[r, col] + kx[r, col] * (zs - level), y0[r, col] + ky[r, col] * (zs - level)
+        met.append(bool((block.height(px, py) >= zs).any()))
+        drawn.append(bool(alpha[r, col] >= 0.5))
+    assert 10 < sum(met) < len(rows) - 10  # the column crosses the rim
+    assert drawn == met
 
 
 def test_a_point_on_top_of_a_tall_part_appears_where_the_pinhole_says():

@@ -382,8 +382,8 @@ def test_a_node_the_fit_ran_away_with_beside_a_face_takes_the_face():
     assert near[5, 29] == pytest.approx(3.68) and near[5, 30] == pytest.approx(4.3)
 
 
-# Ea (mm) on this small camera: stepped block 0.37 (4.84 with silhouettes read as waterlines,
-# 0.49 with the nodes behind them bracketed by the rims put back), blade 0.108 (1.05, 0.146);
+# Ea (mm) on this small camera: stepped block 0.367 (4.84 with silhouettes read as waterlines,
+# 0.49 with the nodes behind them bracketed by the rims put back), blade 0.113 (1.05, 0.146);
 # benches/occlusion.py has the full-size figures
 @pytest.mark.parametrize("name, ea_max", [("stepped-block", 0.45), ("blade", 0.125)])
 def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
@@ -402,11 +402,12 @@ def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
     assert job.stats["inkslice:fit"]["Ea"] < ea_max
     if name == "stepped-block":
         # its edge nodes past the hidden walls' rims: under the rays, not the top carried on
-        # (they stood 5.0 mm over the true part on average; 2.7 now)
+        # (1.8 mm over the true part on average; 2.0 with the top carried on. Before the
+        # renderer drew the hidden rims where the rays graze them: 2.7, and 5.0)
         hm = job.heightmap
         edge = hm.outline & (hm.source == WALL)
         X, Y = hm.grid()
-        assert edge.sum() > 50 and np.mean(hm.z[edge] - part.height(X[edge], Y[edge])) < 3.5
+        assert edge.sum() > 50 and np.mean(hm.z[edge] - part.height(X[edge], Y[edge])) < 2.5
 
 
 def test_the_fit_on_two_cores_is_the_fit_on_one(tmp_path):

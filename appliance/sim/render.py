@@ -109,6 +109,7 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
             dg = d[:, 0] * kxd + d[:, 1] * kyd - 1.0
             dg = np.where(np.abs(dg) < 0.05, -0.05, dg)  # grazing: damp the step
             z = z - np.clip((T - z) / dg, -5.0, 5.0)
+        z = _met_or_sought(grid, tg, x0d, y0d, kxd, kyd, level, z)
         px, py = x0d + kxd * (z - level), y0d + kyd * (z - level)
         F = np.asarray(t.footprint(px, py), float)
         pz = pix * (Hc - (z - level)) / Hc
@@ -155,6 +156,44 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
     alpha = 1.0 - remaining * (1.0 - a_wl)
     shade = np.where(alpha > 1e-6, colour / np.maximum(alpha, 1e-6), s_wl)
     return alpha.astype(np.float32), shade.astype(np.float32)
+
+
+# Newton has met the tier's top when the ray stands this close to it (mm); an error dz
+# moves the point seen by dz * k <= dz / 4
+MET_MM = 0.01
+RAY_SAMPLES = 256  # heights a ray is sampled at where Newton did not meet the top
+
+
+def _met_or_sought(grid, tg, x0, y0, kx, ky, level, z):
+    """z where Newton met the tier's top; elsewhere the highest height at which the ray
+    meets it (the first thing the camera sees along it), sought by sampling the ray from
+    the grid's top down and bisecting; under the ink (covering nothing) where it meets
+    none. A ray that grazes a wall leaning with it (a battered wall facing away, a flank
+    along the ray) sends Newton round a cycle that ends off the top but inside the
+    footprint: counted as covered, the rims of the stepped block's hidden walls were drawn
+    2 px beyond their silhouettes."""
+    gx, gy = grid.coords(x0 + kx * (z - level), y0 + ky * (z - level))
+    off = ~(np.abs(lookup(tg.FT, gx, gy)[:, 1] - z) <= MET_MM)
+    if not off.any():
+        return z
+    z = z.copy()
+    i = np.flatnonzero(off)
+    hs = np.linspace(grid.z_max, level, RAY_SAMPLES)
+    above = np.empty((i.size, RAY_SAMPLES), bool)
+    for j, h in enumerate(hs):
+        gx, gy = grid.coords(x0[i] + kx[i] * (h - level), y0[i] + ky[i] * (h - level))
+        above[:, j] = lookup(tg.FT, gx, gy)[:, 1] < h
+    hit = ~above.all(axis=1)
+    first = np.argmax(~above, axis=1)  # the first sample down the ray that is in the part
+    lo = hs[first]
+    hi = np.where(first > 0, hs[np.maximum(first - 1, 0)], lo)
+    for _ in range(20):
+        mid = 0.5 * (lo + hi)
+        gx, gy = grid.coords(x0[i] + kx[i] * (mid - level), y0[i] + ky[i] * (mid - level))
+        inside = lookup(tg.FT, gx, gy)[:, 1] >= mid
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    z[i] = np.where(hit, lo, level - 1.0)
+    return z
 
 
 def _borders(label):
