@@ -708,6 +708,13 @@ scans: sample2 16 -> 20, sample3 28 -> 40, blade 4 -> 8; on them 77f42c0 gives s
 0.223 / 0.957, blade 0.1182 / 2.177 / 3.972, sample2 the same.) A flat face's nodes near their
 own frame's level curve bracketed too (24b01c1), on those scans: blade 0.1182 -> 0.1179, stepped
 block 0.4214 -> 0.4207, steps 0.3280 -> 0.3279, plateau 0.0382 -> 0.0384, the other eight the same.
+Session 41 (7 December 2026), the same scans: edge nodes behind a hidden wall at the middle of the
+base and the ray: stepped block 0.4207 -> 0.3624, the other eleven the same. Session 42: a node the
+fit ran away with beside a face that came out at once takes the face (surface/flatfaces.py
+beside_faces): blade 0.1179 / 2.177 / 3.972 -> 0.1153 / 1.730 / 3.972, steps 0.3279 -> 0.3277,
+stepped block 0.3624 -> 0.3621, the other nine the same. Then the renderer fix for rays grazing a
+leaning wall (sim/render.py; only the stepped block's frames change): a fresh stepped-block render
+gives 0.2912 / 3.313 / 7.588.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
