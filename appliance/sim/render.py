@@ -161,7 +161,9 @@ def _silhouette(surface, grid, rig, level, x0, y0, kx, ky, pix, a_wl, wtier, wwa
 # Newton has met the tier's top when the ray stands this close to it (mm); an error dz
 # moves the point seen by dz * k <= dz / 4
 MET_MM = 0.01
+ABOVE_MM = 0.5  # how far above a meeting the ray is checked (far beyond the lookup's steps)
 RAY_SAMPLES = 256  # heights a ray is sampled at where Newton did not meet the top
+GOLDEN_STEPS = 30  # a sample's step (0.12 mm) down to 0.1 um
 
 
 def _met_or_sought(grid, tg, x0, y0, kx, ky, level, z):
@@ -175,28 +177,70 @@ def _met_or_sought(grid, tg, x0, y0, kx, ky, level, z):
     MAX_TRACE_STEPS and calls a ray still above the part a meeting, and these rays, whose
     safe steps are tiny along the wall, are the ones it runs out on (at level 18.3 it met
     the stepped block's upper tier on rays that pass it by, at 19.7-29.8 mm)."""
-    gx, gy = grid.coords(x0 + kx * (z - level), y0 + ky * (z - level))
-    off = ~(np.abs(lookup(tg.FT, gx, gy)[:, 1] - z) <= MET_MM)
+    rays = _Ray(grid, tg, x0, y0, kx, ky, level)
+    # met, and from above: a ray whose gap grows above where Newton met the top comes out
+    # of a wall there (it went in higher up, where the camera sees it)
+    gap = rays.gap(z)
+    off = ~(np.abs(gap) <= MET_MM) | (rays.gap(z + ABOVE_MM) > gap)
     if not off.any():
         return z
     z = z.copy()
     i = np.flatnonzero(off)
     hs = np.linspace(grid.z_max, level, RAY_SAMPLES)
-    above = np.empty((i.size, RAY_SAMPLES), bool)
+    ray = rays.subset(i)
+    first = np.full(i.size, -1)  # the first sample down the ray that is in the part
+    best, nearest = np.zeros(i.size, int), np.full(i.size, -np.inf)  # the sample nearest it
     for j, h in enumerate(hs):
-        gx, gy = grid.coords(x0[i] + kx[i] * (h - level), y0[i] + ky[i] * (h - level))
-        above[:, j] = lookup(tg.FT, gx, gy)[:, 1] < h
-    hit = ~above.all(axis=1)
-    first = np.argmax(~above, axis=1)  # the first sample down the ray that is in the part
-    lo = hs[first]
+        gap = ray.gap(np.full(i.size, h))
+        first[(first < 0) & (gap >= 0)] = j
+        closer = gap > nearest
+        best[closer], nearest[closer] = j, gap[closer]
+    hit = first >= 0
+    lo = hs[np.maximum(first, 0)]
     hi = np.where(first > 0, hs[np.maximum(first - 1, 0)], lo)
+    # a ray that only clips a rim's corner is in the part for less than a sample's step
+    clip = np.flatnonzero(~hit)
+    if clip.size:
+        peak, gap, above = _closest_approach(ray.subset(clip), hs, best[clip])
+        met = gap >= 0
+        hit[clip] = met
+        lo[clip[met]], hi[clip[met]] = peak[met], above[met]
     for _ in range(20):
         mid = 0.5 * (lo + hi)
-        gx, gy = grid.coords(x0[i] + kx[i] * (mid - level), y0[i] + ky[i] * (mid - level))
-        inside = lookup(tg.FT, gx, gy)[:, 1] >= mid
+        inside = ray.gap(mid) >= 0
         lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
     z[i] = np.where(hit, lo, level - 1.0)
     return z
+
+
+class _Ray:
+    """Pixels' rays through one tier: gap(h), the top minus the height where each meets h."""
+
+    def __init__(self, grid, tg, x0, y0, kx, ky, level):
+        self.grid, self.tg, self.level = grid, tg, level
+        self.x0, self.y0, self.kx, self.ky = x0, y0, kx, ky
+
+    def gap(self, h):
+        gx, gy = self.grid.coords(self.x0 + self.kx * (h - self.level), self.y0 + self.ky * (h - self.level))
+        return lookup(self.tg.FT, gx, gy)[:, 1] - h
+
+    def subset(self, j):
+        return _Ray(self.grid, self.tg, self.x0[j], self.y0[j], self.kx[j], self.ky[j], self.level)
+
+
+def _closest_approach(ray, hs, best):
+    """Rays none of whose samples at heights `hs` is in the tier: where each comes closest
+    to the top (the gap at its highest), sought by a golden-section search between the
+    neighbours of its best sample (`best`) -> (that height, its gap, the sample above it)."""
+    lo = hs[np.minimum(best + 1, hs.size - 1)]
+    hi = above = hs[np.maximum(best - 1, 0)]
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(GOLDEN_STEPS):
+        c, d = hi - r * (hi - lo), lo + r * (hi - lo)  # c below d
+        lower = ray.gap(c) > ray.gap(d)  # the peak lies between lo and d
+        lo, hi = np.where(lower, lo, c), np.where(lower, d, hi)
+    h = 0.5 * (lo + hi)
+    return h, ray.gap(h), above
 
 
 def _borders(label):
