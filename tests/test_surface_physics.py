@@ -548,6 +548,19 @@ def test_the_ink_climbs_a_face_that_came_out_at_once_no_more_than_a_face_that_fl
     assert np.all(flat_face_rise(None, (lo, hi), 2.0) == 0.0)  # no meniscus: the bracket itself
 
 
+def test_an_ink_that_dewets_a_face_that_came_out_at_once_stood_below_it_one_frame_up():
+    """The same face under the second ink (35 deg): no steeper than 0.09 / 2, so the ink that
+    still covered it in the frame above stood in a depression over it, 1.28 mm at least. Its
+    ceiling is that far under the upper level, where it was the upper level itself (the
+    blade's slab beside its flank's foot, second ink: 4.1-5.3 mm high where it is 3.6)."""
+    from appliance.surface.fitpass import flat_face_rise
+
+    lo, hi = np.array([9.90]), np.array([9.99])
+    climb = flat_face_rise(MeniscusModel(**SECOND), (lo, hi), 2.0)
+    expected = 2 * 2.3 * np.sin((np.arctan(0.09 / 2.0) - np.radians(35.0)) / 2)
+    assert abs(climb[0] - expected) < 1e-12 and -1.29 < climb[0] < -1.27
+
+
 def test_a_level_shelf_at_the_outline_does_not_run_away():
     """The harsh bench's plateau: a mesa (flat at 25 mm, smooth shoulders) on a 10 mm shelf
     that runs flat to the outline. Smoothing the top where it is level (LevelRows) leaves free

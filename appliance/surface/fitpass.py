@@ -141,11 +141,13 @@ def flat_face_rise(model, flat, far_mm):
     apparent height stays within its bracket over the far_mm or more it lies from the
     frame above's waterline, so it is no steeper than the bracket over that. (The
     steepest rise of all, a wall's, let the shoulder's rise carry the plateau's foot
-    0.3-0.65 mm above its 10 mm base on the harsh bench.)"""
+    0.3-0.65 mm above its 10 mm base on the harsh bench.) Below zero for an ink that
+    dewets a face that flat: the frame above's ink, which still covered the face, stood
+    at least that far above it (the second ink's blade: the slab beside its flank's foot)."""
     lo, hi = flat
     if model is None:
         return np.zeros(lo.shape)
-    return np.maximum(model.rise(np.arctan(np.nan_to_num(hi - lo) / far_mm)), 0.0)
+    return model.rise(np.arctan(np.nan_to_num(hi - lo) / far_mm))
 
 
 class PassResult(NamedTuple):
