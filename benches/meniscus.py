@@ -715,6 +715,12 @@ beside_faces): blade 0.1179 / 2.177 / 3.972 -> 0.1153 / 1.730 / 3.972, steps 0.3
 stepped block 0.3624 -> 0.3621, the other nine the same. Then the renderer fix for rays grazing a
 leaning wall (sim/render.py; only the stepped block's frames change): a fresh stepped-block render
 gives 0.2912 / 3.313 / 7.588.
+Session 43: the renderer also meets a grazing ray from above where Newton met it coming out of
+the wall (again only the stepped block's frames change): a fresh stepped-block render gives
+0.2654 / 3.888 / 6.414. A face that came out at once is held under its upper level by the
+depression the ink stood in over it (fitpass.flat_face_rise below zero): blade 0.1153 / 1.677 /
+3.972 -> 0.1102 / 1.614 / 3.972, stepped block 0.2654 -> 0.2447, steps 0.3277 -> 0.3256, plateau
+0.0384 -> 0.0379, sample3 0.0283 -> 0.0281, the other eight the same.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3

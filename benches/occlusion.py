@@ -209,6 +209,20 @@ carried on instead (its rule before) 0.1960, clean 0.1505. The rule stays: the f
 wall along the ray (truth near the top) from a vertical one (truth at the base), and the middle of
 the two is what they allow.
 
+7 December 2026 (session 43), the renderer again: Newton, started at the liquid, could meet a ray
+grazing a battered wall where it comes out of the wall, under the top the camera sees, and a
+strip along the y = 86 rim was drawn as ink over rays 1.1-1.2 mm deep in the part. Such a meeting
+is now handed to the sampler, and a ray none of whose samples is in the part gets a search for
+its closest approach (a rim corner it clips). Only the stepped block's frames change (848
+pixels over six levels). Fresh stepped-block renders, blade kept:
+    stepped block clean    0.1348 / 2.224 / 5.505, 29 holes -> 0.1415 / 3.808 / 3.941, no holes;
+        milled: gouge 6.297 mm at (84.8, 22.2), p99 2.192
+    stepped block physics  0.2486 / 3.434 / 4.103 -> 0.2154 / 3.619 / 3.798, within its target;
+        milled: gouge 6.461 -> 6.283 mm, same place (the upper tier's hidden corner, marked
+        occluded +-2.53), p99 2.513 -> 2.481
+The held-under-a-depression bound for faces that came out at once (same session) changes
+nothing here: the first ink commissions to 0.04 deg.
+
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
 benches/seed_table.py); the scans and the calibration are kept in --keep and reused.
