@@ -167,13 +167,14 @@ GOLDEN_STEPS = 30  # a sample's step (0.12 mm) down to 0.1 um
 
 
 def _met_or_sought(grid, tg, x0, y0, kx, ky, level, z):
-    """z where Newton met the tier's top; elsewhere the highest height at which the ray
-    meets it (the first thing the camera sees along it), sought by sampling the ray from
-    the grid's top down and bisecting; under the ink (covering nothing) where it meets
-    none. A ray that grazes a wall leaning with it (a battered wall facing away, a flank
-    along the ray) sends Newton round a cycle that ends off the top but inside the
+    """z where Newton met the tier's top coming down the ray; elsewhere the highest height at
+    which the ray meets it (the first thing the camera sees along it), sought by sampling
+    the ray from the grid's top down and bisecting; under the ink (covering nothing) where
+    it meets none. A ray that grazes a wall leaning with it (a battered wall facing away, a
+    flank along the ray) sends Newton round a cycle that ends off the top but inside the
     footprint: counted as covered, the rims of the stepped block's hidden walls were drawn
-    2 px beyond their silhouettes. Not trace.trace on the one tier: it stops after
+    2 px beyond their silhouettes. Or Newton meets it where it comes out of the wall, under
+    the top: a strip along the rim was drawn as ink. Not trace.trace on the one tier: it stops after
     MAX_TRACE_STEPS and calls a ray still above the part a meeting, and these rays, whose
     safe steps are tiny along the wall, are the ones it runs out on (at level 18.3 it met
     the stepped block's upper tier on rays that pass it by, at 19.7-29.8 mm)."""
