@@ -124,8 +124,8 @@ class SerialStage(Stage):
             raw = self._ser.readline()
             if not raw:
                 return None
-            if not raw.endswith(b"\n"):
-                continue
+            if not raw.endswith(b"\n") or not raw.strip():
+                continue  # a fragment the timeout cut, or the newline a banner opens with
             try:
                 return P.parse_line(raw)
             except P.ProtocolError:

@@ -370,9 +370,14 @@ static void handle_line(char *text, uint8_t len)
   }
 }
 
+/* The banner opens with a bare newline, as grbl's does: a reset can cut the
+ * firmware off in the middle of a line, and without it the banner would run on
+ * from that fragment into one line whose CRC fails, and the host would never
+ * see the reset.  The host skips blank lines. */
 static void banner(void)
 {
   char b[64];
+  serial_write("\n", 1);
   uint8_t n = proto_put_P(b, 0, sizeof b, PSTR("# inkslice-stepper proto="));
   n = proto_put_i32(b, n, sizeof b, PROTO_VERSION);
   n = proto_put_P(b, n, sizeof b, PSTR(" reset="));
