@@ -402,12 +402,12 @@ def test_the_occluding_parts_render_and_reconstruct(tmp_path, name, ea_max):
     assert job.stats["inkslice:fit"]["Ea"] < ea_max
     if name == "stepped-block":
         # its edge nodes past the hidden walls' rims: under the rays, not the top carried on
-        # (0.49 mm under the true part on average, |error| 1.75. With the rays drawn beyond
-        # the rims: 1.8 over; before that, where Newton cycled: 2.7 over, and 5.0 carried on)
+        # (0.49 mm under the true part on average; carried on, 1.06 over. On the renderers
+        # before: 1.8 over against 2.0, and where Newton cycled 2.7 against 5.0)
         hm = job.heightmap
         edge = hm.outline & (hm.source == WALL)
         X, Y = hm.grid()
-        assert edge.sum() > 50 and np.mean(hm.z[edge] - part.height(X[edge], Y[edge])) < 2.5
+        assert edge.sum() > 50 and np.mean(hm.z[edge] - part.height(X[edge], Y[edge])) < 0.5
 
 
 def test_the_fit_on_two_cores_is_the_fit_on_one(tmp_path):
