@@ -215,6 +215,29 @@ def test_a_low_rim_near_the_axis_hides_the_waterline():
     assert np.median(P0[:, 1] - 55) > 1.2 * pix
 
 
+def _drawn_and_rays(part, level):
+    """The part layer's alpha over its pixel rectangle, and each pixel's ray there:
+    (x0, y0, kx, ky), where it meets the liquid and its slope per mm of height."""
+    pm = pixel_map(RIG, False)
+    (r0, r1, c0, c1), alpha, _ = part_layer_roi(part, level, RIG, Effects(), pm)
+    rays = tuple(a.reshape(RIG.height, RIG.width)[r0:r1, c0:c1] for a in (pm.x0, pm.y0, pm.kx, pm.ky))
+    return alpha, rays
+
+
+def _deepest(part, level, rays, rows, cols, steps):
+    """How deep (mm) each pixel's ray gets into the part, marched at `steps` heights from
+    the liquid to above the part's top: >= 0 where it meets it."""
+    x0, y0, kx, ky = rays
+    zs = np.linspace(level, surface_grid(part).z_max + 0.2, steps)[1:]
+    out = np.empty(rows.size)
+    for a in range(0, rows.size, 500):
+        r, c = rows[a : a + 500], cols[a : a + 500]
+        px = x0[r, c][:, None] + kx[r, c][:, None] * (zs - level)
+        py = y0[r, c][:, None] + ky[r, c][:, None] * (zs - level)
+        out[a : a + 500] = (part.height(px, py) - zs).max(axis=1)
+    return out
+
+
 def test_a_battered_wall_facing_away_is_drawn_to_its_rims_silhouette():
     """The stepped block's 85 deg outer wall at y = 86 leans away from the camera by a hair
     more than the rays there: the rim hides it. Down a column of pixels across it, at
@@ -222,17 +245,12 @@ def test_a_battered_wall_facing_away_is_drawn_to_its_rims_silhouette():
     (it was drawn 2 px further out, where Newton's search for the ray's crossing, grazing
     the wall, ended off the top but inside the footprint)."""
     block, level = S.get("stepped-block"), 7.44
-    pm = pixel_map(RIG, False)
-    (r0, r1, c0, c1), alpha, _ = part_layer_roi(block, level, RIG, Effects(), pm)
-    x0, y0, kx, ky = (a.reshape(RIG.height, RIG.width)[r0:r1, c0:c1] for a in (pm.x0, pm.y0, pm.kx, pm.ky))
+    alpha, rays = _drawn_and_rays(block, level)
+    x0, y0 = rays[0], rays[1]
     col = int(np.argmin(np.abs(x0[0] - 50.0)))
     rows = np.flatnonzero((y0[:, col] > 84.5) & (y0[:, col] < 87.0))
-    zs = np.linspace(level, 31.0, 6000)[1:]
-    drawn, met = [], []
-    for r in rows:
-        px, py = x0[r, col] + kx[r, col] * (zs - level), y0[r, col] + ky[r, col] * (zs - level)
-        met.append(bool((block.height(px, py) >= zs).any()))
-        drawn.append(bool(alpha[r, col] >= 0.5))
+    met = list(_deepest(block, level, rays, rows, np.full(rows.size, col), 6000) >= 0)
+    drawn = list(alpha[rows, col] >= 0.5)
     assert 10 < sum(met) < len(rows) - 10  # the column crosses the rim
     assert drawn == met
 
@@ -246,21 +264,13 @@ def test_every_silhouette_pixel_of_the_stepped_block_is_drawn_as_its_ray_meets_t
     battered wall comes out of it, under the top the camera sees: a 2 px strip along the
     y = 86 rim was drawn as ink over rays 1.2 mm deep in the part."""
     block, level, clip_mm = S.get("stepped-block"), 6.44, 0.1
-    pm = pixel_map(RIG, False)
-    (r0, r1, c0, c1), alpha, _ = part_layer_roi(block, level, RIG, Effects(), pm)
-    x0, y0, kx, ky = (a.reshape(RIG.height, RIG.width)[r0:r1, c0:c1] for a in (pm.x0, pm.y0, pm.kx, pm.ky))
+    alpha, rays = _drawn_and_rays(block, level)
     drawn = alpha >= 0.5
     band = cv2.dilate(drawn.view(np.uint8), np.ones((7, 7), np.uint8)) > cv2.erode(
         drawn.view(np.uint8), np.ones((7, 7), np.uint8)
     )
     rr, cc = np.nonzero(band)
-    zs = np.linspace(level, surface_grid(block).z_max + 0.2, 3000)[1:]
-    deepest = np.empty(rr.size)
-    for a in range(0, rr.size, 500):
-        r, c = rr[a : a + 500], cc[a : a + 500]
-        px = x0[r, c][:, None] + kx[r, c][:, None] * (zs - level)
-        py = y0[r, c][:, None] + ky[r, c][:, None] * (zs - level)
-        deepest[a : a + 500] = (block.height(px, py) - zs).max(axis=1)
+    deepest = _deepest(block, level, rays, rr, cc, 3000)
     assert rr.size > 20000  # the whole outline, both tiers
     wrong = (deepest >= 0) != drawn[rr, cc]
     assert np.abs(deepest[wrong]).max() < clip_mm
