@@ -720,7 +720,8 @@ the wall (again only the stepped block's frames change): a fresh stepped-block r
 0.2654 / 3.888 / 6.414. A face that came out at once is held under its upper level by the
 depression the ink stood in over it (fitpass.flat_face_rise below zero): blade 0.1153 / 1.677 /
 3.972 -> 0.1102 / 1.614 / 3.972, stepped block 0.2654 -> 0.2447, steps 0.3277 -> 0.3256, plateau
-0.0384 -> 0.0379, sample3 0.0283 -> 0.0281, the other eight the same.
+0.0384 -> 0.0379, sample3 0.0283 -> 0.0281, the other eight the same. The renderer's review mend
+(40 stepped-block pixels over six levels), a fresh stepped-block render: 0.2451 / 3.897 / 6.538.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3

@@ -221,7 +221,10 @@ pixels over six levels). Fresh stepped-block renders, blade kept:
         milled: gouge 6.461 -> 6.283 mm, same place (the upper tier's hidden corner, marked
         occluded +-2.53), p99 2.513 -> 2.481
 The held-under-a-depression bound for faces that came out at once (same session) changes
-nothing here: the first ink commissions to 0.04 deg.
+nothing here: the first ink commissions to 0.04 deg. The closest-approach search then kept one
+point a step (review mend; 40 pixels of the stepped block change over six levels). Fresh
+stepped-block renders again: clean 0.1371 / 3.809 / 3.942, milled gouge 6.173 at (85.0, 22.0),
+p99 2.167; physics 0.2157 / 3.621 / 3.799, milled gouge 6.302 at (84.8, 22.2), p99 2.477.
 
 physics: the camera block in each scan.json is our calibration from rendered
 chessboards and the meniscus model comes from a rendered sphere scan (as in
