@@ -278,6 +278,9 @@ def level_step(slices: list[Slice]) -> float:
     return float(np.median(-np.diff(levels))) if levels.size > 1 else 0.0
 
 
+LONE_RIM_MM = 0.5  # how far one frame's rims alone may take the outline past every other's
+
+
 def outline_bounds(slices: list[Slice]):
     """(xmin, xmax, ymin, ymax) of the part's outline: the lowest frame's waterline and
     every frame's wall points.
@@ -289,8 +292,22 @@ def outline_bounds(slices: list[Slice]):
     points add nothing but their own errors: a contact line near a rim, seen raised by
     the meniscus and not yet put back, put sample 4's outline 0.2 mm beyond its wall."""
     lowest = next(s for s in reversed(slices) if not s.empty)
-    P = np.vstack([lowest.P] + [s.P[_rim_points(s)] for s in slices if not s.empty and s.wall is not None])
-    return (float(P[:, 0].min()), float(P[:, 0].max()), float(P[:, 1].min()), float(P[:, 1].max()))
+    low = lowest.P.min(axis=0), lowest.P.max(axis=0)
+    # each higher frame's rims, as far out as they reach; one frame alone reaches at most
+    # LONE_RIM_MM past the next farthest (one frame's rims put back short - an edge's chain
+    # broken there - stood 2.2 mm out and stretched the grid; a lone frame whose bracket put
+    # its rim nearest the wall, 0.18 mm past the others, is right: the blade's end)
+    reach = [s.P[_rim_points(s)] for s in slices if not s.empty and s.wall is not None and s is not lowest]
+    reach = [r for r in reach if len(r)]
+    lo, hi = low
+    if reach:
+        lows = np.sort(np.array([r.min(axis=0) for r in reach]), axis=0)
+        highs = np.sort(np.array([r.max(axis=0) for r in reach]), axis=0)
+        if len(reach) >= 2:
+            lows[0] = np.maximum(lows[0], lows[1] - LONE_RIM_MM)
+            highs[-1] = np.minimum(highs[-1], highs[-2] + LONE_RIM_MM)
+        lo, hi = np.minimum(lo, lows[0]), np.maximum(hi, highs[-1])
+    return (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
 
 
 def _rim_points(s: Slice):
