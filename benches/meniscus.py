@@ -722,6 +722,10 @@ depression the ink stood in over it (fitpass.flat_face_rise below zero): blade 0
 3.972 -> 0.1102 / 1.614 / 3.972, stepped block 0.2654 -> 0.2447, steps 0.3277 -> 0.3256, plateau
 0.0384 -> 0.0379, sample3 0.0283 -> 0.0281, the other eight the same. The renderer's review mend
 (40 stepped-block pixels over six levels), a fresh stepped-block render: 0.2451 / 3.897 / 6.538.
+Session 44: wall edges followed over 2 mm of level, the footprint and the grid's bounds from what
+two frames agree on (held out at 0.5 mm steps, benches/harsh.py (zc)), the same scans: blade 0.1102
+/ 1.614 / 3.972 -> 0.1084 / 1.540 / 4.107, sample2 0.0129 -> 0.0122, sample3 0.0281 -> 0.0273,
+steps 0.3256 -> 0.3252, stepped block 0.2447 (the session 43 render), the other nine within 0.0001.
 
     nice -n 10 .venv/bin/python benches/meniscus.py                          # both models, all parts
     nice -n 10 .venv/bin/python benches/meniscus.py --models physics2 --parts crater,sample3
