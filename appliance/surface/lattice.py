@@ -94,7 +94,8 @@ FOOTPRINT_FRAMES = 2  # frames that must show a place out, beyond the lowest one
 
 def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
     """Each node's share of the part's footprint: the fraction of its cell (the node +-
-    half a spacing) inside any of the slices' waterlines, from sub x sub samples per cell.
+    half a spacing) inside the lowest frame's waterline or two other frames', from sub x sub
+    samples per cell.
 
     The nodes inside a waterline undercount its area by a strip of about half a spacing
     all round (2.5 % of a 100 mm block on a 1 mm lattice); an emerged volume summed over

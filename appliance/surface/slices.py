@@ -283,7 +283,7 @@ LONE_RIM_MM = 0.5  # how far one frame's rims alone may take the outline past ev
 
 def outline_bounds(slices: list[Slice]):
     """(xmin, xmax, ymin, ymax) of the part's outline: the lowest frame's waterline and
-    every frame's wall points.
+    every frame's wall points (one frame's alone at most LONE_RIM_MM past the others').
 
     The part only grows as the ink drops, so the lowest frame holds its outline - except
     where the part has left the camera's view there (sample 2's far wall is beyond the
