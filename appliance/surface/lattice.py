@@ -113,13 +113,13 @@ def area_weights(lat: Lattice, slices: list[Slice], sub: int = 4) -> np.ndarray:
     fine = Lattice(
         np.ravel(lat.x[:, None] + lat.hx * off[None, :]), np.ravel(lat.y[:, None] + lat.hy * off[None, :])
     )
-    shown = [sl for sl in slices if not sl.empty]
     count = np.zeros(fine.shape, np.int16)
-    for sl in shown:
-        count += exposed_mask(fine, sl, exact_edges=True)
-    inside = count >= min(FOOTPRINT_FRAMES, len(shown))
-    if shown:
-        inside |= exposed_mask(fine, shown[-1], exact_edges=True)
+    lowest = np.zeros(fine.shape, bool)
+    for sl in slices:  # highest first: the last mask kept is the lowest frame's
+        if not sl.empty:
+            lowest = exposed_mask(fine, sl, exact_edges=True)
+            count += lowest
+    inside = lowest | (count >= FOOTPRINT_FRAMES)
     return inside.reshape(lat.y.size, sub, lat.x.size, sub).mean(axis=(1, 3))
 
 

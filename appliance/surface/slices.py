@@ -292,14 +292,13 @@ def outline_bounds(slices: list[Slice]):
     points add nothing but their own errors: a contact line near a rim, seen raised by
     the meniscus and not yet put back, put sample 4's outline 0.2 mm beyond its wall."""
     lowest = next(s for s in reversed(slices) if not s.empty)
-    low = lowest.P.min(axis=0), lowest.P.max(axis=0)
+    lo, hi = lowest.P.min(axis=0), lowest.P.max(axis=0)
     # each higher frame's rims, as far out as they reach; one frame alone reaches at most
     # LONE_RIM_MM past the next farthest (one frame's rims put back short - an edge's chain
     # broken there - stood 2.2 mm out and stretched the grid; a lone frame whose bracket put
     # its rim nearest the wall, 0.18 mm past the others, is right: the blade's end)
     reach = [s.P[_rim_points(s)] for s in slices if not s.empty and s.wall is not None and s is not lowest]
     reach = [r for r in reach if len(r)]
-    lo, hi = low
     if reach:
         lows = np.sort(np.array([r.min(axis=0) for r in reach]), axis=0)
         highs = np.sort(np.array([r.max(axis=0) for r in reach]), axis=0)
