@@ -388,6 +388,46 @@ Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
   corner at (46, 45.7), level in truth, is solved 2.2 mm high by the meniscus correction's free
   mode (surface/contact_lines.py); at 1 mm steps that corner comes out at once and its bracket
   holds it. Not fixed.
+(zd) Session 45 (7 December 2026), held out by realisation: sample 4 rendered again at render
+  seeds 2-5 (`--parts sample4:2,...`: the same part, plan, camera and meniscus file as (zb), only
+  the noise, glare, dust and play drawn afresh), main 6f491d3. Ea / interior p99 / max mm:
+  seed 1 (zb's render) 0.1842 0.319 1.756; seed 2 0.3195 0.385 3.124; seed 3 0.3407 0.423 5.066;
+  seed 4 0.2470 0.499 3.445; seed 5 0.3250 0.637 2.838. Seed 1 is the best of five, not typical.
+  Samples 1-3 and twin-peaks at seed 2 stay within all three targets (0.0116 0.034 0.168,
+  0.0084 0.020 0.054, 0.0148 0.044 0.483, 0.0194 0.097 0.673). Sample 4's cells over 1 mm
+  are in two places:
+  - the flat corner at (46-48, 45-46.1), level in truth at 22.3 mm, solved 2.0-3.1 mm high
+    (seeds 2, 3, 5: 112-126 cells, 0.08-0.10 mm of Ea). Glare over it in the frames above is
+    not the cause (seed 4 has as much and holds). The cause, on seed 5: a few points of the
+    y = 45 wall in the frames at 21, 20 and 19 mm (1-6 each, 0.05-0.09 mm off the neighbours'
+    waterlines, more than the 0.03 mm wall tolerance: the play the registration leaves) stay
+    level-curve points at the wall, a level or two below the corner. First exposure then
+    finds no height for 176 of its 260 nodes (its polynomial leaves the bracket; seed 1: all
+    247 placed at 22.24-22.37), the fit of the apparent surface there swings 20.4-23.5 with
+    slopes up to 8, and the meniscus solve adds the rise that slope asks (+1.4 mm median).
+    Tried, not kept: runs of points beside a wall, up to 10 points along the loop, within
+    0.06 mm of a neighbour's waterline (but never as far as an 86-degree face moves in the
+    step) are wall too. Seeds 1-5 0.1842 0.1977 0.1433 0.2389 0.2302 (grown in the lowest
+    frame too; without the lowest frame seed 3 stays at 0.3349). On the 21 kept bench scans
+    (harsh and second ink): second-ink sample 3 0.0273 -> 0.0255, sample 2 0.0122 -> 0.0114,
+    harsh sample 3 0.0143 -> 0.0137; but second-ink sample 4 0.0493 -> 0.0501, stepped block
+    0.2447 -> 0.2556, steps 0.3252 -> 0.3277, and, grown in the lowest frame, harsh ring
+    0.0372 -> 0.0548 (its hole's wall, marked right at last, showed that the meniscus solve
+    there stands 0.1-0.2 mm high: the 10 level-curve points had pulled it down). Only along
+    the wall's own direction (15 degrees): seed 5 0.2282 but seed 2 0.3098, and the kept
+    scans no better.
+  - the summit along the y = 55 wall (x 49.4-52, true 37-38.6), 2.8-5.1 mm low (seeds 3, 4 and
+    2: 18-25 cells). In seed 3 the sliver shows in frames 36-34 with a peak of 46-67 DN over a
+    glare haze of 21-33, against the frame's threshold of 75 (the part's lit faces are ~240):
+    it is first read at level 33 and the summit is extrapolated from there.
+  Tried on these renders, not kept: (1) the renderer's own play taken out of every frame in
+  place of the registration (an oracle): the meniscus-free render 0.1128 -> 0.0906, seed 1
+  harsh 0.1842 -> 0.2150 (worse); the registration leaves 0.025 of 0.036 mm rms because from
+  level 36 to 22 only the y = 45 and y = 55 walls are in view, which tell nothing about x. (2) The
+  play from each frame's second difference to its neighbours (every point of a smooth face, not
+  only walls): 0.027-0.031 mm rms left, no better. (3) The contact lines' bend taken from the
+  seen (apparent) level curves everywhere instead of the solved top's: 0.1842 -> 0.2768, second
+  ink 0.0493 -> 0.0840 (the renderer bends the meniscus by the top's level curve).
 
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
@@ -411,7 +451,9 @@ from appliance.sim import surfaces
 from appliance.vision.refine import RESOLUTION_MM
 
 PARTS = "sample1,sample2,sample3,sample4,twin-peaks,plateau,ring"
-HELD_OUT = "crater,steep-front"  # shapes the uncertainty map was not tuned on
+# shapes the uncertainty map was not tuned on, and sample 4 drawn afresh (render seeds 2 and 3:
+# its seed-1 figures are the best of five, (zd))
+HELD_OUT = "crater,steep-front,sample4:2,sample4:3"
 TARGETS = {"Ea": 0.05, "p99": 0.2, "max": 1.0}
 
 
