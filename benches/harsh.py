@@ -406,16 +406,16 @@ Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
     247 placed at 22.24-22.37), the fit of the apparent surface there swings 20.4-23.5 with
     slopes up to 8, and the meniscus solve adds the rise that slope asks (+1.4 mm median).
     Tried, not kept: runs of points beside a wall, up to 10 points along the loop, within
-    0.06 mm of a neighbour's waterline (but never as far as an 86-degree face moves in the
-    step) are wall too. Seeds 1-5 0.1842 0.1977 0.1433 0.2389 0.2302 (grown in the lowest
-    frame too; without the lowest frame seed 3 stays at 0.3349). On the 21 kept bench scans
-    (harsh and second ink): second-ink sample 3 0.0273 -> 0.0255, sample 2 0.0122 -> 0.0114,
-    harsh sample 3 0.0143 -> 0.0137; but second-ink sample 4 0.0493 -> 0.0501, stepped block
-    0.2447 -> 0.2556, steps 0.3252 -> 0.3277, and, grown in the lowest frame, harsh ring
-    0.0372 -> 0.0548 (its hole's wall, marked right at last, showed that the meniscus solve
-    there stands 0.1-0.2 mm high: the 10 level-curve points had pulled it down). Only along
-    the wall's own direction (15 degrees): seed 5 0.2282 but seed 2 0.3098, and the kept
-    scans no better.
+    0.06 mm of a neighbour's waterline (never as far as an 86-degree face moves in the step),
+    are wall too. Grown in every frame: seeds 1-5 0.1844 0.1975 0.1433 0.2383 0.2295, but the
+    harsh ring 0.0372 -> 0.0550 (its hole's wall in the lowest frame, marked right at last,
+    showed that the meniscus solve there stands 0.1-0.2 mm high: those 10 level-curve points
+    had pulled it down). Not grown in the lowest frame: seeds 1-5 0.1845 0.1977 0.3349 0.2387
+    0.2305; on the 21 kept bench scans (harsh and second ink) second-ink sample 3 0.0273 ->
+    0.0255, sample 2 0.0122 -> 0.0114, harsh sample 3 0.0143 -> 0.0137, the ring unchanged,
+    but second-ink sample 4 0.0493 -> 0.0501, stepped block 0.2447 -> 0.2556, steps 0.3252 ->
+    0.3277. Only along the wall's own direction (15 degrees): seed 5 0.2282 but seed 2 0.3098,
+    and the kept scans no better.
   - the summit along the y = 55 wall (x 49.4-52, true 37-38.6), 2.8-5.1 mm low (seeds 3, 4 and
     2: 18-25 cells). In seed 3 the sliver shows in frames 36-34 with a peak of 46-67 DN over a
     glare haze of 21-33, against the frame's threshold of 75 (the part's lit faces are ~240):
