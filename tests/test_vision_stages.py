@@ -7,7 +7,7 @@ from test_vision_synth import INK, PART, draw, grid
 
 from appliance.vision.band import TileGrid
 from appliance.vision.frames import FrameError, best_channel, check_image, hue_split, otsu_split, towards_ink
-from appliance.vision.subpixel import bumps, refine, sample_q8
+from appliance.vision.subpixel import bumps, refine, refine_at, sample_q8
 
 
 def test_otsu_split_finds_the_two_classes_and_ignores_clipped_glare():
@@ -75,6 +75,32 @@ def test_straight_edge_found_to_a_few_hundredths_of_a_pixel(angle):
     dist = pts[inner] @ n - c
     assert inner.sum() > 50
     assert np.sqrt(np.mean(dist**2)) < 0.05
+
+
+def test_a_sliver_narrower_than_the_profile_is_placed_where_it_crosses_the_level_given():
+    """A strip 3 px wide, blurred to a peak of 60 over ink at 20: a 9-px profile from its edge
+    runs from ink to ink, so it has no half-way point; it crosses the level given (40) where
+    the blurred strip does."""
+    u, v = grid(120, 60)
+    strip = ((v >= 28.5) & (v < 31.5)).astype(np.float32)  # rows 29-31 are the sliver
+    blurred = cv2.GaussianBlur(strip, (0, 0), 1.2)
+    img = np.clip(np.rint(20 + 40 * blurred / blurred.max()), 0, 255).astype(np.uint8)
+    binary = (img >= 40).astype(np.uint8) * 255
+    contours, _ = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    chain = max(contours, key=len).reshape(-1, 2)
+    mid = (chain[:, 0] > 10) & (chain[:, 0] < 110)
+    assert len(refine(img, chain, threshold=40, min_contrast=12)[1]) < mid.sum() / 4
+    pts, idx = refine_at(img, chain, np.arange(len(chain)), 40.0)
+    inner = (pts[:, 0] > 10) & (pts[:, 0] < 110)
+    assert inner.sum() > 150  # both sides, nearly every pixel
+    # where the blurred strip itself passes 40, along each column
+    col = img[:, 60].astype(float)
+    above = np.nonzero(col >= 40)[0]
+    lo, hi = above[0], above[-1]
+    top = lo - 1 + (40 - col[lo - 1]) / (col[lo] - col[lo - 1])
+    bottom = hi + (col[hi] - 40) / (col[hi] - col[hi + 1])
+    side = np.where(pts[inner, 1] < 30, top, bottom)
+    assert np.abs(pts[inner, 1] - side).max() < 0.1
 
 
 def test_a_speck_on_the_line_is_a_bump_and_a_corner_is_not():

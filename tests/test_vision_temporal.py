@@ -127,3 +127,40 @@ def test_a_top_first_showing_as_a_sliver_is_read_with_what_the_frames_below_taug
     sliver = waterlines[1].loops[0]
     sides = np.abs(np.abs(sliver[:, 1] - 60) - 0.3)[np.abs(sliver[:, 0] - 80) < 3]
     assert len(sides) > 100 and sides.max() < 0.05  # its sides 0.3 mm either side of the crest
+
+
+def dim_crest_frame(level, crest=20.15, dim=(70, 80, 95)):
+    """A ridge like ridge_frame's, through a more blurred lens, whose top 0.3 mm is a face
+    turned from the lamp: grey `dim` (BGR), just above the threshold the lit faces teach.
+    At level 20 it is a sliver 0.3 mm (4 px) wide, blurred below that threshold, in the
+    haze of a lamp over the ink."""
+    u, v = np.meshgrid(np.arange(BIG_W, dtype=np.float32), np.arange(BIG_H, dtype=np.float32))
+    x, y = u * BIG_MM, (BIG_H - v) * BIG_MM
+    d = np.minimum((crest - level) - np.abs(y - 60), 4 + 0.5 * (20 - level) - np.abs(x - 80))
+    cover = np.clip(0.5 + d / BIG_MM, 0, 1)[..., None]
+    top = np.clip(0.5 + (0.3 - np.abs(y - 60)) / BIG_MM, 0, 1)[..., None]  # the dim face
+    ink, lit = np.array([60, 20, 10.0], np.float32), np.array([220, 225, 230.0], np.float32)
+    part = lit + top * (np.array(dim, np.float32) - lit)
+    haze = 20 * np.exp(-((x - 70) ** 2 + (y - 55) ** 2) / (2 * 25.0**2))[..., None]
+    img = cv2.GaussianBlur(ink + cover * (part - ink) + (1 - cover) * haze, (0, 0), 2.0)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def test_a_top_fainter_than_the_threshold_is_read_with_a_split_learned_inside_the_part_below(tmp_path):
+    levels = (21, 20, 19, 18, 17)
+    refs = []
+    for k, level in enumerate(levels, start=1):
+        write_frame(tmp_path, f"frames/{k:04d}.png", dim_crest_frame(level))
+        refs.append(FrameRef(f"frames/{k:04d}.png", float(level)))
+    write_scan_json(Scan(tmp_path, big_camera(), refs, {}))
+    # the lit faces below teach a threshold the blurred sliver at level 20 never reaches
+    lit = WaterlineExtractor(big_camera())
+    lit.extract(dim_crest_frame(19), 19, below=[(18, dim_crest_frame(18)), (17, dim_crest_frame(17))])
+    assert dim_crest_frame(20)[..., 2].max() < lit.split.threshold
+    waterlines = extract_waterlines(load_scan(tmp_path))
+    assert [len(wl.loops) for wl in waterlines] == [0, 1, 1, 1, 1]
+    sliver = waterlines[1].loops[0]
+    sides = np.abs(np.abs(sliver[:, 1] - 60) - 0.15)[np.abs(sliver[:, 0] - 80) < 3]
+    # its sides 0.15 mm either side of the crest, read a pixel wide: the blur that dims a
+    # sliver also widens it where the profile crosses the split learned on it
+    assert len(sides) > 100 and sides.max() < 1.5 * BIG_MM

@@ -55,7 +55,7 @@ from .frames import (
 )
 from .islands import Event, IslandTracker
 from .options import check_roi, extractor_options
-from .subpixel import bumps, refine, refine_colour
+from .subpixel import bumps, refine, refine_at, refine_colour
 from .support import LowerFrames, Raised
 from .types import Waterline, signed_area
 
@@ -82,6 +82,7 @@ class WaterlineExtractor:
         self._bufs: dict[str, np.ndarray] = {}
         self._decimated = None
         self.hue: Hue | None = None  # colour test against glare, learned on the first frame showing it
+        self.faint = False  # reading a top's sliver with a split learned on it (above.py)
         self.reset()
 
     # -- state -----------------------------------------------------------------
@@ -419,6 +420,13 @@ class WaterlineExtractor:
             more, midx = refine_colour(
                 frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc
             )
+            if len(midx):
+                idx = np.concatenate([idx, midx])
+                order = np.argsort(idx, kind="stable")
+                pts, idx = np.vstack([pts, more])[order], idx[order]
+        if self.faint and len(idx) < len(pixels):
+            missing = np.setdiff1d(np.arange(len(pixels)), idx)
+            more, midx = refine_at(self._smooth, pixels, missing, self.split.threshold, half)
             if len(midx):
                 idx = np.concatenate([idx, midx])
                 order = np.argsort(idx, kind="stable")

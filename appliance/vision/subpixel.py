@@ -105,6 +105,37 @@ def refine(
     return pts, np.nonzero(ok)[0]
 
 
+def refine_at(
+    img: np.ndarray,
+    contour: np.ndarray,
+    subset: np.ndarray,
+    level: float,
+    half: int = 4,
+    max_shift: float = 1.5,
+):
+    """Like `refine`, but where each profile passes `level` itself, not half-way between its ends.
+
+    A top just out of the ink is a sliver a few pixels wide: a profile crosses it from ink to
+    ink and never reaches the part's level, so it has no half-way point. Its edge is where it
+    passes the threshold learned on it (above.py). Used only for the points `refine` dropped.
+    """
+    c, n, s, x, y = _profiles(contour, half, subset)
+    p = sample_q8(img, x, y).astype(np.float32) * (1.0 / ONE)
+    d = p - level
+    d0, d1 = d[:, :-1], d[:, 1:]
+    crosses = (d0 * d1 <= 0) & (d0 != d1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        where = s[:-1] + np.where(crosses, d0 / (d0 - d1), np.nan)
+    # the binary edge is half a pixel from the contour pixel, towards the ink
+    dist = np.where(crosses, np.abs(where - 0.5 * np.sign(d0 - d1)), np.inf)
+    j = np.argmin(dist, axis=1)
+    rows = np.arange(len(p))
+    ok = dist[rows, j] <= max_shift
+    t = where[rows, j][ok]
+    pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
+    return pts, subset[ok]
+
+
 def refine_colour(
     frame: np.ndarray,
     contour: np.ndarray,
