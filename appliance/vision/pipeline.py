@@ -55,7 +55,7 @@ from .frames import (
 )
 from .islands import Event, IslandTracker
 from .options import check_roi, extractor_options
-from .subpixel import bumps, refine, refine_at, refine_colour
+from .subpixel import bumps, more_points, refine, refine_at, refine_colour
 from .support import LowerFrames, Raised
 from .types import Waterline, signed_area
 
@@ -415,22 +415,14 @@ class WaterlineExtractor:
         half, mc = self.options["half_width"], self.options["min_contrast"] / 2
         pts, idx = refine(self._smooth, pixels, self.split.threshold, half, mc)
         grey = len(idx) / max(1, len(pixels))
-        if self.hue is not None and frame.ndim == 3 and len(idx) < len(pixels):
-            missing = np.setdiff1d(np.arange(len(pixels)), idx)
-            more, midx = refine_colour(
-                frame, pixels, missing, self._ch, self.hue.other, self.hue.cut, half, mc
+        # points the grey-level step dropped: from the colour where glare drowns the grey
+        # edge, from the split itself across a faint sliver (above.py)
+        if self.hue is not None and frame.ndim == 3:
+            pts, idx = more_points(
+                pts, idx, pixels, refine_colour, frame, self._ch, self.hue.other, self.hue.cut, half, mc
             )
-            if len(midx):
-                idx = np.concatenate([idx, midx])
-                order = np.argsort(idx, kind="stable")
-                pts, idx = np.vstack([pts, more])[order], idx[order]
-        if self.faint and len(idx) < len(pixels):
-            missing = np.setdiff1d(np.arange(len(pixels)), idx)
-            more, midx = refine_at(self._smooth, pixels, missing, self.split.threshold, half)
-            if len(midx):
-                idx = np.concatenate([idx, midx])
-                order = np.argsort(idx, kind="stable")
-                pts, idx = np.vstack([pts, more])[order], idx[order]
+        if self.faint:
+            pts, idx = more_points(pts, idx, pixels, refine_at, self._smooth, self.split.threshold, half)
         if not keep.all():
             pts = pts[keep[idx]]
         return pts, grey

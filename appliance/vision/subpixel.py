@@ -176,6 +176,20 @@ def refine_colour(
     return pts, subset[ok]
 
 
+def more_points(pts, idx, pixels, step, img, *args):
+    """`pts`/`idx` (points of the contour `pixels` and the pixels they came from, as `refine`
+    gives them) with the points `step(img, pixels, missing, *args)` places for the pixels
+    they lack (`refine_colour`, `refine_at`), in contour order."""
+    if len(idx) == len(pixels):
+        return pts, idx
+    more, midx = step(img, pixels, np.setdiff1d(np.arange(len(pixels)), idx), *args)
+    if not len(midx):
+        return pts, idx
+    idx = np.concatenate([idx, midx])
+    order = np.argsort(idx, kind="stable")
+    return np.vstack([pts, more])[order], idx[order]
+
+
 def bumps(pts: np.ndarray, k: int = 8, min_dev: float = 1.0, max_resid: float = 0.2) -> np.ndarray:
     """Mask of points on a short excursion from an otherwise smooth line (a speck stuck to it).
 
