@@ -429,6 +429,20 @@ Ea / interior p99 / max mm, honest share of (cells over 0.1 mm):
   seen (apparent) level curves everywhere instead of the solved top's: 0.1842 -> 0.2768, second
   ink 0.0493 -> 0.0840 (the renderer bends the meniscus by the top's level curve).
 
+(ze) Session 46 (8 December 2026), (zd)'s summit: the top along the y = 55 wall is a face turned
+  from the lamp, 84 grey once wide against a threshold of 76, and its sliver is blurred under
+  that (peaks 58 at 36 mm, 73-75 at 35). The frames above the first to show the part are now
+  also read with a split learned inside the part the lower frames show (vision/above.py), and a
+  profile across the sliver is placed where it crosses that split (subpixel.refine_at). Seeds 2
+  and 3 read the frames at 34 and 35 mm; cells of the top (true > 35 mm) over 1 mm 18 -> 5 and
+  27 -> 7, all left in the row 0.15 mm from the wall. Ea / interior p99 / max: seed 1 0.1842
+  0.319 1.758 (the same), seed 2 0.3091 0.386 3.126 (its max is at the corner), seed 3 0.3154
+  0.423 2.588; seeds 4 and 5 unchanged (seed 4 learned a threshold of 29: its top is read).
+  Crater and steep-front, samples 1-3 and twin-peaks at seed 2 and the 21 kept harsh and
+  second-ink scans: unchanged to 0.0001. Read with that split only where the learned threshold
+  found nothing: seed 2 read 34 mm with one threshold and 35 mm with the other, a blurred sliver
+  reads a pixel wider at the lower one, and its top was extrapolated to 40.03 for 38.55 (0.3139).
+
     nice -n 10 .venv/bin/python benches/harsh.py --keep /tmp/harsh     # render once, re-process later
     nice -n 10 .venv/bin/python benches/harsh.py --parts sample1,twin-peaks
 """
