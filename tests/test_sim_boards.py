@@ -128,3 +128,20 @@ def test_calibration_recovers_the_camera_and_the_plane_homography(calib):
         f"({err.max() / pix:.3f} px), rms {np.sqrt(np.mean(err**2)):.4f} mm"
     )
     assert err.max() < 0.5 * pix
+
+
+@pytest.mark.slow
+def test_the_same_board_images_give_the_same_camera_to_the_last_bit(calib):
+    """Commissioning is repeatable: threaded, calibrateCamera summed in whatever order its
+    threads finished, and K came out 1e-13 apart from one run to the next."""
+    from appliance.vision import calibration
+
+    folder, truth = calib
+    b = Board()
+    board = calibration.Board(b.cols, b.rows, b.square_mm)
+    images = [cv2.imread(str(folder / im["file"])) for im in truth["images"] if im["kind"] == "pose"]
+    threads = cv2.getNumThreads()
+    runs = [calibration.intrinsics(images, board) for _ in range(4)]
+    assert cv2.getNumThreads() == threads  # OpenCV's own setting is put back
+    for r in runs[1:]:
+        assert r.K.tobytes() == runs[0].K.tobytes() and r.dist.tobytes() == runs[0].dist.tobytes()
