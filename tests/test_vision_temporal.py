@@ -101,66 +101,68 @@ def big_camera():
     )
 
 
-def ridge_frame(level, crest=20.3):
-    """A ridge 8 mm long along x whose crest is at 20.3 mm, its sides falling 1 mm per mm, seen
-    through a slightly blurred lens: at level 20 a sliver 0.6 mm (7 px) wide and 8 mm long."""
+def ridge(level, crest):
+    """The ridge's plan (x, y mm per pixel) and how much of each pixel is part at `level`: 8 mm
+    long along x at level 20, its crest at `crest`, its sides falling 1 mm per mm."""
     u, v = np.meshgrid(np.arange(BIG_W, dtype=np.float32), np.arange(BIG_H, dtype=np.float32))
     x, y = u * BIG_MM, (BIG_H - v) * BIG_MM
     d = np.minimum((crest - level) - np.abs(y - 60), 4 + 0.5 * (20 - level) - np.abs(x - 80))
-    cover = np.clip(0.5 + d / BIG_MM, 0, 1)
-    ink, part = np.array([60, 20, 10.0], np.float32), np.array([220, 225, 230.0], np.float32)
-    img = cv2.GaussianBlur(ink + cover[..., None] * (part - ink), (0, 0), 1.3)
+    return x, y, np.clip(0.5 + d / BIG_MM, 0, 1)[..., None]
+
+
+INK, LIT = np.array([60, 20, 10.0], np.float32), np.array([220, 225, 230.0], np.float32)
+
+
+def ridge_frame(level, crest=20.3):
+    """The ridge through a slightly blurred lens: at level 20 a sliver 0.6 mm (7 px) wide."""
+    _, _, cover = ridge(level, crest)
+    img = cv2.GaussianBlur(INK + cover * (LIT - INK), (0, 0), 1.3)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
-def test_a_top_first_showing_as_a_sliver_is_read_with_what_the_frames_below_taught(tmp_path):
-    levels = (21, 20, 19, 18, 17)
+def ridge_scan(folder, frame_of, levels=(21, 20, 19, 18, 17)):
     refs = []
     for k, level in enumerate(levels, start=1):
-        write_frame(tmp_path, f"frames/{k:04d}.png", ridge_frame(level))
+        write_frame(folder, f"frames/{k:04d}.png", frame_of(level))
         refs.append(FrameRef(f"frames/{k:04d}.png", float(level)))
-    write_scan_json(Scan(tmp_path, big_camera(), refs, {}))
-    # on its own, the sliver is too small a part of the frame to be told from the ink
-    assert WaterlineExtractor(big_camera(), no_part="empty").extract(ridge_frame(20), 20).loops == []
-    waterlines = extract_waterlines(load_scan(tmp_path))
+    write_scan_json(Scan(folder, big_camera(), refs, {}))
+    return load_scan(folder)
+
+
+def sliver_sides(waterlines, half_width):
+    """How far the sliver's points (level 20, the middle 6 mm) are from its true sides."""
     assert [len(wl.loops) for wl in waterlines] == [0, 1, 1, 1, 1]
     sliver = waterlines[1].loops[0]
-    sides = np.abs(np.abs(sliver[:, 1] - 60) - 0.3)[np.abs(sliver[:, 0] - 80) < 3]
+    return np.abs(np.abs(sliver[:, 1] - 60) - half_width)[np.abs(sliver[:, 0] - 80) < 3]
+
+
+def test_a_top_first_showing_as_a_sliver_is_read_with_what_the_frames_below_taught(tmp_path):
+    scan = ridge_scan(tmp_path, ridge_frame)
+    # on its own, the sliver is too small a part of the frame to be told from the ink
+    assert WaterlineExtractor(big_camera(), no_part="empty").extract(ridge_frame(20), 20).loops == []
+    sides = sliver_sides(extract_waterlines(scan), 0.3)
     assert len(sides) > 100 and sides.max() < 0.05  # its sides 0.3 mm either side of the crest
 
 
 def dim_crest_frame(level, crest=20.15, dim=(70, 80, 95)):
-    """A ridge like ridge_frame's, through a more blurred lens, whose top 0.3 mm is a face
-    turned from the lamp: grey `dim` (BGR), just above the threshold the lit faces teach.
-    At level 20 it is a sliver 0.3 mm (4 px) wide, blurred below that threshold, in the
-    haze of a lamp over the ink."""
-    u, v = np.meshgrid(np.arange(BIG_W, dtype=np.float32), np.arange(BIG_H, dtype=np.float32))
-    x, y = u * BIG_MM, (BIG_H - v) * BIG_MM
-    d = np.minimum((crest - level) - np.abs(y - 60), 4 + 0.5 * (20 - level) - np.abs(x - 80))
-    cover = np.clip(0.5 + d / BIG_MM, 0, 1)[..., None]
+    """The ridge through a more blurred lens, its top 0.3 mm a face turned from the lamp:
+    grey `dim` (BGR), just above the threshold the lit faces teach. At level 20 it is a
+    sliver 0.3 mm (4 px) wide, blurred below that threshold, in the haze of a lamp."""
+    x, y, cover = ridge(level, crest)
     top = np.clip(0.5 + (0.3 - np.abs(y - 60)) / BIG_MM, 0, 1)[..., None]  # the dim face
-    ink, lit = np.array([60, 20, 10.0], np.float32), np.array([220, 225, 230.0], np.float32)
-    part = lit + top * (np.array(dim, np.float32) - lit)
+    part = LIT + top * (np.array(dim, np.float32) - LIT)
     haze = 20 * np.exp(-((x - 70) ** 2 + (y - 55) ** 2) / (2 * 25.0**2))[..., None]
-    img = cv2.GaussianBlur(ink + cover * (part - ink) + (1 - cover) * haze, (0, 0), 2.0)
+    img = cv2.GaussianBlur(INK + cover * (part - INK) + (1 - cover) * haze, (0, 0), 2.0)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
 def test_a_top_fainter_than_the_threshold_is_read_with_a_split_learned_inside_the_part_below(tmp_path):
-    levels = (21, 20, 19, 18, 17)
-    refs = []
-    for k, level in enumerate(levels, start=1):
-        write_frame(tmp_path, f"frames/{k:04d}.png", dim_crest_frame(level))
-        refs.append(FrameRef(f"frames/{k:04d}.png", float(level)))
-    write_scan_json(Scan(tmp_path, big_camera(), refs, {}))
+    scan = ridge_scan(tmp_path, dim_crest_frame)
     # the lit faces below teach a threshold the blurred sliver at level 20 never reaches
     lit = WaterlineExtractor(big_camera())
     lit.extract(dim_crest_frame(19), 19, below=[(18, dim_crest_frame(18)), (17, dim_crest_frame(17))])
     assert dim_crest_frame(20)[..., 2].max() < lit.split.threshold
-    waterlines = extract_waterlines(load_scan(tmp_path))
-    assert [len(wl.loops) for wl in waterlines] == [0, 1, 1, 1, 1]
-    sliver = waterlines[1].loops[0]
-    sides = np.abs(np.abs(sliver[:, 1] - 60) - 0.15)[np.abs(sliver[:, 0] - 80) < 3]
+    sides = sliver_sides(extract_waterlines(scan), 0.15)
     # its sides 0.15 mm either side of the crest, read a pixel wide: the blur that dims a
     # sliver also widens it where the profile crosses the split learned on it
     assert len(sides) > 100 and sides.max() < 1.5 * BIG_MM
