@@ -17,7 +17,6 @@ import cv2
 import numpy as np
 
 from .frames import NoPartError, channel_view, check_image, otsu_split
-from .support import support_mask
 from .types import Waterline
 
 
@@ -54,10 +53,7 @@ def read_above(extractor, above, below=()) -> list[Waterline]:
             probe.split, probe.faint = learned, False
         if faint is not None:
             # the frame above this one is confirmed by the sliver as it was read here
-            r = probe.roi
-            probe.lower.masks[float(level_mm)] = support_mask(
-                frame, r, probe.lower.shape, probe._ch, faint.threshold, probe.hue
-            )
+            probe.lower.mask(float(level_mm), frame, probe._ch, faint.threshold, probe.hue)
         out.append(wl)
         below.insert(0, (level_mm, frame))
     return out

@@ -73,16 +73,31 @@ def _crossing(p, s, threshold, min_contrast, max_shift):
     a = 0.5 * (p[:, 0] + p[:, 1])
     b = 0.5 * (p[:, -1] + p[:, -2])
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    d = p - (0.5 * (a + b))[:, None]
+    where, dist = _nearest_crossing(p - (0.5 * (a + b))[:, None], s, np.sign(b - a)[:, None])
+    ok = (dist <= max_shift) & (hi - lo >= min_contrast) & (lo < threshold) & (hi >= threshold)
+    return where, ok
+
+
+def _nearest_crossing(d, s, rising=None):
+    """Offset along each profile where `d` changes sign nearest to the binary edge, and how
+    far from it. The edge is half a pixel from the contour pixel towards the ink: the side
+    `rising` (+1: the profile climbs to the part along s) says, or each crossing's own
+    direction when None (a sliver's profile climbs and falls)."""
     d0, d1 = d[:, :-1], d[:, 1:]
     crosses = (d0 * d1 <= 0) & (d0 != d1)
     with np.errstate(divide="ignore", invalid="ignore"):
         where = s[:-1] + np.where(crosses, d0 / (d0 - d1), np.nan)
-    dist = np.where(crosses, np.abs(where + 0.5 * np.sign(b - a)[:, None]), np.inf)
+    rising = np.sign(d1 - d0) if rising is None else rising
+    dist = np.where(crosses, np.abs(where + 0.5 * rising), np.inf)
     j = np.argmin(dist, axis=1)
-    rows = np.arange(len(p))
-    ok = (dist[rows, j] <= max_shift) & (hi - lo >= min_contrast) & (lo < threshold) & (hi >= threshold)
-    return where[rows, j], ok
+    rows = np.arange(len(d))
+    return where[rows, j], dist[rows, j]
+
+
+def _points(c, n, t, ok):
+    """The contour pixels' points moved `t` along their normals, where `ok`."""
+    t = t[ok]
+    return np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
 
 
 def refine(
@@ -100,9 +115,7 @@ def refine(
     c, n, s, x, y = _profiles(contour, half)
     p = sample_q8(img, x, y).astype(np.float32) * (1.0 / ONE)
     t, ok = _crossing(p, s, threshold, min_contrast, max_shift)
-    t = t[ok]
-    pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
-    return pts, np.nonzero(ok)[0]
+    return _points(c, n, t, ok), np.nonzero(ok)[0]
 
 
 def refine_at(
@@ -121,19 +134,9 @@ def refine_at(
     """
     c, n, s, x, y = _profiles(contour, half, subset)
     p = sample_q8(img, x, y).astype(np.float32) * (1.0 / ONE)
-    d = p - level
-    d0, d1 = d[:, :-1], d[:, 1:]
-    crosses = (d0 * d1 <= 0) & (d0 != d1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        where = s[:-1] + np.where(crosses, d0 / (d0 - d1), np.nan)
-    # the binary edge is half a pixel from the contour pixel, towards the ink
-    dist = np.where(crosses, np.abs(where - 0.5 * np.sign(d0 - d1)), np.inf)
-    j = np.argmin(dist, axis=1)
-    rows = np.arange(len(p))
-    ok = dist[rows, j] <= max_shift
-    t = where[rows, j][ok]
-    pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
-    return pts, subset[ok]
+    t, dist = _nearest_crossing(p - level, s)
+    ok = dist <= max_shift
+    return _points(c, n, t, ok), subset[ok]
 
 
 def refine_colour(
@@ -171,9 +174,7 @@ def refine_colour(
 
     p = channel(main) - channel(other)
     t, ok = _crossing(p, s, -cut, min_contrast, max_shift)
-    t = t[ok]
-    pts = np.column_stack([c[ok, 0] + n[ok, 0] * t, c[ok, 1] + n[ok, 1] * t]).astype(np.float64)
-    return pts, subset[ok]
+    return _points(c, n, t, ok), subset[ok]
 
 
 def more_points(pts, idx, pixels, step, img, *args):
